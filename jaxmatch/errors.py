@@ -1,0 +1,32 @@
+"""The one error type users see.
+
+Every reader raises :class:`InputError` with the file and the problem; the CLI turns it
+into one line on stderr and exit code 2 (:data:`EXIT_BAD_INPUT`). No traceback reaches a user.
+"""
+
+from __future__ import annotations
+
+EXIT_BAD_INPUT = 2
+"""Exit status for bad input (file unreadable, malformed, inconsistent)."""
+
+EXIT_INVERTED = 3
+"""Exit status when a placed mesh has inverted (folded) quads."""
+
+EXIT_UNMATCHABLE = 4
+"""Exit status when no catalogue mesh can be matched to the shape."""
+
+
+class InputError(Exception):
+    """Bad user input. ``str(err)`` is one line: ``"<where>: <problem>"``.
+
+    where: a file path, optionally with a location (``"shape.json"``, ``"fine.toml:12"``).
+    """
+
+    def __init__(self, problem: str, where: str | None = None):
+        self.problem = " ".join(str(problem).split())  # always one line
+        self.where = None if where is None else " ".join(str(where).split())
+        super().__init__(self.problem if self.where is None else f"{self.where}: {self.problem}")
+
+
+class UnmatchableError(Exception):
+    """No mesh of the requested catalogue part has a finite matching with the shape."""

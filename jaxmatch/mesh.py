@@ -1,0 +1,240 @@
+"""Quad mesh data, boundary annotation and validation.
+
+A :class:`QuadMesh` is a combinatorial quad mesh of a closed disk:
+
+* ``quads``: ``(F, 4) int32``, vertex indices ``0 .. V-1``, each quad listed
+  counter-clockwise (all quads consistently oriented);
+* ``boundary``: ``(n,) int32``, the boundary loop, counter-clockwise (interior on the left),
+  starting at an arbitrary boundary vertex.
+
+A vertex is *internal* when it is not on the boundary loop. The paper's catalogue class
+adds: every valence <= 5, and invariant (I): every internal edge (an edge of two quads)
+has at least one internal endpoint.
+
+Boundary annotation (paper, section 4): boundary vertex ``b_i`` becomes the triple
+``[u, v, w]`` = valences of (counter-clockwise neighbour ``b_{i+1}``, ``b_i``,
+clockwise neighbour ``b_{i-1}``).
+"""
+
+from __future__ import annotations
+
+from collections import Counter, defaultdict
+from dataclasses import dataclass
+
+import numpy as np
+
+MAX_VALENCE = 5
+
+
+@dataclass(frozen=True, eq=False)
+class QuadMesh:
+    """A quad mesh of a disk.
+
+    quads: (F, 4) int32, counter-clockwise quads.
+    boundary: (n,) int32, counter-clockwise boundary loop.
+    """
+
+    quads: np.ndarray
+    boundary: np.ndarray
+
+    @property
+    def n_vertices(self) -> int:
+        return int(self.quads.max()) + 1 if self.quads.size else 0
+
+    @property
+    def n_quads(self) -> int:
+        return int(self.quads.shape[0])
+
+    @property
+    def n_boundary(self) -> int:
+        return int(self.boundary.shape[0])
+
+    @property
+    def n_internal(self) -> int:
+        return self.n_vertices - self.n_boundary
+
+
+def edges(quads: np.ndarray) -> np.ndarray:
+    """Undirected edges, ``(E, 2) int`` sorted pairs, each once."""
+    q = np.asarray(quads)
+    d = np.stack([q, np.roll(q, -1, axis=1)], axis=-1).reshape(-1, 2)
+    return np.unique(np.sort(d, axis=1), axis=0)
+
+
+def valences(quads: np.ndarray, n_vertices: int | None = None) -> np.ndarray:
+    """Vertex valences (number of incident edges), ``(V,) int32``."""
+    e = edges(quads)
+    nv = n_vertices if n_vertices is not None else (int(np.max(quads)) + 1)
+    return np.bincount(e.ravel(), minlength=nv).astype(np.int32)
+
+
+def boundary_loop(quads: np.ndarray) -> np.ndarray:
+    """The counter-clockwise boundary loop of a disk mesh with ccw quads, ``(n,) int32``.
+
+    Starts at the smallest boundary vertex index. Raises ValueError when the boundary
+    edges do not form exactly one simple loop.
+    """
+    q = np.asarray(quads)
+    directed = Counter()
+    for quad in q.tolist():
+        for a, b in zip(quad, quad[1:] + quad[:1]):
+            directed[(a, b)] += 1
+    nxt: dict[int, int] = {}
+    for (a, b), c in directed.items():
+        if c > 1:
+            raise ValueError(f"directed edge {a}->{b} used by {c} quads (orientation or manifold error)")
+        if (b, a) not in directed:
+            if a in nxt:
+                raise ValueError(f"vertex {a} is on the boundary twice (pinched)")
+            nxt[a] = b
+    if not nxt:
+        raise ValueError("no boundary (closed surface)")
+    start = min(nxt)
+    loop = [start]
+    while True:
+        v = nxt[loop[-1]]
+        if v == start:
+            break
+        if len(loop) > len(nxt):
+            raise ValueError("boundary edges do not close")
+        loop.append(v)
+    if len(loop) != len(nxt):
+        raise ValueError("boundary has more than one loop")
+    return np.asarray(loop, dtype=np.int32)
+
+
+def from_quads(quads) -> QuadMesh:
+    """Build a :class:`QuadMesh` from ccw quads, computing the boundary loop."""
+    q = np.asarray(quads, dtype=np.int32).reshape(-1, 4)
+    return QuadMesh(quads=q, boundary=boundary_loop(q))
+
+
+def boundary_valences(mesh: QuadMesh) -> np.ndarray:
+    """Valences along the ccw boundary loop, ``(n,) int32``."""
+    return valences(mesh.quads, mesh.n_vertices)[mesh.boundary]
+
+
+def triples(boundary_vals) -> np.ndarray:
+    """Boundary triples ``[u, v, w]`` from a ccw valence sequence.
+
+    boundary_vals: (n,) ints (ccw). Returns (n, 3) int32 where row i is
+    ``[val[i+1], val[i], val[i-1]]`` (ccw neighbour, vertex, clockwise neighbour).
+    """
+    b = np.asarray(boundary_vals, dtype=np.int32)
+    return np.stack([np.roll(b, -1), b, np.roll(b, 1)], axis=-1)
+
+
+def validate(mesh: QuadMesh, max_valence: int = MAX_VALENCE, invariant_i: bool = True) -> list[str]:
+    """All problems that keep ``mesh`` out of the catalogue class; ``[]`` when valid.
+
+    Checks: quads have 4 distinct vertices; all vertices used; consistent orientation;
+    every edge in 1 or 2 quads; two quads share at most one edge; one boundary loop equal
+    to ``mesh.boundary`` up to rotation; every vertex a manifold disk/half-disk (its quad fan
+    is one cycle, or one path for boundary vertices); Euler ``V - E + F = 1``; valences
+    ``<= max_valence``; internal valence >= 3; invariant (I); and the angle-sum identity
+    ``sum_internal(4 - val) + sum_boundary(3 - val) = 4``.
+    """
+    problems: list[str] = []
+    q = np.asarray(mesh.quads)
+    if q.ndim != 2 or q.shape[1] != 4 or q.shape[0] == 0:
+        return ["quads must be a non-empty (F, 4) array"]
+    nv = mesh.n_vertices
+    if q.min() < 0:
+        return ["negative vertex index"]
+    for f, quad in enumerate(q.tolist()):
+        if len(set(quad)) != 4:
+            problems.append(f"quad {f} has repeated vertices {quad}")
+    used = np.zeros(nv, bool)
+    used[q.ravel()] = True
+    if not used.all():
+        problems.append(f"vertices {np.flatnonzero(~used).tolist()} are in no quad")
+    if problems:
+        return problems
+
+    directed = Counter()
+    undirected: dict[tuple[int, int], list[int]] = defaultdict(list)
+    for f, quad in enumerate(q.tolist()):
+        for a, b in zip(quad, quad[1:] + quad[:1]):
+            directed[(a, b)] += 1
+            undirected[(min(a, b), max(a, b))].append(f)
+    for (a, b), c in directed.items():
+        if c > 1:
+            problems.append(f"directed edge {a}->{b} appears in {c} quads (inconsistent orientation)")
+    for e, fs in undirected.items():
+        if len(fs) > 2:
+            problems.append(f"edge {e} is in {len(fs)} quads")
+    pair_count = Counter()
+    for e, fs in undirected.items():
+        if len(fs) == 2:
+            pair_count[tuple(sorted(fs))] += 1
+    for fs, c in pair_count.items():
+        if c > 1:
+            problems.append(f"quads {fs} share {c} edges")
+    if problems:
+        return problems
+
+    try:
+        loop = boundary_loop(q)
+    except ValueError as err:
+        return [str(err)]
+    b = np.asarray(mesh.boundary).tolist()
+    if sorted(b) != sorted(loop.tolist()) or len(b) != len(loop):
+        problems.append("stored boundary differs from the boundary of the quads")
+    else:
+        i = b.index(int(loop[0]))
+        if b[i:] + b[:i] != loop.tolist():
+            problems.append("stored boundary is not the ccw boundary loop")
+    on_boundary = np.zeros(nv, bool)
+    on_boundary[loop] = True
+
+    # vertex fans: corners around each vertex must form one cycle (internal) or one path (boundary)
+    succ: dict[int, dict[int, int]] = defaultdict(dict)  # at vertex v: prev-neighbour -> next-neighbour
+    for quad in q.tolist():
+        for i in range(4):
+            v, nxt_v, prv_v = quad[i], quad[(i + 1) % 4], quad[(i - 1) % 4]
+            succ[v][nxt_v] = prv_v  # ccw around v: from edge (v,nxt) to edge (v,prv)
+    for v in range(nv):
+        s = succ[v]
+        n_corners = len(s)
+        starts = set(s) - set(s.values())
+        if on_boundary[v]:
+            if len(starts) != 1:
+                problems.append(f"boundary vertex {v} is not a single fan")
+                continue
+            cur, seen = next(iter(starts)), 0
+            while cur in s:
+                cur, seen = s[cur], seen + 1
+            if seen != n_corners:
+                problems.append(f"boundary vertex {v} fan is broken")
+        else:
+            if starts:
+                problems.append(f"internal vertex {v} has an open fan")
+                continue
+            cur, seen = next(iter(s)), 0
+            first = cur
+            while True:
+                cur, seen = s[cur], seen + 1
+                if cur == first or seen > n_corners:
+                    break
+            if seen != n_corners:
+                problems.append(f"internal vertex {v} fan is not one cycle")
+    if problems:
+        return problems
+
+    n_edges = len(undirected)
+    if nv - n_edges + len(q) != 1:
+        problems.append(f"Euler characteristic V-E+F = {nv - n_edges + len(q)} != 1")
+    val = valences(q, nv)
+    if val.max() > max_valence:
+        problems.append(f"valence {int(val.max())} > {max_valence} at vertex {int(val.argmax())}")
+    internal = ~on_boundary
+    if internal.any() and val[internal].min() < 3:
+        problems.append("internal vertex of valence < 3")
+    if invariant_i:
+        for (a, bb), fs in undirected.items():
+            if len(fs) == 2 and on_boundary[a] and on_boundary[bb]:
+                problems.append(f"invariant (I) fails: internal edge {a}-{bb} has two boundary endpoints")
+    angle = int((4 - val[internal]).sum() + (3 - val[on_boundary]).sum())
+    if angle != 4:
+        problems.append(f"angle-sum identity gives {angle} != 4")
+    return problems
