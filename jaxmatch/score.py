@@ -1,0 +1,322 @@
+"""Exact scorer: the paper's modified LCS between a shape annotation and mesh boundaries.
+
+Problem
+-------
+``codes: (m,) int`` is the shape's annotation, 0 = ``s`` straight, 1 = ``x`` convex,
+2 = ``v`` concave; its start is fixed. A mesh boundary is a ccw valence sequence
+``vals: (n,)`` with valences in {2, 3, 4, 5}. ``table: (3, 4, 4, 4)`` holds the lattice
+weights, indexed ``table[code, u - 2, v - 2, w - 2]`` (integers or ``-inf`` = forbidden).
+
+Every mesh boundary vertex ``j`` (of an *oriented* sequence, see below) is matched to its own
+input point ``i_j`` with ``i_0 < i_1 < ... < i_{n-1}`` (input points may be skipped, mesh
+vertices may not). The utility is ``sum_j table[codes[i_j], t_j]`` where ``t_j`` is the
+boundary triple of oriented vertex ``j``. A mesh's score is the best utility over all
+alignments and all ``2n`` orientations.
+
+Orientation convention (exact; :func:`oriented_sequence`)
+---------------------------------------------------------
+* ``s = vals`` when not reflected, ``s = vals[::-1]`` when reflected (the mirrored mesh;
+  reversing swaps the ccw and cw neighbours, i.e. ``u`` and ``w`` of every triple);
+* ``s_r = np.roll(s, -r)``, so ``s_r[0] = s[r]``: mesh vertex ``r`` of ``s`` is matched first;
+* triples ``t_j = [s_r[j+1], s_r[j], s_r[j-1]]`` (cyclic), as :func:`jaxmatch.mesh.triples`;
+* ``alignment[j]`` is the input index taken by ``s_r[j]``.
+
+Orientation index ``o`` in ``0 .. 2n-1``: ``o = r`` for rotations of ``vals``, ``o = n + r``
+for rotations of ``vals[::-1]``. Ties between orientations go to the smallest ``o``
+(smallest rotation, non-reflected before reflected).
+
+Dynamic programme
+-----------------
+``D[i][j]`` = best utility matching the first ``j`` oriented vertices into the first ``i``
+input points::
+
+    D[0][0] = 0,  D[0][j > 0] = NEG,  D[i][0] = 0
+    D[i][j] = reduce(D[i-1][j], D[i-1][j-1] + W[i-1, j-1])
+
+answer ``D[m][n]``. ``reduce`` is ``max`` here; :mod:`jaxmatch.soft` passes the smoothed
+maximum ``gamma * logaddexp(a / gamma, b / gamma)`` to the very same core (:func:`dp_scan`).
+Forbidden weights are replaced by the finite ``NEG`` (never ``-inf`` inside the DP); a mesh
+whose best value is ``<= NEG / 2``, or with ``n > m``, is *unmatchable*: utility ``-inf``,
+``unmatchable`` true, rotation ``-1``. This assumes ``|weights| * m << |NEG| / 2``
+(the lattice weights are small integers).
+
+Implementation: one ``jax.lax.scan`` over input points (carry: one ``(n + 1, ...)`` array,
+the DP row for every orientation of every mesh of the batch); input lengths are padded to
+a few bucket sizes (:func:`bucket_length`) with padded points masked as *skipped*; mesh
+batches are padded to a fixed batch size, so XLA compiles once per (bucket length, n,
+batch). Weights are integers, so float32 results are exact.
+"""
+
+from __future__ import annotations
+
+from functools import partial
+from typing import Callable, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from jaxmatch.errors import UnmatchableError
+
+try:  # the lattice loader owns NEG once it exists
+    from jaxmatch.lattice import NEG  # type: ignore[attr-defined]
+except ImportError:  # pragma: no cover - depends on the tree state
+    NEG = -1e9
+NEG = float(NEG)
+"""Finite stand-in for ``-inf`` inside the DP."""
+
+UNROLL = 4
+"""``lax.scan`` unroll factor (measured: see :func:`score_bucket` notes)."""
+
+DEFAULT_BATCH = 256
+"""Meshes per compiled call of :func:`score_bucket`."""
+
+_MIN_BATCH = 8
+
+
+class ScoreResult(NamedTuple):
+    """Scores of a bucket of meshes against one shape (all arrays ``(N,)``)."""
+
+    utility: np.ndarray
+    """float32, best utility; ``-inf`` where unmatchable."""
+    rotation: np.ndarray
+    """int32, ``r`` of the winning orientation (see module docstring); ``-1`` where unmatchable."""
+    reflected: np.ndarray
+    """bool, the winning orientation uses ``vals[::-1]``; False where unmatchable."""
+    unmatchable: np.ndarray
+    """bool, no alignment avoids forbidden weights (or ``n > m``)."""
+
+
+# --------------------------------------------------------------------------- helpers
+
+
+def finite_table(table) -> jnp.ndarray:
+    """``(3, 4, 4, 4) float32`` with ``-inf`` (and anything ``<= NEG``) replaced by ``NEG``."""
+    t = jnp.asarray(table, dtype=jnp.float32)
+    if t.shape != (3, 4, 4, 4):
+        raise ValueError(f"table must have shape (3, 4, 4, 4), got {t.shape}")
+    return jnp.where(t > NEG, t, jnp.float32(NEG))
+
+
+def bucket_length(m: int) -> int:
+    """Padded input length for an input of length ``m``.
+
+    Multiples of 16 up to 128, then multiples of 64 (so a handful of compiled lengths).
+    """
+    m = max(int(m), 1)
+    if m <= 128:
+        return 16 * -(-m // 16)
+    return 64 * -(-m // 64)
+
+
+def pad_codes(codes, m_pad: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """``(codes_pad (m_pad,) int32, valid (m_pad,) bool)``; padded points are invalid (skipped)."""
+    c = np.asarray(codes, dtype=np.int32).reshape(-1)
+    m = c.shape[0]
+    if c.size and (c.min() < 0 or c.max() > 2):
+        raise ValueError("codes must be 0 (s), 1 (x) or 2 (v)")
+    m_pad = bucket_length(m) if m_pad is None else int(m_pad)
+    if m_pad < m:
+        raise ValueError(f"m_pad={m_pad} < m={m}")
+    out = np.zeros(m_pad, np.int32)
+    out[:m] = c
+    return out, np.arange(m_pad) < m
+
+
+def _rotation_index(n: int) -> np.ndarray:
+    return (np.arange(n)[:, None] + np.arange(n)[None, :]) % n  # [r, j] -> (r + j) % n
+
+
+def oriented_sequences(vals) -> jnp.ndarray:
+    """``(N, n) -> (N, 2n, n)``: all rotations of ``vals``, then all rotations of ``vals[:, ::-1]``."""
+    v = jnp.asarray(vals)
+    n = v.shape[-1]
+    rot = _rotation_index(n)
+    return jnp.concatenate([v[..., rot], v[..., ::-1][..., rot]], axis=-2)
+
+
+def orientation_triples(vals) -> jnp.ndarray:
+    """``(N, n) -> (N, 2n, n, 3)`` triples ``[u, v, w]`` of every oriented sequence (orientation ``o``)."""
+    s = oriented_sequences(vals)
+    return jnp.stack([jnp.roll(s, -1, axis=-1), s, jnp.roll(s, 1, axis=-1)], axis=-1)
+
+
+def oriented_sequence(vals_one, rotation: int, reflected: bool) -> np.ndarray:
+    """The ``(n,)`` valences in matched order: ``np.roll(vals[::-1] if reflected else vals, -rotation)``."""
+    s = np.asarray(vals_one, dtype=np.int32).reshape(-1)
+    if reflected:
+        s = s[::-1]
+    return np.roll(s, -int(rotation))
+
+
+def orientation_weights(codes, vals, table_finite) -> jnp.ndarray:
+    """Per-step weights ``W: (m, n, N, 2n)``: ``W[i, j, b, o] = table[codes[i], t_{b,o,j}]``."""
+    t = orientation_triples(vals) - 2  # (N, 2n, n, 3)
+    flat = t[..., 0] * 16 + t[..., 1] * 4 + t[..., 2]  # (N, 2n, n)
+    wc = table_finite.reshape(3, 64)[:, jnp.transpose(flat, (2, 0, 1))]  # (3, n, N, 2n)
+    return wc[codes]
+
+
+# --------------------------------------------------------------------------- the one DP
+
+
+def dp_scan(
+    w: jnp.ndarray,
+    valid: jnp.ndarray,
+    reduce: Callable[[jnp.ndarray, jnp.ndarray], jnp.ndarray],
+    *,
+    keep_rows: bool = False,
+    unroll: int = UNROLL,
+):
+    """The modified-LCS recurrence, once, for any reduction.
+
+    w: ``(m, n, *batch)`` weights, ``w[i, j] = W[i, j]`` (finite); valid: ``(m,)`` bool,
+    invalid input points are skipped (the row is carried unchanged); reduce: elementwise
+    ``(skip, match) -> value`` (``jnp.maximum`` exact, smoothed max soft).
+
+    Returns the last row ``D[m]`` of shape ``(n + 1, *batch)``, and with ``keep_rows`` also all
+    rows ``(m + 1, n + 1, *batch)``.
+    """
+    n = w.shape[1]
+    batch = w.shape[2:]
+    d0 = jnp.concatenate(
+        [jnp.zeros((1, *batch), w.dtype), jnp.full((n, *batch), NEG, w.dtype)], axis=0
+    )
+
+    def step(d, x):
+        wi, ok = x
+        new = jnp.concatenate([d[:1], reduce(d[1:], d[:-1] + wi)], axis=0)
+        new = jnp.where(ok, new, d)
+        return new, (new if keep_rows else None)
+
+    last, rows = jax.lax.scan(step, d0, (w, valid), unroll=unroll)
+    if keep_rows:
+        return last, jnp.concatenate([d0[None], rows], axis=0)
+    return last
+
+
+# --------------------------------------------------------------------------- exact scoring
+
+
+@partial(jax.jit, static_argnames=("unroll",))
+def _score_chunk(codes, valid, vals, table_finite, unroll=UNROLL):
+    """Best value ``(B,)`` and first best orientation ``(B,)`` for a chunk of meshes."""
+    w = orientation_weights(codes, vals, table_finite)
+    last = dp_scan(w, valid, jnp.maximum, unroll=unroll)  # (n+1, B, 2n)
+    final = last[-1]
+    return jnp.max(final, axis=-1), jnp.argmax(final, axis=-1).astype(jnp.int32)
+
+
+def _check_vals(vals) -> np.ndarray:
+    v = np.asarray(vals, dtype=np.int32)
+    if v.ndim == 1:
+        v = v[None]
+    if v.ndim != 2 or v.shape[1] == 0:
+        raise ValueError(f"vals must be (N, n) with n >= 1, got shape {v.shape}")
+    if v.size and (v.min() < 2 or v.max() > 5):
+        raise ValueError("boundary valences must be in 2..5")
+    return v
+
+
+def score_bucket(
+    codes,
+    vals,
+    table,
+    *,
+    batch: int = DEFAULT_BATCH,
+    m_pad: int | None = None,
+    unroll: int = UNROLL,
+) -> ScoreResult:
+    """Score every mesh of one bucket (all of boundary length ``n``) against ``codes``.
+
+    codes: ``(m,)`` ints 0/1/2; vals: ``(N, n)`` ccw boundary valences; table:
+    ``(3, 4, 4, 4)`` weights with ``-inf`` for forbidden. ``m`` is padded to
+    :func:`bucket_length` (or ``m_pad``), the meshes to a multiple of the chunk size
+    ``min(batch, next power of two >= N)`` (at least 8); one compilation per
+    (padded m, n, chunk size).
+    """
+    v = _check_vals(vals)
+    big_n, n = v.shape
+    c = np.asarray(codes, dtype=np.int32).reshape(-1)
+    m = c.shape[0]
+    codes_pad, valid = pad_codes(c, m_pad)
+    tf = finite_table(table)
+    chunk = max(_MIN_BATCH, min(int(batch), 1 << max(big_n - 1, 0).bit_length()))
+    n_chunks = -(-big_n // chunk)
+    vp = np.full((n_chunks * chunk, n), 2, np.int32)
+    vp[:big_n] = v
+    best = np.empty(n_chunks * chunk, np.float32)
+    orient = np.empty(n_chunks * chunk, np.int32)
+    cj, vj = jnp.asarray(codes_pad), jnp.asarray(valid)
+    for k in range(n_chunks):
+        sl = slice(k * chunk, (k + 1) * chunk)
+        b, o = _score_chunk(cj, vj, jnp.asarray(vp[sl]), tf, unroll=unroll)
+        best[sl], orient[sl] = np.asarray(b), np.asarray(o)
+    best, orient = best[:big_n], orient[:big_n]
+    unmatchable = (best <= NEG / 2) | (n > m)
+    utility = np.where(unmatchable, -np.inf, best).astype(np.float32)
+    rotation = np.where(unmatchable, -1, orient % n).astype(np.int32)
+    reflected = (~unmatchable) & (orient >= n)
+    return ScoreResult(utility, rotation, reflected, unmatchable)
+
+
+# --------------------------------------------------------------------------- one mesh
+
+
+@jax.jit
+def _rows_one(codes, valid, seq, table_finite):
+    """All DP rows ``(m + 1, n + 1)`` for one oriented sequence ``seq: (n,)``."""
+    t = jnp.stack([jnp.roll(seq, -1), seq, jnp.roll(seq, 1)], axis=-1) - 2
+    flat = t[:, 0] * 16 + t[:, 1] * 4 + t[:, 2]
+    w = table_finite.reshape(3, 64)[:, flat][codes]  # (m, n)
+    _, rows = dp_scan(w, valid, jnp.maximum, keep_rows=True)
+    return rows
+
+
+def align(codes, vals_one, table, rotation: int, reflected: bool, *, m_pad: int | None = None) -> np.ndarray:
+    """Best alignment for one orientation: ``(n,) int32`` strictly increasing input indices.
+
+    ``alignment[j]`` is the input point taken by ``oriented_sequence(vals_one, rotation,
+    reflected)[j]``. Backtracks the DP rows of :func:`dp_scan` (recomputed for this one
+    orientation) from ``D[m][n]``; at a tie between skipping input point ``i - 1`` and
+    matching it, skipping wins (so each vertex takes the earliest best point counted from
+    the end). Raises :class:`UnmatchableError` when this orientation has no finite alignment.
+    """
+    seq = oriented_sequence(vals_one, rotation, reflected)
+    n = seq.shape[0]
+    c = np.asarray(codes, dtype=np.int32).reshape(-1)
+    m = c.shape[0]
+    if n > m:
+        raise UnmatchableError(f"mesh has {n} boundary vertices but the shape only {m} points")
+    _check_vals(seq)
+    codes_pad, valid = pad_codes(c, m_pad)
+    rows = np.asarray(_rows_one(jnp.asarray(codes_pad), jnp.asarray(valid), jnp.asarray(seq), finite_table(table)))
+    rows = rows[: m + 1]  # padded rows only repeat D[m]
+    if rows[m, n] <= NEG / 2:
+        raise UnmatchableError("every alignment of this orientation uses a forbidden weight")
+    out = np.empty(n, np.int32)
+    i, j = m, n
+    while j > 0:
+        if i > j and rows[i, j] == rows[i - 1, j]:
+            i -= 1  # skip input point i-1
+        else:
+            out[j - 1] = i - 1
+            i, j = i - 1, j - 1
+    return out
+
+
+def utility_of(codes, vals_one, table, rotation: int, reflected: bool, alignment) -> float:
+    """Utility of one explicit alignment (numpy, original table: ``-inf`` if it uses a forbidden weight)."""
+    from jaxmatch.mesh import triples
+
+    seq = oriented_sequence(vals_one, rotation, reflected)
+    n = seq.shape[0]
+    c = np.asarray(codes, dtype=np.int64).reshape(-1)
+    a = np.asarray(alignment, dtype=np.int64).reshape(-1)
+    if a.shape[0] != n:
+        raise ValueError(f"alignment has length {a.shape[0]}, mesh has {n} boundary vertices")
+    if n and (a[0] < 0 or a[-1] >= c.shape[0] or np.any(np.diff(a) <= 0)):
+        raise ValueError("alignment must be strictly increasing input indices in range")
+    t = triples(seq) - 2
+    tab = np.asarray(table, dtype=np.float64)
+    return float(np.sum(tab[c[a], t[:, 0], t[:, 1], t[:, 2]]))

@@ -1,0 +1,138 @@
+"""Soft (differentiable) relaxation of the exact scorer, for tuning lattice weights.
+
+Same DP core as :mod:`jaxmatch.score` (:func:`jaxmatch.score.dp_scan`), with ``max``
+replaced by the smoothed maximum ``smax_gamma(a, b) = gamma * logaddexp(a / gamma, b / gamma)``,
+and the maximum over the ``2n`` orientations replaced by ``gamma * logsumexp(. / gamma)``.
+Since log-sum-exp distributes over ``+``, the result is exactly the log-partition function
+
+    soft = gamma * log( sum over orientations o and alignments a of exp(U(o, a) / gamma) )
+
+so ``exact <= soft <= exact + gamma * log(2n * C(m, n))`` and ``soft -> exact`` as
+``gamma -> 0``. Its gradient w.r.t. a table entry is the expected number of times the entry
+is used under the Gibbs distribution ``exp(U / gamma)`` (each mesh's gradient sums to ``n``).
+
+Forbidden entries (``forbidden_mask``) are fixed at the finite ``NEG`` (never ``-inf``) and
+get exactly zero gradient. Values ``<= NEG / 2`` mean *unmatchable* (no finite alignment or
+``n > m``); they stay finite so gradients stay finite (at any ``gamma > 0``, 1e-3 included).
+
+The computation dtype follows ``table_free`` (float32 normally; float64 under
+``jax.enable_x64`` for finite-difference checks).
+"""
+
+from __future__ import annotations
+
+from functools import partial
+from typing import Callable, Sequence
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from jaxmatch.score import NEG, UNROLL, bucket_length, dp_scan, orientation_weights
+
+__all__ = [
+    "smooth_max",
+    "soft_table",
+    "soft_utility",
+    "soft_utility_batch",
+    "pad_shapes",
+    "table_parts",
+]
+
+
+def smooth_max(gamma) -> Callable[[jnp.ndarray, jnp.ndarray], jnp.ndarray]:
+    """The reduction ``(a, b) -> gamma * logaddexp(a / gamma, b / gamma)`` for :func:`dp_scan`."""
+
+    def reduce(a, b):
+        return gamma * jnp.logaddexp(a / gamma, b / gamma)
+
+    return reduce
+
+
+def soft_table(table_free, forbidden_mask) -> jnp.ndarray:
+    """``table_free`` with forbidden entries set to ``NEG`` (no gradient flows to them)."""
+    t = jnp.asarray(table_free)
+    if not jnp.issubdtype(t.dtype, jnp.floating):
+        t = t.astype(jnp.float32)
+    return jnp.where(jnp.asarray(forbidden_mask, bool), jnp.asarray(NEG, t.dtype), t)
+
+
+def table_parts(table) -> tuple[np.ndarray, np.ndarray]:
+    """Split a lattice table with ``-inf`` into ``(table_free float32, forbidden_mask bool)``;
+    forbidden entries of ``table_free`` are 0."""
+    t = np.asarray(table, dtype=np.float32)
+    forbidden = ~np.isfinite(t) | (t <= NEG)
+    return np.where(forbidden, 0.0, t).astype(np.float32), forbidden
+
+
+def _soft_core(codes, valid, vals, table, gamma, unroll):
+    """``(N,)`` soft utilities of meshes ``vals: (N, n)`` for one padded shape."""
+    w = orientation_weights(codes, vals, table)  # (m, n, N, 2n)
+    last = dp_scan(w, valid, smooth_max(gamma), unroll=unroll)
+    final = last[-1]  # (N, 2n)
+    return gamma * jax.nn.logsumexp(final / gamma, axis=-1)
+
+
+@partial(jax.jit, static_argnames=("unroll",))
+def _soft_one(codes, valid, vals, table_free, forbidden_mask, gamma, unroll=UNROLL):
+    table = soft_table(table_free, forbidden_mask)
+    return _soft_core(codes, valid, vals, table, jnp.asarray(gamma, table.dtype), unroll)
+
+
+@partial(jax.jit, static_argnames=("unroll",))
+def _soft_many(codes, valid, vals, table_free, forbidden_mask, gamma, unroll=UNROLL):
+    table = soft_table(table_free, forbidden_mask)
+    g = jnp.asarray(gamma, table.dtype)
+    return jax.vmap(lambda c, v: _soft_core(c, v, vals, table, g, unroll))(codes, valid)
+
+
+def soft_utility(codes, vals, table_free, forbidden_mask, gamma, *, m_pad: int | None = None, unroll: int = UNROLL):
+    """Soft utilities ``(N,)`` of meshes ``vals: (N, n)`` against one shape ``codes: (m,)``.
+
+    Differentiable in ``table_free`` (and ``gamma``); traceable (``codes``/``vals`` may be
+    traced, their shapes are static). ``m`` is padded to :func:`bucket_length` (or ``m_pad``)
+    with padded points skipped, which does not change the value.
+    """
+    c = jnp.asarray(codes, jnp.int32).reshape(-1)
+    m = c.shape[0]
+    mp = bucket_length(m) if m_pad is None else int(m_pad)
+    if mp < m:
+        raise ValueError(f"m_pad={mp} < m={m}")
+    v = jnp.asarray(vals, jnp.int32)
+    if v.ndim == 1:
+        v = v[None]
+    c = jnp.pad(c, (0, mp - m))
+    valid = jnp.arange(mp) < m
+    return _soft_one(c, valid, v, table_free, forbidden_mask, gamma, unroll=unroll)
+
+
+def pad_shapes(shapes: Sequence, m_pad: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Stack shape annotations of different lengths: ``(codes (S, m_pad) int32, valid (S, m_pad) bool)``.
+
+    ``m_pad`` defaults to :func:`bucket_length` of the longest shape.
+    """
+    lens = [len(np.asarray(s).reshape(-1)) for s in shapes]
+    mp = bucket_length(max(lens, default=1)) if m_pad is None else int(m_pad)
+    if lens and max(lens) > mp:
+        raise ValueError(f"m_pad={mp} < longest shape {max(lens)}")
+    codes = np.zeros((len(shapes), mp), np.int32)
+    valid = np.zeros((len(shapes), mp), bool)
+    for k, s in enumerate(shapes):
+        s = np.asarray(s, np.int32).reshape(-1)
+        codes[k, : s.shape[0]] = s
+        valid[k, : s.shape[0]] = True
+    return codes, valid
+
+
+def soft_utility_batch(codes, valid, vals, table_free, forbidden_mask, gamma, *, unroll: int = UNROLL):
+    """Soft utilities ``(S, N)`` of meshes ``vals: (N, n)`` against ``S`` padded shapes.
+
+    codes, valid: ``(S, m_pad)`` from :func:`pad_shapes` (invalid points are skipped).
+    ``vmap`` over shapes of the same DP; differentiable in ``table_free``. Entry ``[s, k]``
+    equals ``soft_utility(shape s, vals[k:k+1], ...)``; ``n`` greater than shape ``s``'s
+    length gives a value ``<= NEG / 2``.
+    """
+    v = jnp.asarray(vals, jnp.int32)
+    if v.ndim == 1:
+        v = v[None]
+    return _soft_many(jnp.asarray(codes, jnp.int32), jnp.asarray(valid, bool), v, table_free, forbidden_mask, gamma, unroll=unroll)

@@ -1,0 +1,235 @@
+"""Exact scorer (jaxmatch.score) against the plain-Python references."""
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from jaxmatch import mesh, reference
+from jaxmatch.errors import UnmatchableError
+from jaxmatch.score import (
+    NEG,
+    ScoreResult,
+    align,
+    bucket_length,
+    finite_table,
+    orientation_triples,
+    oriented_sequence,
+    score_bucket,
+    utility_of,
+)
+
+S, X, V = 0, 1, 2
+
+
+def random_table(seed: int, forbidden: float) -> np.ndarray:
+    """Integer weights in -5..5, a fraction ``forbidden`` of them -inf."""
+    rng = np.random.default_rng(seed)
+    t = rng.integers(-5, 6, (3, 4, 4, 4)).astype(np.float32)
+    t[rng.random(t.shape) < forbidden] = -np.inf
+    return t
+
+
+@st.composite
+def cases(draw, max_n=6, max_m=9, max_meshes=4):
+    """(codes, vals (N, n), table) with small n, m so brute force is cheap."""
+    m = draw(st.integers(1, max_m))
+    n = draw(st.integers(1, max_n))
+    codes = np.array(draw(st.lists(st.integers(0, 2), min_size=m, max_size=m)), np.int32)
+    n_meshes = draw(st.integers(1, max_meshes))
+    vals = np.array(
+        draw(st.lists(st.lists(st.integers(2, 5), min_size=n, max_size=n), min_size=n_meshes, max_size=n_meshes)),
+        np.int32,
+    )
+    table = random_table(draw(st.integers(0, 2**32 - 1)), draw(st.sampled_from([0.0, 0.2, 0.5, 0.8, 1.0])))
+    return codes, vals, table
+
+
+# --------------------------------------------------------------------------- conventions
+
+
+def test_oriented_sequence_convention():
+    vals = [2, 3, 4, 5]
+    assert oriented_sequence(vals, 0, False).tolist() == [2, 3, 4, 5]
+    assert oriented_sequence(vals, 1, False).tolist() == [3, 4, 5, 2]  # s_r[0] = s[r]
+    assert oriented_sequence(vals, 0, True).tolist() == [5, 4, 3, 2]
+    assert oriented_sequence(vals, 1, True).tolist() == [4, 3, 2, 5]
+
+
+@pytest.mark.parametrize("n", [1, 2, 3, 5, 8])
+def test_orientation_triples_are_mesh_triples_of_oriented_sequences(n):
+    vals = np.random.default_rng(n).integers(2, 6, (3, n))
+    t = np.asarray(orientation_triples(vals))
+    assert t.shape == (3, 2 * n, n, 3)
+    for b in range(3):
+        for o in range(2 * n):
+            expect = mesh.triples(oriented_sequence(vals[b], o % n, o >= n))
+            np.testing.assert_array_equal(t[b, o], expect)
+
+
+def test_reflection_swaps_ccw_and_cw_neighbours():
+    t = np.asarray(orientation_triples([[2, 3, 4, 5]]))[0]
+    np.testing.assert_array_equal(t[4][:, [2, 1, 0]], mesh.triples([2, 3, 4, 5])[::-1])
+
+
+def test_finite_table_replaces_minus_inf_by_neg():
+    t = random_table(0, 0.5)
+    f = np.asarray(finite_table(t))
+    assert f.dtype == np.float32 and np.isfinite(f).all()
+    np.testing.assert_array_equal(f[np.isinf(t)], NEG)
+    np.testing.assert_array_equal(f[np.isfinite(t)], t[np.isfinite(t)])
+
+
+@pytest.mark.parametrize("m, expected", [(1, 16), (16, 16), (17, 32), (64, 64), (128, 128), (129, 192)])
+def test_bucket_length(m, expected):
+    assert bucket_length(m) == expected
+
+
+# --------------------------------------------------------------------------- against brute force
+
+
+@given(cases())
+def test_score_bucket_equals_brute_force(case):
+    codes, vals, table = case
+    res = score_bucket(codes, vals, table)
+    assert isinstance(res, ScoreResult)
+    assert res.utility.dtype == np.float32 and res.rotation.dtype == np.int32 and res.reflected.dtype == bool
+    for k, v in enumerate(vals):
+        best, rot, refl, _ = reference.brute_force(codes, v, table)
+        assert res.utility[k] == best  # integers in float32: exact
+        assert res.unmatchable[k] == (best == -math.inf)
+        if best == -math.inf:
+            assert res.rotation[k] == -1 and not res.reflected[k]
+            continue
+        # ties: smallest rotation, non-reflected first -- the enumeration order of brute_force
+        assert (res.rotation[k], bool(res.reflected[k])) == (rot, refl)
+        a = align(codes, v, table, int(res.rotation[k]), bool(res.reflected[k]))
+        assert a.shape == (len(v),) and a.dtype == np.int32
+        assert np.all(np.diff(a) > 0) and a[0] >= 0 and a[-1] < len(codes)
+        assert utility_of(codes, v, table, res.rotation[k], res.reflected[k], a) == res.utility[k]
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_score_bucket_equals_dp_reference_on_larger_cases(seed):
+    rng = np.random.default_rng(seed)
+    m, n = 30, 10
+    codes = rng.integers(0, 3, m)
+    vals = rng.integers(2, 6, (6, n))
+    table = random_table(seed, 0.3)
+    res = score_bucket(codes, vals, table)
+    expect = [reference.dp_reference(codes, v, table) for v in vals]
+    np.testing.assert_array_equal(res.utility, np.array(expect, np.float32))
+
+
+def test_align_any_orientation_achieves_its_dp_value():
+    rng = np.random.default_rng(7)
+    codes = rng.integers(0, 3, 9)
+    table = random_table(7, 0.0)
+    v = rng.integers(2, 6, 5)
+    by_orientation = {}
+    for u, r, refl, _ in reference.all_utilities(codes, v, table):
+        by_orientation[(r, refl)] = max(u, by_orientation.get((r, refl), -math.inf))
+    for (r, refl), best in by_orientation.items():
+        a = align(codes, v, table, r, refl)
+        assert utility_of(codes, v, table, r, refl, a) == best
+
+
+# --------------------------------------------------------------------------- unmatchable, padding
+
+
+def test_mixed_batch_reports_unmatchable_and_never_ranks_them():
+    # convex points only match valence-2 vertices; straight points anything but 2
+    table = np.full((3, 4, 4, 4), -np.inf, np.float32)
+    table[X, :, 0, :] = 3.0
+    table[S, :, 1:, :] = 1.0
+    codes = [X, S, S, X, S, S, X, S, S, X, S, S]  # a square: 4 corners, 2 straights per side
+    vals = np.array(
+        [
+            [2, 3, 3, 2, 3, 3, 2, 3, 3, 2, 3, 3],  # the 3x3 grid: perfect fit
+            [2, 3, 3, 2, 3, 3, 2, 3, 3, 3, 3, 3],  # 3 corners for 4 convex points, n == m: no skipping
+            [3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 3],  # no valence 2: convex points cannot be matched
+            [2, 2, 2, 2, 2, 2, 2, 2, 2, 2, 2, 2],  # only valence 2: straights cannot be matched
+        ],
+        np.int32,
+    )
+    res = score_bucket(codes, vals, table)
+    expect = [reference.brute_force(codes, v, table)[0] for v in vals]
+    np.testing.assert_array_equal(res.utility, np.array(expect, np.float32))
+    assert res.utility[0] == 4 * 3 + 8 * 1
+    assert res.unmatchable.tolist() == [False, True, True, True]
+    assert np.isneginf(res.utility[1:]).all() and (res.rotation[1:] == -1).all()
+
+
+def test_longer_mesh_than_shape_is_unmatchable():
+    table = np.zeros((3, 4, 4, 4), np.float32)
+    res = score_bucket([S, S, S], [[2, 2, 2, 2], [3, 3, 3, 3]], table)
+    assert res.unmatchable.all() and np.isneginf(res.utility).all()
+    with pytest.raises(UnmatchableError):
+        align([S, S, S], [2, 2, 2, 2], table, 0, False)
+
+
+def test_all_forbidden_table():
+    table = np.full((3, 4, 4, 4), -np.inf, np.float32)
+    res = score_bucket([S, X, V, S, X], [[2, 3, 4], [5, 5, 5]], table)
+    assert res.unmatchable.all() and np.isneginf(res.utility).all()
+    with pytest.raises(UnmatchableError):
+        align([S, X, V, S, X], [2, 3, 4], table, 0, False)
+
+
+def test_padding_does_not_change_results():
+    rng = np.random.default_rng(3)
+    codes = rng.integers(0, 3, 13)
+    vals = rng.integers(2, 6, (21, 6))
+    table = random_table(3, 0.4)
+    base = score_bucket(codes, vals, table)
+    assert base.unmatchable.any() and not base.unmatchable.all()  # a mixed batch
+    for m_pad in (16, 32, 48):
+        for batch in (8, 16, 256):
+            res = score_bucket(codes, vals, table, m_pad=m_pad, batch=batch)
+            for a, b in zip(res, base):
+                np.testing.assert_array_equal(a, b)
+    one_by_one = [score_bucket(codes, v[None], table) for v in vals]
+    np.testing.assert_array_equal(np.concatenate([r.utility for r in one_by_one]), base.utility)
+    with pytest.raises(ValueError):
+        score_bucket(codes, vals, table, m_pad=8)
+
+
+def test_ties_prefer_smallest_rotation_then_unreflected():
+    res = score_bucket([S] * 8, [[2, 3, 4, 5, 3]], np.zeros((3, 4, 4, 4), np.float32))
+    assert (res.utility[0], res.rotation[0], res.reflected[0]) == (0.0, 0, False)
+
+
+def test_reflection_can_win():
+    vals = [2, 2, 3, 5]
+    reflected_triples = mesh.triples(vals[::-1])
+    table = np.full((3, 4, 4, 4), -np.inf, np.float32)
+    for u, v, w in reflected_triples:
+        table[:, u - 2, v - 2, w - 2] = 1.0
+    assert not any(np.isfinite(table[0, u - 2, v - 2, w - 2]) for u, v, w in mesh.triples(vals))
+    res = score_bucket([S, S, S, S], [vals], table)
+    assert (res.utility[0], res.rotation[0], res.reflected[0]) == (4.0, 0, True)
+    a = align([S, S, S, S], vals, table, 0, True)
+    assert a.tolist() == [0, 1, 2, 3]
+
+
+def test_empty_bucket():
+    res = score_bucket([S, S], np.zeros((0, 4), np.int32), np.zeros((3, 4, 4, 4), np.float32))
+    assert all(a.shape == (0,) for a in res)
+
+
+@pytest.mark.parametrize(
+    "codes, vals",
+    [([S, 3], [[2, 2, 2]]), ([S, -1], [[2, 2, 2]]), ([S, S], [[1, 2, 2]]), ([S, S], [[2, 6, 2]])],
+)
+def test_bad_input_raises(codes, vals):
+    with pytest.raises(ValueError):
+        score_bucket(codes, vals, np.zeros((3, 4, 4, 4), np.float32))
+
+
+def test_utility_of_rejects_bad_alignments():
+    table = np.zeros((3, 4, 4, 4), np.float32)
+    for bad in ([0, 0, 1], [0, 1], [1, 2, 5], [-1, 0, 1]):
+        with pytest.raises(ValueError):
+            utility_of([S] * 5, [2, 3, 4], table, 0, False, bad)
