@@ -185,8 +185,8 @@ def test_padding_does_not_change_results():
     table = random_table(3, 0.4)
     base = score_bucket(codes, vals, table)
     assert base.unmatchable.any() and not base.unmatchable.all()  # a mixed batch
-    for m_pad in (16, 32, 48):
-        for batch in (8, 16, 256):
+    for m_pad in (16, 48):
+        for batch in (8, 256):
             res = score_bucket(codes, vals, table, m_pad=m_pad, batch=batch)
             for a, b in zip(res, base):
                 np.testing.assert_array_equal(a, b)
