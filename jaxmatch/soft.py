@@ -9,7 +9,9 @@ Since log-sum-exp distributes over ``+``, the result is exactly the log-partitio
 
 so ``exact <= soft <= exact + gamma * log(2n * C(m, n))`` and ``soft -> exact`` as
 ``gamma -> 0``. Its gradient w.r.t. a table entry is the expected number of times the entry
-is used under the Gibbs distribution ``exp(U / gamma)`` (each mesh's gradient sums to ``n``).
+is used under the Gibbs distribution ``exp(U / gamma)`` (each matchable mesh's gradient sums
+to ``n``; for any mesh it is nonnegative with sum at most ``n``: the smoothed maxima use
+normalised weights in their derivatives, see :func:`smax2`).
 
 Forbidden entries (``forbidden_mask``) are fixed at the finite ``NEG`` (never ``-inf``) and
 get exactly zero gradient. Values ``<= NEG / 2`` mean *unmatchable* (no finite alignment or
@@ -31,6 +33,8 @@ import numpy as np
 from jaxmatch.score import NEG, UNROLL, bucket_length, dp_scan, orientation_weights
 
 __all__ = [
+    "smax",
+    "smax2",
     "smooth_max",
     "soft_table",
     "soft_utility",
@@ -40,11 +44,54 @@ __all__ = [
 ]
 
 
+def _entropy(p):
+    """Binary entropy ``-p log p - (1 - p) log(1 - p)`` (nats), 0 at ``p`` in {0, 1}."""
+    return jax.scipy.special.entr(p) + jax.scipy.special.entr(1.0 - p)
+
+
+@jax.custom_jvp
+def smax2(a, b, gamma):
+    """``gamma * log(exp(a / gamma) + exp(b / gamma))``, elementwise, finite inputs.
+
+    Custom JVP: the weights are ``p = sigmoid((a - b) / gamma)`` and ``1 - p``, which sum to 1
+    even where ``a`` and ``b`` are of the size of ``NEG`` (the generic ``exp(a - out)`` form
+    rounds there and lets gradient mass grow exponentially along the DP). ``d/dgamma`` is
+    the entropy of ``(p, 1 - p)``.
+    """
+    return jnp.maximum(a, b) + gamma * jnp.log1p(jnp.exp(-jnp.abs(a - b) / gamma))
+
+
+@smax2.defjvp
+def _smax2_jvp(primals, tangents):
+    a, b, gamma = primals
+    da, db, dg = tangents
+    out = smax2(a, b, gamma)
+    p = jax.nn.sigmoid((a - b) / gamma)
+    t = p * da + (1.0 - p) * db
+    return out, t + _entropy(p) * dg
+
+
+@partial(jax.custom_jvp, nondiff_argnums=(2,))
+def smax(x, gamma, axis: int = -1):
+    """``gamma * logsumexp(x / gamma, axis)`` with normalised softmax weights in its JVP."""
+    return gamma * jax.nn.logsumexp(x / gamma, axis=axis)
+
+
+@smax.defjvp
+def _smax_jvp(axis, primals, tangents):
+    x, gamma = primals
+    dx, dg = tangents
+    out = smax(x, gamma, axis)
+    p = jax.nn.softmax(x / gamma, axis=axis)
+    ent = -jnp.sum(jnp.where(p > 0, p * jnp.log(jnp.where(p > 0, p, 1.0)), 0.0), axis=axis)
+    return out, jnp.sum(p * dx, axis=axis) + ent * dg
+
+
 def smooth_max(gamma) -> Callable[[jnp.ndarray, jnp.ndarray], jnp.ndarray]:
     """The reduction ``(a, b) -> gamma * logaddexp(a / gamma, b / gamma)`` for :func:`dp_scan`."""
 
     def reduce(a, b):
-        return gamma * jnp.logaddexp(a / gamma, b / gamma)
+        return smax2(a, b, gamma)
 
     return reduce
 
@@ -67,10 +114,9 @@ def table_parts(table) -> tuple[np.ndarray, np.ndarray]:
 
 def _soft_core(codes, valid, vals, table, gamma, unroll):
     """``(N,)`` soft utilities of meshes ``vals: (N, n)`` for one padded shape."""
-    w = orientation_weights(codes, vals, table)  # (m, n, N, 2n)
-    last = dp_scan(w, valid, smooth_max(gamma), unroll=unroll)
-    final = last[-1]  # (N, 2n)
-    return gamma * jax.nn.logsumexp(final / gamma, axis=-1)
+    wc = orientation_weights(vals, table)  # (3, n, N, 2n)
+    last = dp_scan(wc, codes, valid, smooth_max(gamma), unroll=unroll)
+    return smax(last[-1], gamma, -1)  # over the 2n orientations of each mesh
 
 
 @partial(jax.jit, static_argnames=("unroll",))

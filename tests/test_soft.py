@@ -132,6 +132,22 @@ def test_gradient_is_expected_usage_summing_to_n():
         assert float(g.min()) >= 0.0
 
 
+@pytest.mark.parametrize("gamma", [1.0, 1e-3])
+def test_gradient_of_unmatchable_meshes_stays_bounded(gamma):
+    # values of the size of NEG round in float32; the gradient must not blow up there
+    rng = np.random.default_rng(11)
+    m, n = 40, 12
+    codes = rng.integers(0, 3, m)
+    vals = rng.integers(2, 6, (16, n))
+    table = random_table(11, 0.3)
+    exact = score_bucket(codes, vals, table)
+    assert exact.unmatchable.any()
+    free, mask = table_parts(table)
+    for k in np.flatnonzero(exact.unmatchable):
+        g = np.asarray(_grad(codes, vals[k : k + 1], free, mask, gamma))
+        assert np.isfinite(g).all() and g.min() >= 0.0 and g.sum() <= n * (1 + 1e-5)
+
+
 def test_small_gamma_gradient_counts_the_unique_best_path():
     for seed in range(100):
         codes, vals, table = random_case(seed, 8, 4, forbidden=0.3, n_meshes=1)
@@ -170,6 +186,11 @@ def test_gradient_matches_finite_differences_float64():
             e[p] = eps
             fd = (float(f(t0 + e)) - float(f(t0 - e))) / (2 * eps)
             assert g[p] == pytest.approx(fd, rel=1e-6, abs=1e-8)
+        # and w.r.t. gamma (entropy terms of the smoothed maxima)
+        h = lambda gm: soft_utility(codes, vals, t0, mask, gm).sum()  # noqa: E731
+        dg = float(jax.grad(h)(jnp.float64(gamma)))
+        fd = (float(h(gamma + eps)) - float(h(gamma - eps))) / (2 * eps)
+        assert dg == pytest.approx(fd, rel=1e-6)
 
 
 def test_padding_does_not_change_soft_values():
