@@ -55,10 +55,12 @@ __all__ = [
     "MAX_WEIGHT",
     "NEG",
     "TYPES",
+    "TYPE_NAMES",
     "builtin_names",
     "finite_table",
     "lattice_json",
     "lattice_text",
+    "lattice_toml",
     "level_structure",
     "load_lattice",
     "parse_lattice",
@@ -350,6 +352,23 @@ class _Locator:
                 return i + 1
         return None
 
+    def within(self, line: int | None, value) -> int | None:
+        """Line of ``value`` in the array value that starts on ``line`` (else ``line``)."""
+        if line is None:
+            return None
+        if isinstance(value, str):
+            needles = [f'"{value}"', f"'{value}'"]
+        elif isinstance(value, bool):
+            needles = [str(value).lower()]
+        else:
+            needles = [str(value)]
+        for i in range(line - 1, len(self.code)):
+            if i > line - 1 and (self._HEADER.match(self.code[i]) or re.match(r"^\s*[\w\"'.-]+\s*=", self.code[i])):
+                break
+            if any(n in self.code[i] for n in needles):
+                return i + 1
+        return line
+
     def level(self, table: str, index: int, key: str = "weight") -> int | None:
         """Line of ``key`` in the ``index``-th level of ``table`` (else its header line)."""
         heads = [i for i in self._lines(table) if self.levels[i]]
@@ -392,7 +411,7 @@ def _short(value, limit: int = 40) -> str:
 def _validate(doc: dict, loc: _Locator, source: str) -> Lattice:
     for key in doc:
         if key not in _TOP_KEYS:
-            raise InputError(f"unknown key {_short(key)} (allowed: {', '.join(_TOP_KEYS)})", where=loc.at(loc.key(None, key)))
+            raise InputError(f"unknown key {_short(key)} (allowed: {', '.join(_TOP_KEYS)})", where=loc.at(loc.key("", key) or loc.key(None, key)))
     name = doc.get("name", Path(source).stem)
     if not isinstance(name, str) or not name.strip() or "\n" in name:
         raise InputError("name must be a non-empty one-line string", where=loc.at(loc.key("", "name")))
@@ -411,9 +430,9 @@ def _validate(doc: dict, loc: _Locator, source: str) -> Lattice:
                 raise InputError(f"[{kind}]: unknown key {_short(key)} (allowed: {', '.join(_TYPE_KEYS)})", where=loc.at(loc.key(kind, key) or loc.header(kind)))
         placed: dict[str, str] = {}
 
-        def place(triple, what: str, kind=kind, placed=placed):
+        def place(triple, what: str, line: int | None, kind=kind, placed=placed):
             if not isinstance(triple, str) or not _TRIPLE_RE.match(triple):
-                line = loc.value(kind, triple) if isinstance(triple, str) else None
+                line = loc.within(line, triple)
                 raise InputError(f"[{kind}] {what}: {_short(triple)} is not a triple 'u-v-w' with valences 2..5", where=loc.at(line or loc.header(kind)))
             if triple in placed:
                 raise InputError(f"[{kind}]: triple {triple} is placed twice ({placed[triple]} and {what})", where=loc.at(loc.value(kind, triple, 2) or loc.header(kind)))
@@ -424,7 +443,7 @@ def _validate(doc: dict, loc: _Locator, source: str) -> Lattice:
             if not isinstance(value, list):
                 raise InputError(f"[{kind}] {key} must be a list of triples 'u-v-w'", where=loc.at(loc.key(kind, key) or loc.header(kind)))
             for tr in value:
-                place(tr, key)
+                place(tr, key, loc.key(kind, key))
             return tuple(value)
 
         levels = table.get("levels")
@@ -451,7 +470,7 @@ def _validate(doc: dict, loc: _Locator, source: str) -> Lattice:
             if not isinstance(triples, list) or not triples:
                 raise InputError(f"{where}: triples must be a non-empty list of 'u-v-w'", where=loc.at(loc.level(kind, i, "triples")))
             for tr in triples:
-                place(tr, f"level {i + 1}")
+                place(tr, f"level {i + 1}", loc.level(kind, i, "triples"))
             parsed.append(Level(int(w), tuple(triples)))
         weeded = triple_list("weeded")
         forbidden = triple_list("forbidden")

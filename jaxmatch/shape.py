@@ -212,14 +212,14 @@ def largest_remainder(weights, total: int) -> np.ndarray:
     """Split ``total`` items over ``len(weights)`` bins in proportion to ``weights``.
 
     Largest-remainder (Hamilton) rounding: every bin gets the floor of its quota, the rest go
-    to the largest fractional parts; ties go to the lower index. Quotas are rounded to 9
+    to the largest fractional parts; ties go to the lower index. Quotas are rounded to 6
     decimals first so that the result does not depend on round-off (e.g. the four equal sides
     of a translated and scaled square). Returns ``(k,) int64`` summing to ``total``.
     """
     w = np.asarray(weights, dtype=np.float64)
     if w.size == 0:
         return np.zeros(0, np.int64)
-    quota = np.round(total * w / w.sum(), 9)
+    quota = np.round(total * w / w.sum(), 6)
     base = np.floor(quota).astype(np.int64)
     rest = int(total - base.sum())
     order = np.lexsort((np.arange(w.size), -(quota - base)))
@@ -324,7 +324,11 @@ def make_shape(points, corners=None, *, corner_angle: float = DEFAULT_CORNER_ANG
     Raises :class:`InputError` (``where=source``) for any problem; indices in messages refer
     to the input order.
     """
-    angle = _check_angle(corner_angle)
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore", under="ignore"):
+        return _make_shape(points, corners, _check_angle(corner_angle), str(source))
+
+
+def _make_shape(points, corners, angle: float, source: str) -> Shape:
     try:
         p = np.array(points, dtype=np.float64)
     except (TypeError, ValueError, OverflowError) as err:
@@ -345,8 +349,11 @@ def make_shape(points, corners=None, *, corner_angle: float = DEFAULT_CORNER_ANG
         corner_idx = _check_corners(corners, n, source)
 
     def repeated(q, tol):
-        d = np.linalg.norm(np.roll(q, -1, axis=0) - q, axis=1)
-        hit = np.flatnonzero(~(d > tol))
+        if tol == 0:
+            same = np.all(np.roll(q, -1, axis=0) == q, axis=1)
+        else:
+            same = ~(np.linalg.norm(np.roll(q, -1, axis=0) - q, axis=1) > tol)
+        hit = np.flatnonzero(same)
         if hit.size:
             i = int(hit[0])
             if i == n - 1:

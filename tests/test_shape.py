@@ -1,0 +1,383 @@
+"""Shape input and annotation: a specification by example (jaxmatch.shape)."""
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from jaxmatch.errors import InputError
+from jaxmatch.shape import (
+    MAX_POINTS,
+    S,
+    SYMBOLS,
+    V,
+    X,
+    annotate,
+    cumulative_length,
+    default_points,
+    interior_angles,
+    largest_remainder,
+    load_shape,
+    make_shape,
+    parse_shape,
+    point_at,
+    signed_area,
+)
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+
+SQUARE = [[0, 0], [1, 0], [1, 1], [0, 1]]
+L_SHAPE = [[0, 0], [2, 0], [2, 1], [1, 1], [1, 2], [0, 2]]
+TRIANGLE = [[0, 0], [2, 0], [1, math.sqrt(3)]]
+HEXAGON = [[math.cos(k * math.pi / 3), math.sin(k * math.pi / 3)] for k in range(6)]
+
+
+def js(doc) -> bytes:
+    return json.dumps(doc).encode()
+
+
+def corner_points(shape):
+    """User coordinates of the corners, as a set of rounded tuples."""
+    return {tuple(np.round(p, 9)) for p in shape.user_points[shape.corners]}
+
+
+# ---------------------------------------------------------------------------------------------
+# examples and corner detection
+
+
+@pytest.mark.parametrize(
+    "name, n_convex, n_concave",
+    [
+        ("square.json", 4, 0),
+        ("lshape.json", 5, 1),
+        ("lshape.txt", 5, 1),
+        ("triangle.json", 3, 0),
+        ("hexagon.json", 6, 0),
+        ("tshape.json", 6, 2),
+        ("curved.json", 4, 0),
+        ("dshape.json", 2, 0),
+        ("circle.json", 0, 0),
+    ],
+)
+def test_examples_load_with_expected_corners(name, n_convex, n_concave):
+    shape = load_shape(EXAMPLES / name)
+    assert int(shape.convex.sum()) == n_convex
+    assert int((~shape.convex).sum()) == n_concave
+    assert signed_area(shape.points) > 0
+    assert shape.points.min() >= 0 and shape.points.max() <= 1 + 1e-12
+
+
+def test_text_and_json_l_shapes_agree():
+    a, b = load_shape(EXAMPLES / "lshape.json"), load_shape(EXAMPLES / "lshape.txt")
+    np.testing.assert_allclose(a.points, b.points)
+    np.testing.assert_array_equal(a.corners, b.corners)
+    np.testing.assert_array_equal(a.convex, b.convex)
+
+
+@pytest.mark.parametrize(
+    "points, convex",
+    [
+        (SQUARE, [True] * 4),
+        (L_SHAPE, [True, True, True, False, True, True]),
+        (TRIANGLE, [True] * 3),
+        (HEXAGON, [True] * 6),
+    ],
+)
+def test_corner_detection(points, convex):
+    shape = make_shape(points)
+    np.testing.assert_array_equal(shape.corners, np.arange(len(points)))
+    np.testing.assert_array_equal(shape.convex, convex)
+
+
+def test_points_on_straight_sides_are_not_corners():
+    square_with_midpoints = [[0, 0], [0.5, 0], [1, 0], [1, 0.5], [1, 1], [0.5, 1], [0, 1], [0, 0.5]]
+    shape = make_shape(square_with_midpoints)
+    assert corner_points(shape) == {(0, 0), (1, 0), (1, 1), (0, 1)}
+
+
+@pytest.mark.parametrize("threshold, n_corners", [(30, 8), (44, 8), (46, 0), (10, 8)])
+def test_corner_threshold(threshold, n_corners):
+    octagon = [[math.cos(k * math.pi / 4), math.sin(k * math.pi / 4)] for k in range(8)]  # turns 45 deg
+    assert make_shape(octagon, corner_angle=threshold).n_corners == n_corners
+
+
+def test_explicit_corners_override_angles():
+    shape = make_shape(SQUARE, corners=[0, 2])
+    assert corner_points(shape) == {(0, 0), (1, 1)}
+    assert shape.convex.all()
+    assert make_shape(SQUARE, corners=[]).n_corners == 0
+
+
+def test_interior_angles_and_area():
+    np.testing.assert_allclose(interior_angles(SQUARE), [90] * 4)
+    np.testing.assert_allclose(interior_angles(L_SHAPE), [90, 90, 90, 270, 90, 90])
+    assert signed_area(SQUARE) == pytest.approx(1.0)
+    assert signed_area(SQUARE[::-1]) == pytest.approx(-1.0)
+
+
+# ---------------------------------------------------------------------------------------------
+# normalisation
+
+
+def test_clockwise_is_normalised_and_corners_remapped():
+    cw = L_SHAPE[::-1]  # clockwise, the concave corner (1, 1) is input index 2
+    shape = make_shape(cw, corners=[0, 1, 2, 3, 4, 5])
+    assert signed_area(shape.points) > 0
+    concave = shape.user_points[shape.corners[~shape.convex]]
+    np.testing.assert_allclose(concave, [[1, 1]])
+    ccw = make_shape(L_SHAPE)
+    a, b = annotate(shape, 20).symbols, annotate(ccw, 20).symbols
+    assert a in b + b  # the same cyclic sequence, started at another corner
+
+
+def test_clockwise_explicit_corner_subset():
+    cw = [[0, 0], [0, 1], [1, 1], [1, 0]]
+    shape = make_shape(cw, corners=[1, 3])
+    assert corner_points(shape) == {(0, 1), (1, 0)}
+
+
+def test_unit_box_and_user_transform():
+    pts = np.array(L_SHAPE, float) * 7.5 + [100, -3]
+    shape = make_shape(pts)
+    assert shape.scale == pytest.approx(15.0)
+    np.testing.assert_allclose(shape.offset, [100, -3])
+    assert shape.points.min() == 0 and shape.points.max() == 1
+    # same loop in user coordinates (rotated so that the first corner comes first)
+    assert {tuple(np.round(p, 9)) for p in shape.user_points} == {tuple(np.round(p, 9)) for p in pts}
+
+
+def test_first_corner_is_first_point():
+    # point 0 is a straight point: the loop is rotated so points[0] is the first corner
+    pts = [[0.5, 0], [1, 0], [1, 1], [0, 1], [0, 0]]
+    shape = make_shape(pts)
+    assert shape.corners[0] == 0
+    np.testing.assert_allclose(shape.user_points[0], [1, 0])
+
+
+# ---------------------------------------------------------------------------------------------
+# bad input
+
+
+BAD = [
+    (b"\xff\xfe\x00garbage", "x.json", "UTF-8"),
+    (b"{not json", "x.json", "JSON"),
+    (b"[]", "x.json", "object"),
+    (js({"boundary": [[0, 0], [1, 0]]}), "x.json", "at least 3"),
+    (js({"boundary": SQUARE, "colour": "red"}), "x.json", "unknown key"),
+    (js({"corners": [0]}), "x.json", "missing"),
+    (js({"boundary": {"a": 1}}), "x.json", "list"),
+    (js({"boundary": [[0, 0], [1, 0], [1]]}), "x.json", "pair"),
+    (js({"boundary": [[0, 0], [1, 0], [[1], 1]]}), "x.json", "non-number"),
+    (js({"boundary": [[0, 0], [1, 0], ["1", 1]]}), "x.json", "non-number"),
+    (js({"boundary": [[0, 0], [1, 0], [True, 1]]}), "x.json", "non-number"),
+    (b'{"boundary": [[0, 0], [1, 0], [NaN, 1]]}', "x.json", "finite"),
+    (b'{"boundary": [[0, 0], [1, 0], [Infinity, 1]]}', "x.json", "finite"),
+    (b'{"boundary": [[0, 0], [1, 0], [1e999, 1]]}', "x.json", "finite"),
+    (js({"boundary": [[0, 0], [1, 0], [10**400, 1]]}), "x.json", "finite"),
+    (b'{"boundary": [[0,0],[1,0],[1,1]], "boundary": [[0,0],[1,0],[1,1]]}', "x.json", "duplicate"),
+    (js({"boundary": [[0, 0], [1, 0], [1, 0], [0, 1]]}), "x.json", "repeated"),
+    (js({"boundary": [[0, 0], [1, 0], [1, 1], [0, 0]]}), "x.json", "repeats the first"),
+    (js({"boundary": [[0, 0], [1, 0], [2, 0]]}), "x.json", "zero area"),
+    (js({"boundary": [[0, 0], [1, 1], [1, 0], [0, 1]]}), "x.json", "crosses"),
+    (js({"boundary": [[0, 0], [2, 0], [2, 2], [1, 0], [0, 2]]}), "x.json", "crosses"),  # touches
+    (js({"boundary": [[0, 0], [2, 0], [1, 0], [1, 1]]}), "x.json", "crosses"),  # folds back
+    (js({"boundary": [[-1e308, 0], [1e308, 0], [0, 1]]}), "x.json", "too large"),
+    (js({"boundary": SQUARE, "corners": [0, 4]}), "x.json", "out of range"),
+    (js({"boundary": SQUARE, "corners": [0, -1]}), "x.json", "out of range"),
+    (js({"boundary": SQUARE, "corners": [1, 1]}), "x.json", "twice"),
+    (js({"boundary": SQUARE, "corners": [1.0]}), "x.json", "integer"),
+    (js({"boundary": SQUARE, "corners": [True]}), "x.json", "integer"),
+    (js({"boundary": SQUARE, "corners": 2}), "x.json", "list"),
+    (b"[" * 100000, "x.json", "JSON"),
+    (b"0 0\n1 0\n", "x.txt", "at least 3"),
+    (b"0 0\n1 zero\n1 1\n", "x.txt", "not a number"),
+    (b"0 0\n1 0 3\n1 1\n", "x.txt", "two numbers"),
+    (b"0 0\n1 nan\n1 1\n", "x.txt", "finite"),
+    (b"# only a comment\n\n", "x.txt", "no points"),
+    (b"0 0\n1 0\n1 0\n0 1\n", "x.txt", "repeated"),
+]
+
+
+@pytest.mark.parametrize("data, name, fragment", BAD)
+def test_bad_input_is_one_line_input_error(data, name, fragment):
+    with pytest.raises(InputError) as info:
+        parse_shape(data, f"some/dir/{name}")
+    msg = str(info.value)
+    assert "some/dir/" + name in msg
+    assert fragment.lower() in msg.lower()
+    assert "\n" not in msg
+
+
+def test_text_errors_name_the_line():
+    with pytest.raises(InputError, match=r"s\.txt:3: "):
+        parse_shape(b"0 0\n# comment\n1 x\n", "s.txt")
+
+
+def test_too_many_points():
+    pts = [[math.cos(a), math.sin(a)] for a in np.linspace(0, 6, MAX_POINTS + 1)]
+    with pytest.raises(InputError, match="maximum"):
+        parse_shape(js({"boundary": pts}), "big.json")
+
+
+def test_unreadable_file(tmp_path):
+    with pytest.raises(InputError, match="cannot read"):
+        load_shape(tmp_path / "missing.json")
+    with pytest.raises(InputError, match="cannot read"):
+        load_shape(tmp_path)  # a directory
+
+
+def test_bad_corner_angle():
+    with pytest.raises(InputError, match="corner angle"):
+        make_shape(SQUARE, corner_angle=200)
+
+
+@pytest.mark.parametrize("name", ["r.json", "r.txt", "r.shape"])
+@given(data=st.binary(max_size=300))
+def test_random_bytes_never_crash(name, data):
+    try:
+        parse_shape(data, name)
+    except InputError as err:
+        assert name in str(err) and "\n" not in str(err)
+
+
+json_values = st.recursive(
+    st.none() | st.booleans() | st.integers() | st.floats() | st.text(max_size=5),
+    lambda inner: st.lists(inner, max_size=6) | st.dictionaries(st.sampled_from(["boundary", "corners", "x"]), inner, max_size=3),
+    max_leaves=30,
+)
+
+
+@given(doc=json_values)
+def test_random_json_never_crashes(doc):
+    try:
+        parse_shape(json.dumps(doc).encode(), "r.json")
+    except InputError as err:
+        assert "r.json" in str(err)
+
+
+@given(
+    pts=st.lists(st.tuples(st.integers(-3, 3), st.integers(-3, 3)), min_size=0, max_size=9),
+    corners=st.none() | st.lists(st.integers(-2, 10), max_size=5),
+)
+def test_random_polygons_either_load_or_input_error(pts, corners):
+    doc = {"boundary": [list(p) for p in pts]}
+    if corners is not None:
+        doc["corners"] = corners
+    try:
+        shape = parse_shape(js(doc), "p.json")
+    except InputError as err:
+        assert "p.json" in str(err)
+        return
+    assert signed_area(shape.points) > 0
+    annotate(shape, default_points(shape, 8))
+
+
+# ---------------------------------------------------------------------------------------------
+# annotation
+
+
+def test_square_annotation():
+    a = annotate(make_shape(SQUARE), 12)
+    assert a.symbols == "xssxssxssxss"
+    np.testing.assert_array_equal(a.codes, [X, S, S] * 4)
+    np.testing.assert_array_equal(a.side, np.repeat(np.arange(4), 3))
+    np.testing.assert_allclose(a.t, np.arange(12) / 3)
+    assert a.perimeter == pytest.approx(4.0)
+    np.testing.assert_allclose(a.positions[:3], [[0, 0], [1 / 3, 0], [2 / 3, 0]])
+
+
+def test_symbols_match_codes():
+    a = annotate(make_shape(L_SHAPE), 17)
+    assert a.symbols == "".join(SYMBOLS[c] for c in a.codes)
+    assert a.symbols.count("v") == 1 and a.symbols.count("x") == 5
+
+
+def test_s_points_proportional_to_side_length():
+    # 3 x 1 rectangle: sides 3, 1, 3, 1 -> 8 s points split 3, 1, 3, 1
+    a = annotate(make_shape([[0, 0], [3, 0], [3, 1], [0, 1]]), 12)
+    assert a.symbols == "xsssxsxsssxs"
+    assert np.bincount(a.side).tolist() == [4, 2, 4, 2]
+
+
+@pytest.mark.parametrize("m", [6, 7, 11, 20, 33])
+def test_annotation_invariants(m):
+    shape = make_shape(L_SHAPE)
+    a = annotate(shape, m)
+    assert len(a.symbols) == m == a.codes.shape[0] == a.t.shape[0] == a.positions.shape[0]
+    assert a.t[0] == 0 and np.all(np.diff(a.t) > 0) and a.t[-1] < a.perimeter
+    np.testing.assert_allclose(a.positions, point_at(shape.points, a.t))
+    corners = np.flatnonzero(a.codes != S)
+    np.testing.assert_array_equal(a.side[corners], np.arange(shape.n_corners))
+    # s points evenly spaced strictly inside their side
+    for j in range(shape.n_corners):
+        tj = a.t[a.side == j]
+        end = a.t[corners[j + 1]] if j + 1 < shape.n_corners else a.perimeter
+        gaps = np.diff(np.concatenate([tj, [end]]))
+        np.testing.assert_allclose(gaps, gaps[0])
+
+
+def test_corner_positions_exact_in_user_coordinates():
+    pts = np.array(L_SHAPE, float) * 3 + 1
+    shape = make_shape(pts)
+    a = annotate(shape, 12)
+    got = shape.to_user(a.positions[a.codes != S])
+    assert {tuple(np.round(p, 9)) for p in got} == {tuple(p) for p in pts.tolist()}
+
+
+def test_no_corners_all_straight_evenly_spaced():
+    circle = [[math.cos(a), math.sin(a)] for a in np.linspace(0, 2 * math.pi, 40, endpoint=False)]
+    shape = make_shape(circle)
+    assert shape.n_corners == 0
+    a = annotate(shape, 10)
+    assert a.symbols == "s" * 10
+    np.testing.assert_allclose(np.diff(a.t), a.perimeter / 10)
+
+
+def test_m_equal_to_corner_count_and_too_small():
+    shape = make_shape(L_SHAPE)
+    assert annotate(shape, 6).symbols == "xxxvxx"
+    with pytest.raises(InputError, match="corners"):
+        annotate(shape, 5)
+    with pytest.raises(InputError):
+        annotate(make_shape(SQUARE, corners=[]), 0)
+
+
+@given(
+    scale=st.floats(1e-3, 1e4),
+    dx=st.floats(-1e3, 1e3),
+    dy=st.floats(-1e3, 1e3),
+    m=st.integers(8, 40),
+    which=st.sampled_from([SQUARE, L_SHAPE, TRIANGLE, HEXAGON]),
+)
+def test_symbols_invariant_under_translation_and_scale(scale, dx, dy, m, which):
+    base = annotate(make_shape(which), m)
+    moved = annotate(make_shape(np.array(which, float) * scale + [dx, dy]), m)
+    assert moved.symbols == base.symbols
+    np.testing.assert_allclose(moved.t, base.t, atol=1e-9)
+
+
+@given(weights=st.lists(st.floats(0.01, 100), min_size=1, max_size=10), total=st.integers(0, 200))
+def test_largest_remainder_sums_and_is_near_quota(weights, total):
+    counts = largest_remainder(weights, total)
+    assert counts.sum() == total
+    quota = total * np.array(weights) / np.sum(weights)
+    assert np.all(np.abs(counts - quota) < 1 + 1e-9)
+
+
+@pytest.mark.parametrize("n", [0, 1, 4, 12, 30])
+@pytest.mark.parametrize("name", ["square.json", "tshape.json", "circle.json"])
+def test_default_points(n, name):
+    shape = load_shape(EXAMPLES / name)
+    m = default_points(shape, n)
+    assert m >= n and m >= shape.n_corners and m >= 1 and m - shape.n_corners >= n
+    annotate(shape, m)
+
+
+def test_cumulative_length_and_point_at():
+    cum = cumulative_length(SQUARE)
+    np.testing.assert_allclose(cum, [0, 1, 2, 3, 4])
+    np.testing.assert_allclose(point_at(SQUARE, [0.5, 4.25, -0.5]), [[0.5, 0], [0.25, 0], [0, 0.5]])
