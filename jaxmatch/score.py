@@ -249,14 +249,11 @@ def score_bucket(
     n_chunks = -(-big_n // chunk)
     vp = np.full((n_chunks * chunk, n), 2, np.int32)
     vp[:big_n] = v
-    best = np.empty(n_chunks * chunk, np.float32)
-    orient = np.empty(n_chunks * chunk, np.int32)
     cj, vj = jnp.asarray(codes_pad), jnp.asarray(valid)
-    for k in range(n_chunks):
-        sl = slice(k * chunk, (k + 1) * chunk)
-        b, o = _score_chunk(cj, vj, jnp.asarray(vp[sl]), tf, unroll=unroll)
-        best[sl], orient[sl] = np.asarray(b), np.asarray(o)
-    best, orient = best[:big_n], orient[:big_n]
+    # dispatch every chunk first (asynchronous), then collect
+    outs = [_score_chunk(cj, vj, jnp.asarray(vp[k * chunk : (k + 1) * chunk]), tf, unroll=unroll) for k in range(n_chunks)]
+    best = np.concatenate([np.asarray(b) for b, _ in outs] or [np.empty(0, np.float32)])[:big_n]
+    orient = np.concatenate([np.asarray(o) for _, o in outs] or [np.empty(0, np.int32)])[:big_n]
     unmatchable = (best <= NEG / 2) | (n > m)
     utility = np.where(unmatchable, -np.inf, best).astype(np.float32)
     rotation = np.where(unmatchable, -1, orient % n).astype(np.int32)

@@ -29,6 +29,7 @@ from typing import Callable, Sequence
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.custom_derivatives import SymbolicZero
 
 from jaxmatch.score import NEG, UNROLL, bucket_length, dp_scan, orientation_weights
 
@@ -61,14 +62,31 @@ def smax2(a, b, gamma):
     return jnp.maximum(a, b) + gamma * jnp.log1p(jnp.exp(-jnp.abs(a - b) / gamma))
 
 
-@smax2.defjvp
+def _tangent(terms, like):
+    """Sum of the ``coefficient * tangent`` terms whose tangent is not a symbolic zero."""
+    out = None
+    for coef, t in terms:
+        if isinstance(t, SymbolicZero):
+            continue
+        out = coef * t if out is None else out + coef * t
+    return jnp.zeros_like(like) if out is None else out
+
+
 def _smax2_jvp(primals, tangents):
     a, b, gamma = primals
     da, db, dg = tangents
-    out = smax2(a, b, gamma)
-    p = jax.nn.sigmoid((a - b) / gamma)
-    t = p * da + (1.0 - p) * db
-    return out, t + _entropy(p) * dg
+    d = a - b
+    e = jnp.exp(-jnp.abs(d) / gamma)
+    out = jnp.maximum(a, b) + gamma * jnp.log1p(e)
+    r = 1.0 / (1.0 + e)
+    p = jnp.where(d >= 0, r, e * r)  # sigmoid(d / gamma), sharing exp with the value
+    terms = [(p, da), (1.0 - p, db)]
+    if not isinstance(dg, SymbolicZero):
+        terms.append((_entropy(p), dg))
+    return out, _tangent(terms, out)
+
+
+smax2.defjvp(_smax2_jvp, symbolic_zeros=True)
 
 
 @partial(jax.custom_jvp, nondiff_argnums=(2,))
@@ -77,14 +95,21 @@ def smax(x, gamma, axis: int = -1):
     return gamma * jax.nn.logsumexp(x / gamma, axis=axis)
 
 
-@smax.defjvp
 def _smax_jvp(axis, primals, tangents):
     x, gamma = primals
     dx, dg = tangents
     out = smax(x, gamma, axis)
     p = jax.nn.softmax(x / gamma, axis=axis)
-    ent = -jnp.sum(jnp.where(p > 0, p * jnp.log(jnp.where(p > 0, p, 1.0)), 0.0), axis=axis)
-    return out, jnp.sum(p * dx, axis=axis) + ent * dg
+    terms = []
+    if not isinstance(dx, SymbolicZero):
+        terms.append((1.0, jnp.sum(p * dx, axis=axis)))
+    if not isinstance(dg, SymbolicZero):
+        ent = -jnp.sum(jnp.where(p > 0, p * jnp.log(jnp.where(p > 0, p, 1.0)), 0.0), axis=axis)
+        terms.append((ent, dg))
+    return out, _tangent(terms, out)
+
+
+smax.defjvp(_smax_jvp, symbolic_zeros=True)
 
 
 def smooth_max(gamma) -> Callable[[jnp.ndarray, jnp.ndarray], jnp.ndarray]:
