@@ -1,0 +1,226 @@
+"""Pictures of matches: the shape, its s/x/v annotation and the placed mesh.
+
+Drawing uses :class:`matplotlib.figure.Figure` directly (Agg canvas, no pyplot, no display,
+no global state). Colours follow the paper's figures in spirit: each boundary valence
+(2, 3, 4, 5) has its own colour, so a good match shows low valences at the shape's convex
+corners and high valences at its concave corners.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterable, Sequence
+
+import numpy as np
+from matplotlib.collections import LineCollection, PolyCollection
+from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
+
+from .embed import Placement, inverted_mask
+from .errors import InputError
+from .files import atomic_path
+from .mesh import edges, valences
+
+__all__ = [
+    "CODE_STYLE",
+    "FIGURE_FORMATS",
+    "Panel",
+    "VALENCE_COLOURS",
+    "draw_many",
+    "draw_match",
+    "figure_format",
+    "new_figure",
+    "quality_line",
+    "save_figure",
+]
+
+VALENCE_COLOURS: dict[int, str] = {2: "#1f77b4", 3: "#2ca02c", 4: "#ff7f0e", 5: "#9467bd"}
+"""Boundary vertex colour by valence (blue, green, orange, purple); others are grey."""
+
+CODE_STYLE: dict[int, tuple[str, str, str]] = {
+    0: ("s (straight)", "o", "#7f7f7f"),
+    1: ("x (convex corner)", "X", "#000000"),
+    2: ("v (concave corner)", "v", "#8c564b"),
+}
+"""Annotation code -> (legend label, marker, colour)."""
+
+IRREGULAR_MARKERS: dict[int, str] = {3: "^", 5: "p"}
+"""Internal vertex valence -> marker (triangle for 3, pentagon for 5; others a diamond)."""
+
+FIGURE_FORMATS: dict[str, str] = {".png": "png", ".svg": "svg"}
+"""Picture suffix -> matplotlib format."""
+
+INVERTED_COLOUR = "#d62728"
+QUAD_COLOUR = "#dbe9f6"
+EDGE_COLOUR = "#1b2a41"
+OUTLINE_COLOUR = "#b0b0b0"
+
+
+@dataclass(frozen=True, eq=False)
+class Panel:
+    """One match to draw: shape outline ``points (P, 2)``, annotated ``positions (m, 2)`` and
+    ``codes (m,)``, the :class:`~jaxmatch.embed.Placement`, and a title."""
+
+    points: np.ndarray
+    positions: np.ndarray
+    codes: np.ndarray
+    placement: Placement
+    title: str = ""
+
+
+def quality_line(placement: Placement) -> str:
+    """``"min SJ 0.873, mean SJ 0.973, inverted 0"``."""
+    return (
+        f"min SJ {placement.min_scaled_jacobian:.3f}, mean SJ {placement.mean_scaled_jacobian:.3f}, "
+        f"inverted {placement.inverted}"
+    )
+
+
+def draw_match(
+    ax,
+    points: np.ndarray,
+    annotation_positions: np.ndarray,
+    codes: np.ndarray,
+    placement: Placement,
+    title: str | None = None,
+    *,
+    legend: bool = True,
+) -> None:
+    """Draw one match on the matplotlib axes ``ax``.
+
+    points: (P, 2) shape outline (closed ccw loop); annotation_positions: (m, 2) and
+    codes: (m,) ints (0 s, 1 x, 2 v); placement: the placed mesh (same coordinates).
+    Draws the outline, the quads (inverted ones filled red), the mesh edges, the annotated
+    points (marker per code), boundary vertices coloured by valence and irregular internal
+    vertices (valence 3 triangle, 5 pentagon); the title gets a second line with the quality
+    (min / mean scaled Jacobian, inverted count).
+    """
+    pts = np.asarray(points, dtype=np.float64)
+    xy = np.asarray(placement.xy, dtype=np.float64)
+    quads = np.asarray(placement.mesh.quads)
+    loop = np.asarray(placement.mesh.boundary)
+    val = valences(quads, xy.shape[0])
+
+    # quads: light fill, inverted ones red
+    bad = inverted_mask(xy, quads)
+    faces = xy[quads]
+    ax.add_collection(
+        PolyCollection(
+            faces,
+            facecolors=np.where(bad[:, None], np.array([[0.84, 0.15, 0.16, 0.75]]), np.array([[0.86, 0.91, 0.96, 1.0]])),
+            edgecolors="none",
+            zorder=1,
+        )
+    )
+    # shape outline
+    closed = np.vstack([pts, pts[:1]])
+    ax.plot(closed[:, 0], closed[:, 1], color=OUTLINE_COLOUR, lw=3.0, zorder=2, solid_joinstyle="round")
+    # mesh edges
+    e = edges(quads)
+    ax.add_collection(LineCollection(xy[e], colors=EDGE_COLOUR, linewidths=1.0, zorder=3))
+
+    handles = []
+    # annotated shape points
+    pos = np.asarray(annotation_positions, dtype=np.float64).reshape(-1, 2)
+    cds = np.asarray(codes).reshape(-1)
+    for code, (label, marker, colour) in CODE_STYLE.items():
+        sel = cds == code
+        if sel.any():
+            ax.scatter(pos[sel, 0], pos[sel, 1], marker=marker, s=22 if code == 0 else 60, c=colour, zorder=4, linewidths=0)
+            handles.append(Line2D([], [], ls="", marker=marker, color=colour, label=label))
+    # boundary vertices by valence
+    bval = val[loop]
+    for v in sorted(set(bval.tolist())):
+        colour = VALENCE_COLOURS.get(v, "#7f7f7f")
+        sel = loop[bval == v]
+        ax.scatter(xy[sel, 0], xy[sel, 1], s=70, facecolors="none", edgecolors=colour, linewidths=2.2, zorder=5)
+        handles.append(Line2D([], [], ls="", marker="o", mfc="none", mec=colour, mew=2.2, label=f"boundary valence {v}"))
+    # irregular internal vertices
+    irr = np.asarray(placement.irregular, dtype=np.int64)
+    for v in sorted(set(val[irr].tolist())):
+        marker = IRREGULAR_MARKERS.get(v, "D")
+        colour = VALENCE_COLOURS.get(v, "#7f7f7f")
+        sel = irr[val[irr] == v]
+        ax.scatter(xy[sel, 0], xy[sel, 1], marker=marker, s=90, c=colour, edgecolors="k", linewidths=0.8, zorder=6)
+        handles.append(Line2D([], [], ls="", marker=marker, color=colour, mec="k", label=f"internal valence {v}"))
+    if bad.any():
+        handles.append(Line2D([], [], ls="", marker="s", ms=10, color=INVERTED_COLOUR, alpha=0.75, label="inverted quad"))
+
+    both = np.vstack([pts, xy])
+    lo, hi = both.min(axis=0), both.max(axis=0)
+    pad = 0.06 * float(max(hi - lo)) or 1.0
+    ax.set_xlim(lo[0] - pad, hi[0] + pad)
+    ax.set_ylim(lo[1] - pad, hi[1] + pad)
+    ax.set_aspect("equal")
+    ax.set_xticks([])
+    ax.set_yticks([])
+    for spine in ax.spines.values():
+        spine.set_visible(False)
+    head = f"{title}\n" if title else ""
+    ax.set_title(head + quality_line(placement), fontsize=10)
+    if legend:
+        ax.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.01), ncol=3, fontsize=7, frameon=False, handletextpad=0.2, columnspacing=0.8)
+
+
+def new_figure(n_panels: int = 1, ncols: int | None = None, panel_size: float = 4.2) -> tuple[Figure, list]:
+    """A figure with ``n_panels`` axes in a grid (at most 4 columns unless ``ncols``).
+    Returns ``(figure, axes)``; unused grid cells are hidden."""
+    n = max(int(n_panels), 1)
+    cols = int(ncols) if ncols else min(n, 4)
+    rows = math.ceil(n / cols)
+    fig = Figure(figsize=(panel_size * cols, (panel_size + 0.9) * rows), layout="constrained")
+    axes = fig.subplots(rows, cols, squeeze=False).ravel().tolist()
+    for ax in axes[n:]:
+        ax.set_visible(False)
+    return fig, axes[:n]
+
+
+def figure_format(path: str | os.PathLike) -> str:
+    """The picture format for ``path``'s suffix; :class:`InputError` when not .png/.svg."""
+    suffix = Path(path).suffix.lower()
+    try:
+        return FIGURE_FORMATS[suffix]
+    except KeyError:
+        raise InputError(f"unknown picture format {suffix or '(no suffix)'!r}; use .png or .svg", where=str(path)) from None
+
+
+def save_figure(fig: Figure, path: str | os.PathLike, *, dpi: int = 120) -> Path:
+    """Write ``fig`` to ``path`` atomically; format from the suffix (.png or .svg).
+
+    Raises :class:`InputError` for another suffix (nothing written). A failing write leaves
+    no file (and no temporary) and keeps a previous file at ``path``. Returns the path.
+    """
+    fmt = figure_format(path)
+    final = Path(path)
+    with atomic_path(final) as tmp:
+        fig.savefig(tmp, format=fmt, dpi=dpi)
+    return final
+
+
+def _panel(item) -> Panel:
+    if isinstance(item, Panel):
+        return item
+    if isinstance(item, dict):
+        return Panel(**item)
+    return Panel(*item)
+
+
+def draw_many(items: Iterable[Panel | Sequence | dict], path: str | os.PathLike, *, ncols: int | None = None, title: str | None = None) -> Path:
+    """Draw several matches side by side (one panel each, e.g. the top K) and save to ``path``.
+
+    items: :class:`Panel` objects, or tuples ``(points, positions, codes, placement[, title])``,
+    or dicts with those keys. Returns the path written (atomically, see :func:`save_figure`).
+    """
+    figure_format(path)  # fail early on a bad suffix
+    panels = [_panel(it) for it in items]
+    if not panels:
+        raise ValueError("draw_many needs at least one match to draw")
+    fig, axes = new_figure(len(panels), ncols)
+    for ax, p in zip(axes, panels):
+        draw_match(ax, p.points, p.positions, p.codes, p.placement, title=p.title or None)
+    if title:
+        fig.suptitle(title)
+    return save_figure(fig, path)
