@@ -31,13 +31,14 @@ Steps of :func:`place`:
    corner; a positive ``delta`` makes it finite on folded meshes so that a gradient method can
    pull folded corners through zero (untangling). ``delta`` shrinks as the mesh unfolds.
    Untangling uses ``p = 1``; smoothing uses a barrier-like ``delta`` and continues over
-   ``p = 2, 4, 8, 16`` (larger ``p`` weighs the worst corner more). L-BFGS
-   (a small numpy implementation) moves the internal vertices only. A result replaces the current one
-   only if it has fewer inverted quads, or as many and a higher minimum scaled Jacobian (then
-   a higher mean): smoothing never folds a valid mesh nor worsens its worst quad.
+   ``p = 2, 4, 8, 16`` (larger ``p`` weighs the worst corner more). L-BFGS (a small numpy
+   implementation) moves the internal vertices only. A result replaces the current one only
+   if it has fewer inverted quads, or as many and a higher minimum scaled Jacobian (then a
+   higher mean): smoothing never folds a valid mesh nor worsens its worst quad.
 
 All geometry is done in normalised coordinates (centred, unit RMS radius) and mapped back, so
-the placement moves exactly with translations and uniform scalings of the input.
+the placement moves with translations and uniform scalings of the input (up to round-off);
+boundary vertices are copied from the input exactly.
 """
 
 from __future__ import annotations
@@ -178,12 +179,10 @@ def _piece(points: np.ndarray, cum: np.ndarray, t0: float, t1: float) -> np.ndar
     """Polyline from parameter t0 to t1 (t1 > t0, at most one lap later), ends included."""
     per = cum[-1]
     tol = 1e-9 * per
-    P = points.shape[0]
     c2 = np.concatenate([cum[:-1], cum[:-1] + per, cum[:-1] + 2 * per])
     p2 = np.concatenate([points, points, points])
     inner = p2[(c2 > t0 + tol) & (c2 < t1 - tol)]
     ends = point_at(points, np.array([t0, t1]))
-    del P
     return np.concatenate([ends[:1], inner, ends[1:]])
 
 

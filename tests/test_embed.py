@@ -55,11 +55,9 @@ def subdivide(mesh):
             mids[key] = nv + len(mids)
         return mids[key]
 
-    out, centres = [], []
+    out = []
     for quad in mesh.quads.tolist():
-        m = [mid(quad[i], quad[(i + 1) % 4]) for i in range(4)]
-        centres.append(quad)
-        out.append((quad, m))
+        out.append((quad, [mid(quad[i], quad[(i + 1) % 4]) for i in range(4)]))
     base = nv + len(mids)
     quads = []
     for f, (quad, m) in enumerate(out):
@@ -120,11 +118,11 @@ def polygon_loop(corners, per_side):
     return pts, np.arange(k) * per_side
 
 
-# each case: name -> (points, t, alignment, mesh, rotation, reflected, positions)
+# each case: a function returning place()'s arguments (points, t, alignment, mesh, rotation, reflected)
 def case_quad():
     mesh, _ = grid(1, 1)
     pts, corners = polygon_loop([(0, 0), (2, 0), (2, 2), (0, 2)], 4)
-    t, pos = annotated(pts, np.arange(len(pts)))
+    t, _ = annotated(pts, np.arange(len(pts)))
     return pts, t, corners, mesh, 0, False
 
 
