@@ -17,7 +17,8 @@ at most K internal vertices, so every prefix of every shelling of M survives:
   endpoint (invariant (I)). A quad of P with no interior vertex, or an internal edge of P with
   both endpoints on the boundary of P, needs one of its boundary vertices to be internal in
   M; so |Int(P)| + (a packing lower bound on the hitting set of those needs) <= K;
-* F(P) <= F(M) <= 5 K (every quad holds an internal vertex of valence <= 5).
+* F(P) <= F(M) <= sum of the valences of the internal vertices of M (every quad holds one)
+  <= sum over Int(P) of their (final) valences + 5 (K - |Int(P)|).
 
 Disks are deduplicated per level by their canonical form (:mod:`jaxmatch.canon`), and
 every catalogue mesh found is recorded once by its canonical key.
@@ -134,6 +135,13 @@ def needs_lower_bound(d: Disk) -> int:
     return count
 
 
+def quad_bound(d: Disk, max_internal: int) -> int:
+    """Upper bound on the quads of any catalogue mesh (k <= max_internal) containing ``d``."""
+    on_b = set(d.boundary)
+    inner = sum(v for i, v in enumerate(d.vals) if i not in on_b)
+    return inner + 5 * (max_internal - d.interior)
+
+
 def is_catalogue_mesh(d: Disk) -> bool:
     """The disk satisfies the catalogue class: (I), every quad has an interior vertex (k>=1)."""
     if d.interior == 0:
@@ -159,6 +167,8 @@ def shell(max_internal: int, progress=None) -> dict[int, dict[tuple, Disk]]:
         for d in level.values():
             for child in children(d):
                 if child.interior + needs_lower_bound(child) > max_internal:
+                    continue
+                if len(child.quads) > quad_bound(child, max_internal):
                     continue
                 key = canonical(child.quads, child.boundary, child.vals).key
                 if key not in nxt:

@@ -1,0 +1,217 @@
+"""The ``jaxmatch`` command line (typer app only: parse, call the library, print).
+
+Bad input ends with one line on stderr and exit status 2 (see :mod:`jaxmatch.errors`).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+from pathlib import Path
+from typing import Optional
+
+import typer
+from rich.console import Console
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.table import Table
+
+from . import catalogue as cat_mod
+from .errors import EXIT_BAD_INPUT, EXIT_UNMATCHABLE, InputError, UnmatchableError
+
+app = typer.Typer(add_completion=False, pretty_exceptions_enable=False, no_args_is_help=True,
+                  help="Pick the best quadrilateral mesh from a catalogue for a planar shape.")
+lattice_app = typer.Typer(no_args_is_help=True, help="Inspect lattice weight files.")
+catalogue_app = typer.Typer(no_args_is_help=True, help="Build and inspect mesh catalogues.")
+app.add_typer(lattice_app, name="lattice")
+app.add_typer(catalogue_app, name="catalogue")
+
+out = Console(soft_wrap=True)
+err = Console(stderr=True)
+
+
+def _progress() -> Progress:
+    return Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                    console=err, transient=True, disable=not err.is_terminal and not os.environ.get("JAXMATCH_PROGRESS"))
+
+
+def _enable_compile_cache() -> None:
+    """JAX's persistent compilation cache, so a second run does not compile again."""
+    import jax
+
+    cache = Path(os.environ.get("JAXMATCH_CACHE", Path.home() / ".cache" / "jaxmatch")) / "xla"
+    try:
+        cache.mkdir(parents=True, exist_ok=True)
+        jax.config.update("jax_compilation_cache_dir", str(cache))
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+        jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+    except Exception:  # a read-only home: run without the cache
+        pass
+
+
+def _open_catalogue(path: Optional[Path]):
+    return cat_mod.load(path) if path is not None else cat_mod.default_catalogue()
+
+
+@app.command()
+def score(
+    shape: Path = typer.Argument(..., help="Shape file: JSON {boundary, corners} or text rows 'x y'."),
+    catalogue: Optional[Path] = typer.Option(None, help="Catalogue file (default: the shipped k=0..5 catalogue)."),
+    internal: Optional[str] = typer.Option(None, help="Mesh size: K or K1..K2 internal vertices. Without it all sizes compete, "
+                                           "and larger meshes (more boundary vertices, more matched points) get larger raw utilities."),
+    lattice: str = typer.Option("fine", help="Lattice: fine, coarse, or a TOML path."),
+    top: int = typer.Option(5, min=1, help="How many meshes to show."),
+    points: Optional[int] = typer.Option(None, min=1, help="Number m of annotated shape points (default: 2 x longest boundary)."),
+    per_size: bool = typer.Option(False, "--per-size", help="Show the best --top meshes of each size k (utilities only compare within a size)."),
+    corner_angle: float = typer.Option(30.0, help="Corner threshold (degrees from straight) when the shape lists no corners."),
+    as_json: bool = typer.Option(False, "--json", help="Print one JSON object instead of a table."),
+) -> None:
+    """Rank catalogue meshes for SHAPE by the paper's modified LCS utility."""
+    from .lattice import load_lattice
+    from .pipeline import rank
+    from .shape import load_shape
+
+    _enable_compile_cache()
+    shp = load_shape(shape, corner_angle=corner_angle)
+    lat = load_lattice(lattice)
+    cat = _open_catalogue(catalogue)
+    ks = cat_mod.parse_range(internal) if internal is not None else None
+    with _progress() as prog:
+        task = prog.add_task("scoring meshes", total=None)
+        ranking = rank(shp, cat, lat, internal=ks, top=top, points=points, per_size=per_size,
+                       progress=lambda d, t: prog.update(task, completed=d, total=t))
+    if as_json:
+        print(json.dumps({
+            "shape": str(shape), "sequence": ranking.annotation.symbols, "lattice": lat.name,
+            "points": len(ranking.annotation.codes), "scored": ranking.scored, "unmatchable": ranking.unmatchable,
+            "results": [r.as_json() for r in ranking.results],
+        }))
+        return
+    out.print(f"shape [bold]{shape}[/]: {len(ranking.annotation.codes)} points [cyan]{ranking.annotation.symbols}[/]")
+    out.print(f"lattice {lat.name}; scored {ranking.scored} meshes, {ranking.unmatchable} unmatchable")
+    table = Table(title="best per size" if per_size else f"top {top}")
+    for col in ("rank", "mesh id", "internal", "boundary", "utility", "rotation", "reflected"):
+        table.add_column(col, justify="right" if col not in ("mesh id",) else "left")
+    for i, r in enumerate(ranking.results, 1):
+        table.add_row(str(i), r.mesh_id, str(r.internal_vertices), str(r.boundary_length), f"{r.utility:g}",
+                      str(r.rotation), "yes" if r.reflected else "no")
+    out.print(table)
+
+
+@app.command()
+def annotate(
+    shape: Path = typer.Argument(..., help="Shape file."),
+    points: Optional[int] = typer.Option(None, min=1, help="Number m of points (default: for the default catalogue)."),
+    corner_angle: float = typer.Option(30.0, help="Corner threshold in degrees."),
+    as_json: bool = typer.Option(False, "--json"),
+) -> None:
+    """Print the shape's s/x/v sequence and where each point lies (user coordinates)."""
+    from .shape import annotate as annotate_shape, default_points, load_shape
+
+    shp = load_shape(shape, corner_angle=corner_angle)
+    m = points if points is not None else default_points(shp, max(_open_catalogue(None).lengths))
+    ann = annotate_shape(shp, m)
+    xy = shp.to_user(ann.positions)
+    if as_json:
+        print(json.dumps({"shape": str(shape), "sequence": ann.symbols,
+                          "points": [{"index": i, "symbol": s, "x": float(p[0]), "y": float(p[1]), "side": int(sd)}
+                                     for i, (s, p, sd) in enumerate(zip(ann.symbols, xy, ann.side))]}))
+        return
+    out.print(ann.symbols)
+    table = Table()
+    for col in ("index", "symbol", "x", "y", "side"):
+        table.add_column(col, justify="right")
+    for i, (s, p, sd) in enumerate(zip(ann.symbols, xy, ann.side)):
+        table.add_row(str(i), s, f"{p[0]:.6g}", f"{p[1]:.6g}", str(int(sd)))
+    out.print(table)
+
+
+@lattice_app.command("show")
+def lattice_show(name: str = typer.Argument(..., help="fine, coarse, or a TOML path."),
+                 as_json: bool = typer.Option(False, "--json", help="All 64 triples per type; null means -inf.")) -> None:
+    """Show a lattice's weight table."""
+    from .lattice import lattice_json, lattice_text, load_lattice
+
+    lat = load_lattice(name)
+    if as_json:
+        print(json.dumps(lattice_json(lat)))
+    else:
+        out.print(lattice_text(lat), markup=False)
+
+
+@catalogue_app.command("build")
+def catalogue_build(internal: str = typer.Option(..., help="K or K1..K2."),
+                    out_path: Path = typer.Option(..., "--out", help="Output .npz file (written atomically).")) -> None:
+    """Enumerate every catalogue mesh for the given numbers of internal vertices."""
+    ks = cat_mod.parse_range(internal)
+    with _progress() as prog:
+        task = prog.add_task("closing vertices", total=max(ks))
+        info = cat_mod.build(ks, out_path, progress=lambda j, states, found: prog.update(
+            task, completed=j, description=f"k={j}: {found} meshes"))
+    cat = cat_mod.load(out_path)
+    for k, d in cat.counts()["per_k"].items():
+        err.print(f"k={k}: {d['meshes']} meshes ({d['up_to_rotation']} up to rotation only)")
+    err.print(f"wrote {out_path}: {info['meshes']} meshes in {info['generate_s']:.1f} s")
+
+
+@catalogue_app.command("info")
+def catalogue_info(path: Path = typer.Argument(...), as_json: bool = typer.Option(False, "--json")) -> None:
+    """Counts per number of internal vertices and per boundary length."""
+    c = cat_mod.load(path).counts()
+    if as_json:
+        print(json.dumps(c))
+        return
+    out.print(f"format version {c['format_version']}")
+    t = Table(title="per k")
+    for col in ("k", "meshes (up to rotation and reflection)", "up to rotation only"):
+        t.add_column(col, justify="right")
+    for k, d in c["per_k"].items():
+        t.add_row(k, str(d["meshes"]), str(d["up_to_rotation"]))
+    out.print(t)
+    t2 = Table(title="per boundary length")
+    t2.add_column("n", justify="right")
+    t2.add_column("meshes", justify="right")
+    for n, cnt in c["per_boundary_length"].items():
+        t2.add_row(n, str(cnt))
+    out.print(t2)
+
+
+@catalogue_app.command("export")
+def catalogue_export(path: Path = typer.Argument(...), mesh_id: str = typer.Option(..., "--id"),
+                     fmt: str = typer.Option("json", "--format", help="json")) -> None:
+    """Print one mesh: {id, internal_vertices, quads, boundary, triples}."""
+    if fmt != "json":
+        raise InputError(f"unknown format {fmt!r} (supported: json)", "--format")
+    print(json.dumps(cat_mod.export(cat_mod.load(path), mesh_id)))
+
+
+def main() -> None:
+    """Console entry point: run the app; bad input -> one line on stderr, exit 2."""
+    try:
+        app(standalone_mode=False)
+    except InputError as e:
+        err.print(f"error: {e}", markup=False, highlight=False)
+        sys.exit(EXIT_BAD_INPUT)
+    except UnmatchableError as e:
+        err.print(f"no match: {e}", markup=False, highlight=False)
+        sys.exit(EXIT_UNMATCHABLE)
+    except (typer.Abort, KeyboardInterrupt):
+        err.print("aborted")
+        sys.exit(130)
+    except Exception as e:  # click usage errors and anything unexpected: still one line
+        import click
+
+        if isinstance(e, click.exceptions.ClickException):
+            err.print(f"error: {e.format_message()}", markup=False, highlight=False)
+            sys.exit(e.exit_code)
+        if isinstance(e, click.exceptions.Exit):
+            sys.exit(e.exit_code)
+        if os.environ.get("JAXMATCH_DEBUG"):
+            raise
+        err.print(f"internal error: {type(e).__name__}: {' '.join(str(e).split())} (set JAXMATCH_DEBUG=1 for a traceback)",
+                  markup=False, highlight=False)
+        sys.exit(1)
+
+
+if __name__ == "__main__":
+    main()
