@@ -185,32 +185,32 @@ def catalogue_export(path: Path = typer.Argument(...), mesh_id: str = typer.Opti
     print(json.dumps(cat_mod.export(cat_mod.load(path), mesh_id)))
 
 
+def _fail(line: str, code: int) -> None:
+    """One unwrapped line on stderr, then exit."""
+    print(" ".join(line.split()), file=sys.stderr)
+    sys.exit(code)
+
+
 def main() -> None:
     """Console entry point: run the app; bad input -> one line on stderr, exit 2."""
     try:
         app(standalone_mode=False)
     except InputError as e:
-        err.print(f"error: {e}", markup=False, highlight=False)
-        sys.exit(EXIT_BAD_INPUT)
+        _fail(f"error: {e}", EXIT_BAD_INPUT)
     except UnmatchableError as e:
-        err.print(f"no match: {e}", markup=False, highlight=False)
-        sys.exit(EXIT_UNMATCHABLE)
+        _fail(f"no match: {e}", EXIT_UNMATCHABLE)
     except (typer.Abort, KeyboardInterrupt):
-        err.print("aborted")
-        sys.exit(130)
+        _fail("aborted", 130)
     except Exception as e:  # click usage errors and anything unexpected: still one line
         import click
 
         if isinstance(e, click.exceptions.ClickException):
-            err.print(f"error: {e.format_message()}", markup=False, highlight=False)
-            sys.exit(e.exit_code)
+            _fail(f"error: {e.format_message()}", e.exit_code)
         if isinstance(e, click.exceptions.Exit):
             sys.exit(e.exit_code)
         if os.environ.get("JAXMATCH_DEBUG"):
             raise
-        err.print(f"internal error: {type(e).__name__}: {' '.join(str(e).split())} (set JAXMATCH_DEBUG=1 for a traceback)",
-                  markup=False, highlight=False)
-        sys.exit(1)
+        _fail(f"internal error: {type(e).__name__}: {e} (set JAXMATCH_DEBUG=1 for a traceback)", 1)
 
 
 if __name__ == "__main__":
