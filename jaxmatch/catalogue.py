@@ -30,7 +30,8 @@ from typing import Callable, Iterator, NamedTuple
 
 import numpy as np
 
-from .canon import canonical, mesh_id, relabel
+from .canon import mesh_id, relabel
+from .canon_fast import canonical_key
 from .errors import InputError
 from .files import atomic_path
 from .mesh import QuadMesh, boundary_valences, triples, valences
@@ -83,11 +84,14 @@ def parse_range(text: str) -> list[int]:
     return list(range(a, b + 1))
 
 
-def generate(max_internal: int, progress: Callable | None = None, workers: int | None = None) -> list[Entry]:
-    """All catalogue meshes with k = 0 .. max_internal, canonical, sorted by (k, n, id)."""
+def generate(max_internal: int, progress: Callable | None = None, workers: int = 1) -> list[Entry]:
+    """All catalogue meshes with k = 0 .. max_internal, canonical, sorted by (k, n, id).
+
+    workers: processes used to expand each level (see :func:`jaxmatch.closing.close_all`).
+    """
     from .closing import close_all
 
-    found = close_all(max_internal, progress=progress)
+    found = close_all(max_internal, progress=progress, workers=workers)
     entries = []
     for k, disks in found.items():
         for d in disks.values():
@@ -98,7 +102,7 @@ def generate(max_internal: int, progress: Callable | None = None, workers: int |
 
 def entry_from_quads(quads, boundary, vals, k: int) -> Entry:
     """Canonicalise one disk mesh into a catalogue :class:`Entry`."""
-    c = canonical(quads, boundary, vals)
+    c = canonical_key(quads, boundary, vals)
     q, b = relabel(quads, boundary, c.start)
     return Entry(id=mesh_id(c.key, k), k=k, mesh=QuadMesh(quads=q, boundary=b), aut=c.aut, chiral=c.chiral)
 
@@ -256,10 +260,10 @@ def default_catalogue() -> Catalogue:
     return load(p)
 
 
-def build(internal: list[int], out: str | os.PathLike, progress: Callable | None = None) -> dict:
+def build(internal: list[int], out: str | os.PathLike, progress: Callable | None = None, workers: int = 1) -> dict:
     """Generate meshes for the k in ``internal`` and save them to ``out``. Returns timing info."""
     t0 = time.perf_counter()
-    entries = [e for e in generate(max(internal), progress=progress) if e.k in internal]
+    entries = [e for e in generate(max(internal), progress=progress, workers=workers) if e.k in internal]
     t1 = time.perf_counter()
     save(entries, out)
     return {"meshes": len(entries), "generate_s": t1 - t0, "save_s": time.perf_counter() - t1}

@@ -30,7 +30,7 @@ from __future__ import annotations
 
 from typing import Callable
 
-from .canon import canonical
+from .canon_fast import canonical_key as canonical
 from .shelling import Disk, attach, single_quad, is_catalogue_mesh
 
 
@@ -93,32 +93,59 @@ def close_vertex(d: Disk, p: int, max_internal: int) -> list[Disk]:
     return results
 
 
-def close_all(max_internal: int, progress: Callable | None = None) -> dict[int, dict[tuple, Disk]]:
+def _expand(states: list[Disk], max_internal: int) -> dict[tuple, Disk]:
+    """Children of a chunk of states (every boundary vertex closed in every way), deduplicated."""
+    out: dict[tuple, Disk] = {}
+    for s in states:
+        for p in s.boundary:
+            for child in close_vertex(s, p, max_internal):
+                key = canonical(child.quads, child.boundary, child.vals).key
+                if key not in out:
+                    out[key] = child
+    return out
+
+
+def close_all(max_internal: int, progress: Callable | None = None, workers: int = 1) -> dict[int, dict[tuple, Disk]]:
     """All catalogue meshes with k = 0 .. max_internal internal vertices.
 
-    Returns {k: {canonical key: Disk}}. ``progress(k, n_states)`` is called when level k is done.
+    Returns {k: {canonical key: Disk}}. ``progress(k, n_states, n_found)`` is called when
+    level k is done. ``workers > 1`` expands each level's states in that many processes.
     """
     found: dict[int, dict[tuple, Disk]] = {k: {} for k in range(max_internal + 1)}
     q = single_quad()
     found[0][canonical(q.quads, q.boundary, q.vals).key] = q
     if max_internal == 0:
         return found
-    # level 1: the stars of valence 3, 4, 5 (close a corner of the single quad... no: build directly)
     levels: dict[int, dict[tuple, Disk]] = {j: {} for j in range(1, max_internal + 1)}
+    # level 1: closing a corner of the single quad gives the stars of valence 3, 4, 5
     for child in close_vertex(q, 0, max_internal):
-        if child.interior >= 1:
-            levels[child.interior].setdefault(canonical(child.quads, child.boundary, child.vals).key, child)
-    for j in range(1, max_internal + 1):
-        for key, s in levels[j].items():
-            if is_catalogue_mesh(s):
-                found[j][key] = s
-        if j == max_internal:
-            break
-        for s in levels[j].values():
-            for p in s.boundary:
-                for child in close_vertex(s, p, max_internal):
-                    key = canonical(child.quads, child.boundary, child.vals).key
-                    levels[child.interior].setdefault(key, child)
-        if progress is not None:
-            progress(j, len(levels[j]), len(found[j]))
+        levels[child.interior].setdefault(canonical(child.quads, child.boundary, child.vals).key, child)
+    pool = None
+    if workers > 1:
+        import concurrent.futures
+        import multiprocessing
+
+        pool = concurrent.futures.ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"))
+    try:
+        for j in range(1, max_internal + 1):
+            for key, s in levels[j].items():
+                if is_catalogue_mesh(s):
+                    found[j][key] = s
+            if j < max_internal:
+                states = list(levels[j].values())
+                if pool is None or len(states) < 64:
+                    parts = [_expand(states, max_internal)]
+                else:
+                    size = max(16, len(states) // (workers * 16))
+                    chunks = [states[i : i + size] for i in range(0, len(states), size)]
+                    parts = pool.map(_expand, chunks, [max_internal] * len(chunks))
+                for part in parts:
+                    for key, child in part.items():
+                        levels[child.interior].setdefault(key, child)
+            levels[j] = {}  # expanded: free the memory
+            if progress is not None:
+                progress(j, len(found[j]), len(found[j]))
+    finally:
+        if pool is not None:
+            pool.shutdown()
     return found
