@@ -17,7 +17,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from rich.table import Table
 
 from . import catalogue as cat_mod
-from .errors import EXIT_BAD_INPUT, EXIT_UNMATCHABLE, InputError, UnmatchableError
+from .errors import EXIT_BAD_INPUT, EXIT_INVERTED, EXIT_UNMATCHABLE, InputError, UnmatchableError
 
 app = typer.Typer(add_completion=False, pretty_exceptions_enable=False, no_args_is_help=True,
                   help="Pick the best quadrilateral mesh from a catalogue for a planar shape.")
@@ -53,6 +53,19 @@ def _open_catalogue(path: Optional[Path]):
     return cat_mod.load(path) if path is not None else cat_mod.default_catalogue()
 
 
+TIE_BREAK_HELP = ("Order among equal utilities: 'geometry' places the tied meshes and prefers the higher min scaled "
+                  "Jacobian, then fewer irregular internal vertices (beyond the paper); 'id' keeps the paper's "
+                  "combinatorial order (fewer internal vertices, shorter boundary, id).")
+
+
+def _tie_break(text: str) -> str:
+    from .pipeline import TIE_BREAKS
+
+    if text not in TIE_BREAKS:
+        raise InputError(f"expected one of {', '.join(TIE_BREAKS)}, got {text!r}", "--tie-break")
+    return text
+
+
 @app.command()
 def score(
     shape: Path = typer.Argument(..., help="Shape file: JSON {boundary, corners} or text rows 'x y'."),
@@ -64,13 +77,19 @@ def score(
     points: Optional[int] = typer.Option(None, min=1, help="Number m of annotated shape points (default: 2 x longest boundary)."),
     per_size: bool = typer.Option(False, "--per-size", help="Show the best --top meshes of each size k (utilities only compare within a size)."),
     corner_angle: float = typer.Option(30.0, help="Corner threshold (degrees from straight) when the shape lists no corners."),
+    tie_break: str = typer.Option("geometry", "--tie-break", help=TIE_BREAK_HELP),
+    png: Optional[Path] = typer.Option(None, "--png", help="Also draw the listed meshes placed in the shape, side by side, to this .png file."),
+    svg: Optional[Path] = typer.Option(None, "--svg", help="Same picture as --png, as .svg."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object instead of a table."),
 ) -> None:
     """Rank catalogue meshes for SHAPE by the paper's modified LCS utility."""
     from .lattice import load_lattice
     from .pipeline import rank
+    from .placement import check_outputs, draw_placements, panel_title, place_top
     from .shape import load_shape
 
+    check_outputs(png=png, svg=svg)
+    tb = _tie_break(tie_break)
     _enable_compile_cache()
     shp = load_shape(shape, corner_angle=corner_angle)
     lat = load_lattice(lattice)
@@ -78,14 +97,22 @@ def score(
     ks = cat_mod.parse_range(internal) if internal is not None else None
     with _progress() as prog:
         task = prog.add_task("scoring meshes", total=None)
-        ranking = rank(shp, cat, lat, internal=ks, top=top, points=points, per_size=per_size,
+        ranking = rank(shp, cat, lat, internal=ks, top=top, points=points, per_size=per_size, tie_break=tb,
                        progress=lambda d, t: prog.update(task, completed=d, total=t))
+    written = []
+    if png is not None or svg is not None:
+        placed = place_top(shp, ranking, cat)
+        items = [(panel_title(i, r), pl) for i, (r, pl) in enumerate(zip(ranking.results, placed), 1)]
+        head = f"{shape.name}: {'best per size' if per_size else f'top {len(items)}'}"
+        written = [str(draw_placements(p, shp, ranking.annotation, items, title=head)) for p in (png, svg) if p is not None]
     if as_json:
         print(json.dumps({
             "shape": str(shape), "sequence": ranking.annotation.symbols, "lattice": lat.name,
             "points": len(ranking.annotation.codes), "scored": ranking.scored, "unmatchable": ranking.unmatchable,
-            "results": [r.as_json() for r in ranking.results],
+            "tie_break": tb, "results": [r.as_json() for r in ranking.results],
         }))
+        for w in written:
+            print(f"wrote {w}", file=sys.stderr)
         return
     out.print(f"shape [bold]{shape}[/]: {len(ranking.annotation.codes)} points [cyan]{ranking.annotation.symbols}[/]")
     out.print(f"lattice {lat.name}; scored {ranking.scored} meshes, {ranking.unmatchable} unmatchable")
@@ -96,6 +123,102 @@ def score(
         table.add_row(str(i), r.mesh_id, str(r.internal_vertices), str(r.boundary_length), f"{r.utility:g}",
                       str(r.rotation), "yes" if r.reflected else "no")
     out.print(table)
+    for w in written:
+        out.print(f"wrote {w}", markup=False, highlight=False)
+
+
+@app.command()
+def mesh(
+    shape: Path = typer.Argument(..., help="Shape file: JSON {boundary, corners} or text rows 'x y'."),
+    catalogue: Optional[Path] = typer.Option(None, help="Catalogue file (default: the shipped k=0..5 catalogue)."),
+    internal: Optional[str] = typer.Option(None, help="Mesh size: K or K1..K2 internal vertices (default: all sizes compete)."),
+    lattice: str = typer.Option("fine", help="Lattice: fine, coarse, or a TOML path."),
+    points: Optional[int] = typer.Option(None, min=1, help="Number m of annotated shape points (default: 2 x longest boundary)."),
+    rank_: int = typer.Option(1, "--rank", min=1, help="Place the R-th ranked mesh."),
+    out_path: Optional[Path] = typer.Option(None, "--out", help="Mesh file: .vtk .vtu .obj .msh or .json (written atomically)."),
+    png: Optional[Path] = typer.Option(None, "--png", help="Picture of the placed mesh in the shape (.png)."),
+    svg: Optional[Path] = typer.Option(None, "--svg", help="Picture of the placed mesh in the shape (.svg)."),
+    require_valid: bool = typer.Option(False, "--require-valid", help="Walk down the ranking (up to 50 meshes) and place the first "
+                                       "mesh that embeds with zero inverted quads."),
+    tie_break: str = typer.Option("geometry", "--tie-break", help=TIE_BREAK_HELP),
+    corner_angle: float = typer.Option(30.0, help="Corner threshold (degrees from straight) when the shape lists no corners."),
+    as_json: bool = typer.Option(False, "--json", help="Print one JSON object."),
+) -> None:
+    """Rank like 'score', place the R-th mesh in SHAPE and write it (and/or a picture).
+
+    Exit status 3 when the placed mesh has inverted quads (the files are written anyway).
+    """
+    from .lattice import load_lattice
+    from .meshfile import write_mesh
+    from .placement import DEFAULT_WALK, check_outputs, choose_mesh, draw_placements, panel_title
+    from .shape import load_shape
+
+    check_outputs(out_path, png, svg)
+    tb = _tie_break(tie_break)
+    _enable_compile_cache()
+    shp = load_shape(shape, corner_angle=corner_angle)
+    lat = load_lattice(lattice)
+    cat = _open_catalogue(catalogue)
+    ks = cat_mod.parse_range(internal) if internal is not None else None
+    with _progress() as prog:
+        task = prog.add_task("scoring meshes", total=None)
+        choice = choose_mesh(shp, cat, lat, rank=rank_, internal=ks, points=points, tie_break=tb,
+                             require_valid=require_valid, walk=DEFAULT_WALK,
+                             progress=lambda d, t: prog.update(task, completed=d, total=t))
+    m, pl, ann = choice.match, choice.placement, choice.ranking.annotation
+    written = {}
+    if out_path is not None:
+        written["out"] = str(write_mesh(out_path, pl))
+    for key, path in (("png", png), ("svg", svg)):
+        if path is not None:
+            written[key] = str(draw_placements(path, shp, ann, [(panel_title(choice.rank, m), pl)], title=shape.name))
+    last = choice.requested_rank + DEFAULT_WALK - 1
+    notes = []
+    if choice.rank != choice.requested_rank:
+        notes.append(f"mesh #{choice.requested_rank} folds; placed #{choice.rank} {m.mesh_id}, the first mesh of the ranking "
+                     "that embeds without inverted quads")
+    if not choice.valid:
+        notes.append(f"FOLDED: {pl.inverted} of {pl.mesh.n_quads} quads of mesh #{choice.rank} {m.mesh_id} are inverted "
+                     "(a corner of zero or negative area: the placed mesh folds over itself or is degenerate); "
+                     "files were written anyway")
+        if choice.alternative is not None:
+            ar, am, apl = choice.alternative
+            notes.append(f"next-ranked mesh that embeds without folds: #{ar} {am.mesh_id} (utility {am.utility:g}, "
+                         f"min scaled Jacobian {apl.min_scaled_jacobian:.3f}); use --rank {ar} or --require-valid")
+        else:
+            notes.append(f"no mesh ranked #{choice.requested_rank}..#{last} embeds without folds")
+    if as_json:
+        alt = choice.alternative
+        print(json.dumps({
+            "shape": str(shape), "sequence": ann.symbols, "lattice": lat.name, "tie_break": tb,
+            "rank": choice.rank, "requested_rank": choice.requested_rank, "mesh_id": m.mesh_id,
+            "internal_vertices": int(m.internal_vertices), "boundary_length": int(m.boundary_length),
+            "utility": float(m.utility), "rotation": int(m.rotation), "reflected": bool(m.reflected),
+            "quads": int(pl.mesh.n_quads), "min_scaled_jacobian": pl.min_scaled_jacobian,
+            "mean_scaled_jacobian": pl.mean_scaled_jacobian, "inverted": int(pl.inverted),
+            "irregular": int(len(pl.irregular)), "area_ratio": pl.area_ratio, "valid": choice.valid,
+            "alignment": [int(i) for i in pl.alignment],
+            "out": written.get("out"), "png": written.get("png"), "svg": written.get("svg"),
+            "next_valid": None if alt is None else {"rank": alt[0], "mesh_id": alt[1].mesh_id, "utility": float(alt[1].utility),
+                                                    "min_scaled_jacobian": alt[2].min_scaled_jacobian},
+        }))
+        for note in notes:
+            print(note, file=sys.stderr)
+    else:
+        out.print(f"shape [bold]{shape}[/]: {len(ann.codes)} points [cyan]{ann.symbols}[/]")
+        out.print(f"lattice {lat.name}; scored {choice.ranking.scored} meshes, {choice.ranking.unmatchable} unmatchable; "
+                  f"ties broken by {tb}", highlight=False)
+        out.print(f"mesh #{choice.rank} {m.mesh_id}: {m.internal_vertices} internal, {m.boundary_length} boundary vertices, "
+                  f"{pl.mesh.n_quads} quads, {len(pl.irregular)} irregular internal; utility {m.utility:g}, rotation {m.rotation}, "
+                  f"{'reflected' if m.reflected else 'not reflected'}", markup=False, highlight=False)
+        out.print(f"scaled Jacobian: min {pl.min_scaled_jacobian:.3f}, mean {pl.mean_scaled_jacobian:.3f}; "
+                  f"inverted quads: {pl.inverted}; mesh area / shape area {pl.area_ratio:.3f}", markup=False, highlight=False)
+        for note in notes:
+            out.print(note, markup=False, highlight=False)
+        for path in written.values():
+            out.print(f"wrote {path}", markup=False, highlight=False)
+    if not choice.valid:
+        raise typer.Exit(EXIT_INVERTED)
 
 
 @app.command()
@@ -194,7 +317,7 @@ def _fail(line: str, code: int) -> None:
 def main() -> None:
     """Console entry point: run the app; bad input -> one line on stderr, exit 2."""
     try:
-        app(standalone_mode=False)
+        code = app(standalone_mode=False)  # a command's typer.Exit(code) comes back as the return value
     except InputError as e:
         _fail(f"error: {e}", EXIT_BAD_INPUT)
     except UnmatchableError as e:
@@ -211,6 +334,8 @@ def main() -> None:
         if os.environ.get("JAXMATCH_DEBUG"):
             raise
         _fail(f"internal error: {type(e).__name__}: {e} (set JAXMATCH_DEBUG=1 for a traceback)", 1)
+    if isinstance(code, int) and code:
+        sys.exit(code)
 
 
 if __name__ == "__main__":

@@ -5,7 +5,8 @@ Everything the ``jaxmatch score`` command prints comes from :func:`rank`.
 
 from __future__ import annotations
 
-from typing import Callable, NamedTuple
+from itertools import groupby, islice
+from typing import Callable, Iterator, NamedTuple
 
 import numpy as np
 
@@ -47,12 +48,25 @@ class Match(NamedTuple):
 
 
 class Ranking(NamedTuple):
-    """Result of :func:`rank`: the annotation used, the top matches (best first) and counts."""
+    """Result of :func:`rank`: the annotation used, the top matches (best first) and counts.
+
+    placements: with ``tie_break="geometry"``, the meshes placed to break ties
+    (mesh id -> :class:`~jaxmatch.embed.Placement`, user coordinates); None otherwise.
+    following: the matches after ``results`` in the same order, produced lazily (a one-shot
+    iterator; with ``tie_break="geometry"`` it places tied meshes as it goes, into
+    ``placements``, within the same cap); None with ``per_size``.
+    """
 
     annotation: Annotation
     results: list[Match]
     scored: int
     unmatchable: int
+    placements: dict | None = None
+    following: Iterator[Match] | None = None
+
+
+TIE_BREAKS = ("id", "geometry")
+"""Orders among equal utilities (see :func:`rank`)."""
 
 
 def selected_lengths(catalogue: Catalogue, internal: list[int] | None) -> list[int]:
@@ -70,6 +84,8 @@ def rank(
     points: int | None = None,
     per_size: bool = False,
     progress: Callable[[int, int], None] | None = None,
+    tie_break: str = "id",
+    tie_cap: int | None = None,
 ) -> Ranking:
     """Score every selected catalogue mesh against ``shape`` and return the best ``top``.
 
@@ -77,9 +93,25 @@ def rank(
     meshes, which match more points). per_size: return the best ``top`` of *each* k.
     points: number m of annotated shape points (default :func:`default_points` for the
     longest selected boundary). progress(done, total): meshes scored so far.
-    Ties are broken by (fewer internal vertices, shorter boundary, id) for determinism.
-    Raises UnmatchableError when no selected mesh has a finite matching.
+
+    tie_break: order among equal utilities.
+
+    * ``"id"`` (default): fewer internal vertices, then shorter boundary, then id.
+    * ``"geometry"`` (beyond the paper; meshes with the same boundary sequence always tie, and
+      integer weights make many more ties): every mesh whose utility equals that of a returned
+      mesh is placed in the shape (:func:`jaxmatch.placement.place_match`, about 0.02-0.15 s
+      each) and ties are ordered by higher min scaled Jacobian, then fewer irregular internal
+      vertices, then id (:func:`jaxmatch.placement.rerank_ties`). Only ties are re-ordered,
+      utilities keep their order. At most ``tie_cap`` meshes (default
+      :data:`jaxmatch.placement.TIE_CAP` = 64) are placed per call, in "id" order; tied meshes
+      past the cap follow the placed ones of their utility in "id" order. Meshes alone at
+      their utility are not placed. The placements are returned in ``Ranking.placements``.
+
+    Raises UnmatchableError when no selected mesh has a finite matching; ValueError for an
+    unknown ``tie_break``.
     """
+    if tie_break not in TIE_BREAKS:
+        raise ValueError(f"tie_break must be one of {TIE_BREAKS}, got {tie_break!r}")
     lengths = selected_lengths(catalogue, internal)
     if not lengths:
         raise UnmatchableError(f"the catalogue has no mesh with {internal_text(internal)}")
@@ -102,20 +134,44 @@ def rank(
     if not rows:
         raise UnmatchableError(unmatchable_reason(ann, lengths, lattice))
     rows.sort(key=lambda r: (-r[0], r[1], r[2], r[3]))
-    if per_size:
-        chosen, count = [], {}
-        for r in rows:
-            if count.get(r[1], 0) < top:
-                count[r[1]] = count.get(r[1], 0) + 1
-                chosen.append(r)
-        chosen.sort(key=lambda r: (r[1], -r[0], r[2], r[3]))
-    else:
-        chosen = rows[:top]
-    results = []
-    for util, k, n, mid, rot, refl, vals in chosen:
+
+    def to_match(r) -> Match:
+        util, k, n, mid, rot, refl, vals = r
         alignment = align(ann.codes, vals, table, rot, refl)
-        results.append(Match(mid, k, n, util, rot, refl, alignment, triples(oriented_sequence(vals, rot, refl))))
-    return Ranking(ann, results, total, unmatchable)
+        return Match(mid, k, n, util, rot, refl, alignment, triples(oriented_sequence(vals, rot, refl)))
+
+    placements = {} if tie_break == "geometry" else None
+    budget = [_default_tie_cap() if tie_cap is None else max(int(tie_cap), 0)]
+
+    def ordered(sel) -> Iterator[Match]:
+        """Matches of the sorted rows ``sel`` in final order, one utility run at a time."""
+        for _, grp in groupby(sel, key=lambda r: r[0]):
+            grp = list(grp)
+            if placements is None or len(grp) < 2 or budget[0] <= 0:
+                yield from (to_match(r) for r in grp)
+                continue
+            from .placement import rerank_ties
+
+            head = [to_match(r) for r in grp[: budget[0]]]
+            placed = rerank_ties(shape, ann, catalogue, head, cap=budget[0], placements=placements)
+            budget[0] -= len(head)
+            yield from placed
+            yield from (to_match(r) for r in grp[len(head):])
+
+    if per_size:
+        results = []
+        for k in sorted({r[1] for r in rows}):
+            results.extend(islice(ordered([r for r in rows if r[1] == k]), top))
+        return Ranking(ann, results, total, unmatchable, placements, None)
+    it = ordered(rows)
+    results = list(islice(it, top))
+    return Ranking(ann, results, total, unmatchable, placements, it)
+
+
+def _default_tie_cap() -> int:
+    from .placement import TIE_CAP
+
+    return TIE_CAP
 
 
 def internal_text(internal: list[int] | None) -> str:
