@@ -22,7 +22,20 @@ Normalisation done by :func:`make_shape` (every reader goes through it):
    first point first (corner indices are remapped);
 4. the loop is rotated so that ``points[0]`` is the first corner (when there are corners),
    so that the annotation sequence, which starts at the first corner, has arc-length
-   parameters ``t`` measured from ``points[0]`` that increase from ``0``.
+   parameters ``t`` measured from ``points[0]`` that increase from ``0``. A loop without
+   corners is rotated so that ``points[0]`` is its lowest point (smallest ``y``, then
+   smallest ``x``), so that its evenly spaced annotation does not depend on where the
+   input listing starts.
+
+Turning angles below ``1e-9`` radians count as straight (exactly 0): points on a straight run
+are never corners (even with ``corner_angle=0``) and explicit corners there are convex,
+whatever the round-off of translating and scaling the input.
+
+Invariance (tested in ``tests/test_robustness.py``): translating or uniformly scaling the
+input gives the same annotation; listing the loop from another point or in the other
+orientation gives the same annotation up to a cyclic shift (the sequence starts at another
+corner), because ties in distributing ``s`` points over sides are broken from a fixed corner
+(see :func:`annotate`).
 
 All lengths of :class:`Shape` and :class:`Annotation` (``t``, ``perimeter``) are in unit-box
 units; multiply by ``shape.scale`` for user units, and map positions with
@@ -80,6 +93,7 @@ MAX_BYTES = 16 * 2**20
 """Largest accepted input file (bytes)."""
 
 _TINY = 1e-12  # unit-box tolerance for coincident points (length) and zero area (area)
+_STRAIGHT = 1e-9  # radians: smaller turns are round-off on a straight run (never corners, convex)
 _ERRBOUND = 4e-16  # relative error bound of a floating 2x2 orientation determinant
 _JSON_KEYS = ("boundary", "corners")
 _TEXT_SUFFIXES = {".txt", ".csv", ".xy", ".dat", ".tsv"}
@@ -260,8 +274,9 @@ def _crossing(points) -> tuple[int, int] | None:
     """First pair ``(i, j)`` of segments ``i -> i+1`` and ``j -> j+1`` that meet, or None.
 
     Non-adjacent segments must not touch at all; adjacent ones must not overlap (a fold back
-    at their common point). O(P^2) bounding-box filter in row blocks, exact-ish orientation
-    tests on the candidates only.
+    at their common point). O(P^2) bounding-box filter over the pairs ``j >= i + 2`` in row
+    blocks, exact-ish orientation tests on the candidates only. Worst case (every bounding box
+    overlapping every other, e.g. 10,000 thin spikes meeting in the middle) a few seconds.
     """
     p = np.asarray(points, dtype=np.float64)
     n = p.shape[0]
@@ -274,17 +289,21 @@ def _crossing(points) -> tuple[int, int] | None:
         i = int(np.flatnonzero(fold)[0])
         return ((i - 1) % n, i)
     lo, hi = np.minimum(a, b), np.maximum(a, b)
-    block = max(1, 1_000_000 // max(n, 1))
-    for start in range(0, n, block):
-        i = np.arange(start, min(n, start + block))[:, None]
-        j = np.arange(n)[None, :]
-        cand = (j > i + 1) & ~((i == 0) & (j == n - 1))
-        cand &= (lo[i, 0] <= hi[j, 0]) & (lo[j, 0] <= hi[i, 0])
-        cand &= (lo[i, 1] <= hi[j, 1]) & (lo[j, 1] <= hi[i, 1])
+    lox, loy, hix, hiy = (np.ascontiguousarray(v) for v in (lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1]))
+    start = 0
+    while start < n - 2:
+        col = start + 2  # rows i >= start only need columns j >= i + 2 >= col
+        stop = min(n, start + max(1, 1_000_000 // (n - col)))
+        r = slice(start, stop)
+        cand = (lox[r, None] <= hix[None, col:]) & (lox[None, col:] <= hix[r, None])
+        cand &= (loy[r, None] <= hiy[None, col:]) & (loy[None, col:] <= hiy[r, None])
         ii, jj = np.nonzero(cand)
+        ii, jj = ii + start, jj + col
+        keep = (jj > ii + 1) & ~((ii == 0) & (jj == n - 1))
+        ii, jj = ii[keep], jj[keep]
+        start = stop
         if ii.size == 0:
             continue
-        ii = ii + start
         A, B, C, D = a[ii], b[ii], a[jj], b[jj]
         d1, d2 = _orient(C, D, A), _orient(C, D, B)
         d3, d4 = _orient(A, B, C), _orient(A, B, D)
@@ -386,6 +405,7 @@ def _make_shape(points, corners, angle: float, source: str) -> Shape:
         raise InputError(f"boundary crosses or touches itself: segment {si} meets segment {sj}", where=source)
 
     turn = turning_angles(unit)
+    turn[np.abs(turn) <= _STRAIGHT] = 0.0
     if corner_idx is None:
         is_corner = np.abs(np.degrees(turn)) > angle
     else:
@@ -394,11 +414,11 @@ def _make_shape(points, corners, angle: float, source: str) -> Shape:
         is_corner = np.zeros(n, bool)
         is_corner[inverse[corner_idx]] = True
     found = np.flatnonzero(is_corner)
-    if found.size:  # rotate so that the first corner is points[0]
-        roll = int(found[0])
-        unit = np.roll(unit, -roll, axis=0)
-        turn = np.roll(turn, -roll)
-        found = found - roll
+    # rotate so that points[0] is the first corner (without corners: the lowest point)
+    roll = int(found[0]) if found.size else _lowest(unit)
+    unit = np.roll(unit, -roll, axis=0)
+    turn = np.roll(turn, -roll)
+    found = found - roll
     return Shape(
         points=np.ascontiguousarray(unit),
         corners=found.astype(np.int32),
@@ -407,6 +427,15 @@ def _make_shape(points, corners, angle: float, source: str) -> Shape:
         offset=offset.astype(np.float64),
         source=str(source),
     )
+
+
+def _lowest(xy) -> int:
+    """Index of the lowest point of ``xy (k, 2)`` (unit box): smallest ``y``, then smallest ``x``
+    among the points within ``1e-9`` of that ``y`` (so that round-off cannot reorder points at
+    the same height, e.g. a flat bottom after translating or scaling)."""
+    y = xy[:, 1]
+    low = np.flatnonzero(y <= y.min() + 1e-9)
+    return int(low[np.argmin(xy[low, 0])])
 
 
 def _check_corners(corners, n: int, source: str) -> np.ndarray:
@@ -587,10 +616,14 @@ def annotate(shape: Shape, m: int) -> Annotation:
 
     The ``s`` points are split over the sides in proportion to side length
     (:func:`largest_remainder`) and spread evenly by arc length strictly inside each side
-    (``k`` points on a side of length ``L`` sit at ``L * i / (k + 1)``, ``i = 1..k``). The
-    sequence starts at the first corner (``shape.corners[0]``, which :func:`make_shape` puts at
+    (``k`` points on a side of length ``L`` sit at ``L * i / (k + 1)``, ``i = 1..k``). Ties
+    (sides with equal fractional quotas) are broken in ccw side order from the lowest corner
+    (smallest ``y``, then smallest ``x``; heights within ``1e-9`` count as equal), not from the
+    first one, so that the annotation of a
+    loop listed from another corner is the same sequence shifted cyclically. The sequence
+    starts at the first corner (``shape.corners[0]``, which :func:`make_shape` puts at
     ``points[0]``); without corners all ``m`` points are ``s``, evenly spaced from
-    ``points[0]``. ``t`` is measured from the start of the sequence.
+    ``points[0]`` (the lowest point). ``t`` is measured from the start of the sequence.
 
     Raises :class:`InputError` when ``m`` is smaller than the number of corners (or than 1).
     """
@@ -609,7 +642,9 @@ def annotate(shape: Shape, m: int) -> Annotation:
         start = float(cum[shape.corners[0]])
         tc = cum[shape.corners] - start  # corner parameters, tc[0] = 0
         lengths = np.diff(np.concatenate([tc, [per]]))
-        counts = largest_remainder(lengths, m - c)
+        corner_xy = shape.points[shape.corners]
+        low = _lowest(corner_xy)  # ties broken from here
+        counts = np.roll(largest_remainder(np.roll(lengths, -low), m - c), low)
         per_side = counts + 1  # the corner plus its s points
         side = np.repeat(np.arange(c), per_side).astype(np.int32)
         first = np.concatenate([[0], np.cumsum(per_side)[:-1]])
