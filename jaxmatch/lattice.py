@@ -43,7 +43,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .errors import InputError
-from .files import write_text_atomic
+from .files import read_limited, write_text_atomic
 from .shape import SYMBOLS
 
 __all__ = [
@@ -73,6 +73,9 @@ __all__ = [
 
 NEG = -1e9
 """Large finite negative used by the scorer instead of ``-inf``."""
+
+MAX_BYTES = 2**20
+"""Largest accepted lattice file (bytes); the built-ins are about 10 kB."""
 
 MAX_WEIGHT = 1000
 """Largest accepted ``|weight|``: keeps ``m * |weight|`` far from ``|NEG|`` and exact in float32."""
@@ -258,10 +261,7 @@ def _resolve(name_or_path) -> tuple[str, bytes]:
                 pass
             known = ", ".join(builtin_names()) or "none found"
             raise InputError(f"no lattice file or built-in lattice of this name (built-ins: {known})", where=arg)
-    try:
-        return str(path), path.read_bytes()
-    except OSError as err:
-        raise InputError(f"cannot read lattice file: {err.strerror or err}", where=str(path)) from None
+    return str(path), read_limited(path, MAX_BYTES, "lattice file")
 
 
 def load_lattice(name_or_path) -> Lattice:
