@@ -301,10 +301,13 @@ def choose_mesh(shape: Shape, catalogue: Catalogue, lattice: Lattice, *, rank: i
     r = int(rank)
     if r < 1:
         raise InputError(f"rank must be at least 1, got {r}", "--rank")
-    ranking = rank_meshes(shape, catalogue, lattice, internal=internal, top=r, points=points,
+    # top=0: score only; count the matchable meshes before aligning (or placing) any of them
+    ranking = rank_meshes(shape, catalogue, lattice, internal=internal, top=0, points=points,
                           tie_break=tie_break, tie_cap=tie_cap, progress=progress)
-    if len(ranking.results) < r:
-        raise InputError(f"only {len(ranking.results)} meshes match the shape, cannot take rank {r}", "--rank")
+    count = ranking.scored - ranking.unmatchable
+    if count < r:
+        raise InputError(f"only {count} meshes match the shape, cannot take rank {r}", "--rank")
+    ranking = ranking._replace(results=list(islice(ranking.following, r)))
     cache = ranking.placements if ranking.placements is not None else {}
     ann = ranking.annotation
     match = ranking.results[r - 1]

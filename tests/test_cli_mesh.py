@@ -1,0 +1,200 @@
+"""``jaxmatch mesh`` and ``jaxmatch score --png/--svg``: exit codes, files, JSON fields.
+
+Most runs call :func:`jaxmatch.cli.main` in-process (exit codes come from main()); one runs
+``python -m jaxmatch.cli`` in a subprocess to check the real exit status.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import meshio
+import numpy as np
+import pytest
+
+from jaxmatch import catalogue as cm
+from jaxmatch.cli import main
+from jaxmatch.errors import EXIT_BAD_INPUT, EXIT_INVERTED
+from jaxmatch.lattice import load_lattice
+from jaxmatch.meshfile import read_json_mesh
+from jaxmatch.pipeline import rank
+from jaxmatch.placement import place_top
+from jaxmatch.shape import load_shape
+
+ROOT = Path(__file__).resolve().parent.parent
+EXAMPLES = ROOT / "examples"
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.fixture(scope="session")
+def small_cat(tmp_path_factory):
+    p = tmp_path_factory.mktemp("clicat") / "c.npz"
+    cm.save(cm.generate(3), p)
+    return p
+
+
+@pytest.fixture(scope="session")
+def folded(small_cat):
+    """(rank of a folded mesh, rank of the next mesh that embeds without folds) for the
+    triangle under the small catalogue and the CLI's default ranking."""
+    shp = load_shape(EXAMPLES / "triangle.json")
+    r = rank(shp, cm.load(small_cat), load_lattice("fine"), top=12, tie_break="geometry")
+    pls = place_top(shp, r, cm.load(small_cat))
+    bad = next(i for i, p in enumerate(pls) if p.inverted) + 1
+    want = next(i for i, p in enumerate(pls) if i + 1 > bad and p.inverted == 0) + 1
+    return bad, want, r.results[want - 1].mesh_id
+
+
+@pytest.fixture
+def cli(capsys, monkeypatch, tmp_path):
+    monkeypatch.setenv("JAXMATCH_CACHE", str(tmp_path / "cache"))
+
+    def run(*args):
+        monkeypatch.setattr(sys, "argv", ["jaxmatch", *map(str, args)])
+        capsys.readouterr()
+        try:
+            main()
+            code = 0
+        except SystemExit as e:
+            code = e.code if isinstance(e.code, int) else 1
+        out, err = capsys.readouterr()
+        return code, out, err
+
+    return run
+
+
+def test_mesh_writes_vtk_and_pictures_json(cli, small_cat, tmp_path):
+    out, png, svg = tmp_path / "m.vtk", tmp_path / "m.png", tmp_path / "m.svg"
+    code, stdout, err = cli("mesh", EXAMPLES / "square.json", "--catalogue", small_cat, "--out", out, "--png", png, "--svg", svg, "--json")
+    assert code == 0, err
+    d = json.loads(stdout)
+    for key in ("mesh_id", "utility", "rotation", "reflected", "min_scaled_jacobian", "mean_scaled_jacobian", "inverted", "out"):
+        assert key in d
+    assert d["inverted"] == 0 and d["valid"] and d["rank"] == 1 and d["next_valid"] is None
+    assert d["out"] == str(out) and d["png"] == str(png) and d["svg"] == str(svg)
+    assert 0 < d["min_scaled_jacobian"] <= d["mean_scaled_jacobian"] <= 1
+    m = meshio.read(out)
+    quads = m.cells_dict["quad"]
+    assert quads.shape == (d["quads"], 4)
+    sj = m.cell_data_dict["scaled_jacobian"]["quad"]
+    assert sj.min() == pytest.approx(d["min_scaled_jacobian"]) and sj.mean() == pytest.approx(d["mean_scaled_jacobian"])
+    assert np.allclose(m.points[:, 2], 0) and m.points[:, :2].min() >= -1e-9  # the square's user coordinates
+    assert png.read_bytes().startswith(PNG_MAGIC)
+    assert ET.fromstring(svg.read_bytes()).tag.endswith("svg")
+    assert sorted(p.name for p in tmp_path.iterdir() if p.is_file()) == ["m.png", "m.svg", "m.vtk"]  # no temporaries
+
+
+@pytest.mark.parametrize("suffix", [".msh", ".obj", ".json", ".vtu"])
+def test_mesh_formats_read_back(cli, small_cat, tmp_path, suffix):
+    out = tmp_path / f"m{suffix}"
+    code, stdout, err = cli("mesh", EXAMPLES / "lshape.json", "--catalogue", small_cat, "--out", out, "--json")
+    assert code == 0, err
+    d = json.loads(stdout)
+    if suffix == ".json":
+        pts, quads, sj = read_json_mesh(out)
+    else:
+        m = meshio.read(out)
+        pts, quads = m.points[:, :2], m.cells_dict["quad"]
+        sj = m.cell_data_dict["scaled_jacobian"]["quad"] if suffix != ".obj" else None
+    assert quads.shape == (d["quads"], 4)
+    if sj is not None:
+        assert sj.min() == pytest.approx(d["min_scaled_jacobian"])
+    # every quad counter-clockwise (positive area) in the file's coordinates
+    p = pts[quads]
+    q = np.roll(p, -1, axis=1)
+    assert np.all(0.5 * np.sum(p[..., 0] * q[..., 1] - p[..., 1] * q[..., 0], axis=1) > 0)
+
+
+def test_mesh_text_output_and_picture_only(cli, small_cat, tmp_path):
+    png = tmp_path / "only.png"
+    code, stdout, err = cli("mesh", EXAMPLES / "triangle.json", "--catalogue", small_cat, "--png", png)
+    assert code == 0, err
+    assert "scaled Jacobian: min" in stdout and "mean" in stdout and "inverted quads: 0" in stdout
+    assert f"wrote {png}" in stdout
+    assert [p.name for p in tmp_path.iterdir() if p.is_file()] == ["only.png"]
+
+
+def test_mesh_folded_exit_3_still_writes_and_names_next_valid(cli, small_cat, tmp_path, folded):
+    bad, want, want_id = folded
+    out = tmp_path / "f.json"
+    code, stdout, err = cli("mesh", EXAMPLES / "triangle.json", "--catalogue", small_cat, "--rank", bad, "--out", out)
+    assert code == EXIT_INVERTED
+    assert "FOLDED" in stdout and "inverted" in stdout
+    assert f"#{want} {want_id}" in stdout
+    assert out.exists() and read_json_mesh(out)[1].shape[0] > 0
+
+    code, stdout, err = cli("mesh", EXAMPLES / "triangle.json", "--catalogue", small_cat, "--rank", bad, "--json")
+    assert code == EXIT_INVERTED
+    d = json.loads(stdout)
+    assert d["inverted"] > 0 and not d["valid"] and d["rank"] == bad
+    assert d["next_valid"]["rank"] == want and d["next_valid"]["mesh_id"] == want_id
+    assert "FOLDED" in err
+
+
+def test_mesh_require_valid_walks_down(cli, small_cat, tmp_path, folded):
+    bad, want, want_id = folded
+    code, stdout, err = cli("mesh", EXAMPLES / "triangle.json", "--catalogue", small_cat, "--rank", bad, "--require-valid", "--json")
+    assert code == 0, err
+    d = json.loads(stdout)
+    assert d["rank"] == want and d["requested_rank"] == bad and d["mesh_id"] == want_id and d["inverted"] == 0
+
+
+@pytest.mark.parametrize(
+    "extra",
+    [
+        ["--out", "{d}/m.stl"],
+        ["--out", "{d}/m"],
+        ["--out", "{d}/m.vtk", "--png", "{d}/m.jpg"],
+        ["--out", "{d}/m.vtk", "--svg", "{d}/m.png"],
+        ["--out", "{d}/m.vtk", "--tie-break", "size"],
+        ["--out", "{d}/m.vtk", "--rank", "999"],
+    ],
+)
+def test_mesh_bad_options_exit_2_one_line_nothing_written(cli, small_cat, tmp_path, extra):
+    d = tmp_path / "o"
+    d.mkdir()
+    args = [a.format(d=d) for a in extra]
+    code, stdout, err = cli("mesh", EXAMPLES / "square.json", "--catalogue", small_cat, *args)
+    assert code == EXIT_BAD_INPUT
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error:") and "Traceback" not in err
+    assert list(d.iterdir()) == []
+
+
+def test_score_png_svg_top_k(cli, small_cat, tmp_path):
+    png, svg = tmp_path / "top.png", tmp_path / "top.svg"
+    code, stdout, err = cli("score", EXAMPLES / "lshape.json", "--catalogue", small_cat, "--top", "3", "--png", png, "--svg", svg, "--json")
+    assert code == 0, err
+    d = json.loads(stdout)
+    assert d["tie_break"] == "geometry" and len(d["results"]) == 3
+    data = png.read_bytes()
+    assert data.startswith(PNG_MAGIC)
+    width, height = int.from_bytes(data[16:20], "big"), int.from_bytes(data[20:24], "big")
+    assert width > 2 * height  # three panels side by side
+    assert ET.fromstring(svg.read_bytes()).tag.endswith("svg")
+    code, _, err = cli("score", EXAMPLES / "lshape.json", "--catalogue", small_cat, "--png", tmp_path / "x.gif")
+    assert code == EXIT_BAD_INPUT and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "x.gif").exists()
+
+
+def test_score_tie_break_id_keeps_utilities(cli, small_cat):
+    runs = {}
+    for tb in ("id", "geometry"):
+        code, stdout, err = cli("score", EXAMPLES / "square.json", "--catalogue", small_cat, "--top", "6", "--tie-break", tb, "--json")
+        assert code == 0, err
+        runs[tb] = json.loads(stdout)["results"]
+    assert [r["utility"] for r in runs["id"]] == [r["utility"] for r in runs["geometry"]]
+
+
+def test_real_process_exit_3(small_cat, tmp_path, folded):
+    bad, want, _ = folded
+    out = tmp_path / "p.vtk"
+    r = subprocess.run([sys.executable, "-m", "jaxmatch.cli", "mesh", str(EXAMPLES / "triangle.json"), "--catalogue", str(small_cat),
+                        "--rank", str(bad), "--out", str(out)], capture_output=True, text=True, cwd=ROOT, timeout=300)
+    assert r.returncode == EXIT_INVERTED, r.stderr
+    assert "FOLDED" in r.stdout and out.exists()
+    assert meshio.read(out).cells_dict["quad"].shape[1] == 4
