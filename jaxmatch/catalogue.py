@@ -34,12 +34,16 @@ from .canon import mesh_id, relabel
 from .canon_fast import canonical_key
 from .errors import InputError
 from .files import atomic_path
-from .mesh import QuadMesh, boundary_valences, triples, valences
+from .mesh import QuadMesh, boundary_valences, triples, validate, valences
 
 FORMAT = "jaxmatch-catalogue"
 FORMAT_VERSION = 1
 DEFAULT_MAX_INTERNAL = 5
 _ARRAYS = ("ids", "k", "valences", "boundary", "offsets", "quads", "aut", "chiral")
+MAX_MEMBER_BYTES = 2**29
+"""Largest accepted uncompressed catalogue member (the k <= 5 catalogue's largest is 0.5 MB)."""
+MAX_META_BYTES = 2**22
+_REBUILD = "rebuild it with 'jaxmatch catalogue build'"
 
 
 class Bucket(NamedTuple):
@@ -172,14 +176,48 @@ class Catalogue:
         except Exception as err:  # zip CRC errors, truncated members
             raise InputError(f"catalogue member {name} is unreadable ({type(err).__name__}); rebuild it", str(self.path)) from None
         if _sha(a) != self.meta["checksums"].get(name):
-            raise InputError(f"checksum mismatch in {name}: the file is corrupted; rebuild it with 'jaxmatch catalogue build'", str(self.path))
+            raise InputError(f"checksum mismatch in {name}: the file is corrupted; {_REBUILD}", str(self.path))
         self._cache[name] = a
+        return a
+
+    def _bad(self, n: int, problem: str) -> InputError:
+        return InputError(f"catalogue bucket n{n} is inconsistent ({problem}); {_REBUILD}", str(self.path))
+
+    def _checked(self, n: int) -> dict:
+        """The arrays of bucket ``n``, verified against each other (types, shapes, ranges)."""
+        key = ("bucket", n)
+        if key in self._cache:
+            return self._cache[key]
+        a = {name: self._array(f"n{n}.{name}") for name in _ARRAYS}
+        kinds = {"ids": "U", "k": "iu", "valences": "iu", "boundary": "iu", "offsets": "iu", "quads": "iu", "aut": "iu", "chiral": "b"}
+        for name, kind in kinds.items():
+            if a[name].dtype.kind not in kind:
+                raise self._bad(n, f"{name} has dtype {a[name].dtype}")
+        N = a["ids"].shape[0] if a["ids"].ndim == 1 else -1
+        shapes = {"ids": (N,), "k": (N,), "valences": (N, n), "boundary": (N, n), "offsets": (N + 1,), "aut": (N,), "chiral": (N,)}
+        for name, shape in shapes.items():
+            if a[name].shape != shape:
+                raise self._bad(n, f"{name} has shape {a[name].shape}, expected {shape}")
+        q, off = a["quads"], a["offsets"].astype(np.int64)
+        if q.ndim != 2 or q.shape[1] != 4:
+            raise self._bad(n, f"quads has shape {q.shape}, expected (F, 4)")
+        if off[0] != 0 or np.any(np.diff(off) < 1) or off[-1] != q.shape[0]:
+            raise self._bad(n, "offsets do not partition the quads")
+        if N and (a["valences"].min() < 2 or a["valences"].max() > 5):
+            raise self._bad(n, "boundary valences outside 2..5")
+        if N and (a["k"].min() < 0 or a["aut"].min() < 1):
+            raise self._bad(n, "negative internal vertex count or automorphism count")
+        if q.size and q.min() < 0:
+            raise self._bad(n, "negative vertex index")
+        self._cache[key] = a
         return a
 
     def bucket(self, n: int, internal: list[int] | None = None) -> Bucket:
         """The meshes of boundary length n (optionally only those with k in ``internal``)."""
-        ids, k = self._array(f"n{n}.ids"), self._array(f"n{n}.k")
-        vals, aut, chiral = self._array(f"n{n}.valences"), self._array(f"n{n}.aut"), self._array(f"n{n}.chiral")
+        if n not in self.lengths:
+            raise InputError(f"no bucket of boundary length {n}", str(self.path))
+        a = self._checked(n)
+        ids, k, vals, aut, chiral = a["ids"], a["k"], a["valences"], a["aut"], a["chiral"]
         sel = np.ones(len(ids), bool) if internal is None else np.isin(k, internal)
         return Bucket(n, ids[sel], k[sel].astype(np.int32), vals[sel], aut[sel], chiral[sel])
 
@@ -193,14 +231,22 @@ class Catalogue:
     def mesh(self, mesh_id: str) -> QuadMesh:
         """The stored mesh with this id. Raises InputError if absent."""
         for n in self.lengths:
-            ids = self._array(f"n{n}.ids")
-            hit = np.flatnonzero(ids == mesh_id)
+            a = self._checked(n)
+            hit = np.flatnonzero(a["ids"] == mesh_id)
             if hit.size:
                 i = int(hit[0])
-                off = self._array(f"n{n}.offsets")
-                quads = self._array(f"n{n}.quads")[off[i] : off[i + 1]].astype(np.int32)
-                boundary = self._array(f"n{n}.boundary")[i].astype(np.int32)
-                return QuadMesh(quads=quads, boundary=boundary)
+                off = a["offsets"]
+                quads = a["quads"][off[i] : off[i + 1]].astype(np.int32)
+                boundary = a["boundary"][i].astype(np.int32)
+                m = QuadMesh(quads=quads, boundary=boundary)
+                problems = validate(m)
+                if not problems and not np.array_equal(boundary_valences(m), a["valences"][i]):
+                    problems = ["stored boundary valences differ from the quads"]
+                if not problems and m.n_internal != int(a["k"][i]):
+                    problems = ["stored internal vertex count differs from the quads"]
+                if problems:
+                    raise InputError(f"mesh {mesh_id} is not a valid catalogue mesh ({problems[0]}); {_REBUILD}", str(self.path))
+                return m
         raise InputError(f"no mesh with id {mesh_id!r}", str(self.path))
 
     def counts(self) -> dict:
@@ -221,26 +267,44 @@ class Catalogue:
 def load(path: str | os.PathLike) -> Catalogue:
     """Open a catalogue file; refuse corrupted, truncated, foreign or old-version files."""
     p = Path(path)
-    if not p.is_file():
+    if not p.exists():
         raise InputError("no such catalogue file", str(p))
+    if not p.is_file():
+        raise InputError("not a catalogue file (a folder or a device)", str(p))
     try:
         npz = np.load(p, allow_pickle=False)
         if not hasattr(npz, "files"):
             raise ValueError("not an npz archive")
+        for info in npz.zip.infolist():  # refuse zip bombs before decompressing anything
+            limit = MAX_META_BYTES if info.filename == "meta.npy" else MAX_MEMBER_BYTES
+            if info.file_size > limit:
+                raise InputError(f"catalogue member {info.filename} is {info.file_size} bytes uncompressed, more than the "
+                                 f"limit {limit}; not a jaxmatch catalogue", str(p))
         meta = json.loads(bytes(npz["meta"]).decode())
+    except InputError:
+        raise
     except (OSError, ValueError, KeyError, zipfile.BadZipFile, EOFError, UnicodeDecodeError, json.JSONDecodeError) as err:
         raise InputError(f"not a jaxmatch catalogue ({type(err).__name__}); build one with 'jaxmatch catalogue build'", str(p)) from None
     except Exception as err:  # anything else a damaged zip can raise
         raise InputError(f"unreadable catalogue ({type(err).__name__})", str(p)) from None
     if not isinstance(meta, dict) or meta.get("format") != FORMAT:
         raise InputError("not a jaxmatch catalogue (wrong format tag)", str(p))
-    if meta.get("format_version") != FORMAT_VERSION:
+    version = meta.get("format_version")
+    if isinstance(version, bool) or version != FORMAT_VERSION:
         raise InputError(
             f"catalogue format version {meta.get('format_version')} is not the supported {FORMAT_VERSION}; "
             "rebuild it with 'jaxmatch catalogue build --internal 0..5 --out PATH'", str(p))
     for key in ("internal", "lengths", "checksums"):
         if key not in meta:
             raise InputError(f"catalogue metadata lacks {key!r}", str(p))
+
+    def int_list(v):
+        return isinstance(v, list) and all(isinstance(x, int) and not isinstance(x, bool) and 0 <= x <= 10_000 for x in v)
+
+    if not int_list(meta["internal"]) or not int_list(meta["lengths"]) or len(set(meta["lengths"])) != len(meta["lengths"]):
+        raise InputError(f"catalogue metadata is malformed ('internal' and 'lengths' must be lists of small integers); {_REBUILD}", str(p))
+    if not isinstance(meta["checksums"], dict) or not all(isinstance(v, str) for v in meta["checksums"].values()):
+        raise InputError(f"catalogue metadata is malformed ('checksums' must map members to hashes); {_REBUILD}", str(p))
     missing = [f"n{n}.{a}" for n in meta["lengths"] for a in _ARRAYS if f"n{n}.{a}" not in npz.files]
     if missing:
         raise InputError(f"catalogue is missing {missing[0]} (truncated?)", str(p))
