@@ -1,0 +1,605 @@
+"""Tune a lattice's level weights on labelled shapes (soft scorer, optax).
+
+What is tuned
+-------------
+Only the *level weights* of a lattice (:func:`jaxmatch.lattice.level_structure`), never the
+192 table entries one by one: every triple keeps its level, and ``-inf`` entries (weeded and
+forbidden) stay ``-inf`` (they are fixed at ``NEG`` inside the soft scorer and get exactly zero
+gradient). The order of the levels survives by construction: per point type, the parameters
+are the best level's weight ``a`` and one number ``d_l`` per lower level, and
+
+    w_0 = a,    w_l = w_{l-1} - softplus(d_l)        (l = 1, 2, ...)
+
+so a lower level always weighs strictly less (before rounding; rounding to integers keeps
+``w_l <= w_{l-1}``). Levels that were equal start ``MIN_GAP`` apart.
+
+Loss
+----
+Each example is a shape and its preferred mesh of size ``k`` (internal vertices); the
+*candidates* are the catalogue meshes of that size (the size the user fixes with
+``--internal k``), optionally subsampled (:func:`candidates`). With the soft utilities
+``U_q`` at temperature ``gamma`` (:func:`jaxmatch.soft.soft_utility_batch`: a log-sum-exp
+over all orientations and alignments of mesh ``q``) the loss is the softmax cross-entropy
+
+    loss = mean over examples of [ logsumexp_q(U_q / gamma) - U_p / gamma ]
+           + l2 * mean over levels of (w - w_initial) ** 2
+
+i.e. ``-log P(preferred)`` under the Gibbs distribution over (mesh, orientation, alignment)
+pairs with energy ``-utility / gamma``. Meshes with the preferred mesh's boundary valence
+cycle (up to rotation and reflection: *twins*, which every lattice scores alike) are left out
+of the competition; examples whose preferred mesh cannot be matched at all (the fixed
+``-inf`` entries forbid it) are reported and get no weight. Optimiser: optax Adam on
+mini-batches; examples are shuffled by ``numpy.random.default_rng(seed)``; JAX on CPU is
+deterministic, so the same seed and data give the same weights. Every gradient is checked
+with ``isfinite`` (a :class:`FloatingPointError` stops the run).
+
+Rounding
+--------
+Lattice files hold integers. Utilities are compared within one shape only, so multiplying
+all weights by a positive scale changes no ranking: the tuned weights ``w`` are written as
+``round(scale * w)`` with the scale (from :data:`SCALES`, keeping ``|weight| <= MAX_WEIGHT``)
+whose rounded lattice ranks the *training* examples best with the exact scorer
+(pessimistic top-1, then top-5, then the smaller scale). The report evaluates the rounded
+lattice, i.e. exactly what is written (and, for comparison, the unrounded weights).
+
+Evaluation (exact scorer)
+-------------------------
+For each example, the shape is annotated with ``m = default_points(shape, longest boundary of
+the size-k meshes)`` points, as ``jaxmatch score --internal k`` does, and every catalogue
+mesh of size ``k`` is scored with the exact DP (same recurrence as
+:func:`jaxmatch.score.score_bucket`). A competitor *beats* the preferred mesh ``p`` when its
+utility is higher, and, at equal utility:
+
+* ``top1`` / ``top5`` (**pessimistic**): every tie counts against ``p``;
+* ``top1_by_id`` / ``top5_by_id``: a tie counts against ``p`` only when the competitor comes
+  first in ``jaxmatch score``'s order (shorter boundary, then smaller id).
+
+Twins of ``p`` are not competitors. ``top1`` is the fraction of examples that no competitor
+beats, ``top5`` the fraction beaten by at most four. An unmatchable preferred mesh is beaten
+by every competitor.
+
+Not done: a per-type deletion penalty (cost of skipping a shape point; 0 in the paper) would be
+three more parameters, but it needs a change to the exact scorer's recurrence.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from functools import partial
+from typing import Callable, NamedTuple, Sequence
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+
+from .catalogue import Catalogue
+from .labels import Example, MeshIndex, boundary_key, mesh_index
+from .lattice import MAX_WEIGHT, Lattice, Level, LevelStructure, level_structure, table_from_levels, with_level_weights
+from .score import NEG, dp_scan, orientation_weights
+from .shape import annotate, default_points
+from .soft import pad_shapes, soft_utility_batch, table_parts
+
+__all__ = [
+    "Candidates",
+    "Encoded",
+    "MIN_GAP",
+    "SCALES",
+    "TIE_RULE",
+    "TuneResult",
+    "candidates",
+    "choose_scale",
+    "encode",
+    "evaluate",
+    "exact_utilities",
+    "init_params",
+    "params_to_weights",
+    "rank_positions",
+    "run_tuning",
+    "split_examples",
+    "train",
+]
+
+MIN_GAP = 0.01
+"""Starting gap between levels that had equal weights (softplus never reaches 0)."""
+
+SCALES = (1, 2, 3, 4, 5, 6, 8, 10, 12, 16, 20, 25, 32, 50, 64, 100)
+"""Scales tried before rounding the tuned weights to integers."""
+
+TIE_RULE = (
+    "top1/top5: pessimistic (every competitor with an equal utility beats the preferred mesh); "
+    "top1_by_id/top5_by_id: ties go to jaxmatch score's order (shorter boundary, then smaller id); "
+    "meshes with the preferred mesh's boundary valence cycle (twins) are not competitors"
+)
+
+_SHAPE_CHUNK = 32  # shapes per compiled exact-scoring call
+
+
+# ---------------------------------------------------------------------------------------------
+# parametrisation
+
+
+def _segments(structure: LevelStructure) -> list[tuple[int, int]]:
+    """``[start, stop)`` of each type's levels in :func:`level_structure` order."""
+    out = []
+    types = np.asarray(structure.types)
+    for t in range(3):
+        idx = np.flatnonzero(types == t)
+        if idx.size:
+            out.append((int(idx[0]), int(idx[-1]) + 1))
+    return out
+
+
+def init_params(structure: LevelStructure, weights=None) -> np.ndarray:
+    """Parameters ``(L,) float32`` that give ``weights`` (default: the lattice's own)."""
+    w = np.asarray(structure.weights if weights is None else weights, np.float64)
+    p = np.empty_like(w)
+    for a, b in _segments(structure):
+        p[a] = w[a]
+        gap = np.maximum(w[a:b - 1] - w[a + 1:b], MIN_GAP)
+        p[a + 1:b] = gap + np.log(-np.expm1(-gap))  # softplus^-1
+    return p.astype(np.float32)
+
+
+def params_to_weights(params, structure: LevelStructure):
+    """Level weights ``(L,)`` from parameters (JAX-differentiable; see the module docstring)."""
+    parts = []
+    for a, b in _segments(structure):
+        top = params[a]
+        drops = jnp.cumsum(jax.nn.softplus(params[a + 1:b]))
+        parts.append(jnp.concatenate([top[None], top - drops]))
+    return jnp.concatenate(parts)
+
+
+# ---------------------------------------------------------------------------------------------
+# data
+
+
+class Candidates(NamedTuple):
+    """The competing meshes of one size ``k``, in ``jaxmatch score`` order (n, then id).
+
+    buckets: ``[(n, vals (N_n, n) int32)]``; their concatenation is ``ids``.
+    max_n: the longest boundary of *all* size-k meshes (sets the number of shape points).
+    keys: boundary valence cycle of each id (:func:`jaxmatch.labels.boundary_key`).
+    """
+
+    k: int
+    ids: list
+    buckets: list
+    max_n: int
+    keys: list
+
+
+def candidates(index: MeshIndex, k: int, *, keep: Sequence[str] = (), max_candidates: int | None = None, seed: int = 0) -> Candidates:
+    """All meshes of size ``k``; with ``max_candidates`` smaller than their number, the ids in
+    ``keep`` plus a sample drawn with ``numpy.random.default_rng(seed)`` from the others (same
+    seed, same sample), still in ranking order."""
+    ids = list(index.by_k.get(k, []))
+    if not ids:
+        raise ValueError(f"no catalogue mesh with {k} internal vertices")
+    max_n = max(index.where[i][1] for i in ids)
+    if max_candidates is not None and len(ids) > max_candidates:
+        must = sorted(set(keep) & set(ids))
+        rest = [i for i in ids if i not in set(must)]
+        extra = max(int(max_candidates) - len(must), 0)
+        pick = np.random.default_rng(seed).choice(len(rest), size=min(extra, len(rest)), replace=False)
+        chosen = set(must) | {rest[j] for j in pick}
+        ids = [i for i in ids if i in chosen]
+    buckets = []
+    for n in sorted({index.where[i][1] for i in ids}):
+        sel = [i for i in ids if index.where[i][1] == n]
+        buckets.append((n, np.stack([index.vals[i] for i in sel]).astype(np.int32)))
+    ids = [i for n, _ in buckets for i in ids if index.where[i][1] == n]
+    return Candidates(k, ids, buckets, max_n, [boundary_key(index.vals[i]) for i in ids])
+
+
+class Encoded(NamedTuple):
+    """Examples of one size, annotated: ``codes``, ``valid`` ``(S, m_pad)``; ``pos (S,)`` index
+    of the preferred mesh in the candidates; ``twin (S, N) bool`` twins of it (excluded)."""
+
+    codes: np.ndarray
+    valid: np.ndarray
+    pos: np.ndarray
+    twin: np.ndarray
+
+
+def encode(examples: Sequence[Example], cands: Candidates) -> Encoded:
+    """Annotate each shape with ``default_points(shape, cands.max_n)`` points (as
+    ``jaxmatch score --internal k``) and locate its preferred mesh among ``cands``."""
+    where = {mid: j for j, mid in enumerate(cands.ids)}
+    codes, pos, twin = [], [], []
+    for ex in examples:
+        if ex.k != cands.k:
+            raise ValueError(f"{ex.where}: preferred mesh has size {ex.k}, candidates {cands.k}")
+        if ex.preferred not in where:
+            raise ValueError(f"{ex.where}: preferred mesh {ex.preferred} is not among the candidates")
+        m = default_points(ex.shape, cands.max_n)
+        codes.append(annotate(ex.shape, m).codes)
+        p = where[ex.preferred]
+        pos.append(p)
+        key = cands.keys[p]
+        row = np.array([kk == key for kk in cands.keys])
+        row[p] = False
+        twin.append(row)
+    c, v = pad_shapes(codes) if codes else (np.zeros((0, 16), np.int32), np.zeros((0, 16), bool))
+    return Encoded(c, v, np.asarray(pos, np.int32), np.asarray(twin, bool).reshape(len(examples), len(cands.ids)))
+
+
+def _group_by_k(examples: Sequence[Example]) -> dict:
+    groups: dict = {}
+    for i, ex in enumerate(examples):
+        groups.setdefault(ex.k, []).append(i)
+    return dict(sorted(groups.items()))
+
+
+def split_examples(examples: Sequence[Example], fraction: float, seed: int) -> tuple[list[int], list[int]]:
+    """Deterministic train / held-out split ``(train indices, heldout indices)``.
+
+    Split by preferred mesh: all examples of one preferred mesh go to the same side, so the
+    held-out meshes are never seen in training. Preferred ids (sorted) are shuffled with
+    ``numpy.random.default_rng(seed)`` and moved to the held-out side until it holds at least
+    ``round(fraction * N)`` examples (at least one when ``fraction > 0``), keeping one group
+    for training.
+    """
+    if not 0.0 <= fraction < 1.0:
+        raise ValueError(f"held-out fraction must be in [0, 1), got {fraction}")
+    n = len(examples)
+    target = int(round(fraction * n))
+    if fraction > 0:
+        target = max(target, 1)
+    groups: dict = {}
+    for i, ex in enumerate(examples):
+        groups.setdefault(ex.preferred, []).append(i)
+    order = sorted(groups)
+    perm = np.random.default_rng(seed).permutation(len(order))
+    held: list[int] = []
+    for j in perm[: max(len(order) - 1, 0)]:
+        if len(held) >= target:
+            break
+        held.extend(groups[order[j]])
+    hs = set(held)
+    return [i for i in range(n) if i not in hs], sorted(held)
+
+
+# ---------------------------------------------------------------------------------------------
+# exact evaluation
+
+
+@jax.jit
+def _exact_many(codes, valid, vals, table_finite):
+    """``(S, N)`` exact best utility of meshes ``vals`` against padded shapes (NEG-ish when
+    unmatchable): the recurrence of :func:`jaxmatch.score.score_bucket`, vmapped over shapes."""
+    wc = orientation_weights(vals, table_finite)
+
+    def one(c, v):
+        return jnp.max(dp_scan(wc, c, v, jnp.maximum)[-1], axis=-1)
+
+    return jax.vmap(one)(codes, valid)
+
+
+def _finite(table) -> np.ndarray:
+    t = np.asarray(table, np.float32)
+    return np.where(np.isfinite(t) & (t > NEG), t, np.float32(NEG)).astype(np.float32)
+
+
+def exact_utilities(enc: Encoded, cands: Candidates, table) -> np.ndarray:
+    """``(S, N) float32`` exact utilities (``-inf`` when unmatchable) for a ``(3, 4, 4, 4)``
+    table (``-inf`` or ``<= NEG`` = excluded)."""
+    tf = jnp.asarray(_finite(table))
+    s_total = enc.codes.shape[0]
+    out = []
+    for start in range(0, s_total, _SHAPE_CHUNK):
+        c = enc.codes[start:start + _SHAPE_CHUNK]
+        v = enc.valid[start:start + _SHAPE_CHUNK]
+        s = c.shape[0]
+        if s < _SHAPE_CHUNK:  # fixed chunk: one compilation per (m_pad, bucket)
+            c = np.concatenate([c, np.zeros((_SHAPE_CHUNK - s, c.shape[1]), c.dtype)])
+            v = np.concatenate([v, np.zeros((_SHAPE_CHUNK - s, v.shape[1]), bool)])
+        cols = [_exact_many(jnp.asarray(c), jnp.asarray(v), jnp.asarray(vals), tf) for _, vals in cands.buckets]
+        out.append(np.concatenate([np.asarray(x) for x in cols], axis=1)[:s])
+    if not out:
+        return np.zeros((0, len(cands.ids)), np.float32)
+    u = np.concatenate(out)
+    return np.where(u <= NEG / 2, -np.inf, u).astype(np.float32)
+
+
+def rank_positions(util: np.ndarray, pos: np.ndarray, twin: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(pessimistic rank, rank by id)`` (1 = first) of each preferred mesh; see the module
+    docstring. ``util (S, N)`` in candidate (ranking) order."""
+    s, n = util.shape
+    rows = np.arange(s)
+    up = util[rows, pos][:, None]
+    comp = ~twin
+    comp[rows, pos] = False
+    earlier = np.arange(n)[None, :] < pos[:, None]
+    higher = util > up
+    tie = util == up
+    pess = 1 + np.sum(comp & (higher | tie), axis=1)
+    by_id = 1 + np.sum(comp & (higher | (tie & earlier)), axis=1)
+    return pess.astype(np.int64), by_id.astype(np.int64)
+
+
+def _metrics(pess: np.ndarray, by_id: np.ndarray) -> dict:
+    n = int(pess.shape[0])
+    if n == 0:
+        return {"top1": None, "top5": None, "top1_by_id": None, "top5_by_id": None, "mean_rank": None, "examples": 0}
+    return {
+        "top1": float(np.mean(pess == 1)),
+        "top5": float(np.mean(pess <= 5)),
+        "top1_by_id": float(np.mean(by_id == 1)),
+        "top5_by_id": float(np.mean(by_id <= 5)),
+        "mean_rank": float(np.mean(pess)),
+        "examples": n,
+    }
+
+
+class _Group(NamedTuple):
+    k: int
+    members: list  # indices into the example list
+    cands: Candidates
+    enc: Encoded
+
+
+def _groups(examples, index, *, max_candidates=None, seed=0) -> list[_Group]:
+    out = []
+    for k, members in _group_by_k(examples).items():
+        keep = sorted({examples[i].preferred for i in members})
+        cands = candidates(index, k, keep=keep, max_candidates=max_candidates, seed=seed)
+        out.append(_Group(k, members, cands, encode([examples[i] for i in members], cands)))
+    return out
+
+
+def _ranks(groups: list[_Group], n_examples: int, table) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    pess = np.zeros(n_examples, np.int64)
+    by_id = np.zeros(n_examples, np.int64)
+    unmatchable = np.zeros(n_examples, bool)
+    for g in groups:
+        u = exact_utilities(g.enc, g.cands, table)
+        p, b = rank_positions(u, g.enc.pos, g.enc.twin)
+        idx = np.asarray(g.members)
+        pess[idx], by_id[idx] = p, b
+        unmatchable[idx] = ~np.isfinite(u[np.arange(len(idx)), g.enc.pos])
+    return pess, by_id, unmatchable
+
+
+def evaluate(examples: Sequence[Example], catalogue_or_index, table, *, detail: bool = False) -> dict:
+    """Exact-scorer accuracy of ``table`` (a ``(3, 4, 4, 4)`` array or a :class:`Lattice`) on
+    ``examples``: ``{"top1", "top5", "top1_by_id", "top5_by_id", "mean_rank", "examples",
+    "unmatchable"}`` over *all* catalogue meshes of each example's size (tie rule: module
+    docstring); with ``detail`` also ``"ranks"`` (pessimistic rank per example)."""
+    index = catalogue_or_index if isinstance(catalogue_or_index, MeshIndex) else mesh_index(catalogue_or_index)
+    if isinstance(table, Lattice):
+        table = table.table()
+    groups = _groups(examples, index)
+    pess, by_id, unm = _ranks(groups, len(examples), table)
+    out = _metrics(pess, by_id)
+    out["unmatchable"] = int(unm.sum())
+    if detail:
+        out["ranks"] = [int(r) for r in pess]
+    return out
+
+
+# ---------------------------------------------------------------------------------------------
+# training
+
+
+class TuneResult(NamedTuple):
+    """weights: ``(L,) float64`` tuned level weights (unrounded); losses: mean loss per epoch;
+    ignored: indices (into the training examples) whose preferred mesh is unmatchable."""
+
+    weights: np.ndarray
+    losses: list
+    ignored: list
+
+
+def _loss_fn(structure, forbidden, buckets, w0, l2):
+    """Mini-batch loss ``(params, codes, valid, pos, keep, ex_w, gamma) -> scalar``."""
+
+    def loss(params, codes, valid, pos, keep, ex_w, gamma):
+        w = params_to_weights(params, structure)
+        table = table_from_levels(structure, w)
+        u = jnp.concatenate([soft_utility_batch(codes, valid, vals, table, forbidden, gamma) for vals in buckets], axis=1)
+        logits = jnp.where(keep, u / gamma, -jnp.inf)
+        lp = jnp.take_along_axis(logits, pos[:, None], axis=1)[:, 0]
+        ce = jax.nn.logsumexp(logits, axis=1) - lp
+        data = jnp.sum(ce * ex_w) / jnp.maximum(jnp.sum(ex_w), 1.0)
+        return data + l2 * jnp.mean((w - w0) ** 2)
+
+    return loss
+
+
+def train(
+    lattice: Lattice,
+    examples: Sequence[Example],
+    catalogue_or_index,
+    *,
+    epochs: int = 30,
+    temperature: float = 1.0,
+    seed: int = 0,
+    learning_rate: float = 0.05,
+    batch_size: int = 32,
+    l2: float = 1e-3,
+    max_candidates: int | None = 256,
+    progress: Callable[[int, int, float], None] | None = None,
+) -> TuneResult:
+    """Tune the level weights of ``lattice`` on ``examples`` (module docstring).
+
+    progress(step, total_steps, loss): called after every optimiser step.
+    Raises FloatingPointError when a loss or gradient is not finite.
+    """
+    if temperature <= 0 or not math.isfinite(temperature):
+        raise ValueError(f"temperature must be a positive number, got {temperature}")
+    if epochs < 0 or batch_size < 1:
+        raise ValueError("epochs must be >= 0 and batch_size >= 1")
+    index = catalogue_or_index if isinstance(catalogue_or_index, MeshIndex) else mesh_index(catalogue_or_index)
+    structure = level_structure(lattice)
+    _, forbidden = table_parts(lattice.table())
+    w0 = jnp.asarray(structure.weights, jnp.float32)
+    params = jnp.asarray(init_params(structure))
+    groups = _groups(examples, index, max_candidates=max_candidates, seed=seed)
+    # examples whose preferred mesh no weights can match get no weight
+    ignored = []
+    weight_of = {}
+    for g in groups:
+        u = exact_utilities(g.enc, g.cands, lattice.table())
+        ok = np.isfinite(u[np.arange(len(g.members)), g.enc.pos])
+        ignored += [i for i, good in zip(g.members, ok) if not good]
+        weight_of[g.k] = ok.astype(np.float32)
+    steps_fn = {}
+    for g in groups:
+        fn = _loss_fn(structure, forbidden, [jnp.asarray(v) for _, v in g.cands.buckets], w0, float(l2))
+        steps_fn[g.k] = jax.jit(jax.value_and_grad(fn))
+    opt = optax.adam(learning_rate)
+    state = opt.init(params)
+    rng = np.random.default_rng(seed)
+    gamma = jnp.float32(temperature)
+    total = epochs * sum(-(-len(g.members) // batch_size) for g in groups)
+    step = 0
+    losses = []
+
+    @jax.jit
+    def apply(params, state, grads):
+        upd, state = opt.update(grads, state, params)
+        return optax.apply_updates(params, upd), state
+
+    for epoch in range(epochs):
+        epoch_loss, epoch_n = 0.0, 0
+        for g in groups:
+            s = len(g.members)
+            order = rng.permutation(s)
+            for start in range(0, s, batch_size):
+                sel = order[start:start + batch_size]
+                b = len(sel)
+                pad = np.concatenate([sel, np.repeat(sel[:1], batch_size - b)])  # fixed batch shape
+                ex_w = np.concatenate([weight_of[g.k][sel], np.zeros(batch_size - b, np.float32)])
+                keep = ~g.enc.twin[pad]
+                value, grads = steps_fn[g.k](
+                    params, jnp.asarray(g.enc.codes[pad]), jnp.asarray(g.enc.valid[pad]), jnp.asarray(g.enc.pos[pad]),
+                    jnp.asarray(keep), jnp.asarray(ex_w), gamma,
+                )
+                value = float(value)
+                gnp = np.asarray(grads)
+                if not math.isfinite(value) or not np.all(np.isfinite(gnp)):
+                    raise FloatingPointError(f"non-finite loss or gradient at epoch {epoch + 1}, step {step + 1} (loss {value}); try a larger --temperature")
+                params, state = apply(params, state, grads)
+                step += 1
+                epoch_loss += value * b
+                epoch_n += b
+                if progress is not None:
+                    progress(step, total, value)
+        losses.append(epoch_loss / max(epoch_n, 1))
+    w = np.asarray(params_to_weights(params, structure), np.float64)
+    return TuneResult(w, losses, ignored)
+
+
+# ---------------------------------------------------------------------------------------------
+# rounding and the whole job
+
+
+def choose_scale(lattice: Lattice, weights, examples: Sequence[Example], catalogue_or_index, scales: Sequence[int] = SCALES) -> tuple[Lattice, int, list]:
+    """The rounded lattice ``with_level_weights(lattice, scale * weights)`` whose exact ranking
+    of ``examples`` is best (pessimistic top-1, then top-5, then the smaller scale); returns
+    ``(lattice, scale, [{"scale", "top1", "top5", ...}, ...])``."""
+    index = catalogue_or_index if isinstance(catalogue_or_index, MeshIndex) else mesh_index(catalogue_or_index)
+    w = np.asarray(weights, np.float64)
+    biggest = float(np.max(np.abs(w))) if w.size else 0.0
+    groups = _groups(examples, index)
+    best = None
+    rows = []
+    for s in scales:
+        if s * biggest > MAX_WEIGHT:
+            break
+        lat = with_level_weights(lattice, s * w)
+        pess, by_id, _ = _ranks(groups, len(examples), lat.table())
+        m = _metrics(pess, by_id)
+        rows.append({"scale": int(s), **{k: m[k] for k in ("top1", "top5", "top1_by_id", "top5_by_id", "mean_rank")}})
+        key = (m["top1"] or 0.0, m["top5"] or 0.0, m["top1_by_id"] or 0.0)
+        if best is None or key > best[0]:
+            best = (key, s, lat)
+    if best is None:  # weights too large for any scale: clip at scale 1
+        return with_level_weights(lattice, w), 1, rows
+    return best[2], int(best[1]), rows
+
+
+def _weights_json(lattice: Lattice) -> dict:
+    return {kind: [int(lev.weight) for lev in levels] for kind, levels in zip("sxv", lattice.levels)}
+
+
+def run_tuning(
+    lattice: Lattice,
+    examples: Sequence[Example],
+    catalogue: Catalogue,
+    *,
+    heldout: float = 0.25,
+    seed: int = 0,
+    epochs: int = 30,
+    temperature: float = 1.0,
+    learning_rate: float = 0.05,
+    batch_size: int = 32,
+    l2: float = 1e-3,
+    max_candidates: int | None = 256,
+    name: str | None = None,
+    extra: dict | None = None,
+    progress: Callable[[int, int, float], None] | None = None,
+    stage: Callable[[str], None] | None = None,
+) -> tuple[Lattice, dict]:
+    """Split, evaluate before, train, round, evaluate after. Returns ``(tuned lattice, report)``.
+
+    extra: optional ``{name: examples}`` evaluated before and after as well (e.g. another
+    label file); their examples take no part in training or scale choice.
+    The report holds ``train`` and ``heldout`` (and each extra set), each with ``before``,
+    ``after`` (the rounded lattice, as written) and ``after_unrounded`` metrics
+    (:func:`evaluate`), plus settings, the split, the scale search and the losses.
+    """
+    t0 = time.perf_counter()
+    say = stage or (lambda text: None)
+    index = mesh_index(catalogue)
+    train_idx, held_idx = split_examples(examples, heldout, seed)
+    tr = [examples[i] for i in train_idx]
+    he = [examples[i] for i in held_idx]
+    if not tr:
+        raise ValueError("no training examples")
+    say("evaluating the input lattice")
+    sets = {"train": tr, "heldout": he, **(extra or {})}
+    before = {key: evaluate(ex, index, lattice) if ex else evaluate([], index, lattice) for key, ex in sets.items()}
+    say(f"training on {len(tr)} examples")
+    result = train(
+        lattice, tr, index, epochs=epochs, temperature=temperature, seed=seed, learning_rate=learning_rate,
+        batch_size=batch_size, l2=l2, max_candidates=max_candidates, progress=progress,
+    )
+    say("rounding to integers")
+    tuned, scale, scale_rows = choose_scale(lattice, result.weights, tr, index)
+    tuned = Lattice(name=name or f"{lattice.name}-tuned", levels=tuned.levels, weeded=tuned.weeded, forbidden=tuned.forbidden, description=tuned.description)
+    say("evaluating the tuned lattice")
+    structure = level_structure(lattice)
+    float_table = np.asarray(table_from_levels(structure, result.weights.astype(np.float32)))
+    report = {
+        "lattice": {"input": lattice.name, "output": tuned.name},
+        "tie_rule": TIE_RULE,
+        "settings": {
+            "epochs": int(epochs), "temperature": float(temperature), "seed": int(seed),
+            "learning_rate": float(learning_rate), "batch_size": int(batch_size), "l2": float(l2),
+            "max_candidates": None if max_candidates is None else int(max_candidates),
+            "heldout_fraction": float(heldout),
+        },
+        "split": {
+            "by": "preferred mesh", "train": len(tr), "heldout": len(he),
+            "heldout_where": [examples[i].where for i in held_idx],
+        },
+        "sizes": {str(k): len(v) for k, v in _group_by_k(examples).items()},
+        "ignored_unmatchable": [tr[i].where for i in result.ignored],
+        "scale": int(scale),
+        "scales": scale_rows,
+        "loss": [float(x) for x in result.losses],
+        "weights": {"before": _weights_json(lattice), "after": _weights_json(tuned),
+                    "after_unrounded": {kind: [float(result.weights[i]) for i in range(a, b)] for kind, (a, b) in zip("sxv", _segments(structure))}},
+    }
+    for key, ex in sets.items():
+        report[key] = {
+            "before": before[key],
+            "after": evaluate(ex, index, tuned),
+            "after_unrounded": evaluate(ex, index, float_table),
+        }
+    report["seconds"] = round(time.perf_counter() - t0, 1)
+    return tuned, report
