@@ -40,15 +40,23 @@ whose best value is ``<= NEG / 2``, or with ``n > m``, is *unmatchable*: utility
 ``unmatchable`` true, rotation ``-1``. This assumes ``|weights| * m << |NEG| / 2``
 (the lattice weights are small integers).
 
-Implementation: one ``jax.lax.scan`` over input points (carry: one ``(n + 1, ...)`` array,
-the DP row for every orientation of every mesh of the batch); input lengths are padded to
-a few bucket sizes (:func:`bucket_length`) with padded points masked as *skipped*; mesh
-batches are padded to a fixed batch size, so XLA compiles once per (bucket length, n,
-batch). Weights are integers, so float32 results are exact.
+Implementation: one ``jax.lax.scan`` over input points (carry: one ``(n, ...)`` array, the
+DP rows ``j = 1..n`` for every orientation of every mesh of a block; row 0 is the constant 0).
+:func:`dp_scan` is the generic form (any reduction; used by :mod:`jaxmatch.soft` and
+:func:`align`). Exact scoring (:func:`score_bucket`, :func:`final_values`) runs the same
+max-plus recurrence in its fastest form: the narrowest exact number type (:func:`dp_kind`:
+int16 for the shipped lattices), a flat ``(n, 2n * block)`` layout with cache-sized blocks
+(:func:`block_size`) mapped one after another inside a call, padded input points as a code
+whose weights are all the sentinel, and calls dispatched on several host threads. Input
+lengths are padded to a few bucket sizes (:func:`bucket_length`); mesh batches are padded to a
+fixed chunk size, so XLA compiles once per (bucket length, n, block, chunk). Weights are
+integers, so all number types give identical utilities. Measurements: ``docs/perf.md``.
 """
 
 from __future__ import annotations
 
+import os
+from concurrent.futures import ThreadPoolExecutor
 from functools import partial
 from typing import Callable, NamedTuple
 
@@ -182,33 +190,130 @@ def dp_scan(
     """
     n = wc.shape[1]
     batch = wc.shape[2:]
-    d0 = jnp.concatenate(
-        [jnp.zeros((1, *batch), wc.dtype), jnp.full((n, *batch), NEG, wc.dtype)], axis=0
-    )
+    # the carry holds rows j = 1..n only (D[i][0] = 0 is constant): the shifted row is a
+    # zero-padded slice, which XLA:CPU fuses into one vectorised loop (a concatenate in the
+    # step fusion was ~5x slower, docs/perf.md)
+    d0 = jnp.full((n, *batch), NEG, wc.dtype)
+    pad = [(1, 0)] + [(0, 0)] * len(batch)
 
     def step(d, x):
         c, ok = x
         wi = jax.lax.dynamic_index_in_dim(wc, c, axis=0, keepdims=False)
-        new = jnp.concatenate([d[:1], reduce(d[1:], d[:-1] + wi)], axis=0)
+        new = reduce(d, jnp.pad(d[:-1], pad) + wi)
         new = jnp.where(ok, new, d)
         return new, (new if keep_rows else None)
 
     last, rows = jax.lax.scan(step, d0, (codes, valid), unroll=unroll)
+    zero = jnp.zeros((1, *batch), wc.dtype)
+    last = jnp.concatenate([zero, last], axis=0)
     if keep_rows:
-        return last, jnp.concatenate([d0[None], rows], axis=0)
+        m = rows.shape[0]
+        rows = jnp.concatenate([jnp.zeros((m, 1, *batch), wc.dtype), rows], axis=1)
+        return last, jnp.concatenate([jnp.concatenate([zero, d0], axis=0)[None], rows], axis=0)
     return last
 
 
 # --------------------------------------------------------------------------- exact scoring
 
+BLOCK_CELLS = 16384
+"""Target DP cells per scan step of one block (``block * 2n * n``): the carry, the four weight
+slabs and the new row of a block then stay in the L2 cache (docs/perf.md)."""
+
+NEG16 = -16384
+"""Sentinel for the int16 DP (``2 * NEG16`` is still an int16)."""
+
+NEG32 = -(2**30)
+"""Sentinel for the int32 DP."""
+
+_INVALID = 3
+"""Code of a padded input point: every weight is the sentinel, so the point is skipped."""
+
+
+class DPKind(NamedTuple):
+    """The exact DP's number type for a table and boundary length (:func:`dp_kind`)."""
+
+    dtype: type
+    neg: float
+
+
+def dp_kind(table, n: int) -> DPKind:
+    """Narrowest exact number type for the DP of ``table`` with boundary length ``n``.
+
+    Integer weights with ``n * max|w| < 2**13`` use int16 (16 SIMD lanes on AVX2; values stay in
+    ``[2 * NEG16, n * max|w|]``, valid ones above ``NEG16 / 2``, invalid ones at or below it),
+    integer weights with ``n * max|w| < 2**29`` int32, anything else float32 with :data:`NEG`
+    (bit for bit the recurrence of :func:`dp_scan`). All three give identical utilities.
+    """
+    t = np.asarray(finite_table(table))
+    w = t[t > NEG]
+    big = float(np.abs(w).max()) if w.size else 0.0
+    if w.size == 0 or np.all(w == np.round(w)):
+        if n * big < 2**13:
+            return DPKind(np.int16, float(NEG16))
+        if n * big < 2**29:
+            return DPKind(np.int32, float(NEG32))
+    return DPKind(np.float32, NEG)
+
+
+def dp_table(table, kind: DPKind) -> np.ndarray:
+    """``(4, 64)`` weights in ``kind.dtype``: rows = codes s, x, v and the padding code 3;
+    forbidden entries and the whole padding row are ``kind.neg``."""
+    t = np.asarray(finite_table(table)).reshape(3, 64)
+    out = np.full((4, 64), kind.neg, np.float64)
+    out[:3] = np.where(t > NEG, t, kind.neg)
+    return out.astype(kind.dtype)
+
+
+def block_size(n: int, cells: int = BLOCK_CELLS) -> int:
+    """Meshes per block: the largest power of two with ``block * 2n * n <= cells`` (at least 1)."""
+    per = 2 * n * n
+    return 1 << max(int(cells // per).bit_length() - 1, 0)
+
+
+def orientation_slabs(vals, tab) -> jnp.ndarray:
+    """``(B, n)`` valences, ``(4, 64)`` weights -> ``(4, n, 2n * B)``: ``[c, j, o * B + b]`` is the
+    weight of code ``c`` against vertex ``j`` of orientation ``o`` of mesh ``b`` (the weights of
+    :func:`orientation_weights`, orientation-major, mesh-minor).
+
+    Built without a gather per orientation: per-vertex weights ``x[c, k, b]`` (of ``vals`` and of
+    ``vals[::-1]``), tiled ``n + 1`` times along ``k`` and read as ``(n, n + 1)``, give the
+    circulant ``[j, r] = x[(j + r) % n]`` (vertex ``j`` of rotation ``r`` is vertex ``(r + j) % n``).
+    """
+    v = jnp.asarray(vals, jnp.int32)
+    b, n = v.shape
+
+    def per_vertex(s):  # triple [s[k+1], s[k], s[k-1]] -> (4, n, B)
+        s = s.T
+        return tab[:, (jnp.roll(s, -1, 0) - 2) * 16 + (s - 2) * 4 + (jnp.roll(s, 1, 0) - 2)]
+
+    halves = [jnp.tile(x, (1, n + 1, 1)).reshape(4, n, n + 1, b)[:, :, :n, :]
+              for x in (per_vertex(v), per_vertex(v[:, ::-1]))]
+    return jnp.concatenate(halves, 2).reshape(4, n, 2 * n * b)
+
+
+def _final_block(codes, vals, tab, unroll):
+    """``D[m][n]`` of every orientation: ``(B, n)`` -> ``(B, 2n)`` in ``tab.dtype``.
+
+    The max-plus recurrence of :func:`dp_scan` on the flat layout ``(n, 2n * B)``; padded input
+    points carry code 3 (all weights the sentinel), which never changes a valid value.
+    """
+    b, n = vals.shape
+    wc = orientation_slabs(vals, tab)
+    d0 = jnp.full(wc.shape[1:], tab[_INVALID, 0], tab.dtype)
+
+    def step(d, c):
+        wi = jax.lax.dynamic_index_in_dim(wc, c, axis=0, keepdims=False)
+        return jnp.maximum(d, jnp.pad(d[:-1], ((1, 0), (0, 0))) + wi), None
+
+    last = jax.lax.scan(step, d0, codes, unroll=unroll)[0]
+    return last[-1].reshape(2 * n, b).T
+
 
 @partial(jax.jit, static_argnames=("unroll",))
-def _score_chunk(codes, valid, vals, table_finite, unroll=UNROLL):
-    """Best value ``(B,)`` and first best orientation ``(B,)`` for a chunk of meshes."""
-    wc = orientation_weights(vals, table_finite)
-    last = dp_scan(wc, codes, valid, jnp.maximum, unroll=unroll)  # (n+1, B, 2n)
-    final = last[-1]
-    return jnp.max(final, axis=-1), jnp.argmax(final, axis=-1).astype(jnp.int32)
+def final_blocks(codes, vals, tab, unroll=UNROLL):
+    """``codes (m_pad,)`` (3 = padding), ``vals (C, B, n)``, ``tab (4, 64)`` -> ``(C, B, 2n)``:
+    blocks one after another (``lax.map``), so each block's working set stays in cache."""
+    return jax.lax.map(lambda v: _final_block(codes, v, tab, unroll), vals)
 
 
 def _check_vals(vals) -> np.ndarray:
@@ -222,6 +327,102 @@ def _check_vals(vals) -> np.ndarray:
     return v
 
 
+def dp_codes(codes, m_pad: int | None = None) -> np.ndarray:
+    """``(m_pad,) int32`` codes for :func:`final_blocks`: padding points get code 3."""
+    c, valid = pad_codes(codes, m_pad)
+    return np.where(valid, c, _INVALID).astype(np.int32)
+
+
+def default_threads() -> int:
+    """Host threads that dispatch blocks concurrently (the CPUs this process may use)."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # pragma: no cover - not Linux
+        return max(1, os.cpu_count() or 1)
+
+
+_POOL: dict[int, ThreadPoolExecutor] = {}
+
+
+def _pool(threads: int) -> ThreadPoolExecutor:
+    if threads not in _POOL:
+        _POOL[threads] = ThreadPoolExecutor(threads, thread_name_prefix="jaxmatch-score")
+    return _POOL[threads]
+
+
+def run_calls(fn, items, threads: int | None = None) -> list:
+    """``[fn(x) for x in items]``, on ``threads`` host threads when there are several items
+    (each jitted call releases the GIL, so XLA:CPU runs them on separate cores)."""
+    items = list(items)
+    threads = default_threads() if threads is None else max(1, int(threads))
+    if threads == 1 or len(items) < 2:
+        return [fn(x) for x in items]
+    return list(_pool(threads).map(fn, items))
+
+
+def plan_chunks(big_n: int, n: int, batch: int = DEFAULT_BATCH) -> tuple[int, int]:
+    """``(block, blocks per call)`` for ``big_n`` meshes of boundary length ``n``: calls hold
+    ``min(batch, next power of two >= big_n)`` meshes (at least 8), as blocks of
+    :func:`block_size` meshes; one compilation per (padded m, n, block, blocks per call)."""
+    chunk = max(_MIN_BATCH, min(int(batch), 1 << max(big_n - 1, 0).bit_length()))
+    block = min(block_size(n), chunk)
+    return block, -(-chunk // block)
+
+
+def final_values(
+    codes,
+    vals,
+    table,
+    *,
+    batch: int = DEFAULT_BATCH,
+    m_pad: int | None = None,
+    unroll: int = UNROLL,
+    threads: int | None = None,
+    plan: tuple[int, int] | None = None,
+) -> np.ndarray:
+    """Best utility of every orientation: ``(N, 2n) float32``, ``-inf`` where the orientation has
+    no finite alignment (or ``n > m``). Column ``o`` is orientation ``o`` of the module docstring.
+
+    Same arguments as :func:`score_bucket`; ``threads`` host threads dispatch the calls
+    (default :func:`default_threads`); ``plan`` overrides :func:`plan_chunks`.
+    """
+    v = _check_vals(vals)
+    big_n, n = v.shape
+    c = np.asarray(codes, dtype=np.int32).reshape(-1)
+    m = c.shape[0]
+    cj = jnp.asarray(dp_codes(c, m_pad))
+    kind = dp_kind(table, n)
+    tab = jnp.asarray(dp_table(table, kind))
+    block, per_call = plan if plan is not None else plan_chunks(big_n, n, batch)
+    chunk = block * per_call
+    n_calls = -(-big_n // chunk)
+    vp = np.full((n_calls * chunk, n), 2, np.int32)
+    vp[:big_n] = v
+    vp = vp.reshape(n_calls, per_call, block, n)
+    outs = run_calls(lambda k: np.asarray(final_blocks(cj, vp[k], tab, unroll=unroll)), range(n_calls), threads)
+    raw = np.concatenate([o.reshape(-1, 2 * n) for o in outs] or [np.empty((0, 2 * n), kind.dtype)])[:big_n]
+    out = raw.astype(np.float32)
+    out[raw <= kind.neg / 2] = -np.inf
+    if n > m:
+        out[:] = -np.inf
+    return out
+
+
+def reduce_orientations(values: np.ndarray) -> ScoreResult:
+    """:class:`ScoreResult` from per-orientation values ``(N, 2n)`` (:func:`final_values`): the
+    best value, ties to the smallest orientation index."""
+    values = np.asarray(values, np.float32)
+    big_n, two_n = values.shape
+    n = two_n // 2
+    best = values.max(axis=1) if big_n else np.empty(0, np.float32)
+    orient = values.argmax(axis=1) if big_n else np.empty(0, np.int64)
+    unmatchable = ~np.isfinite(best)
+    utility = np.where(unmatchable, -np.inf, best).astype(np.float32)
+    rotation = np.where(unmatchable, -1, orient % max(n, 1)).astype(np.int32)
+    reflected = (~unmatchable) & (orient >= n)
+    return ScoreResult(utility, rotation, reflected, unmatchable)
+
+
 def score_bucket(
     codes,
     vals,
@@ -230,35 +431,19 @@ def score_bucket(
     batch: int = DEFAULT_BATCH,
     m_pad: int | None = None,
     unroll: int = UNROLL,
+    threads: int | None = None,
 ) -> ScoreResult:
     """Score every mesh of one bucket (all of boundary length ``n``) against ``codes``.
 
     codes: ``(m,)`` ints 0/1/2; vals: ``(N, n)`` ccw boundary valences; table:
     ``(3, 4, 4, 4)`` weights with ``-inf`` for forbidden. ``m`` is padded to
     :func:`bucket_length` (or ``m_pad``), the meshes to a multiple of the chunk size
-    ``min(batch, next power of two >= N)`` (at least 8); one compilation per
-    (padded m, n, chunk size).
+    ``min(batch, next power of two >= N)`` (at least 8), cut into cache-sized blocks
+    (:func:`block_size`); one compilation per (padded m, n, block, chunk). The DP runs in the
+    narrowest exact number type (:func:`dp_kind`); chunks are dispatched on ``threads`` host
+    threads (default: every CPU this process may use).
     """
-    v = _check_vals(vals)
-    big_n, n = v.shape
-    c = np.asarray(codes, dtype=np.int32).reshape(-1)
-    m = c.shape[0]
-    codes_pad, valid = pad_codes(c, m_pad)
-    tf = finite_table(table)
-    chunk = max(_MIN_BATCH, min(int(batch), 1 << max(big_n - 1, 0).bit_length()))
-    n_chunks = -(-big_n // chunk)
-    vp = np.full((n_chunks * chunk, n), 2, np.int32)
-    vp[:big_n] = v
-    cj, vj = jnp.asarray(codes_pad), jnp.asarray(valid)
-    # dispatch every chunk first (asynchronous), then collect
-    outs = [_score_chunk(cj, vj, jnp.asarray(vp[k * chunk : (k + 1) * chunk]), tf, unroll=unroll) for k in range(n_chunks)]
-    best = np.concatenate([np.asarray(b) for b, _ in outs] or [np.empty(0, np.float32)])[:big_n]
-    orient = np.concatenate([np.asarray(o) for _, o in outs] or [np.empty(0, np.int32)])[:big_n]
-    unmatchable = (best <= NEG / 2) | (n > m)
-    utility = np.where(unmatchable, -np.inf, best).astype(np.float32)
-    rotation = np.where(unmatchable, -1, orient % n).astype(np.int32)
-    reflected = (~unmatchable) & (orient >= n)
-    return ScoreResult(utility, rotation, reflected, unmatchable)
+    return reduce_orientations(final_values(codes, vals, table, batch=batch, m_pad=m_pad, unroll=unroll, threads=threads))
 
 
 # --------------------------------------------------------------------------- one mesh
