@@ -172,7 +172,6 @@ def mesh(
     for key, path in (("png", png), ("svg", svg)):
         if path is not None:
             written[key] = str(draw_placements(path, shp, ann, [(panel_title(choice.rank, m), pl)], title=shape.name))
-    last = choice.requested_rank + DEFAULT_WALK - 1
     notes = []
     if choice.rank != choice.requested_rank:
         notes.append(f"mesh #{choice.requested_rank} folds; placed #{choice.rank} {m.mesh_id}, the first mesh of the ranking "
@@ -186,7 +185,9 @@ def mesh(
             notes.append(f"next-ranked mesh that embeds without folds: #{ar} {am.mesh_id} (utility {am.utility:g}, "
                          f"min scaled Jacobian {apl.min_scaled_jacobian:.3f}); use --rank {ar} or --require-valid")
         else:
-            notes.append(f"no mesh ranked #{choice.requested_rank}..#{last} embeds without folds")
+            last = choice.requested_rank + choice.searched
+            more = "" if choice.searched >= DEFAULT_WALK - 1 else " (no further meshes match)"
+            notes.append(f"no mesh ranked #{choice.requested_rank}..#{last} embeds without folds{more}")
     if as_json:
         alt = choice.alternative
         print(json.dumps({
