@@ -53,17 +53,24 @@ drawn from ``numpy.random.default_rng(seed)`` in catalogue order: same seed, sam
 
 Designer rule (:func:`design_ranking`)
 --------------------------------------
-A mechanical stand-in for a designer's choice, independent of the lattices: compare the
-shape's *turning function* (cumulative turning angle against arc length, perimeter scaled to
-1) with the mesh's ideal outline with equal edges (so: valence-2 vertices on convex corners,
-valence 4 on concave corners, and mesh vertices spaced evenly along the boundary), minimised
-over the mesh's start position along the boundary (a fine grid of ``samples`` positions),
-its mirror image and a constant angle offset, as the root-mean-square difference in radians
-(the L2 turning-function distance of Arkin et al., 1991). Then:
+A mechanical stand-in for a designer's choice among the meshes of the size ``k`` the user
+fixed; it never looks at a lattice. In order:
 
-1. *fit*: keep the meshes within ``tolerance`` (relative, default 10 %) of the best distance;
-2. *regularity*: among them, fewest irregular internal vertices (valence other than 4);
-3. then the smaller distance; then the smaller id.
+1. *corners*: valence-2 vertices belong on convex corners and valence-4/5 vertices on concave
+   corners. The shape's corner cycle (``x`` convex, ``v`` concave, in loop order) is compared
+   with the mesh's (``x`` for each valence-2 vertex, ``v`` for each valence 4 or 5; valence 3
+   is no corner) by the cyclic edit distance (insertions and deletions cost 1, an ``x``/``v``
+   swap 2; minimised over rotations and the mirror image): the number of corners that do not
+   meet a mesh corner of their kind plus mesh corners left over. Keep the meshes with the
+   smallest distance.
+2. *fit and spacing*: among them, compare the shape's *turning function* (cumulative turning
+   angle against arc length, perimeter scaled to 1) with the mesh's ideal outline drawn with
+   equal edges (so mesh vertices spread evenly along the boundary), minimised over the start
+   position (a grid of ``samples`` positions), the mirror image and a constant angle offset, as
+   the root-mean-square difference in radians (the L2 turning-function distance of Arkin et
+   al., 1991); keep those within ``tolerance`` (relative, default 10 %) of the best.
+3. *regularity*: among them, fewest irregular internal vertices (valence other than 4);
+4. then the smaller turning distance; then the smaller id.
 """
 
 from __future__ import annotations
@@ -87,6 +94,8 @@ __all__ = [
     "LabelSet",
     "MeshIndex",
     "boundary_key",
+    "corner_cycle",
+    "cyclic_edit_distance",
     "design_ranking",
     "dump_labels",
     "example_record",
@@ -96,6 +105,7 @@ __all__ = [
     "mesh_index",
     "parse_label_line",
     "parse_labels",
+    "shape_corner_cycle",
     "synthetic_examples",
     "synthetic_shape",
     "turning_distances",
@@ -360,12 +370,46 @@ def turning_distances(shape: Shape, vals_list, samples: int = 720) -> np.ndarray
     return np.asarray([d for d, _, _ in turning_fits(shape, vals_list, samples)])
 
 
+def corner_cycle(vals) -> str:
+    """The mesh's corners in boundary order: ``x`` per valence 2, ``v`` per valence 4 or 5."""
+    return "".join("x" if v == 2 else "v" for v in np.asarray(vals).reshape(-1).tolist() if v != 3)
+
+
+def shape_corner_cycle(shape: Shape) -> str:
+    """The shape's corners in loop order: ``x`` convex, ``v`` concave."""
+    return "".join("x" if c else "v" for c in shape.convex.tolist())
+
+
+def _edit(a: str, b: str) -> int:
+    """Edit distance: insert/delete 1, substitute 2 (= delete + insert)."""
+    prev = list(range(len(b) + 1))
+    for i, ca in enumerate(a, 1):
+        cur = [i] + [0] * len(b)
+        for j, cb in enumerate(b, 1):
+            cur[j] = min(prev[j] + 1, cur[j - 1] + 1, prev[j - 1] + (0 if ca == cb else 2))
+        prev = cur
+    return prev[-1]
+
+
+def cyclic_edit_distance(a: str, b: str) -> int:
+    """Edit distance between cyclic strings ``a`` and ``b`` (rotations of ``b`` and of its
+    mirror image ``b[::-1]``; rotating one string suffices, Maes 1990)."""
+    if not b:
+        return len(a)
+    best = len(a) + len(b)
+    for seq in (b, b[::-1]):
+        for r in range(len(seq)):
+            best = min(best, _edit(a, seq[r:] + seq[:r]))
+    return best
+
+
 class DesignChoice(NamedTuple):
-    """One row of :func:`design_ranking`: the fit and the orientation it implies
-    (``rotation``/``reflected`` in :mod:`jaxmatch.score`'s convention: the first mesh vertex
-    along the boundary from the shape's first corner)."""
+    """One row of :func:`design_ranking`: the corner distance, the fit and the orientation it
+    implies (``rotation``/``reflected`` in :mod:`jaxmatch.score`'s convention: the first mesh
+    vertex along the boundary from the shape's first corner, by the turning fit)."""
 
     mesh_id: str
+    corners: int
     distance: float
     irregular: int
     within_tolerance: bool
@@ -380,14 +424,24 @@ def design_ranking(shape: Shape, catalogue: Catalogue, k: int, *, index: MeshInd
     ids = index.by_k.get(k, [])
     if not ids:
         raise InputError(f"the catalogue has no mesh with {k} internal vertices", where=str(catalogue.path))
+    target = shape_corner_cycle(shape)
+    cache: dict = {}
+    corner = []
+    for mid in ids:
+        cyc = corner_cycle(index.vals[mid])
+        if cyc not in cache:
+            cache[cyc] = cyclic_edit_distance(target, cyc)
+        corner.append(cache[cyc])
     fits = turning_fits(shape, [index.vals[i] for i in ids], samples)
-    limit = min(d for d, _, _ in fits) * (1.0 + tolerance) + 1e-12
+    best_corner = min(corner)
+    limit = min(d for c, (d, _, _) in zip(corner, fits) if c == best_corner) * (1.0 + tolerance) + 1e-12
     rows = []
-    for mid, (d, shift, refl) in zip(ids, fits):
+    for mid, c, (d, shift, refl) in zip(ids, corner, fits):
         n = index.vals[mid].shape[0]
         rotation = int(np.argmin(np.mod(shift + np.arange(n) / n + 1e-9, 1.0)))
-        rows.append(DesignChoice(mid, float(d), irregular_internal(catalogue, mid), bool(d <= limit), rotation, bool(refl)))
-    rows.sort(key=lambda c: (not c.within_tolerance, c.irregular if c.within_tolerance else 0, c.distance, c.mesh_id))
+        within = c == best_corner and d <= limit
+        rows.append(DesignChoice(mid, int(c), float(d), irregular_internal(catalogue, mid), bool(within), rotation, bool(refl)))
+    rows.sort(key=lambda r: (r.corners, not r.within_tolerance, r.irregular if r.within_tolerance else 0, r.distance, r.mesh_id))
     return rows
 
 
