@@ -26,7 +26,7 @@ catalogue_app = typer.Typer(no_args_is_help=True, help="Build and inspect mesh c
 app.add_typer(lattice_app, name="lattice")
 app.add_typer(catalogue_app, name="catalogue")
 
-out = Console(soft_wrap=True)
+out = Console(soft_wrap=True, width=None if sys.stdout.isatty() else 120)
 err = Console(stderr=True)
 
 
@@ -118,7 +118,7 @@ def score(
     out.print(f"lattice {lat.name}; scored {ranking.scored} meshes, {ranking.unmatchable} unmatchable")
     table = Table(title="best per size" if per_size else f"top {top}")
     for col in ("rank", "mesh id", "internal", "boundary", "utility", "rotation", "reflected"):
-        table.add_column(col, justify="right" if col not in ("mesh id",) else "left")
+        table.add_column(col, justify="right" if col not in ("mesh id",) else "left", no_wrap=True, min_width=15 if col == "mesh id" else None)
     for i, r in enumerate(ranking.results, 1):
         table.add_row(str(i), r.mesh_id, str(r.internal_vertices), str(r.boundary_length), f"{r.utility:g}",
                       str(r.rotation), "yes" if r.reflected else "no")
@@ -265,13 +265,14 @@ def lattice_show(name: str = typer.Argument(..., help="fine, coarse, or a TOML p
 
 @catalogue_app.command("build")
 def catalogue_build(internal: str = typer.Option(..., help="K or K1..K2."),
-                    out_path: Path = typer.Option(..., "--out", help="Output .npz file (written atomically).")) -> None:
+                    out_path: Path = typer.Option(..., "--out", help="Output .npz file (written atomically)."),
+                    workers: int = typer.Option(os.cpu_count() or 1, min=1, help="Processes used to expand each level.")) -> None:
     """Enumerate every catalogue mesh for the given numbers of internal vertices."""
     ks = cat_mod.parse_range(internal)
     with _progress() as prog:
         task = prog.add_task("closing vertices", total=max(ks))
-        info = cat_mod.build(ks, out_path, progress=lambda j, states, found: prog.update(
-            task, completed=j, description=f"k={j}: {found} meshes"))
+        info = cat_mod.build(ks, out_path, workers=workers, progress=lambda j, states, found: (prog.update(
+            task, completed=j, description=f"k={j}: {found} meshes"), err.print(f"k={j}: {found} meshes") if not err.is_terminal else None))
     cat = cat_mod.load(out_path)
     for k, d in cat.counts()["per_k"].items():
         err.print(f"k={k}: {d['meshes']} meshes ({d['up_to_rotation']} up to rotation only)")
