@@ -1,0 +1,650 @@
+"""Bulk scoring: each distinct boundary sequence once, pruned top-K, streaming, several devices.
+
+Everything here returns exactly what the exhaustive scorer (:func:`jaxmatch.score.score_bucket`
+on every mesh) gives; the tests compare them (``tests/test_bulk.py``).
+
+* **Distinct sequences** (:func:`group_sequences`): meshes whose boundary valence sequences are
+  equal up to rotation and reflection get the same ``2n`` orientation values, permuted. Each
+  distinct sequence is scored once and its values are fanned out to the meshes that share it
+  (:func:`fan_out`), so ties between orientations break exactly as for the mesh itself.
+* **Pruning** (:func:`upper_bounds`, :func:`top_k`): a cheap upper bound per sequence (each
+  vertex's best weight over the point types the shape has, capped by how many points of each
+  type there are) lets a top-K search skip sequences that cannot reach the K-th best utility.
+  Sequences are scored in bound order, in rounds; a sequence is skipped only when its bound is
+  *strictly* below the current K-th best utility of every group it could enter, so ties at the
+  cut-off are still found.
+* **Streaming** (:func:`prepare`): the catalogue is read one bucket (boundary length) at a time
+  and only the grouped sequences, ids and k are kept; device memory per call depends on the
+  batch size, never on the catalogue size.
+* **Devices** (:func:`score_sharded`, :func:`score_many`): the same blocks of
+  :func:`jaxmatch.score.final_blocks`, sharded over a 1-D ``jax.sharding.Mesh`` with
+  ``shard_map``: meshes over devices (one shape), or shapes over devices (many shapes). Inputs
+  are built with ``jax.make_array_from_callback`` and outputs gathered with
+  ``multihost_utils.process_allgather``, so the same code runs on several hosts after
+  ``jax.distributed.initialize()`` (docs/perf.md). On CPU, :func:`configure_host_devices` splits
+  the host into N XLA devices (before jax is imported).
+
+This module imports JAX lazily (inside functions), so :func:`configure_host_devices` can run
+first.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import sys
+from functools import partial
+from typing import Callable, Iterable, NamedTuple, Sequence
+
+import numpy as np
+
+__all__ = [
+    "SequenceGroups",
+    "Part",
+    "TopK",
+    "configure_host_devices",
+    "group_sequences",
+    "fan_out",
+    "upper_bounds",
+    "prepare",
+    "score_distinct",
+    "top_k",
+    "top_k_many",
+    "device_mesh",
+    "sharded_values",
+    "score_sharded",
+    "score_many",
+    "write_jsonl",
+]
+
+_NEG = -1e9  # jaxmatch.score.NEG, without importing JAX here
+
+
+# --------------------------------------------------------------------------- devices
+
+
+def configure_host_devices(n: int) -> None:
+    """Make the CPU platform show ``n`` XLA devices (``--xla_force_host_platform_device_count``).
+
+    Must run before JAX is imported (the flag is read once). If JAX is already imported, only
+    checks that at least ``n`` devices exist and raises ``RuntimeError`` otherwise. Accelerator
+    platforms (GPU, TPU) ignore the flag: their devices are the accelerators.
+    """
+    n = int(n)
+    if n < 1:
+        raise ValueError(f"device count must be >= 1, got {n}")
+    if "jax" in sys.modules:
+        import jax
+
+        have = len(jax.devices())
+        if have < n:
+            raise RuntimeError(
+                f"{n} devices requested but JAX was imported with {have}; call "
+                "configure_host_devices before importing jax (or set XLA_FLAGS="
+                f"--xla_force_host_platform_device_count={n})")
+        return
+    flags = re.sub(r"--xla_force_host_platform_device_count=\S+", "", os.environ.get("XLA_FLAGS", "")).split()
+    os.environ["XLA_FLAGS"] = " ".join(flags + [f"--xla_force_host_platform_device_count={n}"])
+
+
+def device_mesh(devices=None):
+    """A 1-D ``jax.sharding.Mesh`` (axis ``"d"``): all devices (None), the first ``devices``
+    (int), or the given device list."""
+    import jax
+    from jax.sharding import Mesh
+
+    if devices is None:
+        devs = jax.devices()
+    elif isinstance(devices, (int, np.integer)):
+        all_devs = jax.devices()
+        if not 1 <= int(devices) <= len(all_devs):
+            raise ValueError(f"asked for {int(devices)} devices, {len(all_devs)} available")
+        devs = all_devs[: int(devices)]
+    else:
+        devs = list(devices)
+    return Mesh(np.array(devs), ("d",))
+
+
+def _global(x: np.ndarray, mesh, spec):
+    """A global ``jax.Array`` of host data ``x`` (the same on every process) laid out as ``spec``."""
+    import jax
+    from jax.sharding import NamedSharding
+
+    return jax.make_array_from_callback(x.shape, NamedSharding(mesh, spec), lambda idx: x[idx])
+
+
+def _to_host(a) -> np.ndarray:
+    """The whole of a global array on this host (an all-gather across processes if needed)."""
+    import jax
+
+    if jax.process_count() == 1:
+        return np.asarray(a)
+    from jax.experimental import multihost_utils
+
+    return np.asarray(multihost_utils.process_allgather(a, tiled=True))
+
+
+# --------------------------------------------------------------------------- distinct sequences
+
+
+class SequenceGroups(NamedTuple):
+    """Meshes of one boundary length grouped by boundary sequence up to rotation and reflection.
+
+    seqs: ``(U, n) int32`` representatives (the lexicographically smallest orientation);
+    index: ``(N,)`` representative of each input sequence; orient: ``(N, 2n)``: orientation ``o``
+    of input sequence ``i`` is orientation ``orient[i, o]`` of ``seqs[index[i]]`` (the same
+    oriented valence sequence; orientation numbering of :mod:`jaxmatch.score`).
+    """
+
+    seqs: np.ndarray
+    index: np.ndarray
+    orient: np.ndarray
+
+
+def _orientations(v: np.ndarray) -> np.ndarray:
+    n = v.shape[1]
+    rot = (np.arange(n)[:, None] + np.arange(n)[None, :]) % n
+    return np.concatenate([v[:, rot], v[:, ::-1][:, rot]], axis=1)
+
+
+def group_sequences(vals) -> SequenceGroups:
+    """Group ``(N, n)`` boundary sequences by equality up to rotation and reflection."""
+    v = np.asarray(vals, np.int32)
+    if v.ndim != 2 or v.shape[1] == 0:
+        raise ValueError(f"vals must be (N, n) with n >= 1, got shape {v.shape}")
+    big_n, n = v.shape
+    if big_n == 0:
+        return SequenceGroups(np.zeros((0, n), np.int32), np.zeros(0, np.int64), np.zeros((0, 2 * n), np.int64))
+    o = _orientations(v)  # (N, 2n, n)
+    cand = np.ones(o.shape[:2], bool)
+    for j in range(n):  # lexicographic argmin over the 2n orientations
+        col = np.where(cand, o[:, :, j], np.iinfo(np.int32).max)
+        cand &= col == col.min(axis=1, keepdims=True)
+    star = cand.argmax(axis=1)  # first smallest orientation o* = (h*, a)
+    canon = o[np.arange(big_n), star]
+    seqs, index = np.unique(canon, axis=0, return_inverse=True)
+    h, a = (star >= n)[:, None], (star % n)[:, None]
+    r = np.arange(n)[None, :]
+    minus, plus = (r - a) % n, (r + a) % n
+    # vals = roll(c, a) (h* = 0) or roll(c[::-1], -a) (h* = 1), c the representative:
+    # rotation r of vals is rotation r - a of c (of c[::-1] when h* = 1), and rotation r of
+    # vals[::-1] is rotation r + a of c[::-1] (of c when h* = 1)
+    first = np.where(h, n + plus, minus)
+    second = np.where(h, minus, n + plus)
+    orient = np.concatenate([first, second], axis=1).astype(np.int64)
+    return SequenceGroups(seqs.astype(np.int32), index.reshape(-1).astype(np.int64), orient)
+
+
+def fan_out(rep_values: np.ndarray, groups: SequenceGroups, rows=None) -> np.ndarray:
+    """Per-orientation values of the meshes (``(N, 2n)``, or only ``rows``) from the values
+    ``(U, 2n)`` of their representatives."""
+    idx = groups.index if rows is None else groups.index[rows]
+    orient = groups.orient if rows is None else groups.orient[rows]
+    return np.asarray(rep_values)[idx[:, None], orient]
+
+
+def score_distinct(codes, vals, table, **kw):
+    """:func:`jaxmatch.score.score_bucket`, scoring each distinct sequence once (same result).
+    Keyword arguments go to :func:`jaxmatch.score.final_values` (or, with ``devices``, to
+    :func:`sharded_values`)."""
+    from .score import reduce_orientations
+
+    g = group_sequences(np.asarray(vals).reshape(-1, np.shape(vals)[-1]))
+    rep = _values(codes, g.seqs, table, **kw)
+    return reduce_orientations(fan_out(rep, g))
+
+
+# --------------------------------------------------------------------------- bounds
+
+
+def _finite_np(table) -> np.ndarray:
+    t = np.asarray(table, np.float64).reshape(3, 64)
+    return np.where(t > _NEG, t, _NEG)
+
+
+_MIRROR = np.array([(w * 16 + v * 4 + u) for u in range(4) for v in range(4) for w in range(4)])
+"""Triple index of ``[u, v, w]`` -> index of ``[w, v, u]`` (the triple in the mirrored mesh)."""
+
+
+def triple_histograms(seqs) -> np.ndarray:
+    """``(U, 64) int32``: how often each triple ``[s[j+1], s[j], s[j-1]]`` (table order) occurs in
+    each sequence ``seqs (U, n)``. Rotations keep it; reflection permutes it (``[:, _MIRROR]``)."""
+    s = np.asarray(seqs, np.int64)
+    u, n = s.shape
+    f = (np.roll(s, -1, 1) - 2) * 16 + (s - 2) * 4 + (np.roll(s, 1, 1) - 2)
+    return np.bincount((f + 64 * np.arange(u)[:, None]).reshape(-1), minlength=64 * u).reshape(u, 64).astype(np.int32)
+
+
+def upper_bounds(seqs, codes, table, *, hist: np.ndarray | None = None) -> np.ndarray:
+    """``(U,) float64`` upper bound of the best utility of each sequence ``seqs (U, n)`` against
+    ``codes (m,)`` (the utility with forbidden weights as ``NEG``, so a bound ``<= NEG / 2``
+    means unmatchable; ``-inf`` when ``n > m``). ``hist``: :func:`triple_histograms` of ``seqs``
+    if already known.
+
+    Per orientation family (``vals`` and ``vals[::-1]``; rotations keep the multiset of triples)
+    each vertex ``j`` has weights ``w_c(j)`` for the types ``c`` the shape has. The bound is the
+    smaller of ``sum_j max_c w_c(j)`` and, for each present type ``b``,
+    ``sum_j w_b(j) + sum_{c != b} (largest count_c values of max(w_c(j) - w_b(j), 0))`` (at most
+    ``count_c`` vertices can take a point of type ``c``). Computed on triple histograms: the
+    sum of the largest gains is a sum over the distinct gain levels (matrix products only).
+    """
+    s = np.asarray(seqs, np.int64)
+    if s.ndim != 2:
+        raise ValueError(f"seqs must be (U, n), got shape {s.shape}")
+    u, n = s.shape
+    c = np.asarray(codes, np.int64).reshape(-1)
+    out = np.full(u, -np.inf)
+    if u == 0 or n > c.shape[0]:
+        return out
+    count = np.bincount(c, minlength=3)[:3]
+    present = np.flatnonzero(count > 0)
+    w = _finite_np(table)  # (3, 64)
+    h0 = triple_histograms(s) if hist is None else np.asarray(hist)
+    for h in (h0, h0[:, _MIRROR]):
+        hf = h.astype(np.float64)
+        bound = hf @ w[present].max(axis=0)
+        for b in present:
+            total = hf @ w[b]
+            for cc in present:
+                if cc == b:
+                    continue
+                gain = np.maximum(w[cc] - w[b], 0.0)
+                levels = np.unique(gain[gain > 0])[::-1]  # distinct positive gains, decreasing
+                if levels.size == 0:
+                    continue
+                # sum of the count_cc largest gains = sum over levels l of
+                # (g_l - g_{l+1}) * min(count_cc, #vertices with gain >= g_l)
+                at_least = hf @ (gain[None, :] >= levels[:, None]).T.astype(np.float64)  # (U, L)
+                steps = levels - np.append(levels[1:], 0.0)
+                total = total + np.minimum(at_least, float(count[cc])) @ steps
+            bound = np.minimum(bound, total)
+        out = np.maximum(out, bound)
+    return out
+
+
+# --------------------------------------------------------------------------- parts (streamed)
+
+
+class Part(NamedTuple):
+    """One bucket of the catalogue, grouped: ``n``, mesh ``ids``/``k``/``valences`` and the
+    :class:`SequenceGroups` of the valences."""
+
+    n: int
+    ids: np.ndarray
+    k: np.ndarray
+    valences: np.ndarray
+    groups: SequenceGroups
+
+
+def prepare(buckets: Iterable) -> list[Part]:
+    """Group each bucket (anything with ``n``, ``ids``, ``k``, ``valences``, e.g.
+    ``Catalogue.buckets(internal)``, consumed one at a time) into a :class:`Part`. Shape
+    independent: prepare once, score many shapes."""
+    parts = []
+    for b in buckets:
+        if len(b.ids) == 0:
+            continue
+        vals = np.asarray(b.valences)
+        parts.append(Part(int(b.n), np.asarray(b.ids), np.asarray(b.k).astype(np.int64), vals, group_sequences(vals)))
+    return parts
+
+
+def _values(codes, seqs, table, *, devices=None, plan=None, **kw) -> np.ndarray:
+    """Per-orientation values of ``seqs`` on one device (threads) or sharded over ``devices``."""
+    if devices is not None and not (isinstance(devices, (int, np.integer)) and int(devices) == 1):
+        kw.pop("threads", None)
+        return sharded_values(codes, seqs, table, devices=devices, plan=plan, **kw)
+    from .score import final_values
+
+    return final_values(codes, seqs, table, plan=plan, **kw)
+
+
+# --------------------------------------------------------------------------- top K
+
+
+class TopK(NamedTuple):
+    """Result of :func:`top_k`.
+
+    rows: ``(utility, k, n, id, rotation, reflected, valences)`` tuples, the rows of
+    :func:`jaxmatch.pipeline.rank`, in its order (utility descending, then k, n, id): the best
+    ``top`` of all meshes (of each k with ``per_size``) plus every further mesh tied with the
+    last of them (the meshes a geometric tie-break needs). Equal to the same selection from the
+    exhaustive ranking.
+    total: meshes considered; scored: meshes whose sequence was scored exactly; pruned: meshes
+    skipped by their bound (utility unknown, below the cut-off); unmatchable: meshes known to be
+    unmatchable (n > m, bound, or scored); sequences / sequences_scored: distinct sequences.
+    """
+
+    rows: list
+    total: int
+    scored: int
+    pruned: int
+    unmatchable: int
+    sequences: int
+    sequences_scored: int
+
+
+def _select(rows: list, top: int, per_size: bool) -> list:
+    """The best ``top`` rows (per k with ``per_size``) plus ties with the last one, in order."""
+    rows = sorted(rows, key=lambda r: (-r[0], r[1], r[2], r[3]))
+    groups: dict = {}
+    for r in rows:
+        groups.setdefault(r[1] if per_size else None, []).append(r)
+    keep = []
+    for g in groups.values():
+        if len(g) > top:
+            cut = g[top - 1][0]
+            g = [r for i, r in enumerate(g) if i < top or r[0] == cut]
+        keep.extend(g)
+    return sorted(keep, key=lambda r: (-r[0], r[1], r[2], r[3]))
+
+
+def top_k(
+    codes,
+    parts,
+    table,
+    *,
+    top: int = 5,
+    per_size: bool = False,
+    prune: bool = True,
+    batch: int | None = None,
+    round_size: int = 64,
+    threads: int | None = None,
+    devices=None,
+    progress: Callable[[int, int], None] | None = None,
+) -> TopK:
+    """Exact top ``top`` meshes for one shape ``codes (m,)``, optionally pruned.
+
+    parts: from :func:`prepare` (or buckets, prepared here). prune=False scores every distinct
+    sequence (each bucket in chunks of ``batch`` meshes). prune=True scores sequences in
+    decreasing bound order in rounds (``round_size`` sequences first, doubling; one block per
+    call) and skips every sequence whose bound is below the current cut-off of each group it
+    could enter. Only the rows that can still be selected are kept, so memory does not grow with
+    the catalogue. devices: None or 1 = this process's default device with ``threads`` host
+    threads; an int or a device list = :func:`sharded_values` over those devices.
+    progress(done, total): meshes settled (scored, pruned or unmatchable) so far.
+    """
+    from .score import DEFAULT_BATCH, NEG, block_size
+
+    top = max(int(top), 1)
+    batch = DEFAULT_BATCH if batch is None else int(batch)
+    parts = _as_parts(parts)
+    codes = np.asarray(codes, np.int32).reshape(-1)
+    total = sum(len(p.ids) for p in parts)
+    keys = sorted({int(k) for p in parts for k in p.k}) if per_size else [0]
+    key_pos = {k: i for i, k in enumerate(keys)}
+    st = dict(rows=[], scored=0, unmatchable=0, seq_scored=0, done=0)
+
+    def group_of(k: np.ndarray) -> np.ndarray:
+        if not per_size:
+            return np.zeros(len(k), np.int64)
+        return np.searchsorted(np.asarray(keys), k)
+
+    def cutoffs() -> np.ndarray:
+        """Current utility of the ``top``-th row of each group (``-inf`` while fewer)."""
+        thr = np.full(len(keys), -np.inf)
+        by: dict = {}
+        for r in st["rows"]:
+            by.setdefault(key_pos[r[1]] if per_size else 0, []).append(r[0])
+        for g, us in by.items():
+            if len(us) >= top:
+                thr[g] = sorted(us, reverse=True)[top - 1]
+        return thr
+
+    def score_some(p: Part, sel: np.ndarray, plan) -> None:
+        from .score import reduce_orientations
+
+        rep = np.full((p.groups.seqs.shape[0], 2 * p.n), -np.inf, np.float32)
+        rep[sel] = _values(codes, p.groups.seqs[sel], table, plan=plan, batch=batch, threads=threads, devices=devices)
+        mesh_rows = np.flatnonzero(np.isin(p.groups.index, sel))
+        res = reduce_orientations(fan_out(rep, p.groups, mesh_rows))
+        ok = np.isfinite(res.utility)
+        keep = ok & (res.utility >= cutoffs()[group_of(p.k[mesh_rows])])  # the others cannot be selected
+        st["rows"] = _select(st["rows"] + [
+            (float(res.utility[i]), int(p.k[r]), p.n, str(p.ids[r]), int(res.rotation[i]), bool(res.reflected[i]), p.valences[r])
+            for i, r in zip(np.flatnonzero(keep), mesh_rows[keep])], top, per_size)
+        st["seq_scored"] += len(sel)
+        st["scored"] += len(mesh_rows)
+        st["unmatchable"] += int((~ok).sum())
+        st["done"] += len(mesh_rows)
+        if progress is not None:
+            progress(st["done"], total)
+
+    bounds = [upper_bounds(p.groups.seqs, codes, table) for p in parts]
+    hopeless = [b <= NEG / 2 for b in bounds]  # n > m, or a vertex with no allowed point type
+    for p, h in zip(parts, hopeless):
+        dead = int(h[p.groups.index].sum())
+        st["unmatchable"] += dead
+        st["done"] += dead
+
+    if not prune:
+        for p, h in zip(parts, hopeless):
+            sel = np.flatnonzero(~h)
+            if sel.size:
+                score_some(p, sel, None)
+    else:
+        # which ranking groups (k values with per_size) each sequence can enter
+        member = []
+        for p in parts:
+            mem = np.zeros((len(p.groups.seqs), len(keys)), bool)
+            mem[p.groups.index, group_of(p.k)] = True
+            member.append(mem)
+        live = [np.flatnonzero(~h) for h in hopeless]
+        ob = np.concatenate([b[lv] for b, lv in zip(bounds, live)] + [np.zeros(0)])
+        op = np.concatenate([np.full(lv.size, i, np.int64) for i, lv in enumerate(live)] + [np.zeros(0, np.int64)])
+        os_ = np.concatenate(live + [np.zeros(0, np.int64)]).astype(np.int64)
+        order = np.lexsort((os_, op, -ob))  # decreasing bound; ties by part, then sequence
+        ob, op, os_ = ob[order], op[order], os_[order]
+        offsets = np.cumsum([0] + [len(p.groups.seqs) for p in parts])
+        mem_all = np.concatenate(member + [np.zeros((0, len(keys)), bool)])[offsets[op] + os_]
+        pending = np.ones(ob.size, bool)
+        size = max(int(round_size), 1)
+        while True:
+            thr = cutoffs()
+            # skip a sequence when its bound is below the cut-off of every group it can enter
+            pending &= ~np.all(~mem_all | (ob[:, None] < thr[None, :]), axis=1)
+            todo = np.flatnonzero(pending)[:size]
+            if todo.size == 0:
+                break
+            pending[todo] = False
+            for pi in np.unique(op[todo]):
+                p = parts[int(pi)]
+                score_some(p, np.sort(os_[todo][op[todo] == pi]), (min(block_size(p.n), batch), 1))
+            size = min(2 * size, 8192)
+    if progress is not None:
+        progress(total, total)
+    return TopK(st["rows"], total, st["scored"], total - st["done"], st["unmatchable"],
+                sum(len(p.groups.seqs) for p in parts), st["seq_scored"])
+
+
+def _as_parts(parts) -> list:
+    if isinstance(parts, list) and all(isinstance(p, Part) for p in parts):
+        return parts
+    return prepare(parts)
+
+
+def top_k_many(codes_list: Sequence, parts, table, *, devices=None, **kw) -> list[TopK]:
+    """:func:`top_k` for several shapes (``codes_list``), sharing one :func:`prepare`.
+
+    devices None or 1: each shape is a (pruned, unless ``prune=False``) :func:`top_k` on this
+    process's device. Several devices: the shapes are sharded over them (:func:`score_many`;
+    every distinct sequence is scored, no pruning). ``kw``: ``top``, ``per_size``, ``batch``
+    (and for one device also ``prune``, ``threads``, ``round_size``). Same rows either way."""
+    parts = _as_parts(parts)
+    if _mesh_size(devices) <= 1:
+        return [top_k(c, parts, table, devices=None, **kw) for c in codes_list]
+    from .score import reduce_orientations
+
+    top, per_size = max(int(kw.get("top", 5)), 1), bool(kw.get("per_size", False))
+    total = sum(len(p.ids) for p in parts)
+    rows: list[list] = [[] for _ in codes_list]
+    unmatchable = [0] * len(codes_list)
+    for p in parts:
+        values = score_many(codes_list, p.groups.seqs, table, devices=devices, values=True, batch=kw.get("batch"))
+        for s, v in enumerate(values):
+            res = reduce_orientations(fan_out(v, p.groups))
+            ok = np.flatnonzero(np.isfinite(res.utility))
+            unmatchable[s] += len(p.ids) - len(ok)
+            rows[s] = _select(rows[s] + [
+                (float(res.utility[i]), int(p.k[i]), p.n, str(p.ids[i]), int(res.rotation[i]), bool(res.reflected[i]), p.valences[i])
+                for i in ok], top, per_size)
+    seqs = sum(len(p.groups.seqs) for p in parts)
+    return [TopK(r, total, total, 0, u, seqs, seqs) for r, u in zip(rows, unmatchable)]
+
+
+def _mesh_size(devices) -> int:
+    if devices is None:
+        return 1
+    if isinstance(devices, (int, np.integer)):
+        return int(devices)
+    return len(list(devices))
+
+
+# --------------------------------------------------------------------------- sharded kernels
+
+_FNS: dict = {}
+
+
+def _sharded_fn(mesh, unroll: int, over: str):
+    """jit(shard_map(...)) of the block kernel: ``over="meshes"`` shards the blocks axis,
+    ``over="shapes"`` the shapes axis."""
+    key = (mesh, unroll, over)
+    if key in _FNS:
+        return _FNS[key]
+    import jax
+    from jax.sharding import PartitionSpec as P
+
+    from .score import _final_block
+
+    def blocks(codes, vals, tab):
+        return jax.lax.map(lambda v: _final_block(codes, v, tab, unroll), vals)
+
+    if over == "meshes":
+        body, specs = blocks, (P(), P("d"), P())
+    else:
+        def body(codes_many, vals, tab):
+            return jax.lax.map(lambda c: blocks(c, vals, tab), codes_many)
+
+        specs = (P("d"), P(), P())
+    fn = jax.jit(jax.shard_map(body, mesh=mesh, in_specs=specs, out_specs=P("d"), check_vma=False))
+    _FNS[key] = fn
+    return fn
+
+
+def sharded_values(
+    codes,
+    vals,
+    table,
+    *,
+    devices=None,
+    batch: int | None = None,
+    m_pad: int | None = None,
+    unroll: int | None = None,
+    plan: tuple[int, int] | None = None,
+) -> np.ndarray:
+    """:func:`jaxmatch.score.final_values` with the meshes sharded over ``devices``
+    (:func:`device_mesh`): ``(N, 2n) float32``, ``-inf`` for orientations without a finite
+    alignment. Each call holds ``devices x blocks per call x block`` meshes."""
+    from jax.sharding import PartitionSpec as P
+
+    from .score import DEFAULT_BATCH, UNROLL, _check_vals, dp_codes, dp_kind, dp_table, plan_chunks
+
+    v = _check_vals(vals)
+    big_n, n = v.shape
+    c = np.asarray(codes, np.int32).reshape(-1)
+    mesh = device_mesh(devices)
+    d = mesh.size
+    kind = dp_kind(table, n)
+    block, per_call = plan if plan is not None else plan_chunks(-(-big_n // d), n, DEFAULT_BATCH if batch is None else batch)
+    chunk = d * per_call * block
+    n_calls = max(-(-big_n // chunk), 1)
+    vp = np.full((n_calls * chunk, n), 2, np.int32)
+    vp[:big_n] = v
+    vp = vp.reshape(n_calls, d * per_call, block, n)
+    fn = _sharded_fn(mesh, UNROLL if unroll is None else int(unroll), "meshes")
+    cj = _global(dp_codes(c, m_pad), mesh, P())
+    tab = _global(dp_table(table, kind), mesh, P())
+    outs = [fn(cj, _global(vp[k], mesh, P("d")), tab) for k in range(n_calls)]  # dispatched asynchronously
+    raw = np.concatenate([_to_host(o).reshape(-1, 2 * n) for o in outs])[:big_n]
+    out = raw.astype(np.float32)
+    out[raw <= kind.neg / 2] = -np.inf
+    if n > c.shape[0]:
+        out[:] = -np.inf
+    return out
+
+
+def score_sharded(codes, vals, table, *, devices=None, **kw):
+    """:func:`jaxmatch.score.score_bucket` with the meshes sharded over ``devices`` (same result)."""
+    from .score import reduce_orientations
+
+    return reduce_orientations(sharded_values(codes, vals, table, devices=devices, **kw))
+
+
+def score_many(
+    codes_list: Sequence,
+    vals,
+    table,
+    *,
+    devices=None,
+    batch: int | None = None,
+    unroll: int | None = None,
+    values: bool = False,
+) -> list:
+    """Score meshes ``vals (N, n)`` against several shapes, the shapes sharded over ``devices``.
+
+    Returns one :class:`jaxmatch.score.ScoreResult` per shape (with ``values``: the ``(N, 2n)``
+    per-orientation values of :func:`jaxmatch.score.final_values` instead). Shapes are padded to
+    the longest one's :func:`jaxmatch.score.bucket_length` (padding points are skipped) and to a
+    multiple of the device count; meshes go in chunks of ``batch``.
+    """
+    from jax.sharding import PartitionSpec as P
+
+    from .score import (DEFAULT_BATCH, UNROLL, _check_vals, bucket_length, dp_codes, dp_kind, dp_table,
+                        plan_chunks, reduce_orientations)
+
+    v = _check_vals(vals)
+    big_n, n = v.shape
+    shapes = [np.asarray(c, np.int32).reshape(-1) for c in codes_list]
+    if not shapes:
+        return []
+    mesh = device_mesh(devices)
+    d = mesh.size
+    m_pad = bucket_length(max(len(c) for c in shapes))
+    s_pad = -(-len(shapes) // d) * d
+    codes = np.full((s_pad, m_pad), 3, np.int32)
+    for i, c in enumerate(shapes):
+        codes[i] = dp_codes(c, m_pad)
+    kind = dp_kind(table, n)
+    block, per_call = plan_chunks(big_n, n, DEFAULT_BATCH if batch is None else batch)
+    chunk = per_call * block
+    n_calls = max(-(-big_n // chunk), 1)
+    vp = np.full((n_calls * chunk, n), 2, np.int32)
+    vp[:big_n] = v
+    vp = vp.reshape(n_calls, per_call, block, n)
+    fn = _sharded_fn(mesh, UNROLL if unroll is None else int(unroll), "shapes")
+    cj = _global(codes, mesh, P("d"))
+    tab = _global(dp_table(table, kind), mesh, P())
+    outs = [fn(cj, _global(vp[k], mesh, P()), tab) for k in range(n_calls)]
+    raw = np.concatenate([_to_host(o).reshape(s_pad, -1, 2 * n) for o in outs], axis=1)[: len(shapes), :big_n]
+    res = []
+    for i, c in enumerate(shapes):
+        out = raw[i].astype(np.float32)
+        out[raw[i] <= kind.neg / 2] = -np.inf
+        if n > c.shape[0]:
+            out[:] = -np.inf
+        res.append(out if values else reduce_orientations(out))
+    return res
+
+
+# --------------------------------------------------------------------------- output
+
+
+def write_jsonl(path, records: Iterable[dict]) -> None:
+    """Write one JSON object per line, atomically (temp file + rename: readers see the old file
+    or the complete new one, never a partial one)."""
+    from .files import atomic_open
+
+    with atomic_open(path, "w") as fh:
+        for rec in records:
+            fh.write(json.dumps(rec, sort_keys=False) + "\n")
