@@ -413,8 +413,8 @@ def _validate(doc: dict, loc: _Locator, source: str) -> Lattice:
         if key not in _TOP_KEYS:
             raise InputError(f"unknown key {_short(key)} (allowed: {', '.join(_TOP_KEYS)})", where=loc.at(loc.key("", key) or loc.key(None, key)))
     name = doc.get("name", Path(source).stem)
-    if not isinstance(name, str) or not name.strip() or "\n" in name:
-        raise InputError("name must be a non-empty one-line string", where=loc.at(loc.key("", "name")))
+    if not isinstance(name, str) or not name.strip() or not name.isprintable():
+        raise InputError("name must be a non-empty one-line string of printable characters", where=loc.at(loc.key("", "name")))
     description = doc.get("description", "")
     if not isinstance(description, str):
         raise InputError("description must be a string", where=loc.at(loc.key("", "description")))

@@ -419,6 +419,14 @@ def test_lattice_bad_triples(triple):
     assert isinstance(err, InputError)
 
 
+@pytest.mark.parametrize("name", ['"a\\u001b[31mred"', '"two\\nlines"', '"tab\\there"', '"   "', '""', "3", "[]"])
+def test_lattice_names_are_printable_one_liners(name):
+    """The name is printed in tables and messages: no control characters (terminal escapes)."""
+    text = FINE.decode().replace('name = "fine"', f"name = {name}", 1)
+    err = result_or_error(parse_lattice, text, "n.toml", where="n.toml:")
+    assert isinstance(err, InputError) and "name" in str(err)
+
+
 @pytest.mark.parametrize("kind", ["oversized", "deep array", "deep table", "many keys", "nul bytes", "bom"])
 def test_lattice_odd_files(tmp_path, kind):
     path = tmp_path / "odd.toml"
