@@ -144,12 +144,7 @@ def init_params(structure: LevelStructure, weights=None) -> np.ndarray:
 
 def params_to_weights(params, structure: LevelStructure):
     """Level weights ``(L,)`` from parameters (JAX-differentiable; see the module docstring)."""
-    parts = []
-    for a, b in _segments(structure):
-        top = params[a]
-        drops = jnp.cumsum(jax.nn.softplus(params[a + 1:b]))
-        parts.append(jnp.concatenate([top[None], top - drops]))
-    return jnp.concatenate(parts)
+    return _weights(jnp.asarray(params), tuple(_segments(structure)))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -393,20 +388,41 @@ class TuneResult(NamedTuple):
     ignored: list
 
 
-def _loss_fn(structure, forbidden, buckets, w0, l2):
-    """Mini-batch loss ``(params, codes, valid, pos, keep, ex_w, gamma) -> scalar``."""
+def _weights(params, segments):
+    """:func:`params_to_weights` with static ``segments`` (jit-friendly)."""
+    parts = []
+    for a, b in segments:
+        top = params[a]
+        parts.append(jnp.concatenate([top[None], top - jnp.cumsum(jax.nn.softplus(params[a + 1:b]))]))
+    return jnp.concatenate(parts)
 
-    def loss(params, codes, valid, pos, keep, ex_w, gamma):
-        w = params_to_weights(params, structure)
-        table = table_from_levels(structure, w)
-        u = jnp.concatenate([soft_utility_batch(codes, valid, vals, table, forbidden, gamma) for vals in buckets], axis=1)
-        logits = jnp.where(keep, u / gamma, -jnp.inf)
-        lp = jnp.take_along_axis(logits, pos[:, None], axis=1)[:, 0]
-        ce = jax.nn.logsumexp(logits, axis=1) - lp
-        data = jnp.sum(ce * ex_w) / jnp.maximum(jnp.sum(ex_w), 1.0)
-        return data + l2 * jnp.mean((w - w0) ** 2)
 
-    return loss
+def _loss(params, fixed, batch, gamma, segments):
+    """Mini-batch loss (module docstring).
+
+    fixed: ``(masks (L, 192), base (192,), forbidden (3, 4, 4, 4), buckets (tuple of (N_n, n)),
+    w0 (L,), l2)``; batch: ``(codes, valid, pos, keep (B, N), ex_w (B,))``.
+    """
+    masks, base, forbidden, buckets, w0, l2 = fixed
+    codes, valid, pos, keep, ex_w = batch
+    w = _weights(params, segments)
+    table = (w @ masks + base).reshape(3, 4, 4, 4)  # = table_from_levels(structure, w)
+    u = jnp.concatenate([soft_utility_batch(codes, valid, vals, table, forbidden, gamma) for vals in buckets], axis=1)
+    logits = jnp.where(keep, u / gamma, -jnp.inf)
+    lp = jnp.take_along_axis(logits, pos[:, None], axis=1)[:, 0]
+    ce = jax.nn.logsumexp(logits, axis=1) - lp
+    data = jnp.sum(ce * ex_w) / jnp.maximum(jnp.sum(ex_w), 1.0)
+    return data + l2 * jnp.mean((w - w0) ** 2)
+
+
+_value_and_grad = jax.jit(jax.value_and_grad(_loss), static_argnames=("segments",))
+"""``(params, fixed, batch, gamma, segments) -> (loss, gradient)``; compiled once per shapes."""
+
+
+@jax.jit
+def _adam_step(params, state, grads, learning_rate):
+    upd, state = optax.adam(learning_rate).update(grads, state, params)
+    return optax.apply_updates(params, upd), state
 
 
 def train(
@@ -446,22 +462,19 @@ def train(
         ok = np.isfinite(u[np.arange(len(g.members)), g.enc.pos])
         ignored += [i for i, good in zip(g.members, ok) if not good]
         weight_of[g.k] = ok.astype(np.float32)
-    steps_fn = {}
-    for g in groups:
-        fn = _loss_fn(structure, forbidden, [jnp.asarray(v) for _, v in g.cands.buckets], w0, float(l2))
-        steps_fn[g.k] = jax.jit(jax.value_and_grad(fn))
-    opt = optax.adam(learning_rate)
-    state = opt.init(params)
+    segments = tuple(_segments(structure))
+    masks = jnp.asarray(structure.masks.reshape(structure.masks.shape[0], -1).astype(np.float32))
+    base = jnp.asarray(np.where(structure.masks.any(axis=0), 0.0, NEG).astype(np.float32).reshape(-1))
+    fixed = {
+        g.k: (masks, base, jnp.asarray(forbidden), tuple(jnp.asarray(v) for _, v in g.cands.buckets), w0, jnp.float32(l2))
+        for g in groups
+    }
+    state = optax.adam(learning_rate).init(params)
     rng = np.random.default_rng(seed)
     gamma = jnp.float32(temperature)
     total = epochs * sum(-(-len(g.members) // batch_size) for g in groups)
     step = 0
     losses = []
-
-    @jax.jit
-    def apply(params, state, grads):
-        upd, state = opt.update(grads, state, params)
-        return optax.apply_updates(params, upd), state
 
     for epoch in range(epochs):
         epoch_loss, epoch_n = 0.0, 0
@@ -474,15 +487,14 @@ def train(
                 pad = np.concatenate([sel, np.repeat(sel[:1], batch_size - b)])  # fixed batch shape
                 ex_w = np.concatenate([weight_of[g.k][sel], np.zeros(batch_size - b, np.float32)])
                 keep = ~g.enc.twin[pad]
-                value, grads = steps_fn[g.k](
-                    params, jnp.asarray(g.enc.codes[pad]), jnp.asarray(g.enc.valid[pad]), jnp.asarray(g.enc.pos[pad]),
-                    jnp.asarray(keep), jnp.asarray(ex_w), gamma,
-                )
+                batch = (jnp.asarray(g.enc.codes[pad]), jnp.asarray(g.enc.valid[pad]), jnp.asarray(g.enc.pos[pad]),
+                         jnp.asarray(keep), jnp.asarray(ex_w))
+                value, grads = _value_and_grad(params, fixed[g.k], batch, gamma, segments)
                 value = float(value)
                 gnp = np.asarray(grads)
                 if not math.isfinite(value) or not np.all(np.isfinite(gnp)):
                     raise FloatingPointError(f"non-finite loss or gradient at epoch {epoch + 1}, step {step + 1} (loss {value}); try a larger --temperature")
-                params, state = apply(params, state, grads)
+                params, state = _adam_step(params, state, grads, jnp.float32(learning_rate))
                 step += 1
                 epoch_loss += value * b
                 epoch_n += b
