@@ -58,6 +58,7 @@ from .errors import InputError
 __all__ = [
     "Annotation",
     "DEFAULT_CORNER_ANGLE",
+    "MAX_ANNOTATED",
     "MAX_POINTS",
     "S",
     "SYMBOLS",
@@ -91,6 +92,10 @@ MAX_POINTS = 10_000
 
 MAX_BYTES = 16 * 2**20
 """Largest accepted input file (bytes)."""
+
+MAX_ANNOTATED = 100_000
+"""Largest accepted number ``m`` of annotated points (a memory bound; scoring time grows
+linearly in ``m``, and the default is twice the longest mesh boundary, a few dozen)."""
 
 _TINY = 1e-12  # unit-box tolerance for coincident points (length) and zero area (area)
 _STRAIGHT = 1e-9  # radians: smaller turns are round-off on a straight run (never corners, convex)
@@ -625,12 +630,15 @@ def annotate(shape: Shape, m: int) -> Annotation:
     ``points[0]``); without corners all ``m`` points are ``s``, evenly spaced from
     ``points[0]`` (the lowest point). ``t`` is measured from the start of the sequence.
 
-    Raises :class:`InputError` when ``m`` is smaller than the number of corners (or than 1).
+    Raises :class:`InputError` when ``m`` is smaller than the number of corners (or than 1),
+    or larger than :data:`MAX_ANNOTATED`.
     """
     m = int(m)
     c = shape.n_corners
     if m < max(c, 1):
         raise InputError(f"{m} boundary points requested, but the shape has {c} corners (need at least {max(c, 1)})", where=shape.source)
+    if m > MAX_ANNOTATED:
+        raise InputError(f"{m} boundary points requested, more than the maximum {MAX_ANNOTATED}", where=shape.source)
     cum = cumulative_length(shape.points)
     per = float(cum[-1])
     if c == 0:

@@ -339,6 +339,17 @@ def test_shape_large_files_are_bounded(tmp_path, kind):
         assert isinstance(got, InputError)
 
 
+@pytest.mark.parametrize("m", [-1, 0, 3, 100_001, 10**12])
+def test_annotation_point_counts_are_bounded(m):
+    """``--points`` below the corner count or absurdly large: a one-line error, at once."""
+    shape = make_shape(L_SHAPE, source="l.json")
+    t0 = time.perf_counter()
+    with pytest.raises(InputError) as exc:
+        annotate(shape, m)
+    check_error(exc.value, "l.json")
+    assert time.perf_counter() - t0 < 1.0
+
+
 @pytest.mark.skipif(not Path("/dev/zero").exists(), reason="needs /dev/zero")
 def test_endless_inputs_are_bounded():
     for fn in (load_shape, load_lattice, cm.load):
