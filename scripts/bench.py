@@ -1,0 +1,424 @@
+#!/usr/bin/env python3
+"""Scoring benchmark: jaxmatch's exact scorer against a compiled single-thread reference.
+
+Fixed workload (so figures compare over time): every mesh of the shipped catalogue
+(``jaxmatch/data/catalogue-k0-5.npz``, k = 0..5, 22641 meshes) against each shape of
+:data:`EXAMPLES` annotated with m = 64 points, lattice ``fine``.
+
+Work unit (the same for every scorer): one *DP cell update* is one ``D[i][j]`` of the modified
+LCS for one orientation. Per mesh of boundary length n and shape of m points that is
+``2n orientations x n vertices x m points = 2 n^2 m`` cells, whether or not a scorer computes
+them all. ``cells/s`` = workload cells / wall time; ``meshes/s`` = (meshes x shapes) / wall time.
+
+Printed, from one run:
+
+* jaxmatch exact scorer (``score_bucket`` on every mesh, all host threads): compile time
+  (first pass minus a warm pass) and run time (min / median of ``--reps``), meshes/s, cells/s;
+* the reference (numba ``@njit``, nopython, single thread, float32; the plain recurrence of
+  ``jaxmatch.reference.dp_reference``, written for this benchmark), checked to give identical
+  utilities for every mesh and shape; its throughput, and the ratio jaxmatch / reference;
+* the same workload through ``jaxmatch.bulk``: each distinct boundary sequence once (sharing
+  per k), and pruned exact top-5 against exhaustive top-5 (speed-up, sequences scored);
+* peak RSS: of this process, and of a scorer-only subprocess for catalogue parts k <= 4 and
+  k <= 5 (streaming: memory follows the batch size, not the catalogue);
+* machine load (``os.getloadavg``) before and after, CPUs, versions.
+
+``--json`` prints one JSON object on the last line. ``--cli`` also times a cold and a warm
+``jaxmatch score examples/lshape.json`` (fresh persistent compilation cache). Run from the
+repository root: ``.venv/bin/python scripts/bench.py``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import resource
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+EXAMPLES = ["circle.json", "curved.json", "dshape.json", "hexagon.json", "lshape.json", "lshape.txt",
+            "square.json", "triangle.json", "tshape.json"]
+"""The benchmark shapes (the examples/ folder when the benchmark was written; fixed)."""
+
+POINTS = 64
+
+
+def parse_args(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--json", action="store_true", help="print one JSON object on the last line")
+    ap.add_argument("--reps", type=int, default=5, help="jaxmatch repetitions (default 5)")
+    ap.add_argument("--ref-reps", type=int, default=3, help="reference repetitions (default 3; ~15 s each)")
+    ap.add_argument("--internal", default="0..5", help="catalogue part, K or K1..K2 (default 0..5)")
+    ap.add_argument("--catalogue", type=Path, default=None, help="catalogue file (default: the shipped one)")
+    ap.add_argument("--threads", type=int, default=None, help="jaxmatch host threads (default: all CPUs of this process)")
+    ap.add_argument("--batch", type=int, default=None, help="meshes per compiled call (default score.DEFAULT_BATCH)")
+    ap.add_argument("--block-cells", type=int, default=None, help="DP cells per block step (default score.BLOCK_CELLS)")
+    ap.add_argument("--dtype", choices=["auto", "int32", "float32"], default="auto", help="force the DP number type")
+    ap.add_argument("--skip-reference", action="store_true", help="jaxmatch only (no ratio)")
+    ap.add_argument("--skip-bulk", action="store_true", help="skip the distinct-sequence and pruning measurements")
+    ap.add_argument("--skip-rss", action="store_true", help="skip the per-catalogue-size RSS subprocesses")
+    ap.add_argument("--cli", action="store_true", help="also time cold and warm 'jaxmatch score examples/lshape.json'")
+    ap.add_argument("--rss-probe", action="store_true", help=argparse.SUPPRESS)
+    return ap.parse_args(argv)
+
+
+def rss_mb() -> float:
+    """Peak resident set size of this process so far (MB): ``VmHWM`` of /proc/self/status (reset
+    by exec, unlike ``ru_maxrss``, which a child inherits from its parent), else ``ru_maxrss``."""
+    try:
+        with open("/proc/self/status") as fh:
+            for line in fh:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1]) / 1024.0
+    except OSError:
+        pass
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def summary(xs: list[float]) -> dict:
+    return {"min": min(xs), "median": statistics.median(xs), "all": xs}
+
+
+# --------------------------------------------------------------------------- workload
+
+
+def load_workload(args):
+    from jaxmatch import catalogue as cat_mod
+    from jaxmatch.lattice import load_lattice
+    from jaxmatch.shape import annotate, load_shape
+
+    cat = cat_mod.load(args.catalogue) if args.catalogue else cat_mod.default_catalogue()
+    internal = cat_mod.parse_range(args.internal)
+    buckets = list(cat.buckets(internal))
+    table = load_lattice("fine").table()
+    shapes = [annotate(load_shape(ROOT / "examples" / name), POINTS).codes for name in EXAMPLES]
+    return cat, internal, buckets, table, shapes
+
+
+def workload_cells(buckets, shapes) -> tuple[int, int]:
+    meshes = sum(len(b.ids) for b in buckets)
+    cells = sum(len(b.ids) * 2 * b.n * b.n * len(c) for b in buckets for c in shapes)
+    return meshes * len(shapes), cells
+
+
+def configure(args):
+    from jaxmatch import score
+
+    if args.block_cells:
+        score.BLOCK_CELLS = int(args.block_cells)
+    if args.dtype != "auto":
+        import numpy as np
+
+        forced = score.DPKind(np.int32, float(score.NEG32)) if args.dtype == "int32" else score.DPKind(np.float32, score.NEG)
+        score.dp_kind = lambda table, n: forced  # noqa: E731 - benchmark-only override
+
+
+def jax_pass(buckets, table, shapes, args) -> list:
+    from jaxmatch.score import DEFAULT_BATCH, score_bucket
+
+    batch = args.batch or DEFAULT_BATCH
+    return [[score_bucket(c, b.valences, table, batch=batch, threads=args.threads).utility for b in buckets] for c in shapes]
+
+
+# --------------------------------------------------------------------------- the reference
+
+
+def make_reference():
+    """The recurrence, compiled with numba (nopython, one thread, float32)."""
+    import numba
+    import numpy as np
+
+    from jaxmatch.score import NEG
+
+    neg = np.float32(NEG)
+
+    @numba.njit(nogil=True, cache=False)
+    def score_ref(codes, vals, tf):  # pragma: no cover - compiled
+        big_n, n = vals.shape
+        m = codes.shape[0]
+        out = np.empty(big_n, np.float32)
+        seq = np.empty(n, np.int64)
+        w = np.empty((3, n), np.float32)
+        d = np.empty(n + 1, np.float32)
+        for b in range(big_n):
+            best = np.float32(-np.inf)
+            for o in range(2 * n):
+                r = o % n
+                for j in range(n):  # oriented sequence: rotation r of vals (o < n) or of vals[::-1]
+                    if o < n:
+                        seq[j] = vals[b, (r + j) % n]
+                    else:
+                        seq[j] = vals[b, n - 1 - ((r + j) % n)]
+                for j in range(n):  # weights of triple [s[j+1], s[j], s[j-1]] per code
+                    t = (seq[(j + 1) % n] - 2) * 16 + (seq[j] - 2) * 4 + (seq[(j - 1 + n) % n] - 2)
+                    for c in range(3):
+                        w[c, j] = tf[c, t]
+                d[0] = 0.0
+                for j in range(1, n + 1):
+                    d[j] = neg
+                for i in range(m):  # D[i][j] = max(D[i-1][j], D[i-1][j-1] + W[i-1, j-1])
+                    c = codes[i]
+                    for j in range(n, 0, -1):
+                        x = d[j - 1] + w[c, j - 1]
+                        if x > d[j]:
+                            d[j] = x
+                if d[n] > best:
+                    best = d[n]
+            out[b] = best if best > neg / 2 else -np.inf
+            if n > m:
+                out[b] = -np.inf
+        return out
+
+    def run(buckets, table, shapes):
+        tf = np.where(np.isfinite(table) & (table > NEG), table, NEG).astype(np.float32).reshape(3, 64)
+        vals = [np.ascontiguousarray(b.valences, dtype=np.int64) for b in buckets]
+        return [[score_ref(np.asarray(c, np.int64), v, tf) for v in vals] for c in shapes]
+
+    return run
+
+
+# --------------------------------------------------------------------------- bulk measurements
+
+
+def sharing(buckets) -> dict:
+    """Meshes and distinct boundary sequences (up to rotation and reflection) per k."""
+    import numpy as np
+
+    from jaxmatch import bulk
+
+    per_k: dict = {}
+    all_meshes = all_seqs = 0
+    for b in buckets:
+        g = bulk.group_sequences(b.valences)
+        all_meshes += len(b.ids)
+        all_seqs += len(g.seqs)
+        for k in np.unique(b.k):
+            sel = b.k == k
+            d = per_k.setdefault(int(k), [0, 0])
+            d[0] += int(sel.sum())
+            d[1] += len(np.unique(g.index[sel]))
+    out = {str(k): {"meshes": v[0], "distinct_sequences": v[1], "meshes_per_sequence": round(v[0] / v[1], 4)}
+           for k, v in sorted(per_k.items())}
+    out["all"] = {"meshes": all_meshes, "distinct_sequences": all_seqs, "meshes_per_sequence": round(all_meshes / all_seqs, 4)}
+    return out
+
+
+def bulk_measurements(buckets, table, shapes, args, cells, pairs) -> dict:
+    from jaxmatch import bulk
+    from jaxmatch.score import reduce_orientations
+
+    t = time.perf_counter()
+    parts = bulk.prepare(buckets)
+    prepare_s = time.perf_counter() - t
+
+    def distinct_pass():
+        return [[reduce_orientations(bulk.fan_out(bulk._values(c, p.groups.seqs, table, threads=args.threads), p.groups)).utility
+                 for p in parts] for c in shapes]
+
+    distinct_pass()  # compile (chunk sizes differ from the per-bucket ones)
+    times = []
+    for _ in range(args.reps):
+        t = time.perf_counter()
+        distinct_pass()
+        times.append(time.perf_counter() - t)
+    # top-5, all sizes competing, exhaustive (every distinct sequence) against pruned
+    res = {}
+    for prune in (False, True):
+        for c in shapes:  # compile
+            bulk.top_k(c, parts, table, top=5, prune=prune, threads=args.threads)
+        ts, scored = [], 0
+        for _ in range(args.reps):
+            t = time.perf_counter()
+            outs = [bulk.top_k(c, parts, table, top=5, prune=prune, threads=args.threads) for c in shapes]
+            ts.append(time.perf_counter() - t)
+        scored = sum(o.sequences_scored for o in outs)
+        res["pruned" if prune else "exhaustive"] = {"run_s": summary(ts), "sequences_scored": scored,
+                                                    "rows": [[r[:6] for r in o.rows] for o in outs]}
+    same_rows = res["pruned"].pop("rows") == res["exhaustive"].pop("rows")
+    best = min(times)
+    return {
+        "prepare_s": prepare_s,
+        "distinct": {"run_s": summary(times), "cells_per_s": cells / best, "meshes_per_s": pairs / best},
+        "top5": {**res, "identical": same_rows,
+                 "sequences_total": sum(len(p.groups.seqs) for p in parts) * len(shapes),
+                 "speedup_min": min(res["exhaustive"]["run_s"]["all"]) / min(res["pruned"]["run_s"]["all"])},
+    }
+
+
+# --------------------------------------------------------------------------- RSS and CLI
+
+
+def rss_probe(args) -> dict:
+    """Run the jaxmatch pass once in this (fresh) process and report its memory."""
+    import jax  # noqa: F401
+
+    base = rss_mb()
+    configure(args)
+    cat, internal, buckets, table, shapes = load_workload(args)
+    jax_pass(buckets, table, shapes[:2], args)
+    return {"internal": internal, "meshes": sum(len(b.ids) for b in buckets), "rss_after_import_mb": base, "peak_rss_mb": rss_mb()}
+
+
+def rss_by_catalogue(args) -> dict:
+    out = {}
+    for internal in ("0..4", "0..5"):
+        cmd = [sys.executable, str(Path(__file__).resolve()), "--rss-probe", "--internal", internal]
+        if args.batch:
+            cmd += ["--batch", str(args.batch)]
+        if args.catalogue:
+            cmd += ["--catalogue", str(args.catalogue)]
+        p = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT, timeout=900)
+        out[f"k<={internal[-1]}"] = json.loads(p.stdout.strip().splitlines()[-1]) if p.returncode == 0 else {"error": p.stderr[-500:]}
+    return out
+
+
+def cli_times() -> dict:
+    exe = Path(sys.executable).parent / "jaxmatch"
+    cache = Path(tempfile.mkdtemp(prefix="jaxmatch-bench-cache-"))
+    out = {}
+    try:
+        for label, extra in (("default", []), ("tie_break_id", ["--tie-break", "id"])):
+            shutil.rmtree(cache, ignore_errors=True)
+            env = dict(os.environ, JAXMATCH_CACHE=str(cache))
+            runs = []
+            for _ in range(2):  # cold (empty cache), then warm
+                t = time.perf_counter()
+                p = subprocess.run([str(exe), "score", "examples/lshape.json", *extra], cwd=ROOT, env=env,
+                                   capture_output=True, text=True, timeout=900)
+                runs.append(time.perf_counter() - t if p.returncode == 0 else None)
+            out[label] = {"cold_s": runs[0], "warm_s": runs[1]}
+    finally:
+        shutil.rmtree(cache, ignore_errors=True)
+    return out
+
+
+# --------------------------------------------------------------------------- main
+
+
+def main(argv=None) -> int:
+    args = parse_args(argv)
+    if args.rss_probe:
+        print(json.dumps(rss_probe(args)))
+        return 0
+    load0 = os.getloadavg()
+    import jax
+    import numpy as np
+
+    configure(args)
+    from jaxmatch import score
+
+    cat, internal, buckets, table, shapes = load_workload(args)
+    pairs, cells = workload_cells(buckets, shapes)
+    threads = args.threads or score.default_threads()
+    say = (lambda *a: print(*a, file=sys.stderr, flush=True)) if args.json else (lambda *a: print(*a, flush=True))
+    say(f"workload: {sum(len(b.ids) for b in buckets)} meshes (k in {internal[0]}..{internal[-1]}) x {len(shapes)} shapes, "
+        f"m = {POINTS}: {pairs} mesh-shape pairs, {cells:.4g} DP cell updates (2 n^2 m per pair)")
+    say(f"machine: {os.cpu_count()} CPUs ({threads} jaxmatch threads), load {load0[0]:.2f} {load0[1]:.2f} {load0[2]:.2f}; "
+        f"jax {jax.__version__}, numpy {np.__version__}, python {platform.python_version()}")
+
+    # ---- jaxmatch: compile (first pass of one shape minus a warm pass), then repetitions
+    t = time.perf_counter()
+    jax_pass(buckets, table, shapes[:1], args)
+    first = time.perf_counter() - t
+    t = time.perf_counter()
+    jax_pass(buckets, table, shapes[:1], args)
+    warm = time.perf_counter() - t
+    compile_s = first - warm
+
+    ref_run = None
+    ref_times: list[float] = []
+    ref_compile = None
+    if not args.skip_reference:
+        ref_run = make_reference()
+        t = time.perf_counter()
+        ref_run(buckets[:1], table, shapes[:1])
+        ref_compile = time.perf_counter() - t
+    jax_times: list[float] = []
+    identical = None
+    for rep in range(max(args.reps, args.ref_reps if ref_run else 0)):
+        if rep < args.reps:
+            t = time.perf_counter()
+            ours = jax_pass(buckets, table, shapes, args)
+            jax_times.append(time.perf_counter() - t)
+            say(f"  jaxmatch rep {rep + 1}: {jax_times[-1]:.3f} s")
+        if ref_run is not None and rep < args.ref_reps:
+            t = time.perf_counter()
+            theirs = ref_run(buckets, table, shapes)
+            ref_times.append(time.perf_counter() - t)
+            say(f"  reference rep {rep + 1}: {ref_times[-1]:.3f} s")
+            if identical is None:
+                identical = all(np.array_equal(a, b) for xs, ys in zip(ours, theirs) for a, b in zip(xs, ys))
+    jb = min(jax_times)
+    result = {
+        "workload": {"catalogue": str(cat.path.name), "internal": [internal[0], internal[-1]], "shapes": EXAMPLES,
+                     "points": POINTS, "mesh_shape_pairs": pairs, "cells": cells,
+                     "cell_definition": "2n orientations x n mesh vertices x m shape points per mesh and shape"},
+        "jaxmatch": {"threads": threads, "first_pass_s": first, "warm_pass_s": warm, "compile_s": compile_s,
+                     "run_s": summary(jax_times), "cells_per_s": cells / jb, "meshes_per_s": pairs / jb,
+                     "dtype": np.dtype(score.dp_kind(table, max(b.n for b in buckets)).dtype).name,
+                     "block_cells": score.BLOCK_CELLS, "batch": args.batch or score.DEFAULT_BATCH},
+    }
+    say(f"jaxmatch  : compile {compile_s:.2f} s (first pass of one shape {first:.2f} s, warm {warm:.2f} s); "
+        f"run min {jb:.3f} s, median {statistics.median(jax_times):.3f} s over {len(jax_times)}; "
+        f"{pairs / jb:,.0f} meshes/s, {cells / jb:.3g} cells/s")
+    if ref_times:
+        rb = min(ref_times)
+        result["reference"] = {"impl": "numba njit, nopython, 1 thread, float32", "compile_s": ref_compile,
+                               "run_s": summary(ref_times), "cells_per_s": cells / rb, "meshes_per_s": pairs / rb,
+                               "identical_utilities": identical}
+        ratio = rb / jb
+        ratio_median = statistics.median(ref_times) / statistics.median(jax_times)
+        result["ratio"] = ratio
+        result["ratio_median"] = ratio_median
+        say(f"reference : compile {ref_compile:.2f} s; run min {rb:.3f} s, median {statistics.median(ref_times):.3f} s; "
+            f"{pairs / rb:,.0f} meshes/s, {cells / rb:.3g} cells/s; utilities identical: {identical}")
+        say(f"ratio jaxmatch / reference: {ratio:.2f}x (min vs min), {ratio_median:.2f}x (median vs median)")
+
+    if not args.skip_bulk:
+        result["sharing"] = sharing(buckets)
+        say("sharing   : " + ", ".join(f"k={k}: {v['meshes']} meshes / {v['distinct_sequences']} sequences"
+                                       for k, v in result["sharing"].items()))
+        b = bulk_measurements(buckets, table, shapes, args, cells, pairs)
+        result["bulk"] = b
+        say(f"distinct  : run min {b['distinct']['run_s']['min']:.3f} s, {b['distinct']['cells_per_s']:.3g} cells/s "
+            f"(nominal cells){'; ratio %.2fx' % (b['distinct']['cells_per_s'] / result['reference']['cells_per_s']) if ref_times else ''}")
+        tp = b["top5"]
+        say(f"top-5     : exhaustive min {min(tp['exhaustive']['run_s']['all']):.3f} s, pruned min "
+            f"{min(tp['pruned']['run_s']['all']):.3f} s ({tp['speedup_min']:.1f}x); sequences scored "
+            f"{tp['pruned']['sequences_scored']} of {tp['sequences_total']}; identical rows: {tp['identical']}")
+        if ref_times:
+            result["ratio_distinct"] = b["distinct"]["cells_per_s"] / result["reference"]["cells_per_s"]
+    if not args.skip_rss:
+        result["rss_by_catalogue"] = rss_by_catalogue(args)
+        say("RSS       : " + ", ".join(f"{k}: {v.get('meshes')} meshes, peak {v.get('peak_rss_mb', float('nan')):.0f} MB "
+                                       f"(after import {v.get('rss_after_import_mb', float('nan')):.0f} MB)"
+                                       for k, v in result["rss_by_catalogue"].items()))
+    if args.cli:
+        result["cli"] = cli_times()
+        say("CLI       : " + ", ".join(f"{k}: cold {v['cold_s']:.2f} s, warm {v['warm_s']:.2f} s" for k, v in result["cli"].items()))
+    load1 = os.getloadavg()
+    result["peak_rss_mb"] = rss_mb()
+    result["load"] = {"before": list(load0), "after": list(load1)}
+    result["jaxmatch_cells_per_s"] = result["jaxmatch"]["cells_per_s"]
+    result["jaxmatch_meshes_per_s"] = result["jaxmatch"]["meshes_per_s"]
+    if ref_times:
+        result["reference_cells_per_s"] = result["reference"]["cells_per_s"]
+        result["reference_meshes_per_s"] = result["reference"]["meshes_per_s"]
+    say(f"peak RSS (this process, numba included): {result['peak_rss_mb']:.0f} MB; load after {load1[0]:.2f} {load1[1]:.2f} {load1[2]:.2f}")
+    if args.json:
+        print(json.dumps(result))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
