@@ -17,7 +17,9 @@ Loss
 ----
 Each example is a shape and its preferred mesh of size ``k`` (internal vertices); the
 *candidates* are the catalogue meshes of that size (the size the user fixes with
-``--internal k``), optionally subsampled (:func:`candidates`). With the soft utilities
+``--internal k``). At most ``max_candidates`` (default 256) take part in training: all 96
+meshes of k = 3; for k = 4 (1283 meshes) every preferred mesh of the training examples plus a
+sample drawn with the seed (:func:`candidates`). Evaluation always uses all. With the soft utilities
 ``U_q`` at temperature ``gamma`` (:func:`jaxmatch.soft.soft_utility_batch`: a log-sum-exp
 over all orientations and alignments of mesh ``q``) the loss is the softmax cross-entropy
 
@@ -58,15 +60,17 @@ Twins of ``p`` are not competitors. ``top1`` is the fraction of examples that no
 beats, ``top5`` the fraction beaten by at most four. An unmatchable preferred mesh is beaten
 by every competitor.
 
-Not done: a per-type deletion penalty (cost of skipping a shape point; 0 in the paper) would be
-three more parameters, but it needs a change to the exact scorer's recurrence.
+Not done: a per-type deletion penalty (a cost for skipping a shape point of type s, x or v; 0 in
+the paper) would be three more parameters, but it changes the exact scorer's recurrence (owned by
+:mod:`jaxmatch.score`). A uniform penalty would add nothing: a mesh of ``n`` vertices always skips
+``m - n`` points, so it equals adding a constant to every finite weight. A per-type one would make
+skipped corners cost more than skipped straight points.
 """
 
 from __future__ import annotations
 
 import math
 import time
-from functools import partial
 from typing import Callable, NamedTuple, Sequence
 
 import jax
@@ -76,7 +80,7 @@ import optax
 
 from .catalogue import Catalogue
 from .labels import Example, MeshIndex, boundary_key, mesh_index
-from .lattice import MAX_WEIGHT, Lattice, Level, LevelStructure, level_structure, table_from_levels, with_level_weights
+from .lattice import MAX_WEIGHT, Lattice, LevelStructure, level_structure, table_from_levels, with_level_weights
 from .score import NEG, dp_scan, orientation_weights
 from .shape import annotate, default_points
 from .soft import pad_shapes, soft_utility_batch, table_parts
@@ -430,7 +434,7 @@ def train(
     examples: Sequence[Example],
     catalogue_or_index,
     *,
-    epochs: int = 30,
+    epochs: int = 10,
     temperature: float = 1.0,
     seed: int = 0,
     learning_rate: float = 0.05,
@@ -545,7 +549,7 @@ def run_tuning(
     *,
     heldout: float = 0.25,
     seed: int = 0,
-    epochs: int = 30,
+    epochs: int = 10,
     temperature: float = 1.0,
     learning_rate: float = 0.05,
     batch_size: int = 32,

@@ -21,7 +21,7 @@ from jaxmatch.labels import (
     synthetic_examples,
     turning_fits,
 )
-from jaxmatch.shape import load_shape, make_shape, parse_shape
+from jaxmatch.shape import make_shape
 
 ROOT = Path(__file__).resolve().parents[1]
 LABELS = ROOT / "examples" / "labels"

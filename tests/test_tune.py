@@ -15,7 +15,7 @@ from hypothesis import strategies as st
 
 from jaxmatch import tune
 from jaxmatch.catalogue import default_catalogue
-from jaxmatch.labels import dump_labels, load_labels, mesh_index, parse_labels, synthetic_examples
+from jaxmatch.labels import dump_labels, mesh_index, parse_labels, synthetic_examples
 from jaxmatch.lattice import NEG, level_structure, load_lattice, table_from_levels, with_level_weights
 from jaxmatch.score import score_bucket
 from jaxmatch.shape import annotate, default_points
