@@ -227,7 +227,7 @@ def upper_bounds(seqs, codes, table, *, hist: np.ndarray | None = None) -> np.nd
     smaller of ``sum_j max_c w_c(j)`` and, for each present type ``b``,
     ``sum_j w_b(j) + sum_{c != b} (largest count_c values of max(w_c(j) - w_b(j), 0))`` (at most
     ``count_c`` vertices can take a point of type ``c``). Computed on triple histograms: the
-    sum of the largest gains is a sum over the distinct gain levels (matrix products only).
+    largest gains are taken greedily over the triples in decreasing gain order.
     """
     s = np.asarray(seqs, np.int64)
     if s.ndim != 2:
@@ -240,24 +240,27 @@ def upper_bounds(seqs, codes, table, *, hist: np.ndarray | None = None) -> np.nd
     count = np.bincount(c, minlength=3)[:3]
     present = np.flatnonzero(count > 0)
     w = _finite_np(table)  # (3, 64)
-    h0 = triple_histograms(s) if hist is None else np.asarray(hist)
-    for h in (h0, h0[:, _MIRROR]):
-        hf = h.astype(np.float64)
-        bound = hf @ w[present].max(axis=0)
+    h0 = np.ascontiguousarray((triple_histograms(s) if hist is None else np.asarray(hist)).T)  # (64, U)
+    # numpy only, no BLAS (einsum's own loops; a row-by-row running sum): BLAS threads fight
+    # with XLA's under load, and np.cumsum along axis 0 is ~15x slower than the loop below
+    for h in (h0, h0[_MIRROR]):
+        bound = np.einsum("tu,t->u", h, w[present].max(axis=0))
         for b in present:
-            total = hf @ w[b]
+            total = np.einsum("tu,t->u", h, w[b])
             for cc in present:
                 if cc == b:
                     continue
-                gain = np.maximum(w[cc] - w[b], 0.0)
-                levels = np.unique(gain[gain > 0])[::-1]  # distinct positive gains, decreasing
-                if levels.size == 0:
+                gain = w[cc] - w[b]
+                pos = np.flatnonzero(gain > 0)
+                if pos.size == 0:
                     continue
-                # sum of the count_cc largest gains = sum over levels l of
-                # (g_l - g_{l+1}) * min(count_cc, #vertices with gain >= g_l)
-                at_least = hf @ (gain[None, :] >= levels[:, None]).T.astype(np.float64)  # (U, L)
-                steps = levels - np.append(levels[1:], 0.0)
-                total = total + np.minimum(at_least, float(count[cc])) @ steps
+                pos = pos[np.argsort(-gain[pos], kind="stable")]
+                run = h[pos].astype(np.int64)  # vertices with the largest gains first
+                for i in range(1, run.shape[0]):
+                    run[i] += run[i - 1]
+                np.minimum(run, int(count[cc]), out=run)  # at most count_cc of them take type cc
+                run[1:] -= run[:-1].copy()
+                total = total + np.einsum("ku,k->u", run, gain[pos])
             bound = np.minimum(bound, total)
         out = np.maximum(out, bound)
     return out
