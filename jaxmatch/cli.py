@@ -19,6 +19,11 @@ from rich.table import Table
 from . import catalogue as cat_mod
 from .errors import EXIT_BAD_INPUT, EXIT_INVERTED, EXIT_UNMATCHABLE, InputError, UnmatchableError
 
+try:  # typer >= 0.2x vendors click as typer._click and no longer installs click
+    from typer._click.exceptions import ClickException
+except ImportError:  # pragma: no cover - older typer with click
+    from click.exceptions import ClickException
+
 app = typer.Typer(add_completion=False, pretty_exceptions_enable=False, no_args_is_help=True,
                   help="Pick the best quadrilateral mesh from a catalogue for a planar shape.")
 lattice_app = typer.Typer(no_args_is_help=True, help="Inspect lattice weight files.")
@@ -316,6 +321,17 @@ def _fail(line: str, code: int) -> None:
     sys.exit(code)
 
 
+def _interrupted(e: BaseException) -> bool:
+    """A Ctrl-C that arrived wrapped (e.g. as SystemError from compiled code)."""
+    seen = set()
+    while e is not None and id(e) not in seen:
+        if isinstance(e, KeyboardInterrupt):
+            return True
+        seen.add(id(e))
+        e = e.__cause__ or e.__context__
+    return False
+
+
 def main() -> None:
     """Console entry point: run the app; bad input -> one line on stderr, exit 2."""
     try:
@@ -326,16 +342,23 @@ def main() -> None:
         _fail(f"no match: {e}", EXIT_UNMATCHABLE)
     except (typer.Abort, KeyboardInterrupt):
         _fail("aborted", 130)
-    except Exception as e:  # click usage errors and anything unexpected: still one line
-        import click
-
-        if isinstance(e, click.exceptions.ClickException):
-            _fail(f"error: {e.format_message()}", e.exit_code)
-        if isinstance(e, click.exceptions.Exit):
-            sys.exit(e.exit_code)
+    except ClickException as e:  # usage errors: unknown option, bad value, missing argument
+        if type(e).__name__ == "NoArgsIsHelpError":
+            print(e.format_message())
+            sys.exit(0)
+        _fail(f"error: {e.format_message()}", e.exit_code)
+    except typer.Exit as e:
+        if e.exit_code == 130:  # typer turns Ctrl-C into Exit(130)
+            _fail("aborted", 130)
+        sys.exit(e.exit_code)
+    except Exception as e:  # anything unexpected: still one line
+        if _interrupted(e):
+            _fail("aborted", 130)
         if os.environ.get("JAXMATCH_DEBUG"):
             raise
         _fail(f"internal error: {type(e).__name__}: {e} (set JAXMATCH_DEBUG=1 for a traceback)", 1)
+    if code == 130:  # typer turns Ctrl-C into Exit(130), returned in non-standalone mode
+        _fail("aborted", 130)
     if isinstance(code, int) and code:
         sys.exit(code)
 

@@ -28,6 +28,8 @@ canonical ids for k <= 3, and the README records the same comparison for k = 4.
 
 from __future__ import annotations
 
+import contextlib
+import signal
 from typing import Callable
 
 from .canon_fast import canonical_key as canonical
@@ -125,7 +127,8 @@ def close_all(max_internal: int, progress: Callable | None = None, workers: int 
         import concurrent.futures
         import multiprocessing
 
-        pool = concurrent.futures.ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"))
+        pool = concurrent.futures.ProcessPoolExecutor(
+            workers, mp_context=multiprocessing.get_context("spawn"), initializer=_ignore_sigint)
     try:
         for j in range(1, max_internal + 1):
             for key, s in levels[j].items():
@@ -138,14 +141,39 @@ def close_all(max_internal: int, progress: Callable | None = None, workers: int 
                 else:
                     size = max(16, len(states) // (workers * 16))
                     chunks = [states[i : i + size] for i in range(0, len(states), size)]
-                    parts = pool.map(_expand, chunks, [max_internal] * len(chunks))
+                    with _sigint_ignored():  # workers spawned now inherit it: Ctrl-C is the parent's
+                        parts = pool.map(_expand, chunks, [max_internal] * len(chunks))
                 for part in parts:
                     for key, child in part.items():
                         levels[child.interior].setdefault(key, child)
             levels[j] = {}  # expanded: free the memory
             if progress is not None:
                 progress(j, len(found[j]), len(found[j]))
+    except BaseException:
+        if pool is not None:
+            pool.shutdown(wait=False, cancel_futures=True)
+            pool = None
+        raise
     finally:
         if pool is not None:
             pool.shutdown()
     return found
+
+
+@contextlib.contextmanager
+def _sigint_ignored():
+    """Ignore SIGINT while worker processes are started (they inherit the disposition)."""
+    try:
+        old = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    except ValueError:  # not the main thread: leave signals alone
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, old)
+
+
+def _ignore_sigint() -> None:
+    """Workers leave Ctrl-C to the parent (which cancels them), so they print no tracebacks."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)

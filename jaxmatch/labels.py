@@ -86,6 +86,7 @@ import numpy as np
 
 from .catalogue import Catalogue
 from .errors import InputError
+from .files import read_limited
 from .mesh import valences
 from .shape import Shape, load_shape, make_shape, parse_shape, turning_angles, cumulative_length
 
@@ -263,6 +264,10 @@ def parse_labels(text: str, source: str, index: MeshIndex, *, base_dir: Path | N
     return LabelSet(examples, problems)
 
 
+MAX_LABEL_BYTES = 64 * 2**20
+"""Largest label file read (bytes)."""
+
+
 def load_labels(path, catalogue_or_index, *, skip_bad: bool = False) -> LabelSet:
     """Read a JSON-lines label file (see the module docstring).
 
@@ -272,10 +277,9 @@ def load_labels(path, catalogue_or_index, *, skip_bad: bool = False) -> LabelSet
     """
     index = catalogue_or_index if isinstance(catalogue_or_index, MeshIndex) else mesh_index(catalogue_or_index)
     p = Path(path)
+    raw = read_limited(p, MAX_LABEL_BYTES, "label file")  # bounded: /dev/zero cannot hang it
     try:
-        text = p.read_bytes().decode("utf-8-sig")
-    except OSError as err:
-        raise InputError(f"cannot read label file: {err.strerror or err}", where=str(p)) from None
+        text = raw.decode("utf-8-sig")
     except UnicodeDecodeError as err:
         raise InputError(f"not UTF-8 text (byte {err.start})", where=str(p)) from None
     out = parse_labels(text, str(p), index, base_dir=p.parent, skip_bad=skip_bad)

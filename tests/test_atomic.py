@@ -353,16 +353,12 @@ def test_interrupted_build_keeps_the_old_file(tmp_path, workers):
     assert code != 0, err
 
 
-@pytest.mark.xfail(reason="cli.py: main() imports click, which typer >= 0.2x no longer installs (it vendors typer._click), "
-                          "and a KeyboardInterrupt raised inside numba code arrives as SystemError; closing.py: spawned "
-                          "workers print KeyboardInterrupt tracebacks", strict=False)
 @pytest.mark.parametrize("workers", [1, 2])
 def test_interrupted_build_says_aborted(tmp_path, workers):
     code, err = interrupt_build(tmp_path, workers)
     assert code == 130 and "Traceback" not in err and err.strip().splitlines()[-1] == "aborted", err
 
 
-@pytest.mark.xfail(reason="cli.py: main() imports click, which typer >= 0.2x no longer installs (typer._click)", strict=False)
 @pytest.mark.parametrize("args", [["score", "examples/square.json", "--top", "0"], ["score", "--bogus"], ["catalogue", "build"]])
 def test_cli_usage_errors_are_one_line(tmp_path, args):
     code, err = Cli(tmp_path / "usage", *args).finish(120)

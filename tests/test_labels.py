@@ -233,3 +233,16 @@ def test_shipped_synthetic_labels_load(index):
     got = load_labels(LABELS / "synthetic-k3.jsonl", index)
     assert not got.problems and len(got.examples) >= 150
     assert {e.k for e in got.examples} == {3}
+
+
+def test_endless_label_file_is_refused_not_read_forever(tmp_path):
+    """A device that never ends (like /dev/zero) is cut off at the size limit."""
+    import os
+
+    from jaxmatch import catalogue as cm
+    from jaxmatch.labels import load_labels
+
+    if not os.path.exists("/dev/zero"):
+        pytest.skip("no /dev/zero")
+    with pytest.raises(InputError, match="/dev/zero"):
+        load_labels("/dev/zero", cm.default_catalogue())
