@@ -39,6 +39,8 @@ from .mesh import QuadMesh, boundary_valences, triples, validate, valences
 FORMAT = "jaxmatch-catalogue"
 FORMAT_VERSION = 1
 DEFAULT_MAX_INTERNAL = 5
+LARGE_K = 7
+"""Largest k that ``jaxmatch catalogue build`` accepts without ``--allow-large``."""
 _ARRAYS = ("ids", "k", "valences", "boundary", "offsets", "quads", "aut", "chiral")
 MAX_MEMBER_BYTES = 2**29
 """Largest accepted uncompressed catalogue member (the k <= 5 catalogue's largest is 0.5 MB)."""

@@ -271,9 +271,13 @@ def lattice_show(name: str = typer.Argument(..., help="fine, coarse, or a TOML p
 @catalogue_app.command("build")
 def catalogue_build(internal: str = typer.Option(..., help="K or K1..K2."),
                     out_path: Path = typer.Option(..., "--out", help="Output .npz file (written atomically)."),
-                    workers: int = typer.Option(os.cpu_count() or 1, min=1, help="Processes used to expand each level.")) -> None:
+                    workers: int = typer.Option(os.cpu_count() or 1, min=1, help="Processes used to expand each level."),
+                    allow_large: bool = typer.Option(False, "--allow-large", help=f"Allow k > {cat_mod.LARGE_K} (hours and many GB).")) -> None:
     """Enumerate every catalogue mesh for the given numbers of internal vertices."""
     ks = cat_mod.parse_range(internal)
+    if max(ks) > cat_mod.LARGE_K and not allow_large:
+        raise InputError(f"k up to {max(ks)} would take hours or days (counts grow about 15x per k); "
+                         f"pass --allow-large to try anyway", "--internal")
     with _progress() as prog:
         task = prog.add_task("closing vertices", total=max(ks))
         info = cat_mod.build(ks, out_path, workers=workers, progress=lambda j, states, found: (prog.update(

@@ -117,3 +117,9 @@ def test_unmatchable_exit_4(small_cat):
     r = run("score", EXAMPLES / "square.json", "--catalogue", small_cat, "--internal", "3", "--points", "5")
     assert r.returncode == 4
     assert "--points" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+
+
+def test_build_refuses_huge_k_without_allow_large(tmp_path):
+    r = run("catalogue", "build", "--internal", "0..50", "--out", tmp_path / "c.npz")
+    assert r.returncode == 2 and "--allow-large" in r.stderr
+    assert not (tmp_path / "c.npz").exists()
