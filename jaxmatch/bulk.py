@@ -240,7 +240,7 @@ def upper_bounds(seqs, codes, table, *, hist: np.ndarray | None = None) -> np.nd
     count = np.bincount(c, minlength=3)[:3]
     present = np.flatnonzero(count > 0)
     w = _finite_np(table)  # (3, 64)
-    h0 = np.ascontiguousarray((triple_histograms(s) if hist is None else np.asarray(hist)).T)  # (64, U)
+    h0 = np.ascontiguousarray((triple_histograms(s) if hist is None else np.asarray(hist, np.int32)).T)  # (64, U)
     # numpy only, no BLAS (einsum's own loops; a row-by-row running sum): BLAS threads fight
     # with XLA's under load, and np.cumsum along axis 0 is ~15x slower than the loop below
     for h in (h0, h0[_MIRROR]):
@@ -270,14 +270,16 @@ def upper_bounds(seqs, codes, table, *, hist: np.ndarray | None = None) -> np.nd
 
 
 class Part(NamedTuple):
-    """One bucket of the catalogue, grouped: ``n``, mesh ``ids``/``k``/``valences`` and the
-    :class:`SequenceGroups` of the valences."""
+    """One bucket of the catalogue, grouped: ``n``, mesh ``ids``/``k``/``valences``, the
+    :class:`SequenceGroups` of the valences and the :func:`triple_histograms` ``(U, 64) uint8``
+    of the distinct sequences (shape independent, reused by every :func:`upper_bounds`)."""
 
     n: int
     ids: np.ndarray
     k: np.ndarray
     valences: np.ndarray
     groups: SequenceGroups
+    hist: np.ndarray | None = None
 
 
 def prepare(buckets: Iterable) -> list[Part]:
@@ -289,7 +291,10 @@ def prepare(buckets: Iterable) -> list[Part]:
         if len(b.ids) == 0:
             continue
         vals = np.asarray(b.valences)
-        parts.append(Part(int(b.n), np.asarray(b.ids), np.asarray(b.k).astype(np.int64), vals, group_sequences(vals)))
+        g = group_sequences(vals)
+        hist = triple_histograms(g.seqs).astype(np.uint8)  # counts <= n <= 255
+        parts.append(Part(int(b.n), np.asarray(b.ids), np.asarray(b.k).astype(np.int64), vals, g,
+                          hist if int(b.n) < 256 else None))
     return parts
 
 
@@ -414,7 +419,7 @@ def top_k(
         if progress is not None:
             progress(st["done"], total)
 
-    bounds = [upper_bounds(p.groups.seqs, codes, table) for p in parts]
+    bounds = [upper_bounds(p.groups.seqs, codes, table, hist=p.hist) for p in parts]
     hopeless = [b <= NEG / 2 for b in bounds]  # n > m, or a vertex with no allowed point type
     for p, h in zip(parts, hopeless):
         dead = int(h[p.groups.index].sum())
