@@ -106,6 +106,14 @@ def finite_table(table) -> jnp.ndarray:
     return jnp.where(t > NEG, t, jnp.float32(NEG))
 
 
+def _finite_np(table) -> np.ndarray:
+    """:func:`finite_table` in numpy (no device work: called once per scoring call)."""
+    t = np.asarray(table, dtype=np.float32)
+    if t.shape != (3, 4, 4, 4):
+        raise ValueError(f"table must have shape (3, 4, 4, 4), got {t.shape}")
+    return np.where(t > NEG, t, np.float32(NEG))
+
+
 def bucket_length(m: int) -> int:
     """Padded input length for an input of length ``m``.
 
@@ -244,7 +252,7 @@ def dp_kind(table, n: int) -> DPKind:
     integer weights with ``n * max|w| < 2**29`` int32, anything else float32 with :data:`NEG`
     (bit for bit the recurrence of :func:`dp_scan`). All three give identical utilities.
     """
-    t = np.asarray(finite_table(table))
+    t = _finite_np(table)
     w = t[t > NEG]
     big = float(np.abs(w).max()) if w.size else 0.0
     if w.size == 0 or np.all(w == np.round(w)):
@@ -258,7 +266,7 @@ def dp_kind(table, n: int) -> DPKind:
 def dp_table(table, kind: DPKind) -> np.ndarray:
     """``(4, 64)`` weights in ``kind.dtype``: rows = codes s, x, v and the padding code 3;
     forbidden entries and the whole padding row are ``kind.neg``."""
-    t = np.asarray(finite_table(table)).reshape(3, 64)
+    t = _finite_np(table).reshape(3, 64)
     out = np.full((4, 64), kind.neg, np.float64)
     out[:3] = np.where(t > NEG, t, kind.neg)
     return out.astype(kind.dtype)
@@ -390,9 +398,9 @@ def final_values(
     big_n, n = v.shape
     c = np.asarray(codes, dtype=np.int32).reshape(-1)
     m = c.shape[0]
-    cj = jnp.asarray(dp_codes(c, m_pad))
+    cj = dp_codes(c, m_pad)
     kind = dp_kind(table, n)
-    tab = jnp.asarray(dp_table(table, kind))
+    tab = dp_table(table, kind)
     block, per_call = plan if plan is not None else plan_chunks(big_n, n, batch)
     chunk = block * per_call
     n_calls = -(-big_n // chunk)
