@@ -26,7 +26,8 @@ Printed, from one run:
 * machine load (``os.getloadavg``) before and after, CPUs, versions.
 
 ``--json`` prints one JSON object on the last line. ``--cli`` also times a cold and a warm
-``jaxmatch score examples/lshape.json`` (fresh persistent compilation cache). Run from the
+``jaxmatch score examples/lshape.json`` (fresh persistent compilation cache), and the same job
+scored through ``jaxmatch.bulk.top_k`` (pruned and exhaustive) for comparison. Run from the
 repository root: ``.venv/bin/python scripts/bench.py``.
 """
 
@@ -315,19 +316,39 @@ def rss_by_catalogue(args) -> dict:
     return out
 
 
+CLI_PRUNED = """
+from jaxmatch.cli import _enable_compile_cache
+from jaxmatch import bulk, catalogue
+from jaxmatch.lattice import load_lattice
+from jaxmatch.score import align
+from jaxmatch.shape import annotate, default_points, load_shape
+_enable_compile_cache()
+shape, table, cat = load_shape("examples/lshape.json"), load_lattice("fine").table(), catalogue.default_catalogue()
+ann = annotate(shape, default_points(shape, max(cat.lengths)))
+for r in bulk.top_k(ann.codes, cat.buckets(), table, top=5, prune=PRUNE).rows[:5]:
+    align(ann.codes, r[6], table, r[4], r[5])
+"""
+"""What ``jaxmatch score examples/lshape.json --tie-break id`` does, scoring through ``bulk.top_k``."""
+
+
 def cli_times() -> dict:
     exe = Path(sys.executable).parent / "jaxmatch"
     cache = Path(tempfile.mkdtemp(prefix="jaxmatch-bench-cache-"))
     out = {}
+    commands = {
+        "default": [str(exe), "score", "examples/lshape.json"],
+        "tie_break_id": [str(exe), "score", "examples/lshape.json", "--tie-break", "id"],
+        "bulk_top_k_pruned": [sys.executable, "-c", CLI_PRUNED.replace("PRUNE", "True")],
+        "bulk_top_k_exhaustive": [sys.executable, "-c", CLI_PRUNED.replace("PRUNE", "False")],
+    }
     try:
-        for label, extra in (("default", []), ("tie_break_id", ["--tie-break", "id"])):
+        for label, cmd in commands.items():
             shutil.rmtree(cache, ignore_errors=True)
             env = dict(os.environ, JAXMATCH_CACHE=str(cache))
             runs = []
             for _ in range(2):  # cold (empty cache), then warm
                 t = time.perf_counter()
-                p = subprocess.run([str(exe), "score", "examples/lshape.json", *extra], cwd=ROOT, env=env,
-                                   capture_output=True, text=True, timeout=900)
+                p = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=900)
                 runs.append(time.perf_counter() - t if p.returncode == 0 else None)
             out[label] = {"cold_s": runs[0], "warm_s": runs[1]}
     finally:
