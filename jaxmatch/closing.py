@@ -20,10 +20,14 @@ internal vertices is connected, because adjacent quads share an internal edge wh
 endpoint lies in both). The unions of stars of the prefixes are exactly the states a closing
 sequence visits, as long as each union is a disk: then closing the next vertex attaches its
 missing quads contiguously. A union that is not a disk would need a pocket of M enclosed by
-one star and reachable only through it; such pockets need many internal vertices (a pinched
-star enclosing a filled 4-cycle already needs about 8). The tests compare this generator
-with :mod:`jaxmatch.shelling`, which is complete by the shellability of disks, as sets of
-canonical ids for k <= 3, and the README records the same comparison for k = 4.
+one star and reachable only through it (when the star's link touches the boundary of the
+union away from the closed vertex, the vertices on the boundary arc between the two contacts
+are internal and can be closed first, which shrinks the pocket; what remains are stars whose
+link passes twice through one diagonal vertex that lies on the mesh boundary and encloses
+internal vertices, which needs many internal vertices: a pinched star enclosing a filled
+4-cycle already needs about 8). So this argument covers the catalogue sizes built here but is
+not a proof for every k. The tests check it against :mod:`jaxmatch.shelling`, which is complete
+by the shellability of disks, as sets of canonical ids for k <= 3.
 """
 
 from __future__ import annotations
