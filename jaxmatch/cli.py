@@ -86,10 +86,16 @@ def score(
     png: Optional[Path] = typer.Option(None, "--png", help="Also draw the listed meshes placed in the shape, side by side, to this .png file."),
     svg: Optional[Path] = typer.Option(None, "--svg", help="Same picture as --png, as .svg."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object instead of a table."),
+    devices: Optional[int] = typer.Option(None, min=1, help="Shard the scoring over N JAX devices (GPUs, or N CPU host devices)."),
+    exhaustive: bool = typer.Option(False, "--exhaustive", help="Score every mesh instead of the pruned top-K search (same results, slower)."),
 ) -> None:
     """Rank catalogue meshes for SHAPE by the paper's modified LCS utility."""
+    if devices is not None:
+        from .bulk import configure_host_devices
+
+        configure_host_devices(devices)  # before JAX is imported
     from .lattice import load_lattice
-    from .pipeline import rank
+    from .pipeline import rank, ranking_json
     from .placement import check_outputs, draw_placements, panel_title, place_top
     from .shape import load_shape
 
@@ -103,6 +109,7 @@ def score(
     with _progress() as prog:
         task = prog.add_task("scoring meshes", total=None)
         ranking = rank(shp, cat, lat, internal=ks, top=top, points=points, per_size=per_size, tie_break=tb,
+                       prune=not exhaustive, devices=devices,
                        progress=lambda d, t: prog.update(task, completed=d, total=t))
     written = []
     if png is not None or svg is not None:
@@ -111,16 +118,13 @@ def score(
         head = f"{shape.name}: {'best per size' if per_size else f'top {len(items)}'}"
         written = [str(draw_placements(p, shp, ranking.annotation, items, title=head)) for p in (png, svg) if p is not None]
     if as_json:
-        print(json.dumps({
-            "shape": str(shape), "sequence": ranking.annotation.symbols, "lattice": lat.name,
-            "points": len(ranking.annotation.codes), "scored": ranking.scored, "unmatchable": ranking.unmatchable,
-            "tie_break": tb, "results": [r.as_json() for r in ranking.results],
-        }))
+        print(json.dumps(ranking_json(str(shape), ranking, lat.name, tb)))
         for w in written:
             print(f"wrote {w}", file=sys.stderr)
         return
     out.print(f"shape [bold]{shape}[/]: {len(ranking.annotation.codes)} points [cyan]{ranking.annotation.symbols}[/]")
-    out.print(f"lattice {lat.name}; scored {ranking.scored} meshes, {ranking.unmatchable} unmatchable")
+    skipped = f", {ranking.pruned} skipped by the bound" if ranking.pruned else ""
+    out.print(f"lattice {lat.name}; {ranking.scored} meshes, {ranking.unmatchable} unmatchable{skipped}")
     table = Table(title="best per size" if per_size else f"top {top}")
     for col in ("rank", "mesh id", "internal", "boundary", "utility", "rotation", "reflected"):
         table.add_column(col, justify="right" if col not in ("mesh id",) else "left", no_wrap=True, min_width=15 if col == "mesh id" else None)
@@ -130,6 +134,50 @@ def score(
     out.print(table)
     for w in written:
         out.print(f"wrote {w}", markup=False, highlight=False)
+
+
+@app.command("score-many")
+def score_many(
+    shapes: list[Path] = typer.Argument(..., help="Shape files."),
+    out_path: Path = typer.Option(..., "--out", help="Results as JSON lines (one per shape, the fields of score --json), written atomically."),
+    catalogue: Optional[Path] = typer.Option(None, help="Catalogue file (default: the shipped k=0..5 catalogue)."),
+    internal: Optional[str] = typer.Option(None, help="Mesh size: K or K1..K2 internal vertices."),
+    lattice: str = typer.Option("fine", help="Lattice: fine, coarse, or a TOML path."),
+    top: int = typer.Option(5, min=1, help="How many meshes per shape."),
+    points: Optional[int] = typer.Option(None, min=1, help="Number m of annotated points per shape."),
+    per_size: bool = typer.Option(False, "--per-size", help="The best --top meshes of each size k."),
+    corner_angle: float = typer.Option(30.0, help="Corner threshold in degrees."),
+    tie_break: str = typer.Option("id", "--tie-break", help=TIE_BREAK_HELP),
+    devices: Optional[int] = typer.Option(None, min=1, help="Shard the scoring over N JAX devices."),
+) -> None:
+    """Score many shapes in one run (bulk mode); every shape is read and checked before scoring."""
+    if devices is not None:
+        from .bulk import configure_host_devices
+
+        configure_host_devices(devices)
+    from .bulk import write_jsonl
+    from .lattice import load_lattice
+    from .pipeline import rank, ranking_json
+    from .shape import load_shape
+
+    tb = _tie_break(tie_break)
+    if out_path.suffix.lower() not in (".jsonl", ".json", ".ndjson"):
+        raise InputError("results are JSON lines: use a .jsonl file", str(out_path))
+    _enable_compile_cache()
+    loaded = [(p, load_shape(p, corner_angle=corner_angle)) for p in shapes]  # bad input fails before any work
+    lat = load_lattice(lattice)
+    cat = _open_catalogue(catalogue)
+    ks = cat_mod.parse_range(internal) if internal is not None else None
+    records = []
+    with _progress() as prog:
+        task = prog.add_task("shapes", total=len(loaded))
+        for p, shp in loaded:
+            ranking = rank(shp, cat, lat, internal=ks, top=top, points=points, per_size=per_size, tie_break=tb,
+                           prune=True, devices=devices)
+            records.append(ranking_json(str(p), ranking, lat.name, tb))
+            prog.advance(task)
+    write_jsonl(out_path, records)
+    err.print(f"wrote {out_path}: {len(records)} shapes", markup=False, highlight=False)
 
 
 @app.command()

@@ -55,6 +55,7 @@ class Ranking(NamedTuple):
     following: the matches after ``results`` in the same order, produced lazily (a one-shot
     iterator; with ``tie_break="geometry"`` it places tied meshes as it goes, into
     ``placements``, within the same cap); None with ``per_size``.
+    pruned: meshes skipped by the pruned search (``rank(prune=True)``): they cannot enter the top.
     """
 
     annotation: Annotation
@@ -63,6 +64,7 @@ class Ranking(NamedTuple):
     unmatchable: int
     placements: dict | None = None
     following: Iterator[Match] | None = None
+    pruned: int = 0
 
 
 TIE_BREAKS = ("id", "geometry")
@@ -86,6 +88,8 @@ def rank(
     progress: Callable[[int, int], None] | None = None,
     tie_break: str = "id",
     tie_cap: int | None = None,
+    prune: bool = False,
+    devices: int | None = None,
 ) -> Ranking:
     """Score every selected catalogue mesh against ``shape`` and return the best ``top``.
 
@@ -107,6 +111,13 @@ def rank(
       past the cap follow the placed ones of their utility in "id" order. Meshes alone at
       their utility are not placed. The placements are returned in ``Ranking.placements``.
 
+    prune: find the top meshes with :func:`jaxmatch.bulk.top_k`: each distinct boundary sequence is
+    scored once, in decreasing order of a cheap upper bound, and sequences that cannot enter the
+    top are skipped (same results as exhaustive scoring, tested; ``Ranking.pruned`` counts the
+    skipped meshes and ``following`` then only holds the remaining tied rows). devices: shard the
+    scoring over that many JAX devices (:func:`jaxmatch.bulk.configure_host_devices` makes CPU
+    devices; it must run before JAX is imported); implies the bulk path.
+
     Raises UnmatchableError when no selected mesh has a finite matching; ValueError for an
     unknown ``tie_break``.
     """
@@ -121,7 +132,14 @@ def rank(
     buckets = list(catalogue.buckets(internal))
     total = sum(len(b.ids) for b in buckets)
     rows = []  # (utility, k, n, id, rotation, reflected, vals)
-    done = unmatchable = 0
+    done = unmatchable = pruned = 0
+    if prune or (devices is not None and devices > 1):
+        from .bulk import top_k
+
+        tk = top_k(ann.codes, buckets, table, top=top, per_size=per_size, prune=prune,
+                   devices=devices if devices is not None and devices > 1 else None, progress=progress)
+        rows, unmatchable, pruned = list(tk.rows), tk.unmatchable, tk.pruned
+        buckets = []
     for b in buckets:
         res = score_bucket(ann.codes, b.valences, table)
         ok = ~res.unmatchable
@@ -162,10 +180,19 @@ def rank(
         results = []
         for k in sorted({r[1] for r in rows}):
             results.extend(islice(ordered([r for r in rows if r[1] == k]), top))
-        return Ranking(ann, results, total, unmatchable, placements, None)
+        return Ranking(ann, results, total, unmatchable, placements, None, pruned)
     it = ordered(rows)
     results = list(islice(it, top))
-    return Ranking(ann, results, total, unmatchable, placements, it)
+    return Ranking(ann, results, total, unmatchable, placements, it, pruned)
+
+
+def ranking_json(shape: str, ranking: Ranking, lattice_name: str, tie_break: str) -> dict:
+    """The JSON record of ``jaxmatch score --json`` (and each line of ``score-many``)."""
+    return {
+        "shape": shape, "sequence": ranking.annotation.symbols, "lattice": lattice_name,
+        "points": len(ranking.annotation.codes), "scored": ranking.scored, "unmatchable": ranking.unmatchable,
+        "pruned": ranking.pruned, "tie_break": tie_break, "results": [r.as_json() for r in ranking.results],
+    }
 
 
 def _default_tie_cap() -> int:

@@ -123,3 +123,33 @@ def test_build_refuses_huge_k_without_allow_large(tmp_path):
     r = run("catalogue", "build", "--internal", "0..50", "--out", tmp_path / "c.npz")
     assert r.returncode == 2 and "--allow-large" in r.stderr
     assert not (tmp_path / "c.npz").exists()
+
+
+def test_pruned_default_equals_exhaustive_and_sharded(small_cat):
+    """The default pruned search, --exhaustive and --devices 4 give the same ranking."""
+    args = ["score", EXAMPLES / "lshape.json", "--catalogue", small_cat, "--internal", "3", "--top", "5", "--json", "--tie-break", "id"]
+    pruned = json.loads(run(*args).stdout)
+    full = json.loads(run(*args, "--exhaustive").stdout)
+    sharded = json.loads(run(*args, "--devices", "4").stdout)
+    assert full["pruned"] == 0 and pruned["pruned"] > 0
+    assert pruned["results"] == full["results"] == sharded["results"]
+
+
+def test_score_many_writes_one_line_per_shape(small_cat, tmp_path):
+    out = tmp_path / "r.jsonl"
+    shapes = [EXAMPLES / "square.json", EXAMPLES / "lshape.json", EXAMPLES / "triangle.json"]
+    r = run("score-many", *shapes, "--catalogue", small_cat, "--internal", "2", "--top", "2", "--out", out)
+    assert r.returncode == 0, r.stderr
+    lines = [json.loads(x) for x in out.read_text().splitlines()]
+    assert [d["shape"] for d in lines] == [str(s) for s in shapes]
+    single = json.loads(run("score", shapes[1], "--catalogue", small_cat, "--internal", "2", "--top", "2", "--json",
+                            "--tie-break", "id").stdout)
+    assert lines[1]["results"] == single["results"]
+
+
+def test_score_many_bad_shape_writes_nothing(small_cat, tmp_path):
+    bad = tmp_path / "bad.json"
+    bad.write_text("{")
+    out = tmp_path / "r.jsonl"
+    r = run("score-many", EXAMPLES / "square.json", bad, "--catalogue", small_cat, "--out", out)
+    assert r.returncode == 2 and str(bad) in r.stderr and not out.exists()
