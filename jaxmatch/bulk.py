@@ -34,7 +34,6 @@ import json
 import os
 import re
 import sys
-from functools import partial
 from typing import Callable, Iterable, NamedTuple, Sequence
 
 import numpy as np

@@ -40,7 +40,7 @@ def _progress() -> Progress:
                     console=err, transient=True, disable=not err.is_terminal and not os.environ.get("JAXMATCH_PROGRESS"))
 
 
-def _enable_compile_cache() -> None:
+def enable_compile_cache() -> None:
     """JAX's persistent compilation cache, so a second run does not compile again."""
     import jax
 
@@ -101,7 +101,7 @@ def score(
 
     check_outputs(png=png, svg=svg)
     tb = _tie_break(tie_break)
-    _enable_compile_cache()
+    enable_compile_cache()
     shp = load_shape(shape, corner_angle=corner_angle)
     lat = load_lattice(lattice)
     cat = _open_catalogue(catalogue)
@@ -163,7 +163,7 @@ def score_many(
     tb = _tie_break(tie_break)
     if out_path.suffix.lower() not in (".jsonl", ".json", ".ndjson"):
         raise InputError("results are JSON lines: use a .jsonl file", str(out_path))
-    _enable_compile_cache()
+    enable_compile_cache()
     loaded = [(p, load_shape(p, corner_angle=corner_angle)) for p in shapes]  # bad input fails before any work
     lat = load_lattice(lattice)
     cat = _open_catalogue(catalogue)
@@ -208,7 +208,7 @@ def mesh(
 
     check_outputs(out_path, png, svg)
     tb = _tie_break(tie_break)
-    _enable_compile_cache()
+    enable_compile_cache()
     shp = load_shape(shape, corner_angle=corner_angle)
     lat = load_lattice(lattice)
     cat = _open_catalogue(catalogue)
@@ -386,8 +386,18 @@ def _interrupted(e: BaseException) -> bool:
 
 def main() -> None:
     """Console entry point: run the app; bad input -> one line on stderr, exit 2."""
+    run_typer(app)
+
+
+def run_typer(typer_app: typer.Typer) -> None:
+    """Run a typer app (``jaxmatch`` or a script) with jaxmatch's exit conventions.
+
+    InputError and usage errors: one line on stderr, exit 2; UnmatchableError: exit 4;
+    Ctrl-C: "aborted", exit 130; anything unexpected: one line, exit 1 (``JAXMATCH_DEBUG=1``
+    shows the traceback).
+    """
     try:
-        code = app(standalone_mode=False)  # a command's typer.Exit(code) comes back as the return value
+        code = typer_app(standalone_mode=False)  # a command's typer.Exit(code) comes back as the return value
     except InputError as e:
         _fail(f"error: {e}", EXIT_BAD_INPUT)
     except UnmatchableError as e:

@@ -13,14 +13,14 @@ labelled with their source mesh (jaxmatch.labels.synthetic_examples).
 from __future__ import annotations
 
 import os
-import sys
 from pathlib import Path
 
 import typer
 from rich.console import Console
 
 from jaxmatch.catalogue import default_catalogue, load
-from jaxmatch.errors import EXIT_BAD_INPUT, InputError
+from jaxmatch.cli import run_typer
+from jaxmatch.errors import InputError
 from jaxmatch.files import write_text_atomic
 from jaxmatch.labels import design_ranking, dump_labels, example_record, mesh_index, synthetic_examples
 from jaxmatch.shape import load_shape
@@ -81,25 +81,9 @@ def synthetic(
     err.print(f"wrote {len(records)} labels to {out}")
 
 
-def _fail(line: str, code: int) -> None:
-    print(" ".join(line.split()), file=sys.stderr)
-    sys.exit(code)
-
-
 def main() -> None:
     """Bad input: one line on stderr, exit 2 (as the jaxmatch command)."""
-    try:
-        app(standalone_mode=False)
-    except InputError as e:
-        _fail(f"error: {e}", EXIT_BAD_INPUT)
-    except Exception as e:  # click usage errors
-        import click
-
-        if isinstance(e, click.exceptions.ClickException):
-            _fail(f"error: {e.format_message()}", e.exit_code)
-        if isinstance(e, click.exceptions.Abort):
-            _fail("aborted", 130)
-        raise
+    run_typer(app)
 
 
 if __name__ == "__main__":

@@ -14,7 +14,6 @@ file's comments kept) and a JSON report, both atomically. All logic lives in jax
 from __future__ import annotations
 
 import json
-import os
 import sys
 from pathlib import Path
 from typing import List, Optional
@@ -25,7 +24,8 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from rich.table import Table
 
 from jaxmatch.catalogue import default_catalogue, load
-from jaxmatch.errors import EXIT_BAD_INPUT, InputError
+from jaxmatch.cli import enable_compile_cache, run_typer
+from jaxmatch.errors import InputError
 from jaxmatch.files import write_text_atomic
 from jaxmatch.labels import load_labels, mesh_index
 from jaxmatch.lattice import BUILTIN_DIR, load_lattice, save_lattice
@@ -46,19 +46,6 @@ def _template(arg: str, source_name: str, command: str) -> str | None:
             "# The comments below are the original design notes; the weights are the tuned ones\n"
             "# (a common positive scale of all weights changes no ranking).\n")
     return head + path.read_text(encoding="utf-8")
-
-
-def _enable_compile_cache() -> None:
-    import jax
-
-    cache = Path(os.environ.get("JAXMATCH_CACHE", Path.home() / ".cache" / "jaxmatch")) / "xla"
-    try:
-        cache.mkdir(parents=True, exist_ok=True)
-        jax.config.update("jax_compilation_cache_dir", str(cache))
-        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
-        jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
-    except Exception:
-        pass
 
 
 def _pct(x) -> str:
@@ -91,7 +78,7 @@ def tune(
         raise InputError(f"must be a positive number, got {temperature}", where="--temperature")
     if not 0.0 <= heldout < 1.0:
         raise InputError(f"must be in [0, 1), got {heldout}", where="--heldout")
-    _enable_compile_cache()
+    enable_compile_cache()
     cat = default_catalogue() if catalogue is None else load(catalogue)
     index = mesh_index(cat)
     lat = load_lattice(lattice)
@@ -141,27 +128,9 @@ def tune(
     out.print(f"wrote {out_path}" + (f" and {report}" if report is not None else "") + f" ({rep['seconds']} s)")
 
 
-def _fail(line: str, code: int) -> None:
-    print(" ".join(line.split()), file=sys.stderr)
-    sys.exit(code)
-
-
 def main() -> None:
     """Bad input: one line on stderr, exit 2 (as the jaxmatch command)."""
-    try:
-        app(standalone_mode=False)
-    except InputError as e:
-        _fail(f"error: {e}", EXIT_BAD_INPUT)
-    except FloatingPointError as e:
-        _fail(f"error: {e}", 1)
-    except Exception as e:  # click usage errors
-        import click
-
-        if isinstance(e, click.exceptions.ClickException):
-            _fail(f"error: {e.format_message()}", e.exit_code)
-        if isinstance(e, click.exceptions.Abort):
-            _fail("aborted", 130)
-        raise
+    run_typer(app)
 
 
 if __name__ == "__main__":
