@@ -28,7 +28,7 @@ from typing import TYPE_CHECKING, Callable, Iterable, Sequence
 import numpy as np
 
 from .embed import Placement, inverted_mask, place, quality
-from .errors import InputError, UnmatchableError
+from .errors import InputError
 
 if TYPE_CHECKING:  # pragma: no cover
     from .catalogue import Catalogue
