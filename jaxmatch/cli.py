@@ -54,6 +54,16 @@ def enable_compile_cache() -> None:
         pass
 
 
+def _inputs(shape: Optional[Path], corner_angle: float, lattice: str, catalogue: Optional[Path], internal: Optional[str]):
+    """(shape or None, lattice, catalogue, k list or None): the inputs every scoring command reads."""
+    from .lattice import load_lattice
+    from .shape import load_shape
+
+    shp = load_shape(shape, corner_angle=corner_angle) if shape is not None else None
+    ks = cat_mod.parse_range(internal) if internal is not None else None
+    return shp, load_lattice(lattice), _open_catalogue(catalogue), ks
+
+
 def _open_catalogue(path: Optional[Path]):
     return cat_mod.load(path) if path is not None else cat_mod.default_catalogue()
 
@@ -94,18 +104,13 @@ def score(
         from .bulk import configure_host_devices
 
         configure_host_devices(devices)  # before JAX is imported
-    from .lattice import load_lattice
     from .pipeline import rank, ranking_json
     from .placement import check_outputs, draw_placements, panel_title, place_top
-    from .shape import load_shape
 
     check_outputs(png=png, svg=svg)
     tb = _tie_break(tie_break)
     enable_compile_cache()
-    shp = load_shape(shape, corner_angle=corner_angle)
-    lat = load_lattice(lattice)
-    cat = _open_catalogue(catalogue)
-    ks = cat_mod.parse_range(internal) if internal is not None else None
+    shp, lat, cat, ks = _inputs(shape, corner_angle, lattice, catalogue, internal)
     with _progress() as prog:
         task = prog.add_task("scoring meshes", total=None)
         ranking = rank(shp, cat, lat, internal=ks, top=top, points=points, per_size=per_size, tie_break=tb,
@@ -156,7 +161,6 @@ def score_many(
 
         configure_host_devices(devices)
     from .bulk import write_jsonl
-    from .lattice import load_lattice
     from .pipeline import rank, ranking_json
     from .shape import load_shape
 
@@ -165,9 +169,7 @@ def score_many(
         raise InputError("results are JSON lines: use a .jsonl file", str(out_path))
     enable_compile_cache()
     loaded = [(p, load_shape(p, corner_angle=corner_angle)) for p in shapes]  # bad input fails before any work
-    lat = load_lattice(lattice)
-    cat = _open_catalogue(catalogue)
-    ks = cat_mod.parse_range(internal) if internal is not None else None
+    _, lat, cat, ks = _inputs(None, corner_angle, lattice, catalogue, internal)
     records = []
     with _progress() as prog:
         task = prog.add_task("shapes", total=len(loaded))
@@ -201,18 +203,13 @@ def mesh(
 
     Exit status 3 when the placed mesh has inverted quads (the files are written anyway).
     """
-    from .lattice import load_lattice
     from .meshfile import write_mesh
     from .placement import DEFAULT_WALK, check_outputs, choose_mesh, draw_placements, panel_title
-    from .shape import load_shape
 
     check_outputs(out_path, png, svg)
     tb = _tie_break(tie_break)
     enable_compile_cache()
-    shp = load_shape(shape, corner_angle=corner_angle)
-    lat = load_lattice(lattice)
-    cat = _open_catalogue(catalogue)
-    ks = cat_mod.parse_range(internal) if internal is not None else None
+    shp, lat, cat, ks = _inputs(shape, corner_angle, lattice, catalogue, internal)
     with _progress() as prog:
         task = prog.add_task("scoring meshes", total=None)
         choice = choose_mesh(shp, cat, lat, rank=rank_, internal=ks, points=points, tie_break=tb,

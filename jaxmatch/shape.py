@@ -54,6 +54,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .errors import InputError
+from .files import read_limited
 
 __all__ = [
     "Annotation",
@@ -473,13 +474,7 @@ def _short(value, limit: int = 40) -> str:
 
 def load_shape(path, *, corner_angle: float = DEFAULT_CORNER_ANGLE) -> Shape:
     """Read a shape file (JSON, or text/CSV rows); see :func:`parse_shape`."""
-    src = str(path)
-    try:
-        with open(path, "rb") as fh:
-            data = fh.read(MAX_BYTES + 1)
-    except OSError as err:
-        raise InputError(f"cannot read shape file: {err.strerror or err}", where=src) from None
-    return parse_shape(data, src, corner_angle=corner_angle)
+    return parse_shape(read_limited(path, MAX_BYTES, "shape file"), str(path), corner_angle=corner_angle)
 
 
 def parse_shape(data, source: str = "<input>", *, corner_angle: float = DEFAULT_CORNER_ANGLE, fmt: str | None = None) -> Shape:

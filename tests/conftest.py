@@ -15,3 +15,22 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 settings.register_profile("dev", max_examples=80, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 settings.register_profile("thorough", max_examples=500, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "dev"))
+
+
+import pytest  # noqa: E402
+
+
+@pytest.fixture(scope="session")
+def cat():
+    """The shipped default catalogue (k = 0..5)."""
+    from jaxmatch.catalogue import default_catalogue
+
+    return default_catalogue()
+
+
+@pytest.fixture(scope="session")
+def index(cat):
+    """Mesh index of the default catalogue (for label files)."""
+    from jaxmatch.labels import mesh_index
+
+    return mesh_index(cat)

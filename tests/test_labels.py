@@ -6,7 +6,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from jaxmatch.catalogue import default_catalogue
 from jaxmatch.errors import InputError
 from jaxmatch.labels import (
     boundary_key,
@@ -16,7 +15,6 @@ from jaxmatch.labels import (
     dump_labels,
     ideal_turns,
     load_labels,
-    mesh_index,
     parse_labels,
     synthetic_examples,
     turning_fits,
@@ -26,16 +24,6 @@ from jaxmatch.shape import make_shape
 ROOT = Path(__file__).resolve().parents[1]
 LABELS = ROOT / "examples" / "labels"
 SQUARE = {"boundary": [[0, 0], [1, 0], [1, 1], [0, 1]]}
-
-
-@pytest.fixture(scope="module")
-def cat():
-    return default_catalogue()
-
-
-@pytest.fixture(scope="module")
-def index(cat):
-    return mesh_index(cat)
 
 
 @pytest.fixture(scope="module")

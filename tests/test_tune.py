@@ -14,8 +14,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from jaxmatch import tune
-from jaxmatch.catalogue import default_catalogue
-from jaxmatch.labels import dump_labels, mesh_index, parse_labels, synthetic_examples
+from jaxmatch.labels import dump_labels, parse_labels, synthetic_examples
 from jaxmatch.lattice import NEG, level_structure, load_lattice, table_from_levels, with_level_weights
 from jaxmatch.score import score_bucket
 from jaxmatch.shape import annotate, default_points
@@ -23,16 +22,6 @@ from jaxmatch.shape import annotate, default_points
 ROOT = Path(__file__).resolve().parents[1]
 SCRIPT = ROOT / "scripts" / "tune_lattice.py"
 TINY = dict(epochs=2, temperature=1.0, learning_rate=0.1, batch_size=8, l2=1e-3)
-
-
-@pytest.fixture(scope="module")
-def cat():
-    return default_catalogue()
-
-
-@pytest.fixture(scope="module")
-def index(cat):
-    return mesh_index(cat)
 
 
 @pytest.fixture(scope="module")
