@@ -16,8 +16,8 @@ from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from . import catalogue as cat_mod
-from .errors import EXIT_BAD_INPUT, EXIT_INVERTED, EXIT_UNMATCHABLE, InputError, UnmatchableError
+from jaxmatch.catalogue import store as cat_mod
+from jaxmatch.errors import EXIT_BAD_INPUT, EXIT_INVERTED, EXIT_UNMATCHABLE, InputError, UnmatchableError
 
 try:  # typer >= 0.2x vendors click as typer._click and no longer installs click
     from typer._click.exceptions import ClickException
@@ -56,8 +56,8 @@ def enable_compile_cache() -> None:
 
 def _inputs(shape: Optional[Path], corner_angle: float, lattice: str, catalogue: Optional[Path], internal: Optional[str]):
     """(shape or None, lattice, catalogue, k list or None): the inputs every scoring command reads."""
-    from .lattice import load_lattice
-    from .shape import load_shape
+    from jaxmatch.scoring.lattice import load_lattice
+    from jaxmatch.shape import load_shape
 
     shp = load_shape(shape, corner_angle=corner_angle) if shape is not None else None
     ks = cat_mod.parse_range(internal) if internal is not None else None
@@ -74,7 +74,7 @@ TIE_BREAK_HELP = ("Order among equal utilities: 'geometry' places the tied meshe
 
 
 def _tie_break(text: str) -> str:
-    from .pipeline import TIE_BREAKS
+    from jaxmatch.api import TIE_BREAKS
 
     if text not in TIE_BREAKS:
         raise InputError(f"expected one of {', '.join(TIE_BREAKS)}, got {text!r}", "--tie-break")
@@ -101,11 +101,12 @@ def score(
 ) -> None:
     """Rank catalogue meshes for SHAPE by the paper's modified LCS utility."""
     if devices is not None:
-        from .bulk import configure_host_devices
+        from jaxmatch.scoring.bulk import configure_host_devices
 
         configure_host_devices(devices)  # before JAX is imported
-    from .pipeline import rank, ranking_json
-    from .placement import check_outputs, draw_placements, panel_title, place_top
+    from jaxmatch.api import rank
+    from jaxmatch.scoring.rank import ranking_json
+    from jaxmatch.placement.choose import check_outputs, draw_placements, panel_title, place_top
 
     check_outputs(png=png, svg=svg)
     tb = _tie_break(tie_break)
@@ -157,12 +158,13 @@ def score_many(
 ) -> None:
     """Score many shapes in one run (bulk mode); every shape is read and checked before scoring."""
     if devices is not None:
-        from .bulk import configure_host_devices
+        from jaxmatch.scoring.bulk import configure_host_devices
 
         configure_host_devices(devices)
-    from .bulk import write_jsonl
-    from .pipeline import rank, ranking_json
-    from .shape import load_shape
+    from jaxmatch.scoring.bulk import write_jsonl
+    from jaxmatch.api import rank
+    from jaxmatch.scoring.rank import ranking_json
+    from jaxmatch.shape import load_shape
 
     tb = _tie_break(tie_break)
     if out_path.suffix.lower() not in (".jsonl", ".json", ".ndjson"):
@@ -203,8 +205,8 @@ def mesh(
 
     Exit status 3 when the placed mesh has inverted quads (the files are written anyway).
     """
-    from .meshfile import write_mesh
-    from .placement import DEFAULT_WALK, check_outputs, choose_mesh, draw_placements, panel_title
+    from jaxmatch.io.meshfile import write_mesh
+    from jaxmatch.placement.choose import DEFAULT_WALK, check_outputs, choose_mesh, draw_placements, panel_title
 
     check_outputs(out_path, png, svg)
     tb = _tie_break(tie_break)
@@ -280,7 +282,7 @@ def annotate(
     as_json: bool = typer.Option(False, "--json"),
 ) -> None:
     """Print the shape's s/x/v sequence and where each point lies (user coordinates)."""
-    from .shape import annotate as annotate_shape, default_points, load_shape
+    from jaxmatch.shape import annotate as annotate_shape, default_points, load_shape
 
     shp = load_shape(shape, corner_angle=corner_angle)
     m = points if points is not None else default_points(shp, max(_open_catalogue(None).lengths))
@@ -304,7 +306,7 @@ def annotate(
 def lattice_show(name: str = typer.Argument(..., help="fine, coarse, or a TOML path."),
                  as_json: bool = typer.Option(False, "--json", help="All 64 triples per type; null means -inf.")) -> None:
     """Show a lattice's weight table."""
-    from .lattice import lattice_json, lattice_text, load_lattice
+    from jaxmatch.scoring.lattice import lattice_json, lattice_text, load_lattice
 
     lat = load_lattice(name)
     if as_json:

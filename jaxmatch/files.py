@@ -21,7 +21,7 @@ import time
 from pathlib import Path
 from typing import IO, Iterator
 
-from .errors import InputError
+from jaxmatch.errors import InputError
 
 STALE_SECONDS = 3600.0
 """A leftover temporary this old is removed even if its process id is in use again."""

@@ -53,8 +53,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .errors import InputError
-from .files import read_limited
+from jaxmatch.errors import InputError
+from jaxmatch.files import read_limited
 
 __all__ = [
     "Annotation",

@@ -15,11 +15,11 @@ Printed, from one run:
 * jaxmatch exact scorer (``score_bucket`` on every mesh, all host threads): compile time
   (first pass minus a warm pass) and run time (min / median of ``--reps``), meshes/s, cells/s;
 * the reference (numba ``@njit``, nopython, single thread, float32; the plain recurrence of
-  ``jaxmatch.reference.dp_reference``, written for this benchmark), checked to give identical
+  ``jaxmatch.scoring.reference.dp_reference``, written for this benchmark), checked to give identical
   utilities for every mesh and shape; its throughput, and the ratio jaxmatch / reference
   (``ratio`` in the JSON). Also a second, SIMD-friendly numba reference (all 2n orientations in
   the innermost loop, which LLVM vectorises): ``ratio_vectorised``;
-* the same workload through ``jaxmatch.bulk``: each distinct boundary sequence once (sharing
+* the same workload through ``jaxmatch.scoring.bulk``: each distinct boundary sequence once (sharing
   per k), and pruned exact top-5 against exhaustive top-5 (speed-up, sequences scored);
 * peak RSS: of this process, and of a scorer-only subprocess for catalogue parts k <= 4 and
   k <= 5 (streaming: memory follows the batch size, not the catalogue);
@@ -27,7 +27,7 @@ Printed, from one run:
 
 ``--json`` prints one JSON object on the last line. ``--cli`` also times a cold and a warm
 ``jaxmatch score examples/lshape.json`` (fresh persistent compilation cache), and the same job
-scored through ``jaxmatch.bulk.top_k`` (pruned and exhaustive) for comparison. Run from the
+scored through ``jaxmatch.scoring.bulk.top_k`` (pruned and exhaustive) for comparison. Run from the
 repository root: ``.venv/bin/python scripts/bench.py``.
 """
 
@@ -96,8 +96,8 @@ def summary(xs: list[float]) -> dict:
 
 
 def load_workload(args):
-    from jaxmatch import catalogue as cat_mod
-    from jaxmatch.lattice import load_lattice
+    from jaxmatch.catalogue import store as cat_mod
+    from jaxmatch.scoring.lattice import load_lattice
     from jaxmatch.shape import annotate, load_shape
 
     cat = cat_mod.load(args.catalogue) if args.catalogue else cat_mod.default_catalogue()
@@ -115,7 +115,7 @@ def workload_cells(buckets, shapes) -> tuple[int, int]:
 
 
 def configure(args):
-    from jaxmatch import score
+    from jaxmatch.scoring import exact as score
 
     if args.block_cells:
         score.BLOCK_CELLS = int(args.block_cells)
@@ -127,7 +127,7 @@ def configure(args):
 
 
 def jax_pass(buckets, table, shapes, args) -> list:
-    from jaxmatch.score import DEFAULT_BATCH, score_bucket
+    from jaxmatch.scoring.exact import DEFAULT_BATCH, score_bucket
 
     batch = args.batch or DEFAULT_BATCH
     return [[score_bucket(c, b.valences, table, batch=batch, threads=args.threads).utility for b in buckets] for c in shapes]
@@ -141,7 +141,7 @@ def make_reference():
     import numba
     import numpy as np
 
-    from jaxmatch.score import NEG
+    from jaxmatch.scoring.exact import NEG
 
     neg = np.float32(NEG)
 
@@ -228,7 +228,7 @@ def sharing(buckets) -> dict:
     """Meshes and distinct boundary sequences (up to rotation and reflection) per k."""
     import numpy as np
 
-    from jaxmatch import bulk
+    from jaxmatch.scoring import bulk
 
     per_k: dict = {}
     all_meshes = all_seqs = 0
@@ -248,8 +248,8 @@ def sharing(buckets) -> dict:
 
 
 def bulk_measurements(buckets, table, shapes, args, cells, pairs) -> dict:
-    from jaxmatch import bulk
-    from jaxmatch.score import reduce_orientations
+    from jaxmatch.scoring import bulk
+    from jaxmatch.scoring.exact import reduce_orientations
 
     t = time.perf_counter()
     parts = bulk.prepare(buckets)
@@ -318,9 +318,10 @@ def rss_by_catalogue(args) -> dict:
 
 CLI_PRUNED = """
 from jaxmatch.cli import _enable_compile_cache
-from jaxmatch import bulk, catalogue
-from jaxmatch.lattice import load_lattice
-from jaxmatch.score import align
+from jaxmatch.scoring import bulk
+from jaxmatch.catalogue import store as catalogue
+from jaxmatch.scoring.lattice import load_lattice
+from jaxmatch.scoring.exact import align
 from jaxmatch.shape import annotate, default_points, load_shape
 _enable_compile_cache()
 shape, table, cat = load_shape("examples/lshape.json"), load_lattice("fine").table(), catalogue.default_catalogue()
@@ -369,7 +370,7 @@ def main(argv=None) -> int:
     import numpy as np
 
     configure(args)
-    from jaxmatch import score
+    from jaxmatch.scoring import exact as score
 
     cat, internal, buckets, table, shapes = load_workload(args)
     pairs, cells = workload_cells(buckets, shapes)

@@ -4,10 +4,10 @@
     scripts/make_labels.py designer --shapes examples/labels/shapes --k 3 --out examples/labels/designer-k3.jsonl
     scripts/make_labels.py synthetic --k 3 --variants 2 --seed 0 --out examples/labels/synthetic-k3.jsonl
 
-designer: label every shape file of a folder with the designer rule (jaxmatch.labels.design_ranking:
+designer: label every shape file of a folder with the designer rule (jaxmatch.tuning.labels.design_ranking:
 turning-function fit of the meshes' ideal outlines, then fewest irregular internal vertices, then id).
 It never looks at a lattice. synthetic: perturbed ideal outlines of every catalogue mesh of size k,
-labelled with their source mesh (jaxmatch.labels.synthetic_examples).
+labelled with their source mesh (jaxmatch.tuning.labels.synthetic_examples).
 """
 
 from __future__ import annotations
@@ -18,11 +18,11 @@ from pathlib import Path
 import typer
 from rich.console import Console
 
-from jaxmatch.catalogue import default_catalogue, load
+from jaxmatch.catalogue.store import default_catalogue, load
 from jaxmatch.cli import run_typer
 from jaxmatch.errors import InputError
 from jaxmatch.files import write_text_atomic
-from jaxmatch.labels import design_ranking, dump_labels, example_record, mesh_index, synthetic_examples
+from jaxmatch.tuning.labels import design_ranking, dump_labels, example_record, mesh_index, synthetic_examples
 from jaxmatch.shape import load_shape
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, help=__doc__.split("\n\n")[0])

@@ -23,12 +23,12 @@ from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 from rich.table import Table
 
-from jaxmatch.catalogue import default_catalogue, load
+from jaxmatch.catalogue.store import default_catalogue, load
 from jaxmatch.cli import enable_compile_cache, run_typer
 from jaxmatch.errors import InputError
 from jaxmatch.files import write_text_atomic
-from jaxmatch.labels import load_labels, mesh_index
-from jaxmatch.lattice import BUILTIN_DIR, load_lattice, save_lattice
+from jaxmatch.tuning.labels import load_labels, mesh_index
+from jaxmatch.scoring.lattice import BUILTIN_DIR, load_lattice, save_lattice
 
 app = typer.Typer(add_completion=False)
 out = Console(soft_wrap=True)
@@ -72,7 +72,7 @@ def tune(
     catalogue: Optional[Path] = typer.Option(None, help="catalogue file (default: the shipped one)"),
 ) -> None:
     """Tune the level weights of a lattice on labelled shapes; write the lattice and a report."""
-    from jaxmatch.tune import run_tuning
+    from jaxmatch.tuning.tune import run_tuning
 
     if not (temperature > 0):
         raise InputError(f"must be a positive number, got {temperature}", where="--temperature")

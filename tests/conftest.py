@@ -23,7 +23,7 @@ import pytest  # noqa: E402
 @pytest.fixture(scope="session")
 def cat():
     """The shipped default catalogue (k = 0..5)."""
-    from jaxmatch.catalogue import default_catalogue
+    from jaxmatch.catalogue.store import default_catalogue
 
     return default_catalogue()
 
@@ -31,6 +31,6 @@ def cat():
 @pytest.fixture(scope="session")
 def index(cat):
     """Mesh index of the default catalogue (for label files)."""
-    from jaxmatch.labels import mesh_index
+    from jaxmatch.tuning.labels import mesh_index
 
     return mesh_index(cat)

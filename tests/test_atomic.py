@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from jaxmatch import catalogue as cm
+from jaxmatch.catalogue import store as cm
 from jaxmatch import files
 from jaxmatch.errors import InputError
 from jaxmatch.files import atomic_open, atomic_path, write_text_atomic
@@ -115,8 +115,8 @@ def test_leftovers_of_dead_writers_are_removed(tmp_path):
 
 
 def _placement():
-    from jaxmatch.embed import arc_lengths, place
-    from jaxmatch.mesh import from_quads
+    from jaxmatch.placement.embed import arc_lengths, place
+    from jaxmatch.catalogue.mesh import from_quads
 
     vid = np.arange(9).reshape(3, 3)
     quads = [[vid[j, i], vid[j, i + 1], vid[j + 1, i + 1], vid[j + 1, i]] for j in range(2) for i in range(2)]
@@ -127,7 +127,7 @@ def _placement():
 
 
 def _figure():
-    from jaxmatch.plot import new_figure
+    from jaxmatch.io.plot import new_figure
 
     fig, axes = new_figure(1)
     axes[0].plot([0, 1], [0, 1])
@@ -135,9 +135,9 @@ def _figure():
 
 
 def writers():
-    from jaxmatch.lattice import load_lattice, save_lattice
-    from jaxmatch.meshfile import write_mesh
-    from jaxmatch.plot import save_figure
+    from jaxmatch.scoring.lattice import load_lattice, save_lattice
+    from jaxmatch.io.meshfile import write_mesh
+    from jaxmatch.io.plot import save_figure
 
     return {
         "catalogue.npz": lambda p: cm.save(cm.generate(1), p),
@@ -233,7 +233,7 @@ def test_no_module_writes_a_file_in_place():
     """Static check of the package: every file write sits inside ``with atomic_path(...)`` or
     ``with atomic_open(...)`` (:mod:`jaxmatch.files` itself implements them)."""
     problems = []
-    for path in sorted(PACKAGE.glob("*.py")):
+    for path in sorted(PACKAGE.rglob("*.py")):
         if path.name != "files.py":
             problems += _non_atomic_writes(path.read_text(encoding="utf-8"), path.name)
     assert not problems, "\n".join(problems)

@@ -1,4 +1,4 @@
-"""Bulk scoring (jaxmatch.bulk) and the fast exact kernel of jaxmatch.score.
+"""Bulk scoring (jaxmatch.scoring.bulk) and the fast exact kernel of jaxmatch.scoring.exact.
 
 Everything is compared with the plain exhaustive scorer (score_bucket on every mesh) or the
 Python references. The multi-device checks run in a subprocess with 4 simulated CPU devices
@@ -18,10 +18,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from jaxmatch import bulk, reference
-from jaxmatch.catalogue import Bucket, default_catalogue
-from jaxmatch.lattice import load_lattice
-from jaxmatch.score import (
+from jaxmatch.scoring import bulk
+from jaxmatch.scoring import reference
+from jaxmatch.catalogue.store import Bucket, default_catalogue
+from jaxmatch.scoring.lattice import load_lattice
+from jaxmatch.scoring.exact import (
     DPKind,
     NEG,
     dp_kind,
@@ -276,13 +277,13 @@ def test_one_device_mesh_runs_the_sharded_code(fine):
 
 
 SHARDED = textwrap.dedent("""
-    from jaxmatch import bulk
+    from jaxmatch.scoring import bulk
     bulk.configure_host_devices(4)
     import jax, numpy as np
     assert len(jax.devices()) == 4, jax.devices()
-    from jaxmatch.catalogue import default_catalogue
-    from jaxmatch.lattice import load_lattice
-    from jaxmatch.score import score_bucket
+    from jaxmatch.catalogue.store import default_catalogue
+    from jaxmatch.scoring.lattice import load_lattice
+    from jaxmatch.scoring.exact import score_bucket
     from jaxmatch.shape import annotate, load_shape
     table = load_lattice("fine").table()
     cat = default_catalogue()

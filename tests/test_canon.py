@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from jaxmatch.canon import canonical, mesh_id
-from jaxmatch.canon_fast import canonical_key
-from jaxmatch.closing import close_all
+from jaxmatch.catalogue.canon import canonical, mesh_id
+from jaxmatch.catalogue.canon_fast import canonical_key
+from jaxmatch.catalogue.closing import close_all
 
 
 @pytest.fixture(scope="module")

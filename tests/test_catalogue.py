@@ -9,12 +9,12 @@ from collections import Counter
 import numpy as np
 import pytest
 
-from jaxmatch import catalogue as cm
-from jaxmatch.canon import canonical, mesh_id
+from jaxmatch.catalogue import store as cm
+from jaxmatch.catalogue.canon import canonical, mesh_id
 from jaxmatch.errors import InputError
-from jaxmatch.lattice import load_lattice
-from jaxmatch.mesh import boundary_valences, triples, validate, valences
-from jaxmatch.shelling import shell
+from jaxmatch.scoring.lattice import load_lattice
+from jaxmatch.catalogue.mesh import boundary_valences, triples, validate, valences
+from jaxmatch.catalogue.shelling import shell
 
 
 @pytest.fixture(scope="module")

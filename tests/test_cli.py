@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from jaxmatch import catalogue as cm
+from jaxmatch.catalogue import store as cm
 
 ROOT = Path(__file__).resolve().parent.parent
 EXAMPLES = ROOT / "examples"

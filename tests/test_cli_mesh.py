@@ -16,13 +16,13 @@ import meshio
 import numpy as np
 import pytest
 
-from jaxmatch import catalogue as cm
+from jaxmatch.catalogue import store as cm
 from jaxmatch.cli import main
 from jaxmatch.errors import EXIT_BAD_INPUT, EXIT_INVERTED
-from jaxmatch.lattice import load_lattice
-from jaxmatch.meshfile import read_json_mesh
-from jaxmatch.pipeline import rank
-from jaxmatch.placement import place_top
+from jaxmatch.scoring.lattice import load_lattice
+from jaxmatch.io.meshfile import read_json_mesh
+from jaxmatch.api import rank
+from jaxmatch.placement.choose import place_top
 from jaxmatch.shape import load_shape
 
 ROOT = Path(__file__).resolve().parent.parent

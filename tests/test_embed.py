@@ -10,7 +10,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from jaxmatch.embed import (
+from jaxmatch.placement.embed import (
     Placement,
     arc_lengths,
     boundary_paths,
@@ -25,7 +25,7 @@ from jaxmatch.embed import (
     to_user,
     tutte,
 )
-from jaxmatch.mesh import boundary_valences, from_quads, validate, valences
+from jaxmatch.catalogue.mesh import boundary_valences, from_quads, validate, valences
 
 # ---------------------------------------------------------------------------------------------
 # hand-built meshes and shapes

@@ -28,10 +28,10 @@ import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
-from jaxmatch import catalogue as cm
+from jaxmatch.catalogue import store as cm
 from jaxmatch.errors import InputError
-from jaxmatch.lattice import MAX_BYTES as LATTICE_MAX_BYTES
-from jaxmatch.lattice import load_lattice, parse_lattice
+from jaxmatch.scoring.lattice import MAX_BYTES as LATTICE_MAX_BYTES
+from jaxmatch.scoring.lattice import load_lattice, parse_lattice
 from jaxmatch.shape import MAX_BYTES as SHAPE_MAX_BYTES
 from jaxmatch.shape import MAX_POINTS, annotate, load_shape, make_shape, parse_shape
 
@@ -663,7 +663,7 @@ def test_catalogue_zip_with_many_members(cat2, tmp_path):
 
 
 def test_label_files_random_lines(tmp_path):
-    labels = pytest.importorskip("jaxmatch.labels")
+    labels = pytest.importorskip("jaxmatch.tuning.labels")
     cat = cm.load(cm.default_path()) if cm.default_path().exists() else None
     if cat is None or not hasattr(labels, "load_labels"):
         pytest.skip("no default catalogue or no load_labels")

@@ -1,4 +1,4 @@
-"""Label files, the synthetic generator and the designer rule (jaxmatch.labels)."""
+"""Label files, the synthetic generator and the designer rule (jaxmatch.tuning.labels)."""
 
 import json
 from pathlib import Path
@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from jaxmatch.errors import InputError
-from jaxmatch.labels import (
+from jaxmatch.tuning.labels import (
     boundary_key,
     corner_cycle,
     cyclic_edit_distance,
@@ -227,8 +227,8 @@ def test_endless_label_file_is_refused_not_read_forever(tmp_path):
     """A device that never ends (like /dev/zero) is cut off at the size limit."""
     import os
 
-    from jaxmatch import catalogue as cm
-    from jaxmatch.labels import load_labels
+    from jaxmatch.catalogue import store as cm
+    from jaxmatch.tuning.labels import load_labels
 
     if not os.path.exists("/dev/zero"):
         pytest.skip("no /dev/zero")

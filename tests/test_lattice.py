@@ -1,4 +1,4 @@
-"""Lattices (weight functions w_s, w_x, w_v): a specification by example (jaxmatch.lattice)."""
+"""Lattices (weight functions w_s, w_x, w_v): a specification by example (jaxmatch.scoring.lattice)."""
 
 import itertools
 import re
@@ -10,9 +10,9 @@ import tomli_w
 from hypothesis import given
 from hypothesis import strategies as st
 
-from jaxmatch import mesh
+from jaxmatch.catalogue import mesh
 from jaxmatch.errors import InputError
-from jaxmatch.lattice import (
+from jaxmatch.scoring.lattice import (
     ALL_TRIPLES,
     BUILTIN_DIR,
     MAX_WEIGHT,

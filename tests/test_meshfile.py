@@ -9,10 +9,10 @@ import meshio
 import numpy as np
 import pytest
 
-from jaxmatch.embed import arc_lengths, place
+from jaxmatch.placement.embed import arc_lengths, place
 from jaxmatch.errors import InputError
-from jaxmatch.meshfile import MESH_FORMATS, mesh_format, read_json_mesh, write_mesh
-from jaxmatch.mesh import from_quads
+from jaxmatch.io.meshfile import MESH_FORMATS, mesh_format, read_json_mesh, write_mesh
+from jaxmatch.catalogue.mesh import from_quads
 
 
 def grid(nx, ny):

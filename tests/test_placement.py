@@ -1,4 +1,4 @@
-"""Placing ranked meshes (jaxmatch.placement) and the geometry tie-break of rank()."""
+"""Placing ranked meshes (jaxmatch.placement.choose) and the geometry tie-break of rank()."""
 
 from __future__ import annotations
 
@@ -9,12 +9,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from jaxmatch import catalogue as cm
-from jaxmatch.embed import inverted_mask, quality, quad_areas
+from jaxmatch.catalogue import store as cm
+from jaxmatch.placement.embed import inverted_mask, quality, quad_areas
 from jaxmatch.errors import InputError
-from jaxmatch.lattice import load_lattice
-from jaxmatch.pipeline import rank
-from jaxmatch.placement import (
+from jaxmatch.scoring.lattice import load_lattice
+from jaxmatch.api import rank
+from jaxmatch.placement.choose import (
     check_outputs,
     choose_mesh,
     draw_placements,
@@ -26,7 +26,7 @@ from jaxmatch.placement import (
     rerank_ties,
     spread_alignment,
 )
-from jaxmatch.score import utility_of
+from jaxmatch.scoring.exact import utility_of
 from jaxmatch.shape import annotate, load_shape, make_shape
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"

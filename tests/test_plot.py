@@ -10,10 +10,10 @@ import pytest
 from matplotlib.collections import PolyCollection
 from matplotlib.figure import Figure
 
-from jaxmatch.embed import arc_lengths, place
+from jaxmatch.placement.embed import arc_lengths, place
 from jaxmatch.errors import InputError
-from jaxmatch.mesh import boundary_valences, from_quads
-from jaxmatch.plot import Panel, draw_many, draw_match, new_figure, quality_line, save_figure
+from jaxmatch.catalogue.mesh import boundary_valences, from_quads
+from jaxmatch.io.plot import Panel, draw_many, draw_match, new_figure, quality_line, save_figure
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 

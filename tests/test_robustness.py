@@ -20,7 +20,7 @@ Exactly what is invariant (all of it tested below):
 * **A loop without corners** starts at its lowest point whatever the listing, so its
   annotation (all ``s``, evenly spaced) and its whole ranking are identical.
 
-Catalogue: ``jaxmatch.catalogue.generate(3)`` (112 meshes, boundary lengths 4..22).
+Catalogue: ``jaxmatch.catalogue.store.generate(3)`` (112 meshes, boundary lengths 4..22).
 """
 
 from __future__ import annotations
@@ -36,11 +36,11 @@ import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
-from jaxmatch import catalogue as cm
+from jaxmatch.catalogue import store as cm
 from jaxmatch.errors import InputError, UnmatchableError
-from jaxmatch.lattice import ALL_TRIPLES, Lattice, Level, load_lattice, save_lattice
-from jaxmatch.pipeline import rank
-from jaxmatch.score import utility_of
+from jaxmatch.scoring.lattice import ALL_TRIPLES, Lattice, Level, load_lattice, save_lattice
+from jaxmatch.api import rank
+from jaxmatch.scoring.exact import utility_of
 from jaxmatch.shape import annotate, make_shape
 
 ROOT = Path(__file__).resolve().parent.parent

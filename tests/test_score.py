@@ -1,4 +1,4 @@
-"""Exact scorer (jaxmatch.score) against the plain-Python references."""
+"""Exact scorer (jaxmatch.scoring.exact) against the plain-Python references."""
 
 import math
 
@@ -7,9 +7,10 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from jaxmatch import mesh, reference
+from jaxmatch.catalogue import mesh
+from jaxmatch.scoring import reference
 from jaxmatch.errors import UnmatchableError
-from jaxmatch.score import (
+from jaxmatch.scoring.exact import (
     NEG,
     ScoreResult,
     align,

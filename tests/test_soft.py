@@ -1,4 +1,4 @@
-"""Soft relaxation (jaxmatch.soft): log-partition value, convergence, finite exact gradients."""
+"""Soft relaxation (jaxmatch.scoring.soft): log-partition value, convergence, finite exact gradients."""
 
 import math
 
@@ -9,9 +9,11 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from jaxmatch import reference, score, soft
-from jaxmatch.score import NEG, score_bucket
-from jaxmatch.soft import pad_shapes, soft_utility, soft_utility_batch, table_parts
+from jaxmatch.scoring import reference
+from jaxmatch.scoring import exact as score
+from jaxmatch.scoring import soft
+from jaxmatch.scoring.exact import NEG, score_bucket
+from jaxmatch.scoring.soft import pad_shapes, soft_utility, soft_utility_batch, table_parts
 
 S, X, V = 0, 1, 2
 N_MESHES = 3  # fixed batch: one compilation per (n, padded m)

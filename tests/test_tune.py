@@ -1,4 +1,4 @@
-"""Lattice tuning (jaxmatch.tune, scripts/tune_lattice.py): parametrisation, exact evaluation,
+"""Lattice tuning (jaxmatch.tuning.tune, scripts/tune_lattice.py): parametrisation, exact evaluation,
 determinism, and a tiny end-to-end run."""
 
 import json
@@ -13,10 +13,10 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from jaxmatch import tune
-from jaxmatch.labels import dump_labels, parse_labels, synthetic_examples
-from jaxmatch.lattice import NEG, level_structure, load_lattice, table_from_levels, with_level_weights
-from jaxmatch.score import score_bucket
+from jaxmatch.tuning import tune
+from jaxmatch.tuning.labels import dump_labels, parse_labels, synthetic_examples
+from jaxmatch.scoring.lattice import NEG, level_structure, load_lattice, table_from_levels, with_level_weights
+from jaxmatch.scoring.exact import score_bucket
 from jaxmatch.shape import annotate, default_points
 
 ROOT = Path(__file__).resolve().parents[1]

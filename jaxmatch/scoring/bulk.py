@@ -1,6 +1,6 @@
 """Bulk scoring: each distinct boundary sequence once, pruned top-K, streaming, several devices.
 
-Everything here returns exactly what the exhaustive scorer (:func:`jaxmatch.score.score_bucket`
+Everything here returns exactly what the exhaustive scorer (:func:`jaxmatch.scoring.exact.score_bucket`
 on every mesh) gives; the tests compare them (``tests/test_bulk.py``).
 
 * **Distinct sequences** (:func:`group_sequences`): meshes whose boundary valence sequences are
@@ -17,7 +17,7 @@ on every mesh) gives; the tests compare them (``tests/test_bulk.py``).
   and only the grouped sequences, ids and k are kept; device memory per call depends on the
   batch size, never on the catalogue size.
 * **Devices** (:func:`score_sharded`, :func:`score_many`): the same blocks of
-  :func:`jaxmatch.score.final_blocks`, sharded over a 1-D ``jax.sharding.Mesh`` with
+  :func:`jaxmatch.scoring.exact.final_blocks`, sharded over a 1-D ``jax.sharding.Mesh`` with
   ``shard_map``: meshes over devices (one shape), or shapes over devices (many shapes). Inputs
   are built with ``jax.make_array_from_callback`` and outputs gathered with
   ``multihost_utils.process_allgather``, so the same code runs on several hosts after
@@ -57,7 +57,7 @@ __all__ = [
     "write_jsonl",
 ]
 
-_NEG = -1e9  # jaxmatch.score.NEG, without importing JAX here
+_NEG = -1e9  # jaxmatch.scoring.exact.NEG, without importing JAX here
 
 
 # --------------------------------------------------------------------------- devices
@@ -133,7 +133,7 @@ class SequenceGroups(NamedTuple):
     seqs: ``(U, n) int32`` representatives (the lexicographically smallest orientation);
     index: ``(N,)`` representative of each input sequence; orient: ``(N, 2n)``: orientation ``o``
     of input sequence ``i`` is orientation ``orient[i, o]`` of ``seqs[index[i]]`` (the same
-    oriented valence sequence; orientation numbering of :mod:`jaxmatch.score`).
+    oriented valence sequence; orientation numbering of :mod:`jaxmatch.scoring.exact`).
     """
 
     seqs: np.ndarray
@@ -184,10 +184,10 @@ def fan_out(rep_values: np.ndarray, groups: SequenceGroups, rows=None) -> np.nda
 
 
 def score_distinct(codes, vals, table, **kw):
-    """:func:`jaxmatch.score.score_bucket`, scoring each distinct sequence once (same result).
-    Keyword arguments go to :func:`jaxmatch.score.final_values` (or, with ``devices``, to
+    """:func:`jaxmatch.scoring.exact.score_bucket`, scoring each distinct sequence once (same result).
+    Keyword arguments go to :func:`jaxmatch.scoring.exact.final_values` (or, with ``devices``, to
     :func:`sharded_values`)."""
-    from .score import reduce_orientations
+    from jaxmatch.scoring.exact import reduce_orientations
 
     g = group_sequences(np.asarray(vals).reshape(-1, np.shape(vals)[-1]))
     rep = _values(codes, g.seqs, table, **kw)
@@ -302,7 +302,7 @@ def _values(codes, seqs, table, *, devices=None, plan=None, **kw) -> np.ndarray:
     if devices is not None and not (isinstance(devices, (int, np.integer)) and int(devices) == 1):
         kw.pop("threads", None)
         return sharded_values(codes, seqs, table, devices=devices, plan=plan, **kw)
-    from .score import final_values
+    from jaxmatch.scoring.exact import final_values
 
     return final_values(codes, seqs, table, plan=plan, **kw)
 
@@ -314,7 +314,7 @@ class TopK(NamedTuple):
     """Result of :func:`top_k`.
 
     rows: ``(utility, k, n, id, rotation, reflected, valences)`` tuples, the rows of
-    :func:`jaxmatch.pipeline.rank`, in its order (utility descending, then k, n, id): the best
+    :func:`jaxmatch.scoring.rank.rank`, in its order (utility descending, then k, n, id): the best
     ``top`` of all meshes (of each k with ``per_size``) plus every further mesh tied with the
     last of them (the meshes a geometric tie-break needs). Equal to the same selection from the
     exhaustive ranking.
@@ -372,7 +372,7 @@ def top_k(
     threads; an int or a device list = :func:`sharded_values` over those devices.
     progress(done, total): meshes settled (scored, pruned or unmatchable) so far.
     """
-    from .score import DEFAULT_BATCH, NEG, block_size
+    from jaxmatch.scoring.exact import DEFAULT_BATCH, NEG, block_size
 
     top = max(int(top), 1)
     batch = DEFAULT_BATCH if batch is None else int(batch)
@@ -400,7 +400,7 @@ def top_k(
         return thr
 
     def score_some(p: Part, sel: np.ndarray, plan) -> None:
-        from .score import reduce_orientations
+        from jaxmatch.scoring.exact import reduce_orientations
 
         rep = np.full((p.groups.seqs.shape[0], 2 * p.n), -np.inf, np.float32)
         rep[sel] = _values(codes, p.groups.seqs[sel], table, plan=plan, batch=batch, threads=threads, devices=devices)
@@ -481,7 +481,7 @@ def top_k_many(codes_list: Sequence, parts, table, *, devices=None, **kw) -> lis
     parts = _as_parts(parts)
     if _mesh_size(devices) <= 1:
         return [top_k(c, parts, table, devices=None, **kw) for c in codes_list]
-    from .score import reduce_orientations
+    from jaxmatch.scoring.exact import reduce_orientations
 
     top, per_size = max(int(kw.get("top", 5)), 1), bool(kw.get("per_size", False))
     total = sum(len(p.ids) for p in parts)
@@ -522,7 +522,7 @@ def _sharded_fn(mesh, unroll: int, over: str):
     import jax
     from jax.sharding import PartitionSpec as P
 
-    from .score import _final_block
+    from jaxmatch.scoring.exact import _final_block
 
     def blocks(codes, vals, tab):
         return jax.lax.map(lambda v: _final_block(codes, v, tab, unroll), vals)
@@ -550,12 +550,12 @@ def sharded_values(
     unroll: int | None = None,
     plan: tuple[int, int] | None = None,
 ) -> np.ndarray:
-    """:func:`jaxmatch.score.final_values` with the meshes sharded over ``devices``
+    """:func:`jaxmatch.scoring.exact.final_values` with the meshes sharded over ``devices``
     (:func:`device_mesh`): ``(N, 2n) float32``, ``-inf`` for orientations without a finite
     alignment. Each call holds ``devices x blocks per call x block`` meshes."""
     from jax.sharding import PartitionSpec as P
 
-    from .score import DEFAULT_BATCH, UNROLL, _check_vals, dp_codes, dp_kind, dp_table, plan_chunks
+    from jaxmatch.scoring.exact import DEFAULT_BATCH, UNROLL, _check_vals, dp_codes, dp_kind, dp_table, plan_chunks
 
     v = _check_vals(vals)
     big_n, n = v.shape
@@ -582,8 +582,8 @@ def sharded_values(
 
 
 def score_sharded(codes, vals, table, *, devices=None, **kw):
-    """:func:`jaxmatch.score.score_bucket` with the meshes sharded over ``devices`` (same result)."""
-    from .score import reduce_orientations
+    """:func:`jaxmatch.scoring.exact.score_bucket` with the meshes sharded over ``devices`` (same result)."""
+    from jaxmatch.scoring.exact import reduce_orientations
 
     return reduce_orientations(sharded_values(codes, vals, table, devices=devices, **kw))
 
@@ -600,14 +600,14 @@ def score_many(
 ) -> list:
     """Score meshes ``vals (N, n)`` against several shapes, the shapes sharded over ``devices``.
 
-    Returns one :class:`jaxmatch.score.ScoreResult` per shape (with ``values``: the ``(N, 2n)``
-    per-orientation values of :func:`jaxmatch.score.final_values` instead). Shapes are padded to
-    the longest one's :func:`jaxmatch.score.bucket_length` (padding points are skipped) and to a
+    Returns one :class:`jaxmatch.scoring.exact.ScoreResult` per shape (with ``values``: the ``(N, 2n)``
+    per-orientation values of :func:`jaxmatch.scoring.exact.final_values` instead). Shapes are padded to
+    the longest one's :func:`jaxmatch.scoring.exact.bucket_length` (padding points are skipped) and to a
     multiple of the device count; meshes go in chunks of ``batch``.
     """
     from jax.sharding import PartitionSpec as P
 
-    from .score import (DEFAULT_BATCH, UNROLL, _check_vals, bucket_length, dp_codes, dp_kind, dp_table,
+    from jaxmatch.scoring.exact import (DEFAULT_BATCH, UNROLL, _check_vals, bucket_length, dp_codes, dp_kind, dp_table,
                         plan_chunks, reduce_orientations)
 
     v = _check_vals(vals)
@@ -650,7 +650,7 @@ def score_many(
 def write_jsonl(path, records: Iterable[dict]) -> None:
     """Write one JSON object per line, atomically (temp file + rename: readers see the old file
     or the complete new one, never a partial one)."""
-    from .files import atomic_open
+    from jaxmatch.files import atomic_open
 
     with atomic_open(path, "w") as fh:
         for rec in records:

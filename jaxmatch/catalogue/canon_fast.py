@@ -1,4 +1,4 @@
-"""Compiled (numba) canonical keys: the same keys as :func:`jaxmatch.canon.canonical`.
+"""Compiled (numba) canonical keys: the same keys as :func:`jaxmatch.catalogue.canon.canonical`.
 
 The catalogue generator computes a canonical key for every candidate disk, which dominates
 its run time in pure Python. This module computes the *identical* key (so mesh ids are the
@@ -128,12 +128,12 @@ def _codes(quads, boundary, vals):
 
 
 def canonical_key(quads, boundary, vals):
-    """``(key, aut, aut_rot, chiral, start)`` exactly as :func:`jaxmatch.canon.canonical`.
+    """``(key, aut, aut_rot, chiral, start)`` exactly as :func:`jaxmatch.catalogue.canon.canonical`.
 
     quads: (F, 4) ccw vertex ids; boundary: (n,) ccw loop; vals: (V,) ints (valences,
     possibly with marks added).
     """
-    from .canon import Canonical
+    from jaxmatch.catalogue.canon import Canonical
 
     q = np.ascontiguousarray(quads, dtype=np.int64).reshape(-1, 4)
     b = np.ascontiguousarray(boundary, dtype=np.int64)

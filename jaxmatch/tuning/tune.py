@@ -2,7 +2,7 @@
 
 What is tuned
 -------------
-Only the *level weights* of a lattice (:func:`jaxmatch.lattice.level_structure`), never the
+Only the *level weights* of a lattice (:func:`jaxmatch.scoring.lattice.level_structure`), never the
 192 table entries one by one: every triple keeps its level, and ``-inf`` entries (weeded and
 forbidden) stay ``-inf`` (they are fixed at ``NEG`` inside the soft scorer and get exactly zero
 gradient). The order of the levels survives by construction: per point type, the parameters
@@ -20,7 +20,7 @@ Each example is a shape and its preferred mesh of size ``k`` (internal vertices)
 ``--internal k``). At most ``max_candidates`` (default 256) take part in training: all 96
 meshes of k = 3; for k = 4 (1283 meshes) every preferred mesh of the training examples plus a
 sample drawn with the seed (:func:`candidates`). Evaluation always uses all. With the soft utilities
-``U_q`` at temperature ``gamma`` (:func:`jaxmatch.soft.soft_utility_batch`: a log-sum-exp
+``U_q`` at temperature ``gamma`` (:func:`jaxmatch.scoring.soft.soft_utility_batch`: a log-sum-exp
 over all orientations and alignments of mesh ``q``) the loss is the softmax cross-entropy
 
     loss = mean over examples of [ logsumexp_q(U_q / gamma) - U_p / gamma ]
@@ -49,7 +49,7 @@ Evaluation (exact scorer)
 For each example, the shape is annotated with ``m = default_points(shape, longest boundary of
 the size-k meshes)`` points, as ``jaxmatch score --internal k`` does, and every catalogue
 mesh of size ``k`` is scored with the exact DP (same recurrence as
-:func:`jaxmatch.score.score_bucket`). A competitor *beats* the preferred mesh ``p`` when its
+:func:`jaxmatch.scoring.exact.score_bucket`). A competitor *beats* the preferred mesh ``p`` when its
 utility is higher, and, at equal utility:
 
 * ``top1`` / ``top5`` (**pessimistic**): every tie counts against ``p``;
@@ -62,7 +62,7 @@ by every competitor.
 
 Not done: a per-type deletion penalty (a cost for skipping a shape point of type s, x or v; 0 in
 the paper) would be three more parameters, but it changes the exact scorer's recurrence (owned by
-:mod:`jaxmatch.score`). A uniform penalty would add nothing: a mesh of ``n`` vertices always skips
+:mod:`jaxmatch.scoring.exact`). A uniform penalty would add nothing: a mesh of ``n`` vertices always skips
 ``m - n`` points, so it equals adding a constant to every finite weight. A per-type one would make
 skipped corners cost more than skipped straight points.
 """
@@ -78,12 +78,12 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from .catalogue import Catalogue
-from .labels import Example, MeshIndex, boundary_key, mesh_index
-from .lattice import MAX_WEIGHT, Lattice, LevelStructure, level_structure, table_from_levels, with_level_weights
-from .score import NEG, dp_scan, orientation_weights
-from .shape import annotate, default_points
-from .soft import pad_shapes, soft_utility_batch, table_parts
+from jaxmatch.catalogue.store import Catalogue
+from jaxmatch.tuning.labels import Example, MeshIndex, boundary_key, mesh_index
+from jaxmatch.scoring.lattice import MAX_WEIGHT, Lattice, LevelStructure, level_structure, table_from_levels, with_level_weights
+from jaxmatch.scoring.exact import NEG, dp_scan, orientation_weights
+from jaxmatch.shape import annotate, default_points
+from jaxmatch.scoring.soft import pad_shapes, soft_utility_batch, table_parts
 
 __all__ = [
     "Candidates",
@@ -160,7 +160,7 @@ class Candidates(NamedTuple):
 
     buckets: ``[(n, vals (N_n, n) int32)]``; their concatenation is ``ids``.
     max_n: the longest boundary of *all* size-k meshes (sets the number of shape points).
-    keys: boundary valence cycle of each id (:func:`jaxmatch.labels.boundary_key`).
+    keys: boundary valence cycle of each id (:func:`jaxmatch.tuning.labels.boundary_key`).
     """
 
     k: int
@@ -268,7 +268,7 @@ def split_examples(examples: Sequence[Example], fraction: float, seed: int) -> t
 @jax.jit
 def _exact_many(codes, valid, vals, table_finite):
     """``(S, N)`` exact best utility of meshes ``vals`` against padded shapes (NEG-ish when
-    unmatchable): the recurrence of :func:`jaxmatch.score.score_bucket`, vmapped over shapes."""
+    unmatchable): the recurrence of :func:`jaxmatch.scoring.exact.score_bucket`, vmapped over shapes."""
     wc = orientation_weights(vals, table_finite)
 
     def one(c, v):

@@ -1,7 +1,7 @@
 """Placing ranked meshes in the user's shape: the glue between ranking and geometry.
 
-:func:`rank <jaxmatch.pipeline.rank>` works on the combinatorics only; this module puts a
-ranked mesh into the shape (:func:`jaxmatch.embed.place` on the unit-box shape, then mapped to
+:func:`rank <jaxmatch.scoring.rank.rank>` works on the combinatorics only; this module puts a
+ranked mesh into the shape (:func:`jaxmatch.placement.embed.place` on the unit-box shape, then mapped to
 the user's coordinates), re-orders tied utilities by the quality of the embedding
 (:func:`rerank_ties`), walks down a ranking for the first mesh that embeds without folds
 (:func:`first_valid`), and draws placed meshes (:func:`draw_placements`).
@@ -27,14 +27,15 @@ from typing import TYPE_CHECKING, Callable, Iterable, Sequence
 
 import numpy as np
 
-from .embed import Placement, inverted_mask, place, quality
-from .errors import InputError
+from jaxmatch.errors import InputError
+from jaxmatch.placement.embed import Placement, inverted_mask, place, quality
+from jaxmatch.scoring.rank import TIE_CAP, Match, Ranking, TieBreaker
+from jaxmatch.scoring.rank import rank as rank_meshes
 
 if TYPE_CHECKING:  # pragma: no cover
-    from .catalogue import Catalogue
-    from .lattice import Lattice
-    from .pipeline import Match, Ranking
-    from .shape import Annotation, Shape
+    from jaxmatch.catalogue.store import Catalogue
+    from jaxmatch.scoring.lattice import Lattice
+    from jaxmatch.shape import Annotation, Shape
 
 __all__ = [
     "DEFAULT_WALK",
@@ -45,13 +46,11 @@ __all__ = [
     "draw_placements",
     "first_valid",
     "geometry_key",
+    "geometry_tie_breaker",
     "place_match",
     "place_top",
     "rerank_ties",
 ]
-
-TIE_CAP = 64
-"""Default largest number of meshes placed to break ties in one ranking."""
 
 DEFAULT_WALK = 50
 """Default number of ranked candidates :func:`first_valid` tries."""
@@ -148,7 +147,7 @@ def place_match(shape: Shape, annotation: Annotation, catalogue: Catalogue, matc
     (:func:`spread_alignment`; ``spread=False``: ``match.alignment`` as it is; should the
     spread one fold, ``match.alignment`` is placed too and the one with fewer inverted quads,
     then higher min scaled Jacobian, is kept). The interior is embedded and smoothed
-    (:func:`jaxmatch.embed.place`). ``Placement.alignment`` holds the
+    (:func:`jaxmatch.placement.embed.place`). ``Placement.alignment`` holds the
     alignment used. Quality (scaled Jacobian, angles, inverted count) is recomputed on the user
     coordinates, so it agrees with what is drawn and written. ``placements``: optional cache
     keyed by mesh id (read and filled; only for one shape, annotation, catalogue and
@@ -237,6 +236,16 @@ def rerank_ties(shape: Shape, annotation: Annotation, catalogue: Catalogue, matc
     return out
 
 
+def geometry_tie_breaker(catalogue: Catalogue, *, smooth_iters: int = 200) -> TieBreaker:
+    """The ``tie_break`` of :func:`jaxmatch.scoring.rank.rank` that orders equal utilities by
+    :func:`rerank_ties` (placed quality) for meshes of ``catalogue``."""
+
+    def reorder(shape: Shape, annotation: Annotation, matches: Sequence[Match], cap: int, placements: dict) -> list[Match]:
+        return rerank_ties(shape, annotation, catalogue, matches, cap=cap, placements=placements, smooth_iters=smooth_iters)
+
+    return reorder
+
+
 # ---------------------------------------------------------------------------------------------
 # walking down a ranking
 
@@ -296,14 +305,13 @@ def choose_mesh(shape: Shape, catalogue: Catalogue, lattice: Lattice, *, rank: i
     are searched for ``alternative``. Raises :class:`InputError` when fewer than ``rank``
     meshes match, :class:`UnmatchableError` when none does.
     """
-    from .pipeline import rank as rank_meshes
-
     r = int(rank)
     if r < 1:
         raise InputError(f"rank must be at least 1, got {r}", "--rank")
     # top=0: score only; count the matchable meshes before aligning (or placing) any of them
+    tb = geometry_tie_breaker(catalogue) if tie_break == "geometry" else tie_break
     ranking = rank_meshes(shape, catalogue, lattice, internal=internal, top=0, points=points,
-                          tie_break=tie_break, tie_cap=tie_cap, progress=progress)
+                          tie_break=tb, tie_cap=tie_cap, progress=progress)
     count = ranking.scored - ranking.unmatchable
     if count < r:
         raise InputError(f"only {count} meshes match the shape, cannot take rank {r}", "--rank")
@@ -340,7 +348,7 @@ def check_outputs(out: str | os.PathLike | None = None, png: str | os.PathLike |
     """Refuse unsupported output suffixes before any work is done (:class:`InputError`, where
     is the option): ``out`` a mesh file (.vtk .vtu .obj .msh .json), ``png`` a .png file,
     ``svg`` a .svg file."""
-    from .meshfile import mesh_format
+    from jaxmatch.io.meshfile import mesh_format
 
     if out is not None:
         try:
@@ -356,10 +364,10 @@ def draw_placements(path: str | os.PathLike, shape: Shape, annotation: Annotatio
                     items: Sequence[tuple[str, Placement]], *, title: str | None = None, ncols: int | None = None) -> Path:
     """Draw placed meshes side by side (one panel per ``(panel title, placement)``) over the
     shape's outline and annotated s/x/v points, in user coordinates, and save to ``path``
-    (.png or .svg, atomically; see :func:`jaxmatch.plot.draw_many`). Each panel shows boundary
+    (.png or .svg, atomically; see :func:`jaxmatch.io.plot.draw_many`). Each panel shows boundary
     vertices coloured by valence, irregular internal vertices, inverted quads in red and the
     quality (min / mean scaled Jacobian, inverted count) in its title."""
-    from .plot import Panel, draw_many
+    from jaxmatch.io.plot import Panel, draw_many
 
     outline = shape.user_points
     pos = shape.to_user(annotation.positions)

@@ -20,7 +20,7 @@ at most K internal vertices, so every prefix of every shelling of M survives:
 * F(P) <= F(M) <= sum of the valences of the internal vertices of M (every quad holds one)
   <= sum over Int(P) of their (final) valences + 5 (K - |Int(P)|).
 
-Disks are deduplicated per level by their canonical form (:mod:`jaxmatch.canon`), and
+Disks are deduplicated per level by their canonical form (:mod:`jaxmatch.catalogue.canon`), and
 every catalogue mesh found is recorded once by its canonical key.
 """
 
@@ -28,8 +28,8 @@ from __future__ import annotations
 
 from typing import Iterator, NamedTuple
 
-from .canon import canonical
-from .mesh import MAX_VALENCE
+from jaxmatch.catalogue.canon import canonical
+from jaxmatch.catalogue.mesh import MAX_VALENCE
 
 
 class Disk(NamedTuple):

@@ -15,9 +15,9 @@ One example per line, a JSON object::
   (internal vertices) is the size the user fixed: the mesh competes with the catalogue meshes
   of the same size;
 * ``rotation`` (int >= 0, less than the mesh's boundary length) and ``reflected`` (bool),
-  optional: the preferred orientation in :mod:`jaxmatch.score`'s convention. They are
+  optional: the preferred orientation in :mod:`jaxmatch.scoring.exact`'s convention. They are
   validated and kept on :class:`Example` but not used by the tuner's loss (see
-  :mod:`jaxmatch.tune`);
+  :mod:`jaxmatch.tuning.tune`);
 * ``note``, optional: free text (e.g. why the label was chosen).
 
 Blank lines and lines whose first non-blank character is ``#`` are skipped. Any other problem
@@ -84,11 +84,11 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .catalogue import Catalogue
-from .errors import InputError
-from .files import read_limited
-from .mesh import valences
-from .shape import Shape, load_shape, make_shape, parse_shape, turning_angles, cumulative_length
+from jaxmatch.catalogue.store import Catalogue
+from jaxmatch.errors import InputError
+from jaxmatch.files import read_limited
+from jaxmatch.catalogue.mesh import valences
+from jaxmatch.shape import Shape, load_shape, make_shape, parse_shape, turning_angles, cumulative_length
 
 __all__ = [
     "Example",
@@ -409,7 +409,7 @@ def cyclic_edit_distance(a: str, b: str) -> int:
 
 class DesignChoice(NamedTuple):
     """One row of :func:`design_ranking`: the corner distance, the fit and the orientation it
-    implies (``rotation``/``reflected`` in :mod:`jaxmatch.score`'s convention: the first mesh
+    implies (``rotation``/``reflected`` in :mod:`jaxmatch.scoring.exact`'s convention: the first mesh
     vertex along the boundary from the shape's first corner, by the turning fit)."""
 
     mesh_id: str

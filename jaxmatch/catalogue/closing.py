@@ -4,7 +4,7 @@ States are *star-covered disks*: disk quad meshes in which every quad contains a
 interior vertex (for k >= 1 every catalogue mesh is one: a quad whose 4 vertices were on the
 boundary would need its internal edges to have an internal endpoint, so all its edges would
 be boundary edges and the mesh would be that single quad). Level j holds the star-covered
-disks with j interior vertices, deduplicated by canonical form (:mod:`jaxmatch.canon`).
+disks with j interior vertices, deduplicated by canonical form (:mod:`jaxmatch.catalogue.canon`).
 
 Step: pick a boundary vertex p of a state and *close* it: attach quads that contain p, one
 at a time, each along a boundary path that starts or ends at p (1, 2 or 3 edges, so vertices
@@ -26,7 +26,7 @@ are internal and can be closed first, which shrinks the pocket; what remains are
 link passes twice through one diagonal vertex that lies on the mesh boundary and encloses
 internal vertices, which needs many internal vertices: a pinched star enclosing a filled
 4-cycle already needs about 8). So this argument covers the catalogue sizes built here but is
-not a proof for every k. The tests check it against :mod:`jaxmatch.shelling`, which is complete
+not a proof for every k. The tests check it against :mod:`jaxmatch.catalogue.shelling`, which is complete
 by the shellability of disks, as sets of canonical ids for k <= 3.
 """
 
@@ -36,8 +36,8 @@ import contextlib
 import signal
 from typing import Callable
 
-from .canon_fast import canonical_key as canonical
-from .shelling import Disk, attach, single_quad, is_catalogue_mesh
+from jaxmatch.catalogue.canon_fast import canonical_key as canonical
+from jaxmatch.catalogue.shelling import Disk, attach, single_quad, is_catalogue_mesh
 
 
 def _needs_lower_bound_excluding(d: Disk, p: int) -> int:

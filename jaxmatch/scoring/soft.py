@@ -1,6 +1,6 @@
 """Soft (differentiable) relaxation of the exact scorer, for tuning lattice weights.
 
-Same DP core as :mod:`jaxmatch.score` (:func:`jaxmatch.score.dp_scan`), with ``max``
+Same DP core as :mod:`jaxmatch.scoring.exact` (:func:`jaxmatch.scoring.exact.dp_scan`), with ``max``
 replaced by the smoothed maximum ``smax_gamma(a, b) = gamma * logaddexp(a / gamma, b / gamma)``,
 and the maximum over the ``2n`` orientations replaced by ``gamma * logsumexp(. / gamma)``.
 Since log-sum-exp distributes over ``+``, the result is exactly the log-partition function
@@ -31,7 +31,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.custom_derivatives import SymbolicZero
 
-from jaxmatch.score import NEG, UNROLL, bucket_length, dp_scan, orientation_weights
+from jaxmatch.scoring.exact import NEG, UNROLL, bucket_length, dp_scan, orientation_weights
 
 __all__ = [
     "smax",

@@ -31,9 +31,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .embed import Placement
-from .errors import InputError
-from .files import atomic_open, atomic_path
+from jaxmatch.placement.embed import Placement
+from jaxmatch.errors import InputError
+from jaxmatch.files import atomic_open, atomic_path
 
 __all__ = ["MESH_FORMATS", "mesh_format", "read_json_mesh", "write_mesh"]
 

@@ -1,4 +1,4 @@
-"""The mesh catalogue: generation (see :mod:`jaxmatch.closing`) and storage.
+"""The mesh catalogue: generation (see :mod:`jaxmatch.catalogue.closing`) and storage.
 
 File format (version :data:`FORMAT_VERSION`): one ``.npz`` (zip of numpy arrays, read
 lazily array by array), written atomically. Member ``meta`` holds UTF-8 JSON:
@@ -30,11 +30,11 @@ from typing import Callable, Iterator, NamedTuple
 
 import numpy as np
 
-from .canon import mesh_id, relabel
-from .canon_fast import canonical_key
-from .errors import InputError
-from .files import atomic_path
-from .mesh import QuadMesh, boundary_valences, triples, validate, valences
+from jaxmatch.catalogue.canon import mesh_id, relabel
+from jaxmatch.catalogue.canon_fast import canonical_key
+from jaxmatch.errors import InputError
+from jaxmatch.files import atomic_path
+from jaxmatch.catalogue.mesh import QuadMesh, boundary_valences, triples, validate, valences
 
 FORMAT = "jaxmatch-catalogue"
 FORMAT_VERSION = 1
@@ -93,9 +93,9 @@ def parse_range(text: str) -> list[int]:
 def generate(max_internal: int, progress: Callable | None = None, workers: int = 1) -> list[Entry]:
     """All catalogue meshes with k = 0 .. max_internal, canonical, sorted by (k, n, id).
 
-    workers: processes used to expand each level (see :func:`jaxmatch.closing.close_all`).
+    workers: processes used to expand each level (see :func:`jaxmatch.catalogue.closing.close_all`).
     """
-    from .closing import close_all
+    from jaxmatch.catalogue.closing import close_all
 
     found = close_all(max_internal, progress=progress, workers=workers)
     entries = []
@@ -315,7 +315,7 @@ def load(path: str | os.PathLike) -> Catalogue:
 
 def default_path() -> Path:
     """The catalogue shipped with the package (k = 0 .. DEFAULT_MAX_INTERNAL)."""
-    return Path(__file__).parent / "data" / f"catalogue-k0-{DEFAULT_MAX_INTERNAL}.npz"
+    return Path(__file__).resolve().parents[1] / "data" / f"catalogue-k0-{DEFAULT_MAX_INTERNAL}.npz"
 
 
 def default_catalogue() -> Catalogue:

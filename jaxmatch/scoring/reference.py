@@ -1,6 +1,6 @@
 """Plain-Python reference scorers (no JAX, deliberately simple and slow).
 
-Same problem and orientation convention as :mod:`jaxmatch.score`: orientation ``s = vals``
+Same problem and orientation convention as :mod:`jaxmatch.scoring.exact`: orientation ``s = vals``
 (or ``vals[::-1]`` when reflected), rotated so ``s_r[0] = s[r]``; triple of ``s_r[j]`` is
 ``[s_r[j+1], s_r[j], s_r[j-1]]``; ``table[code][u-2][v-2][w-2]`` with ``-inf`` = forbidden.
 Orientations are tried in the order rotations ``0..n-1`` of ``vals``, then of ``vals[::-1]``,

@@ -1,7 +1,7 @@
 """Lattices: the weight functions ``w_s, w_x, w_v : {2,3,4,5}^3 -> Z u {-inf}`` (paper, sec. 4).
 
 A mesh boundary vertex is the triple ``"u-v-w"`` = valences of (ccw neighbour, vertex, cw
-neighbour) (:func:`jaxmatch.mesh.triples`). For each shape point type (``s`` straight, ``x``
+neighbour) (:func:`jaxmatch.catalogue.mesh.triples`). For each shape point type (``s`` straight, ``x``
 convex, ``v`` concave) a lattice sorts the 64 triples into *levels* from best to worst, each
 with an integer weight, plus two ``-inf`` groups:
 
@@ -42,9 +42,9 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .errors import InputError
-from .files import read_limited, write_text_atomic
-from .shape import SYMBOLS
+from jaxmatch.errors import InputError
+from jaxmatch.files import read_limited, write_text_atomic
+from jaxmatch.shape import SYMBOLS
 
 __all__ = [
     "ALL_TRIPLES",
@@ -88,7 +88,7 @@ TYPE_NAMES = {"s": "straight point", "x": "convex corner", "v": "concave corner"
 ALL_TRIPLES = tuple(f"{u}-{v}-{w}" for u, v, w in itertools.product(range(2, 6), repeat=3))
 """The 64 triples ``"u-v-w"`` in table order (``u`` slowest, ``w`` fastest)."""
 
-BUILTIN_DIR = Path(__file__).resolve().parent.parent / "lattices"
+BUILTIN_DIR = Path(__file__).resolve().parents[2] / "lattices"
 """Built-in lattices in a source checkout (installed packages use ``jaxmatch/data``)."""
 
 _TRIPLE_RE = re.compile(r"^[2-5]-[2-5]-[2-5]$")

@@ -49,7 +49,7 @@ import numpy as np
 import scipy.sparse
 import scipy.sparse.linalg
 
-from .mesh import QuadMesh, edges, valences
+from jaxmatch.catalogue.mesh import QuadMesh, edges, valences
 
 __all__ = [
     "Placement",

@@ -18,7 +18,7 @@ Orientation convention (exact; :func:`oriented_sequence`)
 * ``s = vals`` when not reflected, ``s = vals[::-1]`` when reflected (the mirrored mesh;
   reversing swaps the ccw and cw neighbours, i.e. ``u`` and ``w`` of every triple);
 * ``s_r = np.roll(s, -r)``, so ``s_r[0] = s[r]``: mesh vertex ``r`` of ``s`` is matched first;
-* triples ``t_j = [s_r[j+1], s_r[j], s_r[j-1]]`` (cyclic), as :func:`jaxmatch.mesh.triples`;
+* triples ``t_j = [s_r[j+1], s_r[j], s_r[j-1]]`` (cyclic), as :func:`jaxmatch.catalogue.mesh.triples`;
 * ``alignment[j]`` is the input index taken by ``s_r[j]``.
 
 Orientation index ``o`` in ``0 .. 2n-1``: ``o = r`` for rotations of ``vals``, ``o = n + r``
@@ -33,7 +33,7 @@ input points::
     D[0][0] = 0,  D[0][j > 0] = NEG,  D[i][0] = 0
     D[i][j] = reduce(D[i-1][j], D[i-1][j-1] + W[i-1, j-1])
 
-answer ``D[m][n]``. ``reduce`` is ``max`` here; :mod:`jaxmatch.soft` passes the smoothed
+answer ``D[m][n]``. ``reduce`` is ``max`` here; :mod:`jaxmatch.scoring.soft` passes the smoothed
 maximum ``gamma * logaddexp(a / gamma, b / gamma)`` to the very same core (:func:`dp_scan`).
 Forbidden weights are replaced by the finite ``NEG`` (never ``-inf`` inside the DP); a mesh
 whose best value is ``<= NEG / 2``, or with ``n > m``, is *unmatchable*: utility ``-inf``,
@@ -42,7 +42,7 @@ whose best value is ``<= NEG / 2``, or with ``n > m``, is *unmatchable*: utility
 
 Implementation: one ``jax.lax.scan`` over input points (carry: one ``(n, ...)`` array, the
 DP rows ``j = 1..n`` for every orientation of every mesh of a block; row 0 is the constant 0).
-:func:`dp_scan` is the generic form (any reduction; used by :mod:`jaxmatch.soft` and
+:func:`dp_scan` is the generic form (any reduction; used by :mod:`jaxmatch.scoring.soft` and
 :func:`align`). Exact scoring (:func:`score_bucket`, :func:`final_values`) runs the same
 max-plus recurrence in its fastest form: the narrowest exact number type (:func:`dp_kind`:
 int16 for the shipped lattices), a flat ``(n, 2n * block)`` layout with cache-sized blocks
@@ -67,7 +67,7 @@ import numpy as np
 from jaxmatch.errors import UnmatchableError
 
 try:  # the lattice loader owns NEG once it exists
-    from jaxmatch.lattice import NEG  # type: ignore[attr-defined]
+    from jaxmatch.scoring.lattice import NEG  # type: ignore[attr-defined]
 except ImportError:  # pragma: no cover - depends on the tree state
     NEG = -1e9
 NEG = float(NEG)
@@ -501,7 +501,7 @@ def align(codes, vals_one, table, rotation: int, reflected: bool, *, m_pad: int 
 
 def utility_of(codes, vals_one, table, rotation: int, reflected: bool, alignment) -> float:
     """Utility of one explicit alignment (numpy, original table: ``-inf`` if it uses a forbidden weight)."""
-    from jaxmatch.mesh import triples
+    from jaxmatch.catalogue.mesh import triples
 
     seq = oriented_sequence(vals_one, rotation, reflected)
     n = seq.shape[0]

@@ -19,10 +19,10 @@ from matplotlib.collections import LineCollection, PolyCollection
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 
-from .embed import Placement, inverted_mask
-from .errors import InputError
-from .files import atomic_path
-from .mesh import edges, valences
+from jaxmatch.placement.embed import Placement, inverted_mask
+from jaxmatch.errors import InputError
+from jaxmatch.files import atomic_path
+from jaxmatch.catalogue.mesh import edges, valences
 
 __all__ = [
     "CODE_STYLE",
@@ -62,7 +62,7 @@ OUTLINE_COLOUR = "#b0b0b0"
 @dataclass(frozen=True, eq=False)
 class Panel:
     """One match to draw: shape outline ``points (P, 2)``, annotated ``positions (m, 2)`` and
-    ``codes (m,)``, the :class:`~jaxmatch.embed.Placement`, and a title."""
+    ``codes (m,)``, the :class:`~jaxmatch.placement.embed.Placement`, and a title."""
 
     points: np.ndarray
     positions: np.ndarray

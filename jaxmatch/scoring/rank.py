@@ -6,16 +6,16 @@ Everything the ``jaxmatch score`` command prints comes from :func:`rank`.
 from __future__ import annotations
 
 from itertools import groupby, islice
-from typing import Callable, Iterator, NamedTuple
+from typing import Callable, Iterator, NamedTuple, Sequence
 
 import numpy as np
 
-from .catalogue import Catalogue
-from .errors import UnmatchableError
-from .lattice import Lattice
-from .mesh import triples
-from .score import align, oriented_sequence, score_bucket
-from .shape import Annotation, Shape, annotate, default_points
+from jaxmatch.catalogue.store import Catalogue
+from jaxmatch.errors import UnmatchableError
+from jaxmatch.scoring.lattice import Lattice
+from jaxmatch.catalogue.mesh import triples
+from jaxmatch.scoring.exact import align, oriented_sequence, score_bucket
+from jaxmatch.shape import Annotation, Shape, annotate, default_points
 
 
 class Match(NamedTuple):
@@ -51,7 +51,7 @@ class Ranking(NamedTuple):
     """Result of :func:`rank`: the annotation used, the top matches (best first) and counts.
 
     placements: with ``tie_break="geometry"``, the meshes placed to break ties
-    (mesh id -> :class:`~jaxmatch.embed.Placement`, user coordinates); None otherwise.
+    (mesh id -> :class:`~jaxmatch.placement.embed.Placement`, user coordinates); None otherwise.
     following: the matches after ``results`` in the same order, produced lazily (a one-shot
     iterator; with ``tie_break="geometry"`` it places tied meshes as it goes, into
     ``placements``, within the same cap); None with ``per_size``.
@@ -67,8 +67,13 @@ class Ranking(NamedTuple):
     pruned: int = 0
 
 
-TIE_BREAKS = ("id", "geometry")
-"""Orders among equal utilities (see :func:`rank`)."""
+TIE_CAP = 64
+"""Default largest number of meshes placed to break ties in one ranking."""
+
+TieBreaker = Callable[[Shape, Annotation, Sequence[Match], int, dict], list[Match]]
+"""``(shape, annotation, tied matches, cap, placements cache) -> re-ordered matches``: re-orders
+runs of equal utility (:func:`jaxmatch.placement.choose.geometry_tie_breaker` places them and
+orders them by quality); it may place at most ``cap`` meshes and fills the cache."""
 
 
 def selected_lengths(catalogue: Catalogue, internal: list[int] | None) -> list[int]:
@@ -86,7 +91,7 @@ def rank(
     points: int | None = None,
     per_size: bool = False,
     progress: Callable[[int, int], None] | None = None,
-    tie_break: str = "id",
+    tie_break: str | TieBreaker = "id",
     tie_cap: int | None = None,
     prune: bool = False,
     devices: int | None = None,
@@ -101,28 +106,29 @@ def rank(
     tie_break: order among equal utilities.
 
     * ``"id"`` (default): fewer internal vertices, then shorter boundary, then id.
-    * ``"geometry"`` (beyond the paper; meshes with the same boundary sequence always tie, and
+    * a :data:`TieBreaker` such as :func:`jaxmatch.placement.choose.geometry_tie_breaker`
+      (``"geometry"`` in :func:`jaxmatch.api.rank` and the CLI; beyond the paper; meshes with the same boundary sequence always tie, and
       integer weights make many more ties): every mesh whose utility equals that of a returned
-      mesh is placed in the shape (:func:`jaxmatch.placement.place_match`, about 0.02-0.15 s
+      mesh is placed in the shape (:func:`jaxmatch.placement.choose.place_match`, about 0.02-0.15 s
       each) and ties are ordered by higher min scaled Jacobian, then fewer irregular internal
-      vertices, then id (:func:`jaxmatch.placement.rerank_ties`). Only ties are re-ordered,
+      vertices, then id (:func:`jaxmatch.placement.choose.rerank_ties`). Only ties are re-ordered,
       utilities keep their order. At most ``tie_cap`` meshes (default
-      :data:`jaxmatch.placement.TIE_CAP` = 64) are placed per call, in "id" order; tied meshes
+      :data:`TIE_CAP` = 64) are placed per call, in "id" order; tied meshes
       past the cap follow the placed ones of their utility in "id" order. Meshes alone at
       their utility are not placed. The placements are returned in ``Ranking.placements``.
 
-    prune: find the top meshes with :func:`jaxmatch.bulk.top_k`: each distinct boundary sequence is
+    prune: find the top meshes with :func:`jaxmatch.scoring.bulk.top_k`: each distinct boundary sequence is
     scored once, in decreasing order of a cheap upper bound, and sequences that cannot enter the
     top are skipped (same results as exhaustive scoring, tested; ``Ranking.pruned`` counts the
     skipped meshes and ``following`` then only holds the remaining tied rows). devices: shard the
-    scoring over that many JAX devices (:func:`jaxmatch.bulk.configure_host_devices` makes CPU
+    scoring over that many JAX devices (:func:`jaxmatch.scoring.bulk.configure_host_devices` makes CPU
     devices; it must run before JAX is imported); implies the bulk path.
 
     Raises UnmatchableError when no selected mesh has a finite matching; ValueError for an
     unknown ``tie_break``.
     """
-    if tie_break not in TIE_BREAKS:
-        raise ValueError(f"tie_break must be one of {TIE_BREAKS}, got {tie_break!r}")
+    if not (tie_break == "id" or callable(tie_break)):
+        raise ValueError(f"tie_break must be 'id' or a tie breaker function, got {tie_break!r}")
     lengths = selected_lengths(catalogue, internal)
     if not lengths:
         raise UnmatchableError(f"the catalogue has no mesh with {internal_text(internal)}")
@@ -134,7 +140,7 @@ def rank(
     rows = []  # (utility, k, n, id, rotation, reflected, vals)
     done = unmatchable = pruned = 0
     if prune or (devices is not None and devices > 1):
-        from .bulk import top_k
+        from jaxmatch.scoring.bulk import top_k
 
         tk = top_k(ann.codes, buckets, table, top=top, per_size=per_size, prune=prune,
                    devices=devices if devices is not None and devices > 1 else None, progress=progress)
@@ -158,8 +164,8 @@ def rank(
         alignment = align(ann.codes, vals, table, rot, refl)
         return Match(mid, k, n, util, rot, refl, alignment, triples(oriented_sequence(vals, rot, refl)))
 
-    placements = {} if tie_break == "geometry" else None
-    budget = [_default_tie_cap() if tie_cap is None else max(int(tie_cap), 0)]
+    placements = {} if callable(tie_break) else None
+    budget = [TIE_CAP if tie_cap is None else max(int(tie_cap), 0)]
 
     def ordered(sel) -> Iterator[Match]:
         """Matches of the sorted rows ``sel`` in final order, one utility run at a time."""
@@ -168,10 +174,8 @@ def rank(
             if placements is None or len(grp) < 2 or budget[0] <= 0:
                 yield from (to_match(r) for r in grp)
                 continue
-            from .placement import rerank_ties
-
             head = [to_match(r) for r in grp[: budget[0]]]
-            placed = rerank_ties(shape, ann, catalogue, head, cap=budget[0], placements=placements)
+            placed = tie_break(shape, ann, head, budget[0], placements)
             budget[0] -= len(head)
             yield from placed
             yield from (to_match(r) for r in grp[len(head):])
@@ -193,12 +197,6 @@ def ranking_json(shape: str, ranking: Ranking, lattice_name: str, tie_break: str
         "points": len(ranking.annotation.codes), "scored": ranking.scored, "unmatchable": ranking.unmatchable,
         "pruned": ranking.pruned, "tie_break": tie_break, "results": [r.as_json() for r in ranking.results],
     }
-
-
-def _default_tie_cap() -> int:
-    from .placement import TIE_CAP
-
-    return TIE_CAP
 
 
 def internal_text(internal: list[int] | None) -> str:
