@@ -36,7 +36,7 @@ All lengths here are in the user's units.
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Iterator, NamedTuple, Sequence
+from typing import TYPE_CHECKING, Callable, Iterator, NamedTuple, Sequence
 
 import numpy as np
 import scipy.sparse
@@ -69,6 +69,7 @@ __all__ = [
     "side_lengths",
     "side_polylines",
     "estimated_mean_edge",
+    "feasible",
     "nearest_counts",
     "side_points",
     "solve_multiplicities",
@@ -303,14 +304,20 @@ def _corner_positions(shape: Shape, annotation, alignment: np.ndarray) -> np.nda
     return np.asarray(pos, np.int64)
 
 
-def _fit(shape: Shape, annotation, match: "Match", placement: Placement, rank: int) -> PatchTemplate | None:
-    """A :class:`PatchTemplate` from a placed match, or None when a corner has no vertex."""
-    loop = np.asarray(placement.mesh.boundary, np.int64)
+def _fit(shape: Shape, annotation, match: "Match", catalogue: "Catalogue", rank: int) -> PatchTemplate | None:
+    """An unplaced :class:`PatchTemplate` (``placement`` None) from a ranked match, or None when
+    a corner of the shape has no mesh vertex. The chords and sides do not depend on the
+    placement: :func:`~jaxmatch.placement.choose.place_match` re-spreads the alignment only over
+    points of the same type, and a match with every corner matched uses every corner point."""
+    from jaxmatch.placement.embed import oriented_boundary
+
+    om, loop32 = oriented_boundary(catalogue.mesh(match.mesh_id), match.rotation, match.reflected)
+    loop = np.asarray(loop32, np.int64)
     nb = loop.shape[0]
     if shape.n_corners == 0:
         paths = [np.concatenate([loop, loop[:1]])]
     else:
-        pos = _corner_positions(shape, annotation, placement.alignment)
+        pos = _corner_positions(shape, annotation, match.alignment)
         if pos is None:
             return None
         n = shape.n_corners
@@ -321,14 +328,14 @@ def _fit(shape: Shape, annotation, match: "Match", placement: Placement, rank: i
             path = loop[np.arange(a, stop + 1) % nb]
             paths.append(path[::-1].copy() if rev else path)
     first = [(int(p[k]), int(p[k + 1])) for p in paths for k in range(p.shape[0] - 1)]
-    e, chord, qc, nc = _chords(placement.mesh.quads, loop, first)
-    V = int(np.asarray(placement.mesh.quads).max()) + 1
+    e, chord, qc, nc = _chords(om.quads, loop, first)
+    V = int(np.asarray(om.quads).max()) + 1
     key = e[:, 0] * V + e[:, 1]
     side_chords = []
     for p in paths:
         lo, hi = np.minimum(p[:-1], p[1:]), np.maximum(p[:-1], p[1:])
         side_chords.append(chord[np.searchsorted(key, lo * V + hi)].astype(np.int64))
-    return PatchTemplate(shape, match.mesh_id, tuple(side_chords), nc, match, rank, placement, qc, e, chord,
+    return PatchTemplate(shape, match.mesh_id, tuple(side_chords), nc, match, rank, None, qc, e, chord,
                          tuple(p.astype(np.int64) for p in paths))
 
 
@@ -343,10 +350,11 @@ def _candidates(shape: Shape, catalogue: "Catalogue", lattice: "Lattice", *, lim
     return ranking.annotation, ms
 
 
-def _iter_templates(shape, catalogue, lattice, *, limit: int, internal=None,
-                    rejected: list | None = None) -> Iterator[PatchTemplate]:
-    """Templates in candidate order (see :func:`patch_templates`), placed lazily. Rejected
-    candidates are appended to ``rejected`` as ``(rank, mesh_id, reason)``."""
+def _iter_templates(shape, catalogue, lattice, *, limit: int, internal=None, rejected: list | None = None,
+                    check: Callable[[PatchTemplate], str | None] | None = None) -> Iterator[PatchTemplate]:
+    """Placed templates in candidate order (see :func:`patch_templates`), at most ``limit`` per
+    size. ``check(unplaced template)``: a reason to skip it before placing (None: go on).
+    Skipped candidates are appended to ``rejected`` as ``(rank, mesh_id, reason)``."""
     from jaxmatch.placement.choose import place_match
 
     ann, ms = _candidates(shape, catalogue, lattice, limit=3 * max(int(limit), 1), internal=internal)
@@ -354,19 +362,27 @@ def _iter_templates(shape, catalogue, lattice, *, limit: int, internal=None,
     for r, m in enumerate(ms, start=1):
         if taken.get(m.internal_vertices, 0) >= limit:
             continue
-        pl = place_match(shape, ann, catalogue, m)
-        t = _fit(shape, ann, m, pl, r)
-        reason = None
-        if t is None:
-            reason = "leaves a corner without a mesh vertex"
-        elif pl.inverted:
-            reason = f"folds when placed ({pl.inverted} inverted quads)"
+        t = _fit(shape, ann, m, catalogue, r)
+        reason = "leaves a corner without a mesh vertex" if t is None else (check(t) if check is not None else None)
+        if reason is None:
+            pl = place_match(shape, ann, catalogue, m)
+            if pl.inverted:
+                reason = f"folds when placed ({pl.inverted} inverted quads)"
+            elif not np.array_equal(pl.mesh.quads, catalogue_oriented_quads(catalogue, m)):  # pragma: no cover
+                reason = "placement changed the mesh"
         if reason is not None:
             if rejected is not None:
                 rejected.append((r, m.mesh_id, reason))
             continue
         taken[m.internal_vertices] = taken.get(m.internal_vertices, 0) + 1
-        yield t
+        yield t._replace(placement=pl)
+
+
+def catalogue_oriented_quads(catalogue: "Catalogue", match: "Match") -> np.ndarray:
+    """``(F, 4)`` quads of ``match``'s mesh oriented as matched (mirrored when reflected)."""
+    from jaxmatch.placement.embed import oriented_boundary
+
+    return oriented_boundary(catalogue.mesh(match.mesh_id), match.rotation, match.reflected)[0].quads
 
 
 def patch_templates(shape: Shape, catalogue: "Catalogue", lattice: "Lattice", *, limit: int = 20,
@@ -540,6 +556,17 @@ def estimated_mean_edge(template: PatchTemplate, mult) -> float:
     return float(total / count)
 
 
+def feasible(template: PatchTemplate, counts) -> bool:
+    """Whether some multiplicities give exactly ``counts`` ``(n_sides,)`` edges per side."""
+    A = template.side_matrix()
+    c = np.asarray(counts, np.int64)
+    if c.sum() % 2:
+        return False
+    has_end = A.sum(axis=0) > 0
+    ub = np.where(has_end, max(int(c.max()), 1), 1).astype(np.int64)
+    return _milp_l1(A, c.astype(np.float64), np.ones(A.shape[1]), ub, exact=True) is not None
+
+
 def nearest_counts(template: PatchTemplate, counts) -> np.ndarray:
     """``(n_sides,) int64``: feasible counts closest (L1) to ``counts`` for ``template``."""
     A = template.side_matrix()
@@ -627,6 +654,20 @@ class RefinedMesh(NamedTuple):
     def valid(self) -> bool:
         """No inverted quad."""
         return self.inverted == 0
+
+    def as_placement(self) -> Placement:
+        """The mesh as a :class:`~jaxmatch.placement.embed.Placement` (for the mesh writers and
+        pictures; no alignment, no boundary paths)."""
+        from jaxmatch.catalogue.mesh import QuadMesh, valences
+
+        quads = np.ascontiguousarray(self.quads.astype(np.int32))
+        sj, amin, amax = quality(self.xy, quads)
+        internal = np.ones(self.xy.shape[0], bool)
+        internal[self.boundary] = False
+        irregular = np.flatnonzero(internal & (valences(quads, self.xy.shape[0]) != 4))
+        return Placement(mesh=QuadMesh(quads=quads, boundary=self.boundary.astype(np.int32)), xy=self.xy,
+                         scaled_jacobian=sj, min_angle=amin, max_angle=amax, inverted=self.inverted,
+                         irregular=irregular, region_area=self.region_area, mesh_area=self.mesh_area)
 
     def mean_edge_length(self) -> float:
         """Mean length of the mesh's edges (each once), user units."""
@@ -850,15 +891,18 @@ def refine_mesh(shape: Shape, catalogue: "Catalogue", lattice: "Lattice", *, sid
     best_fail: tuple | None = None  # (distance, template, InfeasibleRequest)
     fallback: tuple | None = None  # (key, template, refined mesh, why): met the request, below the quality floor
     best_size: tuple | None = None  # (deviation, template, mult)
-    for t in _iter_templates(shape, catalogue, lattice, limit=limit, internal=internal, rejected=rejected):
-        try:
-            mult = solve_multiplicities(t, counts=sides, size=size)
-        except InfeasibleRequest as e:
-            d = int(np.abs(np.asarray(e.nearest) - np.asarray(sides)).sum())
-            if best_fail is None or d < best_fail[0]:
-                best_fail = (d, t, e)
-            passed.append((t.rank, t.mesh_id, "cannot meet the counts: nearest feasible " + _fmt(e.nearest)))
-            continue
+    def check(t: PatchTemplate) -> str | None:
+        nonlocal best_fail
+        if sides is None or feasible(t, sides):
+            return None
+        near = nearest_counts(t, sides)
+        d = int(np.abs(near - np.asarray(sides)).sum())
+        if best_fail is None or d < best_fail[0]:
+            best_fail = (d, t, near)
+        return "cannot meet the counts: nearest feasible " + _fmt(near)
+
+    for t in _iter_templates(shape, catalogue, lattice, limit=limit, internal=internal, rejected=passed, check=check):
+        mult = solve_multiplicities(t, counts=sides, size=size)
         if size is not None:
             est = estimated_mean_edge(t, mult)
             dev = abs(est - float(size)) / float(size)
@@ -888,15 +932,15 @@ def refine_mesh(shape: Shape, catalogue: "Catalogue", lattice: "Lattice", *, sid
                 f"took the closest, {t.mesh_id} (mean edge {rm.mean_edge_length():.4g})")
         return RefineChoice(rm, t, _merge([p for p in passed if p[0] != t.rank], rejected, t.rank), note)
     if best_fail is not None:
-        _, t, e = best_fail
+        _, t, near = best_fail
         c = np.asarray(sides, np.int64)
-        near = e.nearest
-        why = e.problem.split(": ", 1)[1].rsplit("; nearest", 1)[0]
-        raise InfeasibleRequest(f"edge counts {_fmt(c)} cannot be met by any of the {len(passed)} templates; "
-                                f"closest template {t.mesh_id}: {why}; nearest feasible counts {_fmt(near)}",
+        tried = sum(1 for p in passed if p[2].startswith("cannot meet"))
+        why = _infeasible_text(t, c, near).split(": ", 1)[1].rsplit("; nearest", 1)[0]
+        raise InfeasibleRequest(f"edge counts {_fmt(c)} cannot be met by any of the {tried} templates that keep the "
+                                f"corners; closest template {t.mesh_id}: {why}; nearest feasible counts {_fmt(near)}",
                                 shape.source, near)
     raise InfeasibleRequest("no catalogue mesh keeps every corner of the shape without folding"
-                            + (f" (tried {len(rejected)})" if rejected else ""), shape.source)
+                            + (f" (tried {len(passed)})" if passed else ""), shape.source)
 
 
 def _merge(passed: list, rejected: list, upto: int) -> list:
