@@ -857,8 +857,8 @@ class RefineChoice(NamedTuple):
     note: str | None = None
 
 
-def refine_mesh(shape: Shape, catalogue: "Catalogue", lattice: "Lattice", *, sides=None, size=None,
-                internal=None, limit: int = 10) -> RefineChoice:
+def refine_mesh(shape: Shape, catalogue: "Catalogue" = None, lattice: "Lattice" = None, *, sides=None, size=None,
+                internal=None, limit: int = 10, templates: Sequence[PatchTemplate] | None = None) -> RefineChoice:
     """A quad mesh of ``shape`` with the requested number of edges per side, or edges of about
     the requested length: the Python API of ``jaxmatch mesh --sides/--size``.
 
@@ -880,6 +880,9 @@ def refine_mesh(shape: Shape, catalogue: "Catalogue", lattice: "Lattice", *, sid
     Raises :class:`InfeasibleRequest` when no template can meet ``sides`` (the message names the
     sides and the nearest feasible counts over all templates), :class:`InputError` for malformed
     requests, :class:`jaxmatch.errors.UnmatchableError` when no mesh matches the shape.
+
+    templates: already fitted templates of ``shape`` (e.g. from :func:`patch_templates`, to
+    serve many requests); then ``catalogue``, ``lattice``, ``internal`` and ``limit`` are unused.
     """
     if (sides is None) == (size is None):
         raise ValueError("give exactly one of sides and size")
@@ -901,7 +904,11 @@ def refine_mesh(shape: Shape, catalogue: "Catalogue", lattice: "Lattice", *, sid
             best_fail = (d, t, near)
         return "cannot meet the counts: nearest feasible " + _fmt(near)
 
-    for t in _iter_templates(shape, catalogue, lattice, limit=limit, internal=internal, rejected=passed, check=check):
+    if templates is None:
+        walk = _iter_templates(shape, catalogue, lattice, limit=limit, internal=internal, rejected=passed, check=check)
+    else:
+        walk = _given(templates, passed, check)
+    for t in walk:
         mult = solve_multiplicities(t, counts=sides, size=size)
         if size is not None:
             est = estimated_mean_edge(t, mult)
@@ -941,6 +948,15 @@ def refine_mesh(shape: Shape, catalogue: "Catalogue", lattice: "Lattice", *, sid
                                 shape.source, near)
     raise InfeasibleRequest("no catalogue mesh keeps every corner of the shape without folding"
                             + (f" (tried {len(passed)})" if passed else ""), shape.source)
+
+
+def _given(templates, passed: list, check) -> Iterator[PatchTemplate]:
+    for t in templates:
+        why = check(t)
+        if why is None:
+            yield t
+        else:
+            passed.append((t.rank, t.mesh_id, why))
 
 
 def _merge(passed: list, rejected: list, upto: int) -> list:
