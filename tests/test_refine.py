@@ -256,14 +256,14 @@ def test_refined_topology_is_a_disk_without_new_irregular_vertices(cat, data):
 # integer programs
 
 
-@pytest.mark.parametrize("name", ["square.json", "triangle.json"])
-def test_milp_feasibility_equals_enumeration(templates, name):
+@pytest.mark.parametrize("name, cap", [("square.json", 4), ("triangle.json", 6)])
+def test_milp_feasibility_equals_enumeration(templates, name, cap):
     shp, ts = templates(EXAMPLES / name)
     n = max(shp.n_corners, 1)
-    for t in ts[:6]:
+    for t in ts[:5]:
         A = t.side_matrix()
-        reach = reachable(A, 5)
-        for c in itertools.product(range(1, 6), repeat=n):
+        reach = reachable(A, cap)
+        for c in itertools.product(range(1, cap + 1), repeat=n):
             ok = R.feasible(t, c)
             assert ok == (c in reach), (t.mesh_id, c)
             if ok:

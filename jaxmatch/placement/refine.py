@@ -82,6 +82,9 @@ MAX_COUNT = 100_000
 """Largest accepted edge count of one side (memory bound: the mesh grows with the product of
 the counts)."""
 
+MAX_QUADS = 2_000_000
+"""Largest refined mesh (quads) :func:`refine_and_place` builds (about 1 GB of working memory)."""
+
 MAX_SIZE_EDGES = 1_000_000
 """Largest accepted ``perimeter / size`` (edges on the boundary) for a size request."""
 
@@ -95,6 +98,11 @@ SMOOTH_ITERS_LARGE = 50
 """Iterations per round for larger meshes, which are smoothed only when the interpolated
 placement has an inverted quad or a scaled Jacobian below :data:`SJ_FLOOR` (each objective
 evaluation costs about 1.5 ms per 1000 quads)."""
+
+TEMPLATE_SJ_MIN = 0.01
+"""Templates whose placement has a quad with a smaller scaled Jacobian are not used: a corner of
+about 180 degrees (e.g. a valence-2 boundary vertex on a straight side) stays one in every
+refinement and ends up inverted or degenerate."""
 
 SJ_FLOOR = 0.3
 """Minimum scaled Jacobian under which a large refined mesh is smoothed."""
@@ -368,6 +376,9 @@ def _iter_templates(shape, catalogue, lattice, *, limit: int, internal=None, rej
             pl = place_match(shape, ann, catalogue, m)
             if pl.inverted:
                 reason = f"folds when placed ({pl.inverted} inverted quads)"
+            elif not pl.min_scaled_jacobian >= TEMPLATE_SJ_MIN:
+                reason = (f"has a degenerate quad when placed (min scaled Jacobian {pl.min_scaled_jacobian:.3f}: "
+                          "a straight angle, e.g. a valence-2 vertex on a side)")
             elif not np.array_equal(pl.mesh.quads, catalogue_oriented_quads(catalogue, m)):  # pragma: no cover
                 reason = "placement changed the mesh"
         if reason is not None:
@@ -387,13 +398,14 @@ def catalogue_oriented_quads(catalogue: "Catalogue", match: "Match") -> np.ndarr
 
 def patch_templates(shape: Shape, catalogue: "Catalogue", lattice: "Lattice", *, limit: int = 20,
                     internal=None) -> list[PatchTemplate]:
-    """Ranked templates (best first) whose placement keeps every corner and has no folded quad.
+    """Ranked templates (best first) whose placement keeps every corner and has no folded quad
+    (nor a degenerate one: min scaled Jacobian >= :data:`TEMPLATE_SJ_MIN`).
 
     Candidates: the best ``3 * limit`` meshes of each size k (``internal``: the sizes; None:
     every size of the catalogue) by :func:`jaxmatch.scoring.rank.rank`, merged by utility (then
     fewer internal vertices, then id); each is placed
     (:func:`jaxmatch.placement.choose.place_match`) and kept when every corner of the shape is
-    a mesh vertex and no quad is inverted; at most ``limit`` are kept per size. Sizes are mixed
+    a mesh vertex and no quad is inverted or degenerate; at most ``limit`` are kept per size. Sizes are mixed
     because a request for few edges needs a small template and raw utilities favour large ones.
     """
     return list(_iter_templates(shape, catalogue, lattice, limit=limit, internal=internal))
@@ -415,7 +427,8 @@ class InfeasibleRequest(InputError):
 def _check_counts(counts, n_sides: int, where: str) -> np.ndarray:
     try:
         c = np.asarray(counts)
-        ok = c.ndim == 1 and c.dtype.kind in "iu" or (c.dtype.kind == "f" and np.all(np.mod(c, 1) == 0))
+        whole = c.dtype.kind in "iu" or (c.dtype.kind == "f" and bool(np.all(np.isfinite(c) & (np.mod(c, 1) == 0))))
+        ok = c.ndim == 1 and whole
     except (TypeError, ValueError):
         ok = False
     if not ok:
@@ -753,6 +766,8 @@ def refine_and_place(template: PatchTemplate, mult, *, smooth_iters: int | None 
     """Split every quad by the multiplicities of its two chords, put the refined boundary
     vertices on the user's boundary by arc length, place and smooth the interior.
 
+    Raises :class:`InputError` when the mesh would have more than :data:`MAX_QUADS` quads.
+
     mult: ``(n_chords,)`` ints >= 1. Boundary: side i gets ``counts[i] = side_matrix[i] @ mult``
     edges, its vertices evenly spaced by arc length on the user's side (:func:`side_points`;
     corners exactly the input points). Interior: bilinear interpolation of the template's
@@ -766,6 +781,10 @@ def refine_and_place(template: PatchTemplate, mult, *, smooth_iters: int | None 
     m = np.asarray(mult, np.int64).ravel()
     if m.shape[0] != template.n_chords or np.any(m < 1):
         raise ValueError(f"mult must be {template.n_chords} integers >= 1")
+    n_quads = int(np.sum(m[template.quad_chords[:, 0]] * m[template.quad_chords[:, 1]]))
+    if n_quads > MAX_QUADS:
+        raise InputError(f"the refined mesh would have {n_quads} quads, more than the maximum {MAX_QUADS} "
+                         "(ask for fewer edges or a larger size)", template.shape.source)
     pl = template.placement
     tq = np.asarray(pl.mesh.quads, np.int64)
     nv, quads, along, W, VV = _refine_topology(tq, template.edge_list, template.edge_chord, template.quad_chords, m)
