@@ -2,7 +2,7 @@
 """Which ``jaxmatch mesh --sides`` requests of 1..MAX edges per side can be met, shape by shape.
 
     .venv/bin/python scripts/sides_feasibility.py [SHAPES...] [--max 8] [--limit 4]
-        [--full-up-to 4096] [--sample 2000] [--place 12] [--seed 0] [--out report.json]
+        [--full-up-to 512] [--sample 300] [--place 6] [--seed 0] [--out report.json]
 
 Default shapes: the 3-, 4-, 5- and 6-sided convex shapes (examples/triangle, square, hexagon,
 labels/shapes/pentagon) and every labelled shape in examples/labels/shapes/.
@@ -127,9 +127,9 @@ def check_shape(path: Path, cat, lat, *, cap: int, limit: int, full_up_to: int, 
 def main(shapes: Optional[List[Path]] = typer.Argument(None, help="Shape files (default: convex 3-6 sided examples and the labelled shapes)."),
          cap: int = typer.Option(8, "--max", min=1, max=12, help="Largest count per side."),
          limit: int = typer.Option(4, "--limit", min=1, help="Templates per size (patch_templates)."),
-         full_up_to: int = typer.Option(4096, "--full-up-to", help="Check the solver on every request when there are at most this many."),
-         sample: int = typer.Option(2000, "--sample", help="Random requests checked otherwise."),
-         place: int = typer.Option(12, "--place", help="Feasible (and as many infeasible) requests placed end to end."),
+         full_up_to: int = typer.Option(512, "--full-up-to", help="Check the solver on every request when there are at most this many."),
+         sample: int = typer.Option(300, "--sample", help="Random requests checked otherwise."),
+         place: int = typer.Option(6, "--place", help="Feasible (and as many infeasible) requests placed end to end."),
          seed: int = typer.Option(0, "--seed"),
          report: Optional[Path] = typer.Option(None, "--out", help="JSON report (written atomically).")) -> None:
     """Count the feasible --sides requests per shape and check the solver against enumeration."""
