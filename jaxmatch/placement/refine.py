@@ -103,6 +103,11 @@ SMOOTH_ITERS_LARGE = 50
 placement has an inverted quad or a scaled Jacobian below :data:`SJ_FLOOR` (each objective
 evaluation costs about 1.5 ms per 1000 quads)."""
 
+SCAN_PER_LIMIT = (3, 30)
+"""Candidates per size scanned for templates, as multiples of ``limit``: a first scan, and a
+deeper one when the first finds fewer than ``limit`` templates in all (shapes with many corners,
+whose best-ranked meshes skip some)."""
+
 TEMPLATE_SJ_MIN = 0.01
 """Templates whose placement has a quad with a smaller scaled Jacobian are not used: a corner of
 about 180 degrees (e.g. a valence-2 boundary vertex on a straight side) stays one in every
@@ -221,7 +226,7 @@ class PatchTemplate(NamedTuple):
         from corner i to i+1.
     n_chords: number of chords (closed chords included; they have no boundary edge).
     match: the ranked :class:`~jaxmatch.scoring.rank.Match`; rank: its 1-based position in the
-        candidate order of :func:`patch_templates`.
+        candidate order of :func:`patch_templates` (of the deeper scan, when one was needed).
     placement: the template placed in the shape (user coordinates; ``placement.mesh`` is the
         oriented mesh whose quads the chords refer to).
     quad_chords: ``(F, 2) int64`` chord of edges 0/2 and of edges 1/3 of each quad.
@@ -369,28 +374,35 @@ def _iter_templates(shape, catalogue, lattice, *, limit: int, internal=None, rej
     Skipped candidates are appended to ``rejected`` as ``(rank, mesh_id, reason)``."""
     from jaxmatch.placement.choose import place_match
 
-    ann, ms = _candidates(shape, catalogue, lattice, limit=3 * max(int(limit), 1), internal=internal)
     taken: dict[int, int] = {}
-    for r, m in enumerate(ms, start=1):
-        if taken.get(m.internal_vertices, 0) >= limit:
-            continue
-        t = _fit(shape, ann, m, catalogue, r)
-        reason = "leaves a corner without a mesh vertex" if t is None else (check(t) if check is not None else None)
-        if reason is None:
-            pl = place_match(shape, ann, catalogue, m)
-            if pl.inverted:
-                reason = f"folds when placed ({pl.inverted} inverted quads)"
-            elif not pl.min_scaled_jacobian >= TEMPLATE_SJ_MIN:
-                reason = (f"has a degenerate quad when placed (min scaled Jacobian {pl.min_scaled_jacobian:.3f}: "
-                          "a straight angle, e.g. a valence-2 vertex on a side)")
-            elif not np.array_equal(pl.mesh.quads, catalogue_oriented_quads(catalogue, m)):  # pragma: no cover
-                reason = "placement changed the mesh"
-        if reason is not None:
-            if rejected is not None:
-                rejected.append((r, m.mesh_id, reason))
-            continue
-        taken[m.internal_vertices] = taken.get(m.internal_vertices, 0) + 1
-        yield t._replace(placement=pl)
+    seen: set = set()
+    for scan in SCAN_PER_LIMIT:
+        if scan > SCAN_PER_LIMIT[0] and sum(taken.values()) >= limit:
+            break  # the deeper scan only when the first found fewer than `limit` templates
+        ann, ms = _candidates(shape, catalogue, lattice, limit=scan * max(int(limit), 1), internal=internal)
+        for r, m in enumerate(ms, start=1):
+            key = (m.mesh_id, m.rotation, m.reflected)
+            if taken.get(m.internal_vertices, 0) >= limit or key in seen:
+                continue
+            seen.add(key)
+            t = _fit(shape, ann, m, catalogue, r)
+            if t is None:
+                reason = "leaves a corner without a mesh vertex"
+            else:
+                reason = check(t) if check is not None else None
+            if reason is None:
+                pl = place_match(shape, ann, catalogue, m)
+                if pl.inverted:
+                    reason = f"folds when placed ({pl.inverted} inverted quads)"
+                elif not pl.min_scaled_jacobian >= TEMPLATE_SJ_MIN:
+                    reason = (f"has a degenerate quad when placed (min scaled Jacobian {pl.min_scaled_jacobian:.3f}: "
+                              "a straight angle, e.g. a valence-2 vertex on a side)")
+            if reason is not None:
+                if rejected is not None and (scan == SCAN_PER_LIMIT[0] or t is not None):  # not every corner-skipper twice
+                    rejected.append((r, m.mesh_id, reason))
+                continue
+            taken[m.internal_vertices] = taken.get(m.internal_vertices, 0) + 1
+            yield t._replace(placement=pl)
 
 
 def catalogue_oriented_quads(catalogue: "Catalogue", match: "Match") -> np.ndarray:
@@ -406,7 +418,8 @@ def patch_templates(shape: Shape, catalogue: "Catalogue", lattice: "Lattice", *,
     (nor a degenerate one: min scaled Jacobian >= :data:`TEMPLATE_SJ_MIN`).
 
     Candidates: the best ``3 * limit`` meshes of each size k (``internal``: the sizes; None:
-    every size of the catalogue) by :func:`jaxmatch.scoring.rank.rank`, merged by utility (then
+    every size of the catalogue; ``30 * limit`` when that finds fewer than ``limit`` templates,
+    see :data:`SCAN_PER_LIMIT`) by :func:`jaxmatch.scoring.rank.rank`, merged by utility (then
     fewer internal vertices, then id); each is placed
     (:func:`jaxmatch.placement.choose.place_match`) and kept when every corner of the shape is
     a mesh vertex and no quad is inverted or degenerate; at most ``limit`` are kept per size. Sizes are mixed
