@@ -1,0 +1,222 @@
+"""Split a concave shape into patches at its concave corners, and choose between meshing it with
+one template and meshing its patches (:mod:`jaxmatch.placement.layout`).
+
+Cuts (:func:`cut_segments`) start at every concave corner and run straight into the shape to
+the first point where they meet its boundary again:
+
+* ``"continuations"``: both sides at the corner, continued past it (a rectilinear shape becomes
+  rectangles; every piece is convex, since each reflex angle is split in three);
+* ``"bisectors"``: one cut along the bisector of the reflex angle (fewer, larger pieces).
+
+The outline and the cuts are noded and polygonized with shapely (:func:`decompose`); the pieces
+become a :class:`~jaxmatch.placement.layout.Layout` whose corners are the shape's corners and
+every point where three or more pieces' edges meet (cut ends and crossings), so that pieces
+share their sides whole and the merged mesh is conforming. Every point of the outline is kept,
+so the decomposition covers the shape exactly.
+
+:func:`mesh_shape` meshes the shape as one patch and each decomposition, and keeps the best by
+the placement rules (no inverted quad, area kept, then the higher minimum scaled Jacobian, then
+the higher mean, fewer irregular vertices, fewer patches); it says which won.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, NamedTuple
+
+import numpy as np
+
+from jaxmatch.errors import InputError
+from jaxmatch.placement.layout import Layout, LayoutMesh, make_layout, mesh_layout
+from jaxmatch.shape import Shape
+
+if TYPE_CHECKING:  # pragma: no cover
+    from jaxmatch.catalogue.store import Catalogue
+    from jaxmatch.scoring.lattice import Lattice
+
+__all__ = ["STRATEGIES", "ShapeChoice", "cut_segments", "decompose", "mesh_shape", "single_patch", "choice_key"]
+
+STRATEGIES = ("continuations", "bisectors")
+"""The ways :func:`cut_segments` cuts at concave corners."""
+
+SINGLE = "single"
+"""Name of the one-patch candidate in :func:`mesh_shape`."""
+
+
+
+def _rays(shape: Shape, strategy: str) -> list[tuple[np.ndarray, np.ndarray]]:
+    """(start (2,), unit direction (2,)) of every cut, user coordinates."""
+    if strategy not in STRATEGIES:
+        raise ValueError(f"strategy must be one of {STRATEGIES}, got {strategy!r}")
+    pts = shape.user_points
+    P = pts.shape[0]
+    out = []
+    for c, convex in zip(shape.corners.tolist(), shape.convex.tolist()):
+        if convex:
+            continue
+        v, prev, nxt = pts[c], pts[(c - 1) % P], pts[(c + 1) % P]
+        u1 = (prev - v) / np.linalg.norm(prev - v)
+        u2 = (nxt - v) / np.linalg.norm(nxt - v)
+        if strategy == "continuations":
+            dirs = [-u1, -u2]
+        else:
+            b = -(u1 + u2)
+            dirs = [b / np.linalg.norm(b)] if np.linalg.norm(b) > 1e-12 else [np.array([u1[1], -u1[0]])]
+        out += [(v, d) for d in dirs]
+    return out
+
+
+def _hits(shape: Shape, strategy: str) -> tuple[list[np.ndarray], list[tuple[int, float, np.ndarray]]]:
+    """Cuts (``(2, 2)`` segments) and where they end on the outline: ``(segment index, fraction
+    along it, point)`` for ends inside an outline segment (ends within ``1e-9`` of the extent of
+    an outline point are moved onto that point)."""
+    import shapely
+
+    pts = shape.user_points
+    ring = shapely.LinearRing(pts)
+    extent = float(np.max(pts.max(axis=0) - pts.min(axis=0)))
+    tol = 1e-9 * extent
+    far = 4.0 * extent
+    cuts: list[np.ndarray] = []
+    inserts: list[tuple[int, float, np.ndarray]] = []
+    for v, d in _rays(shape, strategy):
+        hit = ring.intersection(shapely.LineString([v, v + far * d]))
+        coords = shapely.get_coordinates(hit)
+        dist = (coords - v) @ d
+        ok = dist > tol
+        if not ok.any():
+            continue
+        end = coords[ok][np.argmin(dist[ok])]
+        near = np.linalg.norm(pts - end, axis=1)
+        j = int(np.argmin(near))
+        if near[j] <= tol:
+            end = pts[j]
+        else:  # inside an outline segment: the nearest one
+            a, b = pts, np.roll(pts, -1, axis=0)
+            ab = b - a
+            f = np.clip(np.sum((end - a) * ab, axis=1) / np.sum(ab * ab, axis=1), 0.0, 1.0)
+            k = int(np.argmin(np.linalg.norm(a + f[:, None] * ab - end, axis=1)))
+            inserts.append((k, float(f[k]), end))
+        seg = np.array([v, end])
+        if any(np.allclose(seg, c[::-1], atol=tol) or np.allclose(seg, c, atol=tol) for c in cuts):
+            continue
+        cuts.append(seg)
+    return cuts, inserts
+
+
+def cut_segments(shape: Shape, strategy: str = "continuations") -> list[np.ndarray]:
+    """The cuts of ``strategy`` as ``(2, 2) float64`` segments (user coordinates): from a concave
+    corner to the first point beyond it where the ray meets the outline (an outline point when
+    within ``1e-9`` of the shape's extent of one). Duplicates (the same cut from both of its
+    ends) are dropped."""
+    return _hits(shape, strategy)[0]
+
+
+def single_patch(shape: Shape) -> Layout:
+    """The shape as a layout of one patch (its corners as given)."""
+    pts = shape.user_points
+    corners = shape.corners.tolist() if shape.n_corners >= 2 else None
+    return make_layout(pts.tolist(), [list(range(pts.shape[0]))], corners, source=shape.source)
+
+
+def decompose(shape: Shape, strategy: str = "continuations") -> Layout:
+    """Split ``shape`` by the cuts of ``strategy`` (:func:`cut_segments`) into a
+    :class:`Layout`. A shape without concave corners gives one patch. Raises
+    :class:`InputError` when the pieces do not make a valid layout."""
+    import shapely
+    from shapely.ops import polygonize
+
+    pts = shape.user_points
+    cuts, inserts = _hits(shape, strategy)
+    if not cuts:
+        return single_patch(shape)
+    ring_pts = []
+    for k in range(pts.shape[0]):  # the outline with the cut ends inserted (exact end points)
+        ring_pts.append(pts[k])
+        ring_pts += [e for _, _, e in sorted((i for i in inserts if i[0] == k), key=lambda i: i[1])]
+    ring_pts = np.array(ring_pts)
+    lines = [shapely.LineString(np.vstack([ring_pts, ring_pts[:1]]))] + [shapely.LineString(c) for c in cuts]
+    noded = shapely.union_all(lines)
+    outline = shapely.Polygon(pts)
+    faces = [f for f in polygonize(shapely.get_parts(noded)) if outline.contains(f.representative_point())]
+    index: dict[tuple[float, float], int] = {}
+    points: list[tuple[float, float]] = []
+    loops: list[list[int]] = []
+    degree: dict[frozenset, int] = {}
+    for f in faces:
+        ring = np.asarray(f.exterior.coords)[:-1]
+        loop = []
+        for x, y in ring.tolist():
+            key = (x, y)
+            if key not in index:
+                index[key] = len(points)
+                points.append(key)
+            loop.append(index[key])
+        loops.append(loop)
+        for a, b in zip(loop, loop[1:] + loop[:1]):
+            degree[frozenset((a, b))] = 1
+    nbrs = np.zeros(len(points), np.int64)
+    for e in degree:
+        for v in e:
+            nbrs[v] += 1
+    shape_corners = {tuple(p) for p in pts[shape.corners].tolist()}
+    corners = [i for i, p in enumerate(points) if p in shape_corners or nbrs[i] >= 3]
+    return make_layout([list(p) for p in points], loops, corners, source=f"{shape.source} ({strategy} cuts)")
+
+
+class ShapeChoice(NamedTuple):
+    """Result of :func:`mesh_shape`.
+
+    chosen: ``"single"`` or a strategy name; mesh: its :class:`LayoutMesh`;
+    tried: ``(name, mesh or None, note)`` for every candidate, in the order tried (note: why a
+    candidate has no mesh, or "").
+    """
+
+    chosen: str
+    mesh: LayoutMesh
+    tried: tuple
+
+
+def choice_key(mesh: LayoutMesh) -> tuple:
+    """Order of candidates (smaller is better): inverted quads, area not kept (|ratio - 1| >
+    1e-6), then higher min scaled Jacobian (2 decimals), higher mean (2 decimals), fewer
+    irregular internal vertices, fewer patches."""
+    return (mesh.inverted > 0, abs(mesh.area_ratio - 1.0) > 1e-6, -round(mesh.min_scaled_jacobian, 2),
+            -round(mesh.mean_scaled_jacobian, 2), int(mesh.irregular.size), mesh.layout.n_patches)
+
+
+def mesh_shape(shape: Shape, catalogue: Catalogue, lattice: Lattice, *, size: float,
+               strategies=(SINGLE,) + STRATEGIES) -> ShapeChoice:
+    """Mesh ``shape`` with target edge length ``size`` (user units) as one patch and as each
+    decomposition in ``strategies`` (``"single"`` and names of :data:`STRATEGIES`), and keep the
+    best by :func:`choice_key`. Decompositions are smoothed across their cuts
+    (``smooth_cuts``). Raises :class:`InputError` when no candidate can be meshed."""
+    tried = []
+    seen_layouts = []
+    for name in strategies:
+        try:
+            lay = single_patch(shape) if name == SINGLE else decompose(shape, name)
+        except InputError as e:
+            tried.append((name, None, str(e)))
+            continue
+        if any(_same(lay, other) for other in seen_layouts):
+            tried.append((name, None, "same patches as an earlier candidate"))
+            continue
+        seen_layouts.append(lay)
+        try:
+            m = mesh_layout(lay, catalogue, lattice, size=size, smooth_cuts=lay.n_patches > 1)
+        except InputError as e:
+            tried.append((name, None, e.problem))
+            continue
+        tried.append((name, m, ""))
+    good = [(choice_key(m), i, n, m) for i, (n, m, _) in enumerate(tried) if m is not None]
+    if not good:
+        raise InputError("no candidate could be meshed: " + "; ".join(f"{n}: {note}" for n, _, note in tried),
+                         where=shape.source)
+    _, _, name, m = min(good, key=lambda g: (g[0], g[1]))
+    return ShapeChoice(name, m, tuple(tried))
+
+
+def _same(a: Layout, b: Layout) -> bool:
+    if a.n_patches != b.n_patches or a.points.shape != b.points.shape:
+        return False
+    return bool(np.array_equal(a.points, b.points)) and all(np.array_equal(x, y) for x, y in zip(a.patches, b.patches))
