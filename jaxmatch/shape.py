@@ -122,6 +122,11 @@ class Shape:
     offset: ``(2,) float64``, user coordinates of the unit-box origin:
         ``user = points * scale + offset``.
     source: where the shape came from (file path), used in error messages.
+    input_points: ``(P, 2) float64`` or None, the user's coordinates exactly as given, in the
+        order of ``points`` (``to_user(points)`` equals them up to round-off only).
+    corner_order: ``(c,) int64`` or None, the user's corner ``i`` is ``corners[corner_order[i]]``:
+        the order of an explicit ``corners`` list, else the order of the input file.
+    input_clockwise: the input loop was clockwise (``points`` is reversed from it).
     """
 
     points: np.ndarray
@@ -130,6 +135,9 @@ class Shape:
     scale: float
     offset: np.ndarray
     source: str = "<shape>"
+    input_points: np.ndarray | None = None
+    corner_order: np.ndarray | None = None
+    input_clockwise: bool = False
 
     @property
     def n_points(self) -> int:
@@ -425,6 +433,12 @@ def _make_shape(points, corners, angle: float, source: str) -> Shape:
     unit = np.roll(unit, -roll, axis=0)
     turn = np.roll(turn, -roll)
     found = found - roll
+    index = np.roll(index, -roll)  # input index of each point, in the final order
+    position = np.empty(n, np.int64)  # input index -> final point index
+    position[index] = np.arange(n)
+    corner_of_point = np.full(n, -1, np.int64)
+    corner_of_point[found] = np.arange(found.size)
+    user_list = corner_idx if corner_idx is not None else np.sort(index[found])
     return Shape(
         points=np.ascontiguousarray(unit),
         corners=found.astype(np.int32),
@@ -432,6 +446,9 @@ def _make_shape(points, corners, angle: float, source: str) -> Shape:
         scale=scale,
         offset=offset.astype(np.float64),
         source=str(source),
+        input_points=np.ascontiguousarray(p[index]),
+        corner_order=corner_of_point[position[np.asarray(user_list, np.int64)]],
+        input_clockwise=bool(area < 0),
     )
 
 

@@ -1,0 +1,855 @@
+"""Meshes of the size the user asks for: refinement of a catalogue template by chord multiplicities.
+
+A quad mesh of a disk is a union of *chords*: strips of quads that cross the mesh through
+opposite edges of each quad (the classes of the relation "opposite edges of one quad"). A
+chord either runs from one boundary edge to another or closes on itself; it may cross itself
+(a quad whose two edge pairs belong to the same chord). Giving every chord ``c`` an integer
+multiplicity ``mult[c] >= 1`` and splitting each quad whose chords are ``(a, b)`` into a
+``mult[a] x mult[b]`` grid refines the mesh without new irregular vertices; side ``i`` of the
+shape then has ``sum_c A[i, c] * mult[c]`` edges, ``A`` the side matrix
+(:meth:`PatchTemplate.side_matrix`: how many template boundary edges of chord ``c`` lie on
+side ``i``). Every chord with boundary ends has two of them, so the total is always even.
+
+Pipeline (:func:`refine_mesh` runs it all):
+
+1. :func:`patch_templates`: ranked catalogue meshes fitted to the shape (placed by
+   :func:`jaxmatch.placement.choose.place_match`) with every corner on a template vertex and no
+   folded quad, seen as chords with the template boundary edges of each side.
+2. :func:`solve_multiplicities`: the multiplicities, by an integer program
+   (:func:`scipy.optimize.milp`, HiGHS): per-side counts exactly, or the counts closest to
+   ``side length / size``. Infeasible requests raise :class:`InfeasibleRequest` naming the
+   sides and the nearest feasible counts.
+3. :func:`refine_and_place`: the refined quads; boundary vertices evenly spaced by arc length
+   on the user's sides (straight or curved polylines, exact input coordinates at corners);
+   interior: the template's placement interpolated bilinearly in each quad, moved by the
+   harmonic extension of the boundary displacement (one sparse solve), then untangled and
+   smoothed by :func:`jaxmatch.placement.embed.smooth` (never makes the worst quad worse).
+
+Sides are in the USER's order: side ``i`` runs from the user's corner ``i`` to corner ``i + 1``
+(corners in the order of an explicit ``corners`` list, else of the input file; also for a
+clockwise file, whose sides then run clockwise). A shape without corners has one side, the
+whole loop from ``shape.points[0]`` (counter-clockwise), and takes one total count.
+
+All lengths here are in the user's units.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING, Iterator, NamedTuple, Sequence
+
+import numpy as np
+import scipy.sparse
+import scipy.sparse.csgraph
+import scipy.sparse.linalg
+from scipy.optimize import Bounds, LinearConstraint, milp
+
+from jaxmatch.catalogue.mesh import edges
+from jaxmatch.errors import InputError
+from jaxmatch.placement.embed import Placement, inverted_mask, polygon_area, quad_areas, quality, smooth
+from jaxmatch.shape import Shape
+
+if TYPE_CHECKING:  # pragma: no cover
+    from jaxmatch.catalogue.store import Catalogue
+    from jaxmatch.scoring.lattice import Lattice
+    from jaxmatch.scoring.rank import Match
+
+__all__ = [
+    "InfeasibleRequest",
+    "PatchTemplate",
+    "RefineChoice",
+    "RefinedMesh",
+    "SIZE_TOLERANCE",
+    "patch_templates",
+    "refine_and_place",
+    "refine_mesh",
+    "refined_json",
+    "side_lengths",
+    "side_polylines",
+    "side_points",
+    "solve_multiplicities",
+]
+
+SIZE_TOLERANCE = 0.2
+"""A ``size`` request is met when the mean boundary edge length is within this fraction of it."""
+
+MAX_COUNT = 100_000
+"""Largest accepted edge count of one side (memory bound: the mesh grows with the product of
+the counts)."""
+
+MAX_SIZE_EDGES = 1_000_000
+"""Largest accepted ``perimeter / size`` (edges on the boundary) for a size request."""
+
+_CHORD_WEIGHT = 0.01
+"""Weight of the secondary objective (multiplicities proportional to the chords' widths)
+against the primary one (edges per side) in the integer programs."""
+
+
+# ---------------------------------------------------------------------------------------------
+# the user's sides
+
+
+def _side_frame(shape: Shape) -> list[tuple[int, bool]]:
+    """For each user side ``i``: ``(j, reversed)``, the ccw side ``j`` of ``shape`` (from
+    ``shape.corners[j]`` to ``corners[j + 1]``) it is, and whether the user runs it backwards.
+
+    Raises :class:`InputError` when explicit corners are not listed in boundary order."""
+    n = shape.n_corners
+    if n == 0:
+        return [(0, False)]
+    order = np.arange(n) if shape.corner_order is None else np.asarray(shape.corner_order, np.int64)
+    step = (np.roll(order, -1) - order) % n
+    forward = bool(np.all(step == 1 % n))
+    backward = bool(np.all(step == (n - 1) % n))
+    if forward and backward:  # n <= 2: the file's orientation decides
+        forward = not shape.input_clockwise
+    elif not (forward or backward):
+        raise InputError("corners are not listed in boundary order (side i must run from corner i to corner i + 1)",
+                         where=shape.source)
+    if forward:
+        return [(int(order[i]), False) for i in range(n)]
+    return [(int(order[(i + 1) % n]), True) for i in range(n)]
+
+
+def _user_xy(shape: Shape) -> np.ndarray:
+    """``(P, 2)`` the shape's points in user coordinates, exactly as given when known."""
+    return shape.input_points if shape.input_points is not None else shape.user_points
+
+
+def side_polylines(shape: Shape) -> tuple[np.ndarray, ...]:
+    """The user's sides as polylines of input points, ``(k_i, 2) float64`` user coordinates,
+    from corner ``i`` to corner ``i + 1`` inclusive (without corners: one closed polyline from
+    ``points[0]`` around to ``points[0]``)."""
+    xy = _user_xy(shape)
+    P = xy.shape[0]
+    n = shape.n_corners
+    if n == 0:
+        return (np.concatenate([xy, xy[:1]]),)
+    out = []
+    for j, rev in _side_frame(shape):
+        a, b = int(shape.corners[j]), int(shape.corners[(j + 1) % n])
+        stop = b if b > a else b + P
+        idx = np.arange(a, stop + 1) % P
+        poly = xy[idx]
+        out.append(poly[::-1].copy() if rev else poly)
+    return tuple(out)
+
+
+def side_lengths(shape: Shape) -> np.ndarray:
+    """``(n_sides,) float64`` arc length of each user side (user units)."""
+    return np.array([float(np.linalg.norm(np.diff(p, axis=0), axis=1).sum()) for p in side_polylines(shape)])
+
+
+def side_points(polyline: np.ndarray, count: int) -> np.ndarray:
+    """``(count + 1, 2)`` points evenly spaced by arc length on ``polyline (k, 2)``, from its
+    first point to its last, both ends exact.
+
+    Computed from the lexicographically smaller end whatever the direction, so that two
+    patches sharing a side with the same count get bit-identical points. On a straight
+    two-point side, point ``j`` (counted from the smaller end ``p0``) is
+    ``p0 + (j / count) * (p1 - p0)``."""
+    poly = np.asarray(polyline, dtype=np.float64)
+    N = int(count)
+    first, last = poly[0], poly[-1]
+    closed = bool(np.array_equal(first, last))
+    flip = (not closed) and tuple(last) < tuple(first)
+    p = poly[::-1] if flip else poly
+    frac = np.arange(N + 1, dtype=np.float64) / N
+    if p.shape[0] == 2:
+        out = p[0] + frac[:, None] * (p[1] - p[0])
+    else:
+        seg = np.linalg.norm(np.diff(p, axis=0), axis=1)
+        cum = np.concatenate([[0.0], np.cumsum(seg)])
+        t = frac * cum[-1]
+        idx = np.clip(np.searchsorted(cum, t, side="right") - 1, 0, p.shape[0] - 2)
+        w = np.where(seg[idx] > 0, (t - cum[idx]) / np.where(seg[idx] > 0, seg[idx], 1.0), 0.0)
+        out = p[idx] + w[:, None] * (p[idx + 1] - p[idx])
+    out[0], out[-1] = p[0], p[-1]
+    return out[::-1].copy() if flip else out
+
+
+# ---------------------------------------------------------------------------------------------
+# templates
+
+
+class PatchTemplate(NamedTuple):
+    """A catalogue mesh fitted to an n-sided shape with every corner on a template vertex,
+    seen as chords (strips of quads). Sides are in the USER's order: side i runs from the
+    user's corner i to corner i+1 (corners as listed in the input, also for clockwise input;
+    for a Shape made with explicit corners c_0..c_{n-1}, corner i is c_i).
+
+    shape: the shape it is fitted to; mesh_id: catalogue id of the template.
+    side_chords: side i: ``(e_i,) int64`` chord of each template boundary edge along side i,
+        from corner i to i+1.
+    n_chords: number of chords (closed chords included; they have no boundary edge).
+    match: the ranked :class:`~jaxmatch.scoring.rank.Match`; rank: its 1-based position in the
+        candidate order of :func:`patch_templates`.
+    placement: the template placed in the shape (user coordinates; ``placement.mesh`` is the
+        oriented mesh whose quads the chords refer to).
+    quad_chords: ``(F, 2) int64`` chord of edges 0/2 and of edges 1/3 of each quad.
+    edge_list: ``(E, 2) int64`` undirected edges (sorted pairs, :func:`edges` order);
+        edge_chord: ``(E,) int64`` chord of each.
+    side_path: side i: ``(e_i + 1,) int64`` template vertex ids from corner i to corner i+1.
+    """
+
+    shape: Shape
+    mesh_id: str
+    side_chords: tuple
+    n_chords: int
+    match: "Match"
+    rank: int
+    placement: Placement
+    quad_chords: np.ndarray
+    edge_list: np.ndarray
+    edge_chord: np.ndarray
+    side_path: tuple
+
+    def side_matrix(self) -> np.ndarray:
+        """``(n_sides, n_chords) int64``: ``A[i, c]`` = edges of chord ``c`` on side ``i``."""
+        A = np.zeros((len(self.side_chords), self.n_chords), np.int64)
+        for i, ch in enumerate(self.side_chords):
+            np.add.at(A[i], np.asarray(ch, np.int64), 1)
+        return A
+
+    @property
+    def n_sides(self) -> int:
+        return len(self.side_chords)
+
+    def chord_widths(self) -> np.ndarray:
+        """``(n_chords,) float64`` mean placed length of each chord's edges (user units): the
+        width of the strip, which multiplicity ``m`` splits into ``m`` edges."""
+        xy = self.placement.xy
+        ln = np.linalg.norm(xy[self.edge_list[:, 0]] - xy[self.edge_list[:, 1]], axis=1)
+        tot = np.bincount(self.edge_chord, weights=ln, minlength=self.n_chords)
+        cnt = np.bincount(self.edge_chord, minlength=self.n_chords)
+        return tot / np.maximum(cnt, 1)
+
+
+def _chords(quads: np.ndarray, boundary: np.ndarray, first_edges: Sequence[tuple[int, int]]):
+    """Chords of a quad mesh of a disk.
+
+    quads: (F, 4) ccw; first_edges: boundary edges ``(u, w)`` in the order chords should be
+    numbered by (a chord's number is the position of its first boundary edge in this order;
+    closed chords follow, by their smallest edge). Returns ``(edge_list (E, 2), edge_chord
+    (E,), quad_chords (F, 2), n_chords)``."""
+    q = np.asarray(quads, np.int64)
+    e = edges(q).astype(np.int64)
+    V = int(q.max()) + 1
+    key = e[:, 0] * V + e[:, 1]
+
+    def edge_id(a, b):
+        lo, hi = np.minimum(a, b), np.maximum(a, b)
+        return np.searchsorted(key, lo * V + hi)
+
+    qe = np.stack([edge_id(q[:, k], q[:, (k + 1) % 4]) for k in range(4)], axis=1)  # (F, 4)
+    E = e.shape[0]
+    rows = np.concatenate([qe[:, 0], qe[:, 1]])
+    cols = np.concatenate([qe[:, 2], qe[:, 3]])
+    g = scipy.sparse.coo_matrix((np.ones(rows.size), (rows, cols)), shape=(E, E))
+    ncomp, label = scipy.sparse.csgraph.connected_components(g, directed=False)
+    # renumber: by first boundary edge along the sides, then the rest by smallest edge
+    rename = np.full(ncomp, -1, np.int64)
+    nxt = 0
+    fe = np.asarray(first_edges, np.int64).reshape(-1, 2)
+    order = np.concatenate([edge_id(fe[:, 0], fe[:, 1]), np.arange(E)])
+    for eid in order.tolist():
+        c = label[eid]
+        if rename[c] < 0:
+            rename[c] = nxt
+            nxt += 1
+    chord = rename[label]
+    return e, chord, np.stack([chord[qe[:, 0]], chord[qe[:, 1]]], axis=1), int(ncomp)
+
+
+def _corner_positions(shape: Shape, annotation, alignment: np.ndarray) -> np.ndarray | None:
+    """Position in the matched boundary loop of each ccw shape corner, ``(c,) int64``, or None
+    when a corner has no template vertex."""
+    al = np.asarray(alignment, np.int64)
+    codes = np.asarray(annotation.codes)
+    side = np.asarray(annotation.side)
+    n = shape.n_corners
+    first = np.searchsorted(side, np.arange(n))  # annotation index of corner j
+    if n and np.any(codes[first] == 0):
+        return None
+    where = {int(a): j for j, a in enumerate(al.tolist())}
+    pos = [where.get(int(i)) for i in first]
+    if any(p is None for p in pos):
+        return None
+    return np.asarray(pos, np.int64)
+
+
+def _fit(shape: Shape, annotation, match: "Match", placement: Placement, rank: int) -> PatchTemplate | None:
+    """A :class:`PatchTemplate` from a placed match, or None when a corner has no vertex."""
+    loop = np.asarray(placement.mesh.boundary, np.int64)
+    nb = loop.shape[0]
+    if shape.n_corners == 0:
+        paths = [np.concatenate([loop, loop[:1]])]
+    else:
+        pos = _corner_positions(shape, annotation, placement.alignment)
+        if pos is None:
+            return None
+        n = shape.n_corners
+        paths = []
+        for j, rev in _side_frame(shape):
+            a, b = int(pos[j]), int(pos[(j + 1) % n])
+            stop = b if b > a else b + nb
+            path = loop[np.arange(a, stop + 1) % nb]
+            paths.append(path[::-1].copy() if rev else path)
+    first = [(int(p[k]), int(p[k + 1])) for p in paths for k in range(p.shape[0] - 1)]
+    e, chord, qc, nc = _chords(placement.mesh.quads, loop, first)
+    V = int(np.asarray(placement.mesh.quads).max()) + 1
+    key = e[:, 0] * V + e[:, 1]
+    side_chords = []
+    for p in paths:
+        lo, hi = np.minimum(p[:-1], p[1:]), np.maximum(p[:-1], p[1:])
+        side_chords.append(chord[np.searchsorted(key, lo * V + hi)].astype(np.int64))
+    return PatchTemplate(shape, match.mesh_id, tuple(side_chords), nc, match, rank, placement, qc, e, chord,
+                         tuple(p.astype(np.int64) for p in paths))
+
+
+def _candidates(shape: Shape, catalogue: "Catalogue", lattice: "Lattice", *, limit: int,
+                internal=None) -> tuple[object, list["Match"]]:
+    """(annotation, matches): the best ``limit`` matches of every selected size (k), merged
+    best utility first (then fewer internal vertices, then id)."""
+    from jaxmatch.scoring.rank import rank
+
+    ranking = rank(shape, catalogue, lattice, internal=internal, top=max(int(limit), 1), per_size=True)
+    ms = sorted(ranking.results, key=lambda m: (-m.utility, m.internal_vertices, m.mesh_id))
+    return ranking.annotation, ms
+
+
+def _iter_templates(shape, catalogue, lattice, *, limit: int, internal=None,
+                    rejected: list | None = None) -> Iterator[PatchTemplate]:
+    """Templates in candidate order (see :func:`patch_templates`), placed lazily. Rejected
+    candidates are appended to ``rejected`` as ``(rank, mesh_id, reason)``."""
+    from jaxmatch.placement.choose import place_match
+
+    ann, ms = _candidates(shape, catalogue, lattice, limit=3 * max(int(limit), 1), internal=internal)
+    taken: dict[int, int] = {}
+    for r, m in enumerate(ms, start=1):
+        if taken.get(m.internal_vertices, 0) >= limit:
+            continue
+        pl = place_match(shape, ann, catalogue, m)
+        t = _fit(shape, ann, m, pl, r)
+        reason = None
+        if t is None:
+            reason = "leaves a corner without a mesh vertex"
+        elif pl.inverted:
+            reason = f"folds when placed ({pl.inverted} inverted quads)"
+        if reason is not None:
+            if rejected is not None:
+                rejected.append((r, m.mesh_id, reason))
+            continue
+        taken[m.internal_vertices] = taken.get(m.internal_vertices, 0) + 1
+        yield t
+
+
+def patch_templates(shape: Shape, catalogue: "Catalogue", lattice: "Lattice", *, limit: int = 20,
+                    internal=None) -> list[PatchTemplate]:
+    """Ranked templates (best first) whose placement keeps every corner and has no folded quad.
+
+    Candidates: the best ``3 * limit`` meshes of each size k (``internal``: the sizes; None:
+    every size of the catalogue) by :func:`jaxmatch.scoring.rank.rank`, merged by utility (then
+    fewer internal vertices, then id); each is placed
+    (:func:`jaxmatch.placement.choose.place_match`) and kept when every corner of the shape is
+    a mesh vertex and no quad is inverted; at most ``limit`` are kept per size. Sizes are mixed
+    because a request for few edges needs a small template and raw utilities favour large ones.
+    """
+    return list(_iter_templates(shape, catalogue, lattice, limit=limit, internal=internal))
+
+
+# ---------------------------------------------------------------------------------------------
+# multiplicities
+
+
+class InfeasibleRequest(InputError):
+    """A request no multiplicities can meet. The message names the side(s) and the nearest
+    feasible counts; ``nearest``: those counts ``(n_sides,)`` or None."""
+
+    def __init__(self, problem: str, where: str | None = None, nearest: Sequence[int] | None = None):
+        super().__init__(problem, where)
+        self.nearest = None if nearest is None else tuple(int(x) for x in nearest)
+
+
+def _check_counts(counts, n_sides: int, where: str) -> np.ndarray:
+    try:
+        c = np.asarray(counts)
+        ok = c.ndim == 1 and c.dtype.kind in "iu" or (c.dtype.kind == "f" and np.all(np.mod(c, 1) == 0))
+    except (TypeError, ValueError):
+        ok = False
+    if not ok:
+        raise InputError(f"edge counts must be a list of integers, got {counts!r}", where)
+    c = c.astype(np.int64)
+    if c.shape[0] != n_sides:
+        what = "one total count (the shape has no corners)" if n_sides == 1 else f"one count per side ({n_sides} sides)"
+        raise InputError(f"{c.shape[0]} edge counts given, expected {what}", where)
+    if np.any(c < 1) or np.any(c > MAX_COUNT):
+        raise InputError(f"edge counts must lie in 1..{MAX_COUNT}, got {','.join(map(str, c.tolist()))}", where)
+    return c
+
+
+def _milp_l1(A: np.ndarray, target: np.ndarray, tau: np.ndarray, ub: np.ndarray, *, exact: bool,
+             chord_weight: float = _CHORD_WEIGHT) -> np.ndarray | None:
+    """Integer ``m (C,)``, ``1 <= m <= ub``: with ``exact``, ``A m == target`` minimising
+    ``sum |m - tau|``; else minimising ``sum_i |A_i m - target_i| + chord_weight * sum_c |m_c - tau_c|``.
+    Returns None when infeasible."""
+    n, C = A.shape
+    # variables: m (C), r (n) side deviations, s (C) chord deviations
+    nv = C + n + C
+    cost = np.concatenate([np.zeros(C), np.full(n, 0.0 if exact else 1.0),
+                           np.full(C, 1.0 if exact else chord_weight)])
+    rows, lo, hi = [], [], []
+    Z = np.zeros
+    if exact:
+        rows.append(np.hstack([A, Z((n, n)), Z((n, C))]))
+        lo.append(target)
+        hi.append(target)
+    else:  # r >= |A m - t|
+        rows.append(np.hstack([A, -np.eye(n), Z((n, C))]))
+        lo.append(np.full(n, -np.inf))
+        hi.append(target)
+        rows.append(np.hstack([A, np.eye(n), Z((n, C))]))
+        lo.append(target)
+        hi.append(np.full(n, np.inf))
+    I = np.eye(C)
+    rows.append(np.hstack([I, Z((C, n)), -I]))  # s >= |m - tau|
+    lo.append(np.full(C, -np.inf))
+    hi.append(tau)
+    rows.append(np.hstack([I, Z((C, n)), I]))
+    lo.append(tau)
+    hi.append(np.full(C, np.inf))
+    cons = LinearConstraint(np.vstack(rows), np.concatenate(lo), np.concatenate(hi))
+    lb = np.concatenate([np.ones(C), np.zeros(n + C)])
+    ubv = np.concatenate([ub.astype(np.float64), np.full(n + C, np.inf)])
+    integ = np.concatenate([np.ones(C), np.zeros(n + C)])
+    res = milp(cost, constraints=cons, bounds=Bounds(lb, ubv), integrality=integ,
+               options={"presolve": True, "time_limit": 30.0})
+    if res.status != 0 or res.x is None:
+        return None
+    m = np.rint(res.x[:C]).astype(np.int64)
+    if exact and not np.array_equal(A @ m, target):  # pragma: no cover - solver tolerance
+        return None
+    return m
+
+
+def _tau(template: PatchTemplate, h: float) -> np.ndarray:
+    """Preferred (fractional) multiplicities for edges of length ``h``: chord width / h, >= 1."""
+    return np.maximum(template.chord_widths() / h, 1.0)
+
+
+def solve_multiplicities(template: PatchTemplate, *, counts=None, size=None) -> np.ndarray:
+    """``(n_chords,) int64 >= 1`` multiplicities.
+
+    counts: ``(n_sides,)`` ints >= 1: ``side_matrix @ mult == counts`` exactly; among the
+    solutions, the one closest (L1) to multiplicities proportional to the chords' widths (so
+    that the edges are about equally long). size: target edge length (user units): the counts
+    closest (L1, in edges) to ``side_length / size``, and closed or otherwise free chords
+    split to about ``size``. Exactly one of the two. Integer programs by
+    :func:`scipy.optimize.milp` (HiGHS).
+
+    Raises :class:`InfeasibleRequest` (odd total; a side the template cannot refine finely or
+    coarsely enough) with the nearest feasible counts; :class:`InputError` for malformed
+    counts or sizes.
+    """
+    A = template.side_matrix()
+    n, C = A.shape
+    src = template.shape.source
+    if (counts is None) == (size is None):
+        raise ValueError("give exactly one of counts and size")
+    lengths = side_lengths(template.shape)
+    has_end = A.sum(axis=0) > 0
+    if size is not None:
+        try:
+            h = float(size)
+        except (TypeError, ValueError):
+            h = math.nan
+        if not (h > 0 and math.isfinite(h)):
+            raise InputError(f"element size must be a positive number, got {size!r}", src)
+        if lengths.sum() / h > MAX_SIZE_EDGES:
+            raise InputError(f"element size {h:g} gives more than {MAX_SIZE_EDGES} boundary edges "
+                             f"(perimeter {lengths.sum():g})", src)
+        target = lengths / h
+        tau = _tau(template, h)
+        ub = np.maximum(np.ceil(2 * tau + 2 * target.max()), 1).astype(np.int64)
+        m = _milp_l1(A, target, tau, ub, exact=False)
+        if m is None:  # pragma: no cover - always feasible (m = 1)
+            raise InfeasibleRequest("no multiplicities found", src)
+        return m
+    c = _check_counts(counts, n, src)
+    h = float(lengths.sum() / c.sum())
+    tau = _tau(template, h)
+    ub = np.where(has_end, c.max(), 1).astype(np.int64)
+    m = None if c.sum() % 2 else _milp_l1(A, c.astype(np.float64), tau, ub, exact=True)
+    if m is not None:
+        return np.where(has_end, m, np.maximum(np.rint(tau), 1).astype(np.int64))
+    near = nearest_counts(template, c)
+    raise InfeasibleRequest(_infeasible_text(template, c, near), src, near)
+
+
+def nearest_counts(template: PatchTemplate, counts) -> np.ndarray:
+    """``(n_sides,) int64``: feasible counts closest (L1) to ``counts`` for ``template``."""
+    A = template.side_matrix()
+    c = np.asarray(counts, np.int64)
+    C = A.shape[1]
+    ub = np.full(C, max(int(c.max()), 1) + 2, np.int64)
+    m = _milp_l1(A, c.astype(np.float64), np.ones(C), ub, exact=False, chord_weight=1e-4)
+    return A @ m
+
+
+def _fmt(counts) -> str:
+    return ",".join(str(int(x)) for x in counts)
+
+
+def _infeasible_text(template: PatchTemplate, counts: np.ndarray, near: np.ndarray) -> str:
+    A = template.side_matrix()
+    n = len(counts)
+    why = []
+    if counts.sum() % 2:
+        why.append(f"the total {int(counts.sum())} is odd (a quad mesh of a disk has an even number of boundary edges)")
+    low = A.sum(axis=1)
+    few = [i for i in range(n) if counts[i] < low[i]]
+    if few:
+        why.append("; ".join(f"side {i} needs at least {int(low[i])} edges" for i in few))
+    off = [i for i in range(n) if counts[i] != near[i] and i not in few]
+    if off:
+        why.append(("side " if len(off) == 1 else "sides ") + ", ".join(map(str, off))
+                   + " cannot have exactly " + _fmt(counts[off]) + " edges with the other counts")
+    return (f"edge counts {_fmt(counts)} cannot be met by template {template.mesh_id}: " + "; ".join(why)
+            + f"; nearest feasible counts {_fmt(near)}")
+
+
+# ---------------------------------------------------------------------------------------------
+# refinement and placement
+
+
+class RefinedMesh(NamedTuple):
+    """A refined template placed in the shape (user coordinates).
+
+    xy: ``(V, 2) float64``; quads: ``(Q, 4) int64``, counter-clockwise.
+    side_vertices: side i: vertex ids from corner i to corner i+1 inclusive,
+        ``(counts[i] + 1,) int64`` (without corners: a closed loop, first id == last id).
+    counts: ``(n_sides,) int64`` edges per side; mult: ``(n_chords,) int64`` multiplicities.
+    boundary: ``(n,) int64`` the ccw boundary loop.
+    scaled_jacobian: ``(Q,) float64`` per quad (Verdict), inverted: quads with a corner of
+        signed area <= 0; edge_ratio: ``(Q,) float64`` longest / shortest edge per quad.
+    region_area / mesh_area: area of the user's polygon / sum of the quads' signed areas.
+    template: the :class:`PatchTemplate` refined.
+    """
+
+    xy: np.ndarray
+    quads: np.ndarray
+    side_vertices: tuple
+    counts: np.ndarray
+    mult: np.ndarray
+    boundary: np.ndarray
+    scaled_jacobian: np.ndarray
+    inverted: int
+    edge_ratio: np.ndarray
+    region_area: float
+    mesh_area: float
+    template: PatchTemplate
+
+    @property
+    def n_quads(self) -> int:
+        return int(self.quads.shape[0])
+
+    @property
+    def min_scaled_jacobian(self) -> float:
+        return float(self.scaled_jacobian.min())
+
+    @property
+    def mean_scaled_jacobian(self) -> float:
+        return float(self.scaled_jacobian.mean())
+
+    @property
+    def max_edge_ratio(self) -> float:
+        return float(self.edge_ratio.max())
+
+    @property
+    def area_ratio(self) -> float:
+        return float(self.mesh_area / self.region_area)
+
+    @property
+    def valid(self) -> bool:
+        """No inverted quad."""
+        return self.inverted == 0
+
+    def mean_edge_length(self) -> float:
+        """Mean length of the mesh's edges (each once), user units."""
+        e = edges(self.quads)
+        return float(np.linalg.norm(self.xy[e[:, 0]] - self.xy[e[:, 1]], axis=1).mean())
+
+
+def _refine_topology(quads: np.ndarray, edge_list: np.ndarray, edge_chord: np.ndarray, quad_chords: np.ndarray,
+                     mult: np.ndarray):
+    """Split quads into grids. Returns ``(n_vertices, quads (Q, 4) int64, edge_base (E,) int64,
+    owner (V', 4) int64 quad-or-edge provenance for interpolation)``.
+
+    Vertex numbering: the template's vertices keep their ids; then the inner points of every
+    template edge ``(u, w)`` (``u < w``), ``mult - 1`` of them from ``u`` to ``w``; then the inner
+    points of each quad grid. ``interp``: ``(V', 4)`` float weights and ``(V', 4)`` template
+    vertex ids giving each new vertex as a bilinear combination of its quad's corners."""
+    q = np.asarray(quads, np.int64)
+    V = int(q.max()) + 1
+    E = edge_list.shape[0]
+    me = mult[edge_chord]
+    edge_base = V + np.concatenate([[0], np.cumsum(me - 1)[:-1]])
+    nv = V + int((me - 1).sum())
+    key = edge_list[:, 0] * V + edge_list[:, 1]
+    ma_all, mb_all = mult[quad_chords[:, 0]], mult[quad_chords[:, 1]]
+
+    def along(a, b, k, m):
+        """Vertex ids at step k (0..m) from template vertex a to b along their edge."""
+        lo, hi = np.minimum(a, b), np.maximum(a, b)
+        eid = np.searchsorted(key, lo * V + hi)
+        kk = np.where(a < b, k, m - k)
+        return np.where(kk == 0, lo, np.where(kk == m, hi, edge_base[eid] + kk - 1))
+
+    out_quads = []
+    w_rows, v_rows = [], []
+    # edge points: linear between the two ends
+    ks = np.concatenate([np.arange(1, m) for m in me.tolist()]) if nv > V else np.zeros(0, np.int64)
+    eidx = np.repeat(np.arange(E), me - 1)
+    s = ks / me[eidx]
+    w_rows.append(np.stack([1 - s, s, np.zeros_like(s), np.zeros_like(s)], axis=1))
+    v_rows.append(np.stack([edge_list[eidx, 0], edge_list[eidx, 1], edge_list[eidx, 0], edge_list[eidx, 1]], axis=1))
+    pairs = np.unique(np.stack([ma_all, mb_all], axis=1), axis=0)
+    base = nv
+    for ma, mb in pairs.tolist():
+        f = np.flatnonzero((ma_all == ma) & (mb_all == mb))
+        nf = f.size
+        Q = q[f]
+        G = np.empty((nf, ma + 1, mb + 1), np.int64)
+        i = np.arange(ma + 1)
+        j = np.arange(mb + 1)
+        G[:, :, 0] = along(Q[:, 0:1], Q[:, 1:2], i[None, :], ma)
+        G[:, ma, :] = along(Q[:, 1:2], Q[:, 2:3], j[None, :], mb)
+        G[:, :, mb] = along(Q[:, 3:4], Q[:, 2:3], i[None, :], ma)
+        G[:, 0, :] = along(Q[:, 0:1], Q[:, 3:4], j[None, :], mb)
+        ni = (ma - 1) * (mb - 1)
+        if ni:
+            G[:, 1:ma, 1:mb] = (base + np.arange(nf)[:, None, None] * ni
+                                + (np.arange(ma - 1)[:, None] * (mb - 1) + np.arange(mb - 1)[None, :])[None])
+            si = (np.arange(1, ma) / ma)[:, None] * np.ones(mb - 1)[None, :]
+            tj = np.ones(ma - 1)[:, None] * (np.arange(1, mb) / mb)[None, :]
+            si, tj = si.ravel(), tj.ravel()
+            wq = np.stack([(1 - si) * (1 - tj), si * (1 - tj), si * tj, (1 - si) * tj], axis=1)
+            w_rows.append(np.broadcast_to(wq[None], (nf, ni, 4)).reshape(-1, 4))
+            v_rows.append(np.broadcast_to(Q[:, None, :], (nf, ni, 4)).reshape(-1, 4))
+            base += nf * ni
+        quad = np.stack([G[:, :-1, :-1], G[:, 1:, :-1], G[:, 1:, 1:], G[:, :-1, 1:]], axis=-1)
+        out_quads.append(quad.reshape(-1, 4))
+    return base, np.concatenate(out_quads), along, np.concatenate(w_rows), np.concatenate(v_rows)
+
+
+def _laplacian(quads: np.ndarray, nv: int) -> scipy.sparse.csr_matrix:
+    e = edges(quads)
+    rows = np.concatenate([e[:, 0], e[:, 1]])
+    cols = np.concatenate([e[:, 1], e[:, 0]])
+    A = scipy.sparse.csr_matrix((np.ones(rows.size), (rows, cols)), shape=(nv, nv))
+    deg = np.asarray(A.sum(axis=1)).ravel()
+    return (scipy.sparse.diags(deg) - A).tocsr()
+
+
+def refine_and_place(template: PatchTemplate, mult, *, smooth_iters: int | None = None) -> RefinedMesh:
+    """Split every quad by the multiplicities of its two chords, put the refined boundary
+    vertices on the user's boundary by arc length, place and smooth the interior.
+
+    mult: ``(n_chords,)`` ints >= 1. Boundary: side i gets ``counts[i] = side_matrix[i] @ mult``
+    edges, its vertices evenly spaced by arc length on the user's side (:func:`side_points`;
+    corners exactly the input points). Interior: bilinear interpolation of the template's
+    placement in each template quad, moved by the harmonic (uniform-weight) extension of the
+    boundary vertices' displacement, then :func:`jaxmatch.placement.embed.smooth`
+    (``smooth_iters`` L-BFGS iterations per round; default 200, fewer for meshes above 2000
+    quads) in a normalised frame.
+    """
+    m = np.asarray(mult, np.int64).ravel()
+    if m.shape[0] != template.n_chords or np.any(m < 1):
+        raise ValueError(f"mult must be {template.n_chords} integers >= 1")
+    pl = template.placement
+    tq = np.asarray(pl.mesh.quads, np.int64)
+    nv, quads, along, W, VV = _refine_topology(tq, template.edge_list, template.edge_chord, template.quad_chords, m)
+    V0 = int(tq.max()) + 1
+    xy = np.empty((nv, 2))
+    xy[:V0] = pl.xy[:V0]
+    xy[V0:] = np.einsum("ik,ikd->id", W, pl.xy[VV])
+    # boundary
+    counts = template.side_matrix() @ m
+    polys = side_polylines(template.shape)
+    side_vertices = []
+    target = {}
+    for i, path in enumerate(template.side_path):
+        ids = []
+        for a, b in zip(path[:-1].tolist(), path[1:].tolist()):
+            lo, hi = min(a, b), max(a, b)
+            eid = int(np.searchsorted(template.edge_list[:, 0] * V0 + template.edge_list[:, 1], lo * V0 + hi))
+            me = int(m[template.edge_chord[eid]])
+            ids.extend(along(np.int64(a), np.int64(b), np.arange(me), me).tolist())
+        ids.append(int(path[-1]))
+        sv = np.asarray(ids, np.int64)
+        assert sv.shape[0] == counts[i] + 1
+        side_vertices.append(sv)
+    bpos = [side_points(p, int(c)) for p, c in zip(polys, counts)]
+    bverts = np.concatenate([sv[:-1] for sv in side_vertices])
+    bxy = np.concatenate([bp[:-1] for bp in bpos])
+    # ccw loop
+    loop = _ccw_loop(side_vertices, template)
+    # harmonic extension of the boundary displacement
+    L = _laplacian(quads, nv)
+    free = np.setdiff1d(np.arange(nv), bverts)
+    disp = np.zeros((nv, 2))
+    disp[bverts] = bxy - xy[bverts]
+    if free.size:
+        Lf = L[free][:, free].tocsc()
+        rhs = -(L[free][:, bverts] @ disp[bverts])
+        disp[free] = np.asarray(scipy.sparse.linalg.spsolve(Lf, rhs)).reshape(-1, 2)
+    xy = xy + disp
+    xy[bverts] = bxy
+    # smoothing in a normalised frame
+    iters = (200 if quads.shape[0] <= 2000 else 30) if smooth_iters is None else int(smooth_iters)
+    off = bxy.mean(axis=0)
+    sc = float(np.sqrt(np.mean(np.sum((bxy - off) ** 2, axis=1)))) or 1.0
+    xs = smooth((xy - off) / sc, quads, bverts, iters=iters)
+    xy = xs * sc + off
+    xy[bverts] = bxy  # exact boundary positions
+    sj = quality(xy, quads)[0]
+    p = xy[quads]
+    el = np.linalg.norm(np.roll(p, -1, axis=1) - p, axis=-1)
+    ratio = el.max(axis=1) / np.maximum(el.min(axis=1), np.finfo(float).tiny)
+    return RefinedMesh(
+        xy=xy, quads=quads, side_vertices=tuple(side_vertices), counts=counts.astype(np.int64), mult=m,
+        boundary=loop, scaled_jacobian=sj, inverted=int(inverted_mask(xy, quads).sum()), edge_ratio=ratio,
+        region_area=abs(polygon_area(_user_xy(template.shape))), mesh_area=float(quad_areas(xy, quads).sum()),
+        template=template,
+    )
+
+
+def _ccw_loop(side_vertices, template: PatchTemplate) -> np.ndarray:
+    """The refined boundary as one ccw loop, ``(n,) int64``."""
+    frame = _side_frame(template.shape)
+    parts = sorted(zip(frame, side_vertices), key=lambda t: t[0][0])
+    loop = np.concatenate([(sv[::-1] if rev else sv)[:-1] for (_, rev), sv in parts])
+    return loop.astype(np.int64)
+
+
+# ---------------------------------------------------------------------------------------------
+# the whole job
+
+
+class RefineChoice(NamedTuple):
+    """Result of :func:`refine_mesh`.
+
+    mesh: the :class:`RefinedMesh`; template: its :class:`PatchTemplate` (``template.rank``:
+    1-based position among the candidates); passed_over: ``(rank, mesh_id, reason)`` of every
+    better-ranked candidate not taken, in order; note: one line when the request could only be
+    approximated (``size`` further than :data:`SIZE_TOLERANCE` from every template), else None.
+    """
+
+    mesh: RefinedMesh
+    template: PatchTemplate
+    passed_over: list
+    note: str | None = None
+
+
+def refine_mesh(shape: Shape, catalogue: "Catalogue", lattice: "Lattice", *, sides=None, size=None,
+                internal=None, limit: int = 20) -> RefineChoice:
+    """A quad mesh of ``shape`` with the requested number of edges per side, or edges of about
+    the requested length: the Python API of ``jaxmatch mesh --sides/--size``.
+
+    sides: one edge count per user side (side i from corner i to corner i+1, corners in the
+    order of the file or of its ``corners`` list; a shape without corners takes one total
+    count), met exactly. size: target edge length in the shape's units: per-side counts
+    closest to ``side length / size``. Exactly one of the two.
+
+    The templates (:func:`patch_templates`: ranked catalogue meshes of every size, ``limit``
+    per size, that keep every corner and place without folds) are tried best first; the first
+    whose refinement meets the request (:func:`solve_multiplicities`) and places without
+    inverted quads (:func:`refine_and_place`) is taken; better-ranked ones passed over are listed
+    with the reason. For ``size``, "meets" means a mean boundary edge length within
+    :data:`SIZE_TOLERANCE` of ``size``; when no template does, the closest is taken and
+    ``note`` says so.
+
+    Raises :class:`InfeasibleRequest` when no template can meet ``sides`` (the message names the
+    sides and the nearest feasible counts over all templates), :class:`InputError` for malformed
+    requests, :class:`jaxmatch.errors.UnmatchableError` when no mesh matches the shape.
+    """
+    if (sides is None) == (size is None):
+        raise ValueError("give exactly one of sides and size")
+    n_sides = max(shape.n_corners, 1)
+    if sides is not None:
+        _check_counts(sides, n_sides, shape.source)
+    passed: list = []
+    rejected: list = []
+    best_fail: tuple | None = None  # (distance, template, InfeasibleRequest)
+    best_size: tuple | None = None  # (deviation, template, mult)
+    folded: tuple | None = None
+    perimeter = float(side_lengths(shape).sum())
+    for t in _iter_templates(shape, catalogue, lattice, limit=limit, internal=internal, rejected=rejected):
+        try:
+            mult = solve_multiplicities(t, counts=sides, size=size)
+        except InfeasibleRequest as e:
+            d = int(np.abs(np.asarray(e.nearest) - np.asarray(sides)).sum())
+            if best_fail is None or d < best_fail[0]:
+                best_fail = (d, t, e)
+            passed.append((t.rank, t.mesh_id, "cannot meet the counts: nearest feasible " + _fmt(e.nearest)))
+            continue
+        if size is not None:
+            total = int((t.side_matrix() @ mult).sum())
+            dev = abs(perimeter / total - float(size)) / float(size)
+            if dev > SIZE_TOLERANCE:
+                if best_size is None or dev < best_size[0]:
+                    best_size = (dev, t, mult)
+                passed.append((t.rank, t.mesh_id, f"mean boundary edge {perimeter / total:.4g}, "
+                                                  f"{100 * dev:.0f}% from the size"))
+                continue
+        rm = refine_and_place(t, mult)
+        if not rm.valid:
+            if folded is None:
+                folded = (t, rm)
+            passed.append((t.rank, t.mesh_id, f"refined mesh folds ({rm.inverted} inverted quads)"))
+            continue
+        return RefineChoice(rm, t, _merge(passed, rejected, t.rank))
+    if size is not None and best_size is not None:
+        _, t, mult = best_size
+        rm = refine_and_place(t, mult)
+        passed = [p for p in passed if p[0] != t.rank]
+        note = (f"no template meets size {float(size):g} within {100 * SIZE_TOLERANCE:.0f}%; "
+                f"took the closest, {t.mesh_id} (mean boundary edge {perimeter / int(rm.counts.sum()):.4g})")
+        return RefineChoice(rm, t, _merge(passed, rejected, t.rank), note)
+    if folded is not None:
+        t, rm = folded
+        return RefineChoice(rm, t, _merge([p for p in passed if p[0] != t.rank], rejected, t.rank),
+                            f"every refinement that meets the request folds; kept {t.mesh_id}")
+    if best_fail is not None:
+        _, t, e = best_fail
+        c = np.asarray(sides, np.int64)
+        near = e.nearest
+        why = e.problem.split(": ", 1)[1].rsplit("; nearest", 1)[0]
+        raise InfeasibleRequest(f"edge counts {_fmt(c)} cannot be met by any of the {len(passed)} templates; "
+                                f"closest template {t.mesh_id}: {why}; nearest feasible counts {_fmt(near)}",
+                                shape.source, near)
+    raise InfeasibleRequest("no catalogue mesh keeps every corner of the shape without folding"
+                            + (f" (tried {len(rejected)})" if rejected else ""), shape.source)
+
+
+def _merge(passed: list, rejected: list, upto: int) -> list:
+    """Candidates ranked before ``upto`` that were not taken, in rank order."""
+    return sorted([p for p in passed + rejected if p[0] < upto], key=lambda p: p[0])
+
+
+def refined_json(choice: RefineChoice) -> dict:
+    """The refinement part of ``jaxmatch mesh --json``: counts per side, quads, chords and
+    multiplicities, quality figures, template and passed-over candidates."""
+    rm, t = choice.mesh, choice.template
+    return {
+        "template": t.mesh_id, "template_rank": int(t.rank),
+        "sides": [int(c) for c in rm.counts], "side_lengths": [float(x) for x in side_lengths(t.shape)],
+        "quads": rm.n_quads, "vertices": int(rm.xy.shape[0]),
+        "chords": [{"chord": c, "multiplicity": int(m), "edges_per_side": [int(x) for x in col]}
+                   for c, (m, col) in enumerate(zip(rm.mult, t.side_matrix().T))],
+        "min_scaled_jacobian": rm.min_scaled_jacobian, "mean_scaled_jacobian": rm.mean_scaled_jacobian,
+        "inverted": int(rm.inverted), "area_ratio": rm.area_ratio, "max_edge_ratio": rm.max_edge_ratio,
+        "mean_edge_length": rm.mean_edge_length(), "valid": rm.valid,
+        "passed_over": [{"rank": int(r), "mesh_id": mid, "reason": why} for r, mid, why in choice.passed_over],
+        "note": choice.note,
+    }
