@@ -526,20 +526,32 @@ def patch_shapes(layout: Layout) -> list[Shape]:
 # the integer program
 
 
+CHORD_WEIGHT = 0.01
+"""Weight of the secondary objective of :func:`solve_counts` (multiplicities close to
+``chord width / size``, so that strips without boundary sides, and wide strips, are split to
+about the size too) against the primary one (edges per side close to ``length / size``)."""
+
+
 def solve_counts(sides: Sides, matrices: Sequence[np.ndarray], *, counts: Mapping[int, int] | None = None,
-                 size: float | None = None, source: str = "<layout>") -> tuple[list[np.ndarray], np.ndarray]:
-    """Chord multiplicities of every patch from ONE integer program.
+                 size: float | None = None, widths: Sequence[np.ndarray] | None = None,
+                 source: str = "<layout>") -> tuple[list[np.ndarray], np.ndarray]:
+    """Chord multiplicities of every patch from ONE integer program (``scipy.optimize.milp``).
 
     matrices: per patch ``(n_p, c_p) int64`` side matrix (edges of chord ``c`` on the patch's
     side ``i``); counts: ``{side id: count}`` required exactly; size: target edge length (user
-    units) for the other sides: minimise ``sum_s |n_s - length_s / size|`` (plus ``1e-6`` times
-    the total multiplicity, so that ties go to the coarser mesh); without ``size``, minimise
-    the total number of side edges. Constraints: ``A_p[i] @ m_p = n_{side(p, i)}`` for every
-    patch side (a shared side has one ``n``), ``m >= 1`` integer.
+    units; default: the requested sides' total length over their total count); widths: per
+    patch ``(c_p,)`` chord widths (user units, :meth:`PatchTemplate.chord_widths`).
+
+    Variables: ``m_p >= 1`` integer per patch and chord, ``n_s >= 1`` integer per side.
+    Constraints: ``A_p[i] @ m_p = n_{side(p, i)}`` for every patch side (so a shared side has
+    one count in both patches, and each patch's total is even), ``n_s = counts[s]`` when
+    requested. Objective: ``sum_s |n_s - length_s / size|`` over the sides not requested, plus
+    :data:`CHORD_WEIGHT` ``* sum_c |m_c - max(width_c / size, 1)|``.
 
     Returns ``(multiplicities per patch ((c_p,) int64), counts per side ((S,) int64))``.
     Raises :class:`LayoutInfeasible` (naming the requested sides and the nearest feasible
-    counts) when the requested counts cannot be met.
+    counts) when the requested counts cannot be met; :class:`InputError` for a bad size or when
+    neither a size nor counts are given.
     """
     from scipy.optimize import Bounds, LinearConstraint, milp
 
@@ -548,63 +560,77 @@ def solve_counts(sides: Sides, matrices: Sequence[np.ndarray], *, counts: Mappin
     nc = [int(np.asarray(A).shape[1]) for A in matrices]
     off = np.concatenate([[0], np.cumsum(nc)]).astype(int)
     M = int(off[-1])
-    use_size = size is not None
-    if use_size and not (float(size) > 0 and math.isfinite(float(size))):
-        raise InputError(f"size must be a positive number, got {size!r}", where=source)
+    if size is None:
+        if not counts:
+            raise InputError("give an element size or edge counts for some sides", where=source)
+        size = float(sum(sides.lengths[s] for s in counts) / sum(counts.values()))
+    h = float(size)
+    if not (h > 0 and math.isfinite(h)):
+        raise InputError(f"element size must be a positive number, got {size!r}", where=source)
+    if float(np.sum(sides.lengths)) / h > 1_000_000:
+        raise InputError(f"element size {h:g} gives more than 1000000 side edges", where=source)
+    tau_m = np.concatenate([np.maximum(np.asarray(w, np.float64) / h, 1.0) for w in widths]) if widths is not None \
+        else np.ones(M)
 
     def program(fixed: Mapping[int, int], targets: Mapping[int, float]):
-        """Variables: m (M), n (S), t (len(targets)). Minimise sum t (+ tie-breaks)."""
+        """Variables: m (M), n (S), t (T side deviations), u (M chord deviations)."""
         T = len(targets)
-        nv = M + S + T
-        rows, rhs_lo, rhs_hi = [], [], []
+        nv = M + S + T + M
+        rows, lo, hi = [], [], []
+
+        def row():
+            r = np.zeros(nv)
+            rows.append(r)
+            return r
+
         for p, A in enumerate(matrices):
             A = np.asarray(A, dtype=np.float64)
             for i, s in enumerate(sides.patch_sides[p]):
-                r = np.zeros(nv)
+                r = row()
                 r[off[p]:off[p + 1]] = A[i]
                 r[M + s] = -1.0
-                rows.append(r)
-                rhs_lo.append(0.0)
-                rhs_hi.append(0.0)
+                lo.append(0.0)
+                hi.append(0.0)
         for j, (s, tau) in enumerate(targets.items()):
-            for sign in (1.0, -1.0):  # t_j >= +-(n_s - tau)
-                r = np.zeros(nv)
+            for sign in (1.0, -1.0):  # t_j >= sign * (n_s - tau)
+                r = row()
                 r[M + s] = -sign
                 r[M + S + j] = 1.0
-                rows.append(r)
-                rhs_lo.append(-sign * tau)
-                rhs_hi.append(np.inf)
-        c = np.zeros(nv)
-        c[M + S:] = 1.0
-        if T:
-            c[:M] = 1e-6
-        else:
-            c[M:M + S] = 1.0
-        lo = np.concatenate([np.ones(M), np.ones(S), np.zeros(T)])
-        hi = np.full(nv, np.inf)
+                lo.append(-sign * tau)
+                hi.append(np.inf)
+        for c in range(M):
+            for sign in (1.0, -1.0):  # u_c >= sign * (m_c - tau_c)
+                r = row()
+                r[c] = -sign
+                r[M + S + T + c] = 1.0
+                lo.append(-sign * tau_m[c])
+                hi.append(np.inf)
+        cost = np.concatenate([np.zeros(M + S), np.ones(T), np.full(M, CHORD_WEIGHT)])
+        lb = np.concatenate([np.ones(M + S), np.zeros(T + M)])
+        ub = np.full(nv, np.inf)
         for s, v in fixed.items():
-            lo[M + s] = hi[M + s] = float(v)
-        integrality = np.concatenate([np.ones(M + S), np.zeros(T)])
-        res = milp(c, constraints=LinearConstraint(np.array(rows), rhs_lo, rhs_hi), integrality=integrality,
-                   bounds=Bounds(lo, hi))
+            lb[M + s] = ub[M + s] = float(v)
+        integrality = np.concatenate([np.ones(M + S), np.zeros(T + M)])
+        res = milp(cost, constraints=LinearConstraint(np.array(rows), lo, hi), integrality=integrality,
+                   bounds=Bounds(lb, ub), options={"time_limit": 60.0})
         if res.status != 0 or res.x is None:
             return None
-        x = np.round(res.x).astype(np.int64)
+        x = np.rint(res.x).astype(np.int64)
         return [x[off[p]:off[p + 1]] for p in range(len(matrices))], x[M:M + S]
 
-    targets = {} if not use_size else {s: float(sides.lengths[s]) / float(size) for s in range(S) if s not in counts}
+    targets = {s: float(sides.lengths[s]) / h for s in range(S) if s not in counts}
     sol = program(counts, targets)
     if sol is not None:
         return sol
-    near = program({}, {s: float(v) for s, v in counts.items()}) if counts else None
     names = sides.names
+    near = program({}, {**targets, **{s: float(v) for s, v in counts.items()}}) if counts else None
     if near is None:  # the templates' chords tie shared sides together in contradictory ways
         raise LayoutInfeasible("no chord multiplicities give shared sides equal counts", where=source)
     nearest = {names[s]: int(near[1][s]) for s in counts}
     wrong = [s for s in counts if near[1][s] != counts[s]] or list(counts)
-    detail = ", ".join(f"{names[s]}: {counts[s]} asked, nearest feasible {nearest[names[s]]}" for s in wrong)
-    raise LayoutInfeasible(f"the requested side counts cannot be met together ({detail}; every patch needs an even "
-                           "number of boundary edges, and opposite sides of a chord get the same count)",
+    detail = ", ".join(f"side {names[s]}: {counts[s]} asked, nearest feasible {nearest[names[s]]}" for s in wrong)
+    raise LayoutInfeasible(f"the requested edge counts cannot be met together ({detail}; every patch needs an even "
+                           "number of boundary edges, and both ends of a strip of quads get the same count)",
                            where=source, nearest=nearest)
 
 
@@ -703,22 +729,18 @@ def _outer_loop(layout: Layout, sides: Sides, side_ids) -> np.ndarray:
 
 
 def _templates(shape: Shape, catalogue, lattice, limit: int) -> list:
-    """Candidate templates for one patch: :func:`patch_templates` for each size in
-    :data:`TEMPLATE_SIZES`, coarse first, at most ``limit``."""
+    """Candidate templates for one patch: :func:`jaxmatch.placement.refine.patch_templates` of
+    the sizes :data:`TEMPLATE_SIZES` (at most ``limit`` each), fewest internal vertices first,
+    then in their ranked order."""
     from jaxmatch.errors import UnmatchableError
     from jaxmatch.placement.refine import patch_templates
 
-    out: list = []
-    for k in TEMPLATE_SIZES:
-        if k not in catalogue.internal:
-            continue
-        try:
-            out += patch_templates(shape, catalogue, lattice, limit=limit - len(out), internal=[k])
-        except UnmatchableError:
-            continue
-        if len(out) >= limit:
-            break
-    return out
+    ks = [k for k in TEMPLATE_SIZES if k in catalogue.internal]
+    try:
+        found = patch_templates(shape, catalogue, lattice, limit=limit, internal=ks)
+    except UnmatchableError:
+        return []
+    return sorted(found, key=lambda t: (t.match.internal_vertices, t.rank))[:limit]
 
 
 def _key(refined_mesh) -> tuple:
@@ -761,7 +783,8 @@ def mesh_layout(layout: Layout, catalogue: Catalogue, lattice: Lattice, *, size:
     for _ in range(ROUNDS):
         tmpl = [cands[p][choice[p]] for p in range(len(shapes))]
         try:
-            mults, n = solve_counts(sides, [t.side_matrix() for t in tmpl], counts=want, size=size, source=layout.source)
+            mults, n = solve_counts(sides, [t.side_matrix() for t in tmpl], counts=want, size=size,
+                                    widths=[t.chord_widths() for t in tmpl], source=layout.source)
         except LayoutInfeasible:
             if not _advance_for_feasibility(sides, cands, choice, want, size, layout.source):
                 raise
@@ -805,7 +828,8 @@ def _advance_for_feasibility(sides, cands, choice, want, size, source) -> bool:
             trial[p] = j
             try:
                 solve_counts(sides, [cands[q][trial[q]].side_matrix() for q in range(len(cands))], counts=want,
-                             size=size, source=source)
+                             size=size, widths=[cands[q][trial[q]].chord_widths() for q in range(len(cands))],
+                             source=source)
             except LayoutInfeasible:
                 continue
             choice[p] = j
