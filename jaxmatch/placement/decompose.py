@@ -26,7 +26,7 @@ from typing import TYPE_CHECKING, NamedTuple
 import numpy as np
 
 from jaxmatch.errors import InputError
-from jaxmatch.placement.layout import Layout, LayoutMesh, make_layout, mesh_layout
+from jaxmatch.placement.layout import ALL_SIZES, TEMPLATE_SIZES, Layout, LayoutMesh, make_layout, mesh_layout
 from jaxmatch.shape import Shape
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -188,8 +188,10 @@ def mesh_shape(shape: Shape, catalogue: Catalogue, lattice: Lattice, *, size: fl
                strategies=(SINGLE,) + STRATEGIES) -> ShapeChoice:
     """Mesh ``shape`` with target edge length ``size`` (user units) as one patch and as each
     decomposition in ``strategies`` (``"single"`` and names of :data:`STRATEGIES`), and keep the
-    best by :func:`choice_key`. Decompositions are smoothed across their cuts
-    (``smooth_cuts``). Raises :class:`InputError` when no candidate can be meshed."""
+    best by :func:`choice_key`. The one patch may use templates of any size of the catalogue
+    (:data:`~jaxmatch.placement.layout.ALL_SIZES`), the pieces the small ones
+    (:data:`~jaxmatch.placement.layout.TEMPLATE_SIZES`). Decompositions are smoothed across
+    their cuts (``smooth_cuts``). Raises :class:`InputError` when no candidate can be meshed."""
     tried = []
     seen_layouts = []
     for name in strategies:
@@ -203,7 +205,8 @@ def mesh_shape(shape: Shape, catalogue: Catalogue, lattice: Lattice, *, size: fl
             continue
         seen_layouts.append(lay)
         try:
-            m = mesh_layout(lay, catalogue, lattice, size=size, smooth_cuts=lay.n_patches > 1)
+            m = mesh_layout(lay, catalogue, lattice, size=size, smooth_cuts=lay.n_patches > 1,
+                            sizes=ALL_SIZES if name == SINGLE else TEMPLATE_SIZES)
         except InputError as e:
             tried.append((name, None, e.problem))
             continue

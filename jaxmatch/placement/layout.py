@@ -59,11 +59,16 @@ __all__ = [
     "LayoutMesh",
     "Sides",
     "TEMPLATE_SIZES",
+    "CHORD_WEIGHT",
     "boundary_edges",
+    "draw_meshes",
     "layout_groups",
+    "layout_panel",
     "layout_sides",
+    "load_counts",
     "load_layout",
     "make_layout",
+    "mesh_quality_line",
     "merge_patches",
     "mesh_layout",
     "parse_layout",
@@ -79,11 +84,17 @@ MAX_BYTES = 16 * 2**20
 MAX_POINTS = 100_000
 """Largest accepted number of layout points."""
 
-TEMPLATE_SIZES = (0, 1, 2, 3)
-"""Internal-vertex counts tried for a patch's templates, in this order (coarse first)."""
+TEMPLATE_SIZES = ((0, 1), (2, 3))
+"""Groups of internal-vertex counts tried for a patch's templates, in this order: the first
+group with a template that keeps the patch's corners gives the candidates (coarse templates
+refine into better-shaped meshes, and each size costs placements)."""
 
-TEMPLATES_PER_PATCH = 6
-"""How many candidate templates a patch keeps (tried in order when a refinement folds)."""
+ALL_SIZES = ((0, 1), (2, 3), (4, 5), (6, 7))
+"""The groups used for a shape meshed as one patch (it may need large templates)."""
+
+TEMPLATES_PER_PATCH = 3
+"""How many candidate templates of each size a patch keeps (tried in order when a refinement
+folds)."""
 
 ROUNDS = 8
 """Largest number of (integer program, refine) rounds :func:`mesh_layout` runs."""
@@ -728,19 +739,24 @@ def _outer_loop(layout: Layout, sides: Sides, side_ids) -> np.ndarray:
 # meshing
 
 
-def _templates(shape: Shape, catalogue, lattice, limit: int) -> list:
+def _templates(shape: Shape, catalogue, lattice, limit: int, sizes=TEMPLATE_SIZES) -> list:
     """Candidate templates for one patch: :func:`jaxmatch.placement.refine.patch_templates` of
-    the sizes :data:`TEMPLATE_SIZES` (at most ``limit`` each), fewest internal vertices first,
-    then in their ranked order."""
+    the first group of ``sizes`` that has one (at most ``limit`` per size), fewest internal
+    vertices first, then in their ranked order."""
     from jaxmatch.errors import UnmatchableError
     from jaxmatch.placement.refine import patch_templates
 
-    ks = [k for k in TEMPLATE_SIZES if k in catalogue.internal]
-    try:
-        found = patch_templates(shape, catalogue, lattice, limit=limit, internal=ks)
-    except UnmatchableError:
-        return []
-    return sorted(found, key=lambda t: (t.match.internal_vertices, t.rank))[:limit]
+    for group in sizes:
+        ks = [k for k in group if k in catalogue.internal]
+        if not ks:
+            continue
+        try:
+            found = patch_templates(shape, catalogue, lattice, limit=limit, internal=ks)
+        except UnmatchableError:
+            continue
+        if found:
+            return sorted(found, key=lambda t: (t.match.internal_vertices, t.rank))
+    return []
 
 
 def _key(refined_mesh) -> tuple:
@@ -750,11 +766,12 @@ def _key(refined_mesh) -> tuple:
 
 def mesh_layout(layout: Layout, catalogue: Catalogue, lattice: Lattice, *, size: float | None = None,
                 counts: Mapping[int, int] | None = None, templates_per_patch: int = TEMPLATES_PER_PATCH,
-                smooth_cuts: bool = False, progress=None) -> LayoutMesh:
+                sizes=TEMPLATE_SIZES, smooth_cuts: bool = False, progress=None) -> LayoutMesh:
     """Mesh every patch of ``layout`` and merge them into one conforming :class:`LayoutMesh`.
 
     size: target edge length (user units) for sides without a requested count; counts:
     ``{side id: edges}`` requested (added to ``layout.requested``, which they override).
+    sizes: groups of template sizes (internal vertices) tried per patch, see :data:`TEMPLATE_SIZES`.
     smooth_cuts: after merging, untangle/smooth all vertices except the outer boundary
     (:func:`jaxmatch.placement.embed.smooth`; for decompositions, whose inner sides are not
     the user's): it never lowers the minimum scaled Jacobian.
@@ -770,10 +787,11 @@ def mesh_layout(layout: Layout, catalogue: Catalogue, lattice: Lattice, *, size:
     shapes = patch_shapes(layout)
     cands = []
     for p, shp in enumerate(shapes):
-        t = _templates(shp, catalogue, lattice, templates_per_patch)
+        t = _templates(shp, catalogue, lattice, templates_per_patch, sizes)
         if not t:
-            raise InputError(f"patch {p}: no catalogue template keeps its {shp.n_corners} corners without folding "
-                             "(split the patch)", where=layout.source)
+            ks = sorted({k for g in sizes for k in g if k in catalogue.internal})
+            raise InputError(f"patch {p}: no catalogue template with {ks[0]}..{ks[-1]} internal vertices keeps its "
+                             f"{shp.n_corners} corners without folding (split the patch)", where=layout.source)
         cands.append(t)
         if progress:
             progress(p + 1, len(shapes))
@@ -872,3 +890,56 @@ def write_layout_mesh(path, mesh: LayoutMesh) -> Path:
     names = [f"patch {p}" for p in range(mesh.layout.n_patches)]
     return write_quads(path, mesh.xy, mesh.quads, cell_data={"patch": mesh.patch, "scaled_jacobian": mesh.scaled_jacobian},
                        quad_groups=mesh.patch, quad_group_names=names, line_groups=layout_groups(mesh))
+
+
+def mesh_quality_line(xy: np.ndarray, quads: np.ndarray) -> str:
+    """``"240 quads, SJ min 0.812 mean 0.951, 0 inverted"``."""
+    sj = quality(xy, quads)[0]
+    return (f"{quads.shape[0]} quads, SJ min {sj.min():.3f} mean {sj.mean():.3f}, "
+            f"{int(inverted_mask(xy, quads).sum())} inverted")
+
+
+def draw_meshes(path, panels: Sequence[tuple], *, title: str | None = None, ncols: int | None = None) -> Path:
+    """Draw quad meshes side by side and save to ``path`` (.png or .svg, atomically).
+
+    panels: ``(panel title, xy (V, 2), quads (Q, 4), patch (Q,) int or None, lines)`` with
+    ``lines`` a list of ``(k, 2)`` polylines drawn thick (e.g. the layout's sides) or None.
+    Quads are filled by patch (pale colours), inverted quads red; internal vertices whose
+    valence is not 4 are marked. Each panel's title ends with its :func:`mesh_quality_line`.
+    """
+    from matplotlib.collections import LineCollection, PolyCollection
+
+    from jaxmatch.io.plot import figure_format, new_figure, save_figure
+
+    figure_format(path)
+    fig, axes = new_figure(len(panels), ncols)
+    for ax, (head, xy, quads, patch, lines) in zip(axes, panels):
+        xy = np.asarray(xy, np.float64)
+        quads = np.asarray(quads, np.int64)
+        pal = np.array([[0.80, 0.88, 0.97], [0.98, 0.88, 0.75], [0.83, 0.94, 0.82], [0.94, 0.84, 0.94],
+                        [0.98, 0.96, 0.76], [0.85, 0.93, 0.93]])
+        face = pal[np.asarray(patch) % len(pal)] if patch is not None else np.tile(pal[0], (quads.shape[0], 1))
+        face = np.where(inverted_mask(xy, quads)[:, None], np.array([0.95, 0.3, 0.3]), face)
+        ax.add_collection(PolyCollection(xy[quads], facecolors=face, edgecolors="0.25", linewidths=0.4))
+        if lines:
+            ax.add_collection(LineCollection([np.asarray(line) for line in lines], colors="k", linewidths=1.4))
+        be = boundary_edges(quads)
+        on_b = np.zeros(xy.shape[0], bool)
+        on_b[be.ravel()] = True
+        irr = np.flatnonzero(~on_b & (valences(quads, xy.shape[0]) != 4))
+        if irr.size:
+            ax.plot(xy[irr, 0], xy[irr, 1], "o", ms=3.5, color="tab:red")
+        ax.set_aspect("equal")
+        ax.autoscale_view()
+        ax.set_xticks([])
+        ax.set_yticks([])
+        ax.set_title(f"{head}\n{mesh_quality_line(xy, quads)}, {irr.size} irregular", fontsize=9)
+    if title:
+        fig.suptitle(title)
+    return save_figure(fig, path)
+
+
+def layout_panel(mesh: LayoutMesh, head: str) -> tuple:
+    """A :func:`draw_meshes` panel for a layout mesh (sides drawn thick)."""
+    lines = [mesh.xy[ids] for ids in mesh.side_vertices]
+    return (head, mesh.xy, mesh.quads, mesh.patch, lines)
