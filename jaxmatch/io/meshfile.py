@@ -23,9 +23,12 @@ Meshes of several patches (:func:`write_quads`, used by ``jaxmatch layout``) add
 (e.g. ``patch``, the patch id of every quad) and named groups: quad groups (each quad in one)
 and line groups (boundary edges, e.g. the outer boundary and each input side; an edge may be in
 several). In ``.msh`` every group is a physical group with its name in ``$PhysicalNames``
-(quads: dimension 2, lines: dimension 1, 2-node line elements); an element's geometrical tag
-equals its physical tag, and a line in several groups is written once per group (MSH 2 gives
-an element one physical tag, and gmsh itself writes such elements this way). ``.vtk``/``.vtu``
+(quads: dimension 2, group ``i`` has physical tag ``i + 1``; lines: dimension 1, 2-node line
+elements); an element's geometrical tag equals its physical tag, and a line in several groups
+is written once per group (MSH 2 gives an element one physical tag, and gmsh itself writes such
+elements this way). A ``.msh`` file with line groups carries no ``$ElementData`` (cell data):
+meshio 5.3.5 splits element data by the wrong lengths when reading a file with more than one
+cell block and fails, so the quad groups (physical tags) carry e.g. the patch of each quad. ``.vtk``/``.vtu``
 get the lines as a second cell block with cell data ``line_group`` (index into the names, in
 the order given) and ``-1``/NaN for the quads' cell data; ``.json`` gets ``"groups": {name:
 [[a, b], ...]}`` and ``"quad_groups"``; ``.obj`` keeps only the quads.
@@ -104,9 +107,8 @@ def _meshio_mesh(xy, quads, cell_data, quad_groups, quad_group_names, line_group
             cells.append(("line", e))
             tags.append(np.full(e.shape[0], first + j, np.int32))
             field_data[g.name] = np.array([first + j, 1])
-        for k, v in cell_data.items():
-            fill = np.nan if np.asarray(v).dtype.kind == "f" else -1
-            data[k] += [np.full(c[1].shape[0], fill, dtype=np.asarray(v).dtype) for c in cells[1:]]
+        if len(cells) > 1:  # meshio 5.3 cannot read $ElementData back once there are several cell blocks
+            data = {}
         data["gmsh:physical"] = tags
         data["gmsh:geometrical"] = [t.copy() for t in tags]
         return meshio.Mesh(_points3d(xy), cells, cell_data=data, field_data=field_data)

@@ -338,11 +338,11 @@ def make_layout(points, patches, corners=None, sides=None, *, source: str = "<la
         uniq, cnt = np.unique(ids, return_counts=True)
         if (cnt > 1).any():
             raise InputError(f"patch {p} lists point {int(uniq[cnt > 1][0])} twice", where=source)
+        if not abs(polygon_area(pts[ids])) > tol * extent:
+            raise InputError(f"patch {p} has zero area", where=source)
         poly = shapely.Polygon(pts[ids])
         if not poly.is_valid:
             raise InputError(f"patch {p} crosses or touches itself ({shapely.is_valid_reason(poly)})", where=source)
-        if not poly.area > tol * extent:
-            raise InputError(f"patch {p} has zero area", where=source)
         if polygon_area(pts[ids]) < 0:
             ids = ids[::-1]
         cpos = np.flatnonzero(corner[ids])
