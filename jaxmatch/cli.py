@@ -312,7 +312,8 @@ def layout(
         raise InputError(f"expected one of {', '.join(strategies)}, got {strategy!r}", "--strategy")
     raw = read_limited(file, lay.MAX_BYTES, "layout file")
     try:
-        is_layout = file.suffix.lower() == ".json" and isinstance(doc := json.loads(raw), dict) and "patches" in doc
+        is_layout = file.suffix.lower() == ".json" and isinstance(doc := json.loads(raw.decode("utf-8-sig")), dict) \
+            and "patches" in doc
     except ValueError:
         is_layout = False
     enable_compile_cache()

@@ -118,8 +118,10 @@ def test_l_shape_choice_between_decompositions(cat, lat):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("size", [0.25, 0.125])
 @pytest.mark.parametrize("name", list(SHAPES))
-def test_done_when_every_shape_two_sizes(cat, lat, name, size):
+def test_done_when_every_shape_two_sizes(cat, lat, name):
     shp = load_shape(SHAPES[name])
-    check_done(shp, mesh_shape(shp, cat, lat, size=size))
+    cache: dict = {}
+    for size in (0.25, 0.125):
+        check_done(shp, mesh_shape(shp, cat, lat, size=size, template_cache=cache))
+    assert cache  # the second size reused the templates

@@ -470,6 +470,13 @@ def test_cli_layout_msh_png_json(cli, tmp_path):
     assert {"boundary", "patch 0", "patch 1", "side 1-4"} <= set(r.field_data)
 
 
+def test_cli_shape_one_strategy(cli, tmp_path):
+    code, stdout, err = cli("layout", ROOT / "examples" / "tshape.json", "--size", 0.5, "--strategy", "continuations")
+    assert code == 0, err
+    assert "chosen: continuations" in stdout and "4 patches" in stdout and "inverted quads: 0" in stdout
+
+
+@pytest.mark.slow
 def test_cli_shape_is_decomposed(cli, tmp_path):
     code, stdout, err = cli("layout", ROOT / "examples" / "lshape.json", "--size", 0.5, "--json")
     assert code == 0, err

@@ -185,13 +185,14 @@ def choice_key(mesh: LayoutMesh) -> tuple:
 
 
 def mesh_shape(shape: Shape, catalogue: Catalogue, lattice: Lattice, *, size: float,
-               strategies=(SINGLE,) + STRATEGIES) -> ShapeChoice:
+               strategies=(SINGLE,) + STRATEGIES, template_cache: dict | None = None) -> ShapeChoice:
     """Mesh ``shape`` with target edge length ``size`` (user units) as one patch and as each
     decomposition in ``strategies`` (``"single"`` and names of :data:`STRATEGIES`), and keep the
     best by :func:`choice_key`. The one patch may use templates of any size of the catalogue
     (:data:`~jaxmatch.placement.layout.ALL_SIZES`), the pieces the small ones
     (:data:`~jaxmatch.placement.layout.TEMPLATE_SIZES`). Decompositions are smoothed across
-    their cuts (``smooth_cuts``). Raises :class:`InputError` when no candidate can be meshed."""
+    their cuts (``smooth_cuts``). template_cache: see :func:`~jaxmatch.placement.layout.mesh_layout`
+    (pass the same dict to mesh the shape at several sizes). Raises :class:`InputError` when no candidate can be meshed."""
     tried = []
     seen_layouts = []
     for name in strategies:
@@ -206,7 +207,7 @@ def mesh_shape(shape: Shape, catalogue: Catalogue, lattice: Lattice, *, size: fl
         seen_layouts.append(lay)
         try:
             m = mesh_layout(lay, catalogue, lattice, size=size, smooth_cuts=lay.n_patches > 1,
-                            sizes=ALL_SIZES if name == SINGLE else TEMPLATE_SIZES)
+                            sizes=ALL_SIZES if name == SINGLE else TEMPLATE_SIZES, template_cache=template_cache)
         except InputError as e:
             tried.append((name, None, e.problem))
             continue

@@ -28,7 +28,9 @@ side has one count, requested counts are met exactly, and without them the count
 to ``side length / size``. Each patch is refined (:func:`jaxmatch.placement.refine.refine_and_place`)
 and the patches are merged (:func:`merge_patches`): the vertices of a side get one global id
 each, so shared sides carry identical vertices and there is no hanging node. A patch whose
-refinement folds is given its next template and the program is solved again.
+refinement folds (or has a scaled Jacobian below :data:`MIN_SJ`) is given its next template and
+the program is solved again; the best round is kept (fewest inverted quads, then the highest
+minimum scaled Jacobian of the worst patch).
 
 All lengths are in the user's units.
 """
@@ -98,6 +100,10 @@ folds)."""
 
 ROUNDS = 8
 """Largest number of (integer program, refine) rounds :func:`mesh_layout` runs."""
+
+MIN_SJ = 0.3
+"""A refined patch whose minimum scaled Jacobian is below this (or that has inverted quads)
+gets its next template in the next round of :func:`mesh_layout` (the best round is kept)."""
 
 _TOL = 1e-9  # relative (to the layout's extent) tolerance for coincident points and areas
 _KEYS = ("points", "patches", "corners", "sides")
@@ -766,12 +772,16 @@ def _key(refined_mesh) -> tuple:
 
 def mesh_layout(layout: Layout, catalogue: Catalogue, lattice: Lattice, *, size: float | None = None,
                 counts: Mapping[int, int] | None = None, templates_per_patch: int = TEMPLATES_PER_PATCH,
-                sizes=TEMPLATE_SIZES, smooth_cuts: bool = False, progress=None) -> LayoutMesh:
+                sizes=TEMPLATE_SIZES, smooth_cuts: bool = False, template_cache: dict | None = None,
+                progress=None) -> LayoutMesh:
     """Mesh every patch of ``layout`` and merge them into one conforming :class:`LayoutMesh`.
 
     size: target edge length (user units) for sides without a requested count; counts:
     ``{side id: edges}`` requested (added to ``layout.requested``, which they override).
     sizes: groups of template sizes (internal vertices) tried per patch, see :data:`TEMPLATE_SIZES`.
+    template_cache: optional dict, read and filled, of each patch's candidate templates (keyed by
+    the patch's points, corners, ``sizes`` and ``templates_per_patch``; valid for one catalogue
+    and lattice), so that meshing the same layout at another size does not rank again.
     smooth_cuts: after merging, untangle/smooth all vertices except the outer boundary
     (:func:`jaxmatch.placement.embed.smooth`; for decompositions, whose inner sides are not
     the user's): it never lowers the minimum scaled Jacobian.
@@ -787,7 +797,14 @@ def mesh_layout(layout: Layout, catalogue: Catalogue, lattice: Lattice, *, size:
     shapes = patch_shapes(layout)
     cands = []
     for p, shp in enumerate(shapes):
-        t = _templates(shp, catalogue, lattice, templates_per_patch, sizes)
+        key = (layout.points[layout.patches[p]].tobytes(), layout.corner[layout.patches[p]].tobytes(), sizes,
+               templates_per_patch)
+        if template_cache is not None and key in template_cache:
+            t = template_cache[key]
+        else:
+            t = _templates(shp, catalogue, lattice, templates_per_patch, sizes)
+            if template_cache is not None:
+                template_cache[key] = t
         if not t:
             ks = sorted({k for g in sizes for k in g if k in catalogue.internal})
             raise InputError(f"patch {p}: no catalogue template with {ks[0]}..{ks[-1]} internal vertices keeps its "
@@ -814,10 +831,10 @@ def mesh_layout(layout: Layout, catalogue: Catalogue, lattice: Lattice, *, size:
                 cache[key] = refine_and_place(t, m)
             refined.append(cache[key])
         keys = [_key(r) for r in refined]
-        total = (sum(k[0] for k in keys), min(k[1] for k in keys))
+        total = (sum(k[0] for k in keys), max(k[1] for k in keys))  # inverted quads, then the worst patch
         if best is None or total < best[0]:
             best = (total, list(tmpl), mults, n, refined)
-        bad = [p for p, k in enumerate(keys) if k[0] > 0 and choice[p] + 1 < len(cands[p])]
+        bad = [p for p, k in enumerate(keys) if (k[0] > 0 or -k[1] < MIN_SJ) and choice[p] + 1 < len(cands[p])]
         if not bad:
             break
         for p in bad:
