@@ -200,9 +200,15 @@ def mesh(
     tie_break: str = typer.Option("geometry", "--tie-break", help=TIE_BREAK_HELP),
     corner_angle: float = typer.Option(30.0, help="Corner threshold (degrees from straight) when the shape lists no corners."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object."),
+    sides: Optional[str] = typer.Option(None, "--sides", help="Edges per side, e.g. 4,2,4,2: side i runs from corner i to "
+                                        "corner i+1 in the file's order (see 'jaxmatch annotate'); one total count for a "
+                                        "shape without corners. Refines the best template that can meet it exactly."),
+    size: Optional[float] = typer.Option(None, "--size", help="Target edge length in the shape's units: refines the best "
+                                         "template to edges of about this length."),
 ) -> None:
     """Rank like 'score', place the R-th mesh in SHAPE and write it (and/or a picture).
 
+    With --sides or --size the chosen template is refined to the requested size instead.
     Exit status 3 when the placed mesh has inverted quads (the files are written anyway).
     """
     from jaxmatch.io.meshfile import write_mesh
@@ -210,6 +216,10 @@ def mesh(
 
     check_outputs(out_path, png, svg)
     tb = _tie_break(tie_break)
+    if sides is not None or size is not None:
+        _mesh_refined(shape, sides, size, catalogue=catalogue, internal=internal, lattice=lattice, rank_=rank_,
+                      out_path=out_path, png=png, svg=svg, corner_angle=corner_angle, as_json=as_json)
+        return
     enable_compile_cache()
     shp, lat, cat, ks = _inputs(shape, corner_angle, lattice, catalogue, internal)
     with _progress() as prog:
@@ -271,6 +281,89 @@ def mesh(
         for path in written.values():
             out.print(f"wrote {path}", markup=False, highlight=False)
     if not choice.valid:
+        raise typer.Exit(EXIT_INVERTED)
+
+
+def _parse_sides(text: str, n_sides: int) -> list[int]:
+    """``"4,2,4,2"`` -> ``[4, 2, 4, 2]``; InputError naming --sides otherwise."""
+    try:
+        counts = [int(tok) for tok in text.replace(" ", "").split(",")]
+    except ValueError:
+        raise InputError(f"expected comma-separated whole numbers like 4,2,4,2, got {text!r}", "--sides") from None
+    if len(counts) != n_sides:
+        what = "one total count (the shape has no corners)" if n_sides == 1 else f"one count per side ({n_sides} sides)"
+        raise InputError(f"{len(counts)} counts given, expected {what}", "--sides")
+    if any(c < 1 for c in counts):
+        raise InputError(f"every count must be at least 1, got {text!r}", "--sides")
+    return counts
+
+
+def _mesh_refined(shape: Path, sides: Optional[str], size: Optional[float], *, catalogue, internal, lattice, rank_,
+                  out_path, png, svg, corner_angle, as_json) -> None:
+    """``mesh --sides/--size``: refine the best template that meets the request."""
+    import math
+
+    import numpy as np
+
+    from jaxmatch.io.meshfile import write_mesh
+    from jaxmatch.placement.choose import draw_placements
+    from jaxmatch.placement.refine import InfeasibleRequest, refine_mesh, refined_json
+    from jaxmatch.shape import S, V, X
+
+    if sides is not None and size is not None:
+        raise InputError("give either --sides or --size, not both", "--size")
+    if rank_ != 1:
+        raise InputError("--rank does not apply with --sides/--size (the best template that meets the request is taken)", "--rank")
+    if size is not None and not (size > 0 and math.isfinite(size)):
+        raise InputError(f"must be a positive length, got {size!r}", "--size")
+    enable_compile_cache()
+    shp, lat, cat, ks = _inputs(shape, corner_angle, lattice, catalogue, internal)
+    counts = _parse_sides(sides, max(shp.n_corners, 1)) if sides is not None else None
+    try:
+        choice = refine_mesh(shp, cat, lat, sides=counts, size=size, internal=ks)
+    except InfeasibleRequest as e:
+        raise InputError(e.problem, "--sides" if sides is not None else "--size") from None
+    rm, t = choice.mesh, choice.template
+    pl = rm.as_placement()
+    written = {}
+    if out_path is not None:
+        written["out"] = str(write_mesh(out_path, pl))
+    corners = shp.to_user(shp.points[shp.corners]) if shp.n_corners else np.zeros((0, 2))
+    codes = np.where(shp.convex, X, V) if shp.n_corners else np.zeros(0, np.int64)
+    for key, path in (("png", png), ("svg", svg)):
+        if path is not None:
+            from jaxmatch.io.plot import Panel, draw_many
+
+            title = f"{t.mesh_id} refined, {rm.n_quads} quads"
+            written[key] = str(draw_many([Panel(shp.user_points, corners, codes, pl, title)], path, title=shape.name))
+    notes = []
+    if choice.passed_over:
+        first = choice.passed_over[0]
+        notes.append(f"passed over {len(choice.passed_over)} better-ranked template(s), the first #{first[0]} {first[1]}: {first[2]}")
+    if choice.note:
+        notes.append(choice.note)
+    if not rm.valid:
+        notes.append(f"FOLDED: {rm.inverted} of {rm.n_quads} quads are inverted; files were written anyway")
+    if as_json:
+        rec = {"shape": str(shape), "lattice": lat.name}
+        rec.update(refined_json(choice))
+        rec.update({"out": written.get("out"), "png": written.get("png"), "svg": written.get("svg")})
+        print(json.dumps(rec))
+        for note in notes:
+            print(note, file=sys.stderr)
+    else:
+        out.print(f"shape [bold]{shape}[/]: {max(shp.n_corners, 1)} side(s)")
+        out.print(f"template #{t.rank} {t.mesh_id} refined: edges per side {','.join(map(str, rm.counts.tolist()))}; "
+                  f"{rm.n_quads} quads, {rm.xy.shape[0]} vertices; {t.n_chords} chords, multiplicities "
+                  f"{','.join(map(str, rm.mult.tolist()))}", markup=False, highlight=False)
+        out.print(f"scaled Jacobian: min {rm.min_scaled_jacobian:.3f}, mean {rm.mean_scaled_jacobian:.3f}; inverted quads: "
+                  f"{rm.inverted}; mesh area / shape area {rm.area_ratio:.4f}; max edge ratio {rm.max_edge_ratio:.2f}; "
+                  f"mean edge length {rm.mean_edge_length():.4g}", markup=False, highlight=False)
+        for note in notes:
+            out.print(note, markup=False, highlight=False)
+        for path in written.values():
+            out.print(f"wrote {path}", markup=False, highlight=False)
+    if not rm.valid:
         raise typer.Exit(EXIT_INVERTED)
 
 
@@ -381,10 +474,15 @@ def annotate(
     m = points if points is not None else default_points(shp, max(_open_catalogue(None).lengths))
     ann = annotate_shape(shp, m)
     xy = shp.to_user(ann.positions)
+    from jaxmatch.placement.refine import side_lengths, side_polylines
+
+    polys, lengths = side_polylines(shp), side_lengths(shp)
     if as_json:
         print(json.dumps({"shape": str(shape), "sequence": ann.symbols,
                           "points": [{"index": i, "symbol": s, "x": float(p[0]), "y": float(p[1]), "side": int(sd)}
-                                     for i, (s, p, sd) in enumerate(zip(ann.symbols, xy, ann.side))]}))
+                                     for i, (s, p, sd) in enumerate(zip(ann.symbols, xy, ann.side))],
+                          "sides": [{"side": i, "from": [float(v) for v in p[0]], "to": [float(v) for v in p[-1]],
+                                     "length": float(ln)} for i, (p, ln) in enumerate(zip(polys, lengths))]}))
         return
     out.print(ann.symbols)
     table = Table()
@@ -393,6 +491,15 @@ def annotate(
     for i, (s, p, sd) in enumerate(zip(ann.symbols, xy, ann.side)):
         table.add_row(str(i), s, f"{p[0]:.6g}", f"{p[1]:.6g}", str(int(sd)))
     out.print(table)
+    out.print("sides for 'mesh --sides' (side i runs from corner i to corner i+1, in the file's order; "
+              "the s/x/v table above numbers them counter-clockwise):" if shp.n_corners else
+              "no corners: 'mesh --sides' takes one total count", markup=False, highlight=False)
+    sides = Table()
+    for col in ("side", "from", "to", "length"):
+        sides.add_column(col, justify="right")
+    for i, (p, ln) in enumerate(zip(polys, lengths)):
+        sides.add_row(str(i), f"({p[0][0]:.6g}, {p[0][1]:.6g})", f"({p[-1][0]:.6g}, {p[-1][1]:.6g})", f"{ln:.6g}")
+    out.print(sides)
 
 
 @lattice_app.command("show")

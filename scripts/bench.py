@@ -72,6 +72,7 @@ def parse_args(argv=None):
     ap.add_argument("--skip-rss", action="store_true", help="skip the per-catalogue-size RSS subprocesses")
     ap.add_argument("--cli", action="store_true", help="also time cold and warm 'jaxmatch score examples/lshape.json'")
     ap.add_argument("--rss-probe", action="store_true", help=argparse.SUPPRESS)
+    ap.add_argument("--refine", action="store_true", help="only the refinement benchmark (bench_refine): a 10,000-quad mesh")
     return ap.parse_args(argv)
 
 
@@ -360,8 +361,72 @@ def cli_times() -> dict:
 # --------------------------------------------------------------------------- main
 
 
+REFINE_SIDES = [100, 100, 100, 100]
+"""Refinement benchmark request: examples/square.json with 100 edges per side (10,000 quads)."""
+
+REFINE_TARGET_S = 1.0
+"""Goal of the refinement benchmark: a 10,000-quad mesh in under this many seconds, warm."""
+
+
+def bench_refine(reps: int = 5) -> dict:
+    """Time to produce a 10,000-quad refined mesh: ``examples/square.json`` with
+    :data:`REFINE_SIDES`, lattice fine, default catalogue.
+
+    ``full``: :func:`jaxmatch.placement.refine.refine_mesh` from the shape (ranking, fitting
+    templates, integer program, refinement, placement), warm (after a first, compiling call);
+    ``refine``: integer program + :func:`refine_and_place` for the chosen template (placement
+    included: boundary, interpolation, harmonic solve, quality; smoothing only when the
+    interpolated mesh needs it, the default above 2000 quads); ``refine_smoothed``: the same with
+    smoothing forced (``SMOOTH_ITERS_LARGE`` iterations per round). ``ratio_to_target``:
+    :data:`REFINE_TARGET_S` / min time (above 1 meets the goal)."""
+    from jaxmatch.catalogue.store import default_catalogue
+    from jaxmatch.cli import enable_compile_cache
+    from jaxmatch.placement import refine as R
+    from jaxmatch.scoring.lattice import load_lattice
+    from jaxmatch.shape import load_shape
+
+    enable_compile_cache()
+    cat, lat = default_catalogue(), load_lattice("fine")
+    shp = load_shape(ROOT / "examples" / "square.json")
+    t = time.perf_counter()
+    choice = R.refine_mesh(shp, cat, lat, sides=REFINE_SIDES)
+    first = time.perf_counter() - t
+    tpl = choice.template
+
+    def timed(fn):
+        ts = []
+        for _ in range(reps):
+            t = time.perf_counter()
+            out = fn()
+            ts.append(time.perf_counter() - t)
+        return ts, out
+
+    full, _ = timed(lambda: R.refine_mesh(shp, cat, lat, sides=REFINE_SIDES))
+    ref, rm = timed(lambda: R.refine_and_place(tpl, R.solve_multiplicities(tpl, counts=REFINE_SIDES)))
+    smo, rms = timed(lambda: R.refine_and_place(tpl, R.solve_multiplicities(tpl, counts=REFINE_SIDES),
+                                                smooth_iters=R.SMOOTH_ITERS_LARGE))
+    return {
+        "request": {"shape": "examples/square.json", "sides": REFINE_SIDES}, "template": tpl.mesh_id,
+        "quads": rm.n_quads, "min_scaled_jacobian": rm.min_scaled_jacobian, "inverted": rm.inverted,
+        "first_call_s": first, "full_s": summary(full), "refine_s": summary(ref),
+        "refine_smoothed_s": summary(smo), "smoothed_min_scaled_jacobian": rms.min_scaled_jacobian,
+        "target_s": REFINE_TARGET_S, "ratio_to_target": REFINE_TARGET_S / min(ref),
+        "ratio_to_target_full": REFINE_TARGET_S / min(full), "load": list(os.getloadavg()),
+    }
+
+
 def main(argv=None) -> int:
     args = parse_args(argv)
+    if args.refine:
+        r = bench_refine(max(args.reps, 1))
+        print(f"refine: {r['quads']} quads ({r['template']}, min SJ {r['min_scaled_jacobian']:.3f}, {r['inverted']} inverted); "
+              f"refine_and_place + milp min {r['refine_s']['min']:.3f} s (ratio to {r['target_s']:g} s target "
+              f"{r['ratio_to_target']:.2f}); from the shape (ranking included) min {r['full_s']['min']:.3f} s; "
+              f"smoothing forced min {r['refine_smoothed_s']['min']:.3f} s (min SJ {r['smoothed_min_scaled_jacobian']:.3f}); "
+              f"load {r['load'][0]:.2f}", file=sys.stderr if args.json else sys.stdout)
+        if args.json:
+            print(json.dumps({"refine": r}))
+        return 0
     if args.rss_probe:
         print(json.dumps(rss_probe(args)))
         return 0

@@ -36,7 +36,7 @@ All lengths here are in the user's units.
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Iterator, NamedTuple, Sequence
+from typing import TYPE_CHECKING, Callable, Iterator, NamedTuple, Sequence
 
 import numpy as np
 import scipy.sparse
@@ -60,12 +60,17 @@ __all__ = [
     "RefineChoice",
     "RefinedMesh",
     "SIZE_TOLERANCE",
+    "SJ_FLOOR",
+    "SMOOTH_ALWAYS",
     "patch_templates",
     "refine_and_place",
     "refine_mesh",
     "refined_json",
     "side_lengths",
     "side_polylines",
+    "estimated_mean_edge",
+    "feasible",
+    "nearest_counts",
     "side_points",
     "solve_multiplicities",
 ]
@@ -77,8 +82,37 @@ MAX_COUNT = 100_000
 """Largest accepted edge count of one side (memory bound: the mesh grows with the product of
 the counts)."""
 
+MAX_QUADS = 2_000_000
+"""Largest refined mesh (quads) :func:`refine_and_place` builds (about 1 GB of working memory)."""
+
 MAX_SIZE_EDGES = 1_000_000
 """Largest accepted ``perimeter / size`` (edges on the boundary) for a size request."""
+
+SMOOTH_ALWAYS = 2000
+"""Refined meshes with at most this many quads are always smoothed (:data:`SMOOTH_ITERS`)."""
+
+SMOOTH_ITERS = 200
+"""L-BFGS iterations per round of :func:`jaxmatch.placement.embed.smooth` for refined meshes."""
+
+SMOOTH_ITERS_LARGE = 50
+"""Iterations per round for larger meshes, which are smoothed only when the interpolated
+placement has an inverted quad or a scaled Jacobian below :data:`SJ_FLOOR` (each objective
+evaluation costs about 1.5 ms per 1000 quads)."""
+
+TEMPLATE_SJ_MIN = 0.01
+"""Templates whose placement has a quad with a smaller scaled Jacobian are not used: a corner of
+about 180 degrees (e.g. a valence-2 boundary vertex on a straight side) stays one in every
+refinement and ends up inverted or degenerate."""
+
+SJ_FLOOR = 0.3
+"""Minimum scaled Jacobian under which a large refined mesh is smoothed."""
+
+SIZE_ROUNDS = 6
+"""Calibration rounds of a ``size`` request (see :func:`solve_multiplicities`)."""
+
+SIZE_CHORD_WEIGHT = 0.5
+"""Weight, for a ``size`` request, of each chord's deviation from ``width / size`` (interior
+edges of about the size) against each side's deviation from ``length / size`` (in edges)."""
 
 _CHORD_WEIGHT = 0.01
 """Weight of the secondary objective (multiplicities proportional to the chords' widths)
@@ -278,14 +312,20 @@ def _corner_positions(shape: Shape, annotation, alignment: np.ndarray) -> np.nda
     return np.asarray(pos, np.int64)
 
 
-def _fit(shape: Shape, annotation, match: "Match", placement: Placement, rank: int) -> PatchTemplate | None:
-    """A :class:`PatchTemplate` from a placed match, or None when a corner has no vertex."""
-    loop = np.asarray(placement.mesh.boundary, np.int64)
+def _fit(shape: Shape, annotation, match: "Match", catalogue: "Catalogue", rank: int) -> PatchTemplate | None:
+    """An unplaced :class:`PatchTemplate` (``placement`` None) from a ranked match, or None when
+    a corner of the shape has no mesh vertex. The chords and sides do not depend on the
+    placement: :func:`~jaxmatch.placement.choose.place_match` re-spreads the alignment only over
+    points of the same type, and a match with every corner matched uses every corner point."""
+    from jaxmatch.placement.embed import oriented_boundary
+
+    om, loop32 = oriented_boundary(catalogue.mesh(match.mesh_id), match.rotation, match.reflected)
+    loop = np.asarray(loop32, np.int64)
     nb = loop.shape[0]
     if shape.n_corners == 0:
         paths = [np.concatenate([loop, loop[:1]])]
     else:
-        pos = _corner_positions(shape, annotation, placement.alignment)
+        pos = _corner_positions(shape, annotation, match.alignment)
         if pos is None:
             return None
         n = shape.n_corners
@@ -296,14 +336,14 @@ def _fit(shape: Shape, annotation, match: "Match", placement: Placement, rank: i
             path = loop[np.arange(a, stop + 1) % nb]
             paths.append(path[::-1].copy() if rev else path)
     first = [(int(p[k]), int(p[k + 1])) for p in paths for k in range(p.shape[0] - 1)]
-    e, chord, qc, nc = _chords(placement.mesh.quads, loop, first)
-    V = int(np.asarray(placement.mesh.quads).max()) + 1
+    e, chord, qc, nc = _chords(om.quads, loop, first)
+    V = int(np.asarray(om.quads).max()) + 1
     key = e[:, 0] * V + e[:, 1]
     side_chords = []
     for p in paths:
         lo, hi = np.minimum(p[:-1], p[1:]), np.maximum(p[:-1], p[1:])
         side_chords.append(chord[np.searchsorted(key, lo * V + hi)].astype(np.int64))
-    return PatchTemplate(shape, match.mesh_id, tuple(side_chords), nc, match, rank, placement, qc, e, chord,
+    return PatchTemplate(shape, match.mesh_id, tuple(side_chords), nc, match, rank, None, qc, e, chord,
                          tuple(p.astype(np.int64) for p in paths))
 
 
@@ -313,15 +353,16 @@ def _candidates(shape: Shape, catalogue: "Catalogue", lattice: "Lattice", *, lim
     best utility first (then fewer internal vertices, then id)."""
     from jaxmatch.scoring.rank import rank
 
-    ranking = rank(shape, catalogue, lattice, internal=internal, top=max(int(limit), 1), per_size=True)
+    ranking = rank(shape, catalogue, lattice, internal=internal, top=max(int(limit), 1), per_size=True, prune=True)
     ms = sorted(ranking.results, key=lambda m: (-m.utility, m.internal_vertices, m.mesh_id))
     return ranking.annotation, ms
 
 
-def _iter_templates(shape, catalogue, lattice, *, limit: int, internal=None,
-                    rejected: list | None = None) -> Iterator[PatchTemplate]:
-    """Templates in candidate order (see :func:`patch_templates`), placed lazily. Rejected
-    candidates are appended to ``rejected`` as ``(rank, mesh_id, reason)``."""
+def _iter_templates(shape, catalogue, lattice, *, limit: int, internal=None, rejected: list | None = None,
+                    check: Callable[[PatchTemplate], str | None] | None = None) -> Iterator[PatchTemplate]:
+    """Placed templates in candidate order (see :func:`patch_templates`), at most ``limit`` per
+    size. ``check(unplaced template)``: a reason to skip it before placing (None: go on).
+    Skipped candidates are appended to ``rejected`` as ``(rank, mesh_id, reason)``."""
     from jaxmatch.placement.choose import place_match
 
     ann, ms = _candidates(shape, catalogue, lattice, limit=3 * max(int(limit), 1), internal=internal)
@@ -329,30 +370,42 @@ def _iter_templates(shape, catalogue, lattice, *, limit: int, internal=None,
     for r, m in enumerate(ms, start=1):
         if taken.get(m.internal_vertices, 0) >= limit:
             continue
-        pl = place_match(shape, ann, catalogue, m)
-        t = _fit(shape, ann, m, pl, r)
-        reason = None
-        if t is None:
-            reason = "leaves a corner without a mesh vertex"
-        elif pl.inverted:
-            reason = f"folds when placed ({pl.inverted} inverted quads)"
+        t = _fit(shape, ann, m, catalogue, r)
+        reason = "leaves a corner without a mesh vertex" if t is None else (check(t) if check is not None else None)
+        if reason is None:
+            pl = place_match(shape, ann, catalogue, m)
+            if pl.inverted:
+                reason = f"folds when placed ({pl.inverted} inverted quads)"
+            elif not pl.min_scaled_jacobian >= TEMPLATE_SJ_MIN:
+                reason = (f"has a degenerate quad when placed (min scaled Jacobian {pl.min_scaled_jacobian:.3f}: "
+                          "a straight angle, e.g. a valence-2 vertex on a side)")
+            elif not np.array_equal(pl.mesh.quads, catalogue_oriented_quads(catalogue, m)):  # pragma: no cover
+                reason = "placement changed the mesh"
         if reason is not None:
             if rejected is not None:
                 rejected.append((r, m.mesh_id, reason))
             continue
         taken[m.internal_vertices] = taken.get(m.internal_vertices, 0) + 1
-        yield t
+        yield t._replace(placement=pl)
+
+
+def catalogue_oriented_quads(catalogue: "Catalogue", match: "Match") -> np.ndarray:
+    """``(F, 4)`` quads of ``match``'s mesh oriented as matched (mirrored when reflected)."""
+    from jaxmatch.placement.embed import oriented_boundary
+
+    return oriented_boundary(catalogue.mesh(match.mesh_id), match.rotation, match.reflected)[0].quads
 
 
 def patch_templates(shape: Shape, catalogue: "Catalogue", lattice: "Lattice", *, limit: int = 20,
                     internal=None) -> list[PatchTemplate]:
-    """Ranked templates (best first) whose placement keeps every corner and has no folded quad.
+    """Ranked templates (best first) whose placement keeps every corner and has no folded quad
+    (nor a degenerate one: min scaled Jacobian >= :data:`TEMPLATE_SJ_MIN`).
 
     Candidates: the best ``3 * limit`` meshes of each size k (``internal``: the sizes; None:
     every size of the catalogue) by :func:`jaxmatch.scoring.rank.rank`, merged by utility (then
     fewer internal vertices, then id); each is placed
     (:func:`jaxmatch.placement.choose.place_match`) and kept when every corner of the shape is
-    a mesh vertex and no quad is inverted; at most ``limit`` are kept per size. Sizes are mixed
+    a mesh vertex and no quad is inverted or degenerate; at most ``limit`` are kept per size. Sizes are mixed
     because a request for few edges needs a small template and raw utilities favour large ones.
     """
     return list(_iter_templates(shape, catalogue, lattice, limit=limit, internal=internal))
@@ -374,7 +427,8 @@ class InfeasibleRequest(InputError):
 def _check_counts(counts, n_sides: int, where: str) -> np.ndarray:
     try:
         c = np.asarray(counts)
-        ok = c.ndim == 1 and c.dtype.kind in "iu" or (c.dtype.kind == "f" and np.all(np.mod(c, 1) == 0))
+        whole = c.dtype.kind in "iu" or (c.dtype.kind == "f" and bool(np.all(np.isfinite(c) & (np.mod(c, 1) == 0))))
+        ok = c.ndim == 1 and whole
     except (TypeError, ValueError):
         ok = False
     if not ok:
@@ -443,8 +497,11 @@ def solve_multiplicities(template: PatchTemplate, *, counts=None, size=None) -> 
     counts: ``(n_sides,)`` ints >= 1: ``side_matrix @ mult == counts`` exactly; among the
     solutions, the one closest (L1) to multiplicities proportional to the chords' widths (so
     that the edges are about equally long). size: target edge length (user units): the counts
-    closest (L1, in edges) to ``side_length / size``, and closed or otherwise free chords
-    split to about ``size``. Exactly one of the two. Integer programs by
+    closest (L1, in edges) to ``side_length / h`` and the multiplicities closest to
+    ``chord width / h`` (weight :data:`SIZE_CHORD_WEIGHT`), where ``h`` starts at ``size`` and is
+    calibrated (at most :data:`SIZE_ROUNDS` solves) until the mean edge length estimated from
+    the template (:func:`estimated_mean_edge`; interior edges are often shorter or longer than
+    boundary ones) is within 2 % of ``size``; the closest solve is returned. Exactly one of the two. Integer programs by
     :func:`scipy.optimize.milp` (HiGHS).
 
     Raises :class:`InfeasibleRequest` (odd total; a side the template cannot refine finely or
@@ -468,13 +525,22 @@ def solve_multiplicities(template: PatchTemplate, *, counts=None, size=None) -> 
         if lengths.sum() / h > MAX_SIZE_EDGES:
             raise InputError(f"element size {h:g} gives more than {MAX_SIZE_EDGES} boundary edges "
                              f"(perimeter {lengths.sum():g})", src)
-        target = lengths / h
-        tau = _tau(template, h)
-        ub = np.maximum(np.ceil(2 * tau + 2 * target.max()), 1).astype(np.int64)
-        m = _milp_l1(A, target, tau, ub, exact=False)
-        if m is None:  # pragma: no cover - always feasible (m = 1)
-            raise InfeasibleRequest("no multiplicities found", src)
-        return m
+        best = None
+        h_eff = h
+        for _ in range(SIZE_ROUNDS):  # calibrate: interior edges differ from boundary ones
+            target = lengths / h_eff
+            tau = _tau(template, h_eff)
+            ub = np.maximum(np.ceil(2 * tau + 2 * target.max()), 1).astype(np.int64)
+            m = _milp_l1(A, target, tau, ub, exact=False, chord_weight=SIZE_CHORD_WEIGHT)
+            if m is None:  # pragma: no cover - always feasible (m = 1)
+                raise InfeasibleRequest("no multiplicities found", src)
+            est = estimated_mean_edge(template, m)
+            if best is None or abs(est / h - 1) < abs(best[0] / h - 1):
+                best = (est, m)
+            if abs(est / h - 1) <= 0.02:
+                break
+            h_eff *= h / est
+        return best[1]
     c = _check_counts(counts, n, src)
     h = float(lengths.sum() / c.sum())
     tau = _tau(template, h)
@@ -484,6 +550,34 @@ def solve_multiplicities(template: PatchTemplate, *, counts=None, size=None) -> 
         return np.where(has_end, m, np.maximum(np.rint(tau), 1).astype(np.int64))
     near = nearest_counts(template, c)
     raise InfeasibleRequest(_infeasible_text(template, c, near), src, near)
+
+
+def estimated_mean_edge(template: PatchTemplate, mult) -> float:
+    """Mean edge length (user units) of the refinement by ``mult``, estimated from the
+    template's placement: every template edge split into ``mult`` equal pieces, and the inner
+    grid lines of each quad as long as the mean of the two quad edges they run along."""
+    m = np.asarray(mult, np.int64)
+    pl = template.placement
+    xy = pl.xy
+    q = np.asarray(pl.mesh.quads, np.int64)
+    p = xy[q]
+    ln = np.linalg.norm(np.roll(p, -1, axis=1) - p, axis=-1)  # (F, 4) edge k: q[k] -> q[k+1]
+    el = np.linalg.norm(xy[template.edge_list[:, 0]] - xy[template.edge_list[:, 1]], axis=1)
+    ma, mb = m[template.quad_chords[:, 0]], m[template.quad_chords[:, 1]]
+    total = el.sum() + np.sum((mb - 1) * (ln[:, 0] + ln[:, 2]) / 2 + (ma - 1) * (ln[:, 1] + ln[:, 3]) / 2)
+    count = m[template.edge_chord].sum() + np.sum(ma * (mb - 1) + mb * (ma - 1))
+    return float(total / count)
+
+
+def feasible(template: PatchTemplate, counts) -> bool:
+    """Whether some multiplicities give exactly ``counts`` ``(n_sides,)`` edges per side."""
+    A = template.side_matrix()
+    c = np.asarray(counts, np.int64)
+    if c.sum() % 2:
+        return False
+    has_end = A.sum(axis=0) > 0
+    ub = np.where(has_end, max(int(c.max()), 1), 1).astype(np.int64)
+    return _milp_l1(A, c.astype(np.float64), np.ones(A.shape[1]), ub, exact=True) is not None
 
 
 def nearest_counts(template: PatchTemplate, counts) -> np.ndarray:
@@ -574,6 +668,20 @@ class RefinedMesh(NamedTuple):
         """No inverted quad."""
         return self.inverted == 0
 
+    def as_placement(self) -> Placement:
+        """The mesh as a :class:`~jaxmatch.placement.embed.Placement` (for the mesh writers and
+        pictures; no alignment, no boundary paths)."""
+        from jaxmatch.catalogue.mesh import QuadMesh, valences
+
+        quads = np.ascontiguousarray(self.quads.astype(np.int32))
+        sj, amin, amax = quality(self.xy, quads)
+        internal = np.ones(self.xy.shape[0], bool)
+        internal[self.boundary] = False
+        irregular = np.flatnonzero(internal & (valences(quads, self.xy.shape[0]) != 4))
+        return Placement(mesh=QuadMesh(quads=quads, boundary=self.boundary.astype(np.int32)), xy=self.xy,
+                         scaled_jacobian=sj, min_angle=amin, max_angle=amax, inverted=self.inverted,
+                         irregular=irregular, region_area=self.region_area, mesh_area=self.mesh_area)
+
     def mean_edge_length(self) -> float:
         """Mean length of the mesh's edges (each once), user units."""
         e = edges(self.quads)
@@ -582,13 +690,16 @@ class RefinedMesh(NamedTuple):
 
 def _refine_topology(quads: np.ndarray, edge_list: np.ndarray, edge_chord: np.ndarray, quad_chords: np.ndarray,
                      mult: np.ndarray):
-    """Split quads into grids. Returns ``(n_vertices, quads (Q, 4) int64, edge_base (E,) int64,
-    owner (V', 4) int64 quad-or-edge provenance for interpolation)``.
+    """Split quads into grids.
 
-    Vertex numbering: the template's vertices keep their ids; then the inner points of every
-    template edge ``(u, w)`` (``u < w``), ``mult - 1`` of them from ``u`` to ``w``; then the inner
-    points of each quad grid. ``interp``: ``(V', 4)`` float weights and ``(V', 4)`` template
-    vertex ids giving each new vertex as a bilinear combination of its quad's corners."""
+    quads: (F, 4) template quads; edge_list (E, 2), edge_chord (E,), quad_chords (F, 2): see
+    :class:`PatchTemplate`; mult: (C,) multiplicities. Vertex numbering: the template's vertices
+    keep their ids; then the inner points of every template edge ``(u, w)`` (``u < w``),
+    ``mult - 1`` of them from ``u`` to ``w``, edge by edge; then the inner points of each quad's
+    grid. Returns ``(n_vertices, quads (Q, 4) int64, along, weights (V' , 4), corners (V', 4))``:
+    ``along(a, b, k, m)`` the vertex ids at step ``k`` of ``m`` from template vertex ``a`` to
+    ``b``; each new vertex ``V + r`` is ``sum_k weights[r, k] * x[corners[r, k]]`` (bilinear in
+    its template quad; linear on its template edge)."""
     q = np.asarray(quads, np.int64)
     V = int(q.max()) + 1
     E = edge_list.shape[0]
@@ -655,17 +766,25 @@ def refine_and_place(template: PatchTemplate, mult, *, smooth_iters: int | None 
     """Split every quad by the multiplicities of its two chords, put the refined boundary
     vertices on the user's boundary by arc length, place and smooth the interior.
 
+    Raises :class:`InputError` when the mesh would have more than :data:`MAX_QUADS` quads.
+
     mult: ``(n_chords,)`` ints >= 1. Boundary: side i gets ``counts[i] = side_matrix[i] @ mult``
     edges, its vertices evenly spaced by arc length on the user's side (:func:`side_points`;
     corners exactly the input points). Interior: bilinear interpolation of the template's
     placement in each template quad, moved by the harmonic (uniform-weight) extension of the
     boundary vertices' displacement, then :func:`jaxmatch.placement.embed.smooth`
-    (``smooth_iters`` L-BFGS iterations per round; default 200, fewer for meshes above 2000
-    quads) in a normalised frame.
+    in a normalised frame (``smooth_iters`` L-BFGS iterations per round; default:
+    :data:`SMOOTH_ITERS` up to :data:`SMOOTH_ALWAYS` quads; above, :data:`SMOOTH_ITERS_LARGE`
+    and only when the interpolated placement folds or has a scaled Jacobian below
+    :data:`SJ_FLOOR`).
     """
     m = np.asarray(mult, np.int64).ravel()
     if m.shape[0] != template.n_chords or np.any(m < 1):
         raise ValueError(f"mult must be {template.n_chords} integers >= 1")
+    n_quads = int(np.sum(m[template.quad_chords[:, 0]] * m[template.quad_chords[:, 1]]))
+    if n_quads > MAX_QUADS:
+        raise InputError(f"the refined mesh would have {n_quads} quads, more than the maximum {MAX_QUADS} "
+                         "(ask for fewer edges or a larger size)", template.shape.source)
     pl = template.placement
     tq = np.asarray(pl.mesh.quads, np.int64)
     nv, quads, along, W, VV = _refine_topology(tq, template.edge_list, template.edge_chord, template.quad_chords, m)
@@ -705,14 +824,20 @@ def refine_and_place(template: PatchTemplate, mult, *, smooth_iters: int | None 
         disp[free] = np.asarray(scipy.sparse.linalg.spsolve(Lf, rhs)).reshape(-1, 2)
     xy = xy + disp
     xy[bverts] = bxy
-    # smoothing in a normalised frame
-    iters = (200 if quads.shape[0] <= 2000 else 30) if smooth_iters is None else int(smooth_iters)
-    off = bxy.mean(axis=0)
-    sc = float(np.sqrt(np.mean(np.sum((bxy - off) ** 2, axis=1)))) or 1.0
-    xs = smooth((xy - off) / sc, quads, bverts, iters=iters)
-    xy = xs * sc + off
-    xy[bverts] = bxy  # exact boundary positions
     sj = quality(xy, quads)[0]
+    bad = int(inverted_mask(xy, quads).sum()) > 0 or float(sj.min()) < SJ_FLOOR
+    if smooth_iters is not None:
+        iters = int(smooth_iters)
+    elif quads.shape[0] <= SMOOTH_ALWAYS:
+        iters = SMOOTH_ITERS
+    else:
+        iters = SMOOTH_ITERS_LARGE if bad else 0
+    if iters > 0:  # in a normalised frame (centred, unit RMS radius)
+        off = bxy.mean(axis=0)
+        sc = float(np.sqrt(np.mean(np.sum((bxy - off) ** 2, axis=1)))) or 1.0
+        xy = smooth((xy - off) / sc, quads, bverts, iters=iters) * sc + off
+        xy[bverts] = bxy  # exact boundary positions
+        sj = quality(xy, quads)[0]
     p = xy[quads]
     el = np.linalg.norm(np.roll(p, -1, axis=1) - p, axis=-1)
     ratio = el.max(axis=1) / np.maximum(el.min(axis=1), np.finfo(float).tiny)
@@ -751,8 +876,8 @@ class RefineChoice(NamedTuple):
     note: str | None = None
 
 
-def refine_mesh(shape: Shape, catalogue: "Catalogue", lattice: "Lattice", *, sides=None, size=None,
-                internal=None, limit: int = 20) -> RefineChoice:
+def refine_mesh(shape: Shape, catalogue: "Catalogue" = None, lattice: "Lattice" = None, *, sides=None, size=None,
+                internal=None, limit: int = 10, templates: Sequence[PatchTemplate] | None = None) -> RefineChoice:
     """A quad mesh of ``shape`` with the requested number of edges per side, or edges of about
     the requested length: the Python API of ``jaxmatch mesh --sides/--size``.
 
@@ -764,14 +889,19 @@ def refine_mesh(shape: Shape, catalogue: "Catalogue", lattice: "Lattice", *, sid
     The templates (:func:`patch_templates`: ranked catalogue meshes of every size, ``limit``
     per size, that keep every corner and place without folds) are tried best first; the first
     whose refinement meets the request (:func:`solve_multiplicities`) and places without
-    inverted quads (:func:`refine_and_place`) is taken; better-ranked ones passed over are listed
-    with the reason. For ``size``, "meets" means a mean boundary edge length within
-    :data:`SIZE_TOLERANCE` of ``size``; when no template does, the closest is taken and
+    inverted quads with a min scaled Jacobian >= :data:`SJ_FLOOR` (:func:`refine_and_place`) is
+    taken; better-ranked ones passed over are listed with the reason. When every refinement
+    that meets the request is below that quality, the best of them is taken and ``note`` says
+    so. For ``size``, "meets" means an estimated mean edge length (:func:`estimated_mean_edge`)
+    within :data:`SIZE_TOLERANCE` of ``size``; when no template does, the closest is taken and
     ``note`` says so.
 
     Raises :class:`InfeasibleRequest` when no template can meet ``sides`` (the message names the
     sides and the nearest feasible counts over all templates), :class:`InputError` for malformed
     requests, :class:`jaxmatch.errors.UnmatchableError` when no mesh matches the shape.
+
+    templates: already fitted templates of ``shape`` (e.g. from :func:`patch_templates`, to
+    serve many requests); then ``catalogue``, ``lattice``, ``internal`` and ``limit`` are unused.
     """
     if (sides is None) == (size is None):
         raise ValueError("give exactly one of sides and size")
@@ -781,55 +911,71 @@ def refine_mesh(shape: Shape, catalogue: "Catalogue", lattice: "Lattice", *, sid
     passed: list = []
     rejected: list = []
     best_fail: tuple | None = None  # (distance, template, InfeasibleRequest)
+    fallback: tuple | None = None  # (key, template, refined mesh, why): met the request, below the quality floor
     best_size: tuple | None = None  # (deviation, template, mult)
-    folded: tuple | None = None
-    perimeter = float(side_lengths(shape).sum())
-    for t in _iter_templates(shape, catalogue, lattice, limit=limit, internal=internal, rejected=rejected):
-        try:
-            mult = solve_multiplicities(t, counts=sides, size=size)
-        except InfeasibleRequest as e:
-            d = int(np.abs(np.asarray(e.nearest) - np.asarray(sides)).sum())
-            if best_fail is None or d < best_fail[0]:
-                best_fail = (d, t, e)
-            passed.append((t.rank, t.mesh_id, "cannot meet the counts: nearest feasible " + _fmt(e.nearest)))
-            continue
+    def check(t: PatchTemplate) -> str | None:
+        nonlocal best_fail
+        if sides is None or feasible(t, sides):
+            return None
+        near = nearest_counts(t, sides)
+        d = int(np.abs(near - np.asarray(sides)).sum())
+        if best_fail is None or d < best_fail[0]:
+            best_fail = (d, t, near)
+        return "cannot meet the counts: nearest feasible " + _fmt(near)
+
+    if templates is None:
+        walk = _iter_templates(shape, catalogue, lattice, limit=limit, internal=internal, rejected=passed, check=check)
+    else:
+        walk = _given(templates, passed, check)
+    for t in walk:
+        mult = solve_multiplicities(t, counts=sides, size=size)
         if size is not None:
-            total = int((t.side_matrix() @ mult).sum())
-            dev = abs(perimeter / total - float(size)) / float(size)
+            est = estimated_mean_edge(t, mult)
+            dev = abs(est - float(size)) / float(size)
             if dev > SIZE_TOLERANCE:
                 if best_size is None or dev < best_size[0]:
                     best_size = (dev, t, mult)
-                passed.append((t.rank, t.mesh_id, f"mean boundary edge {perimeter / total:.4g}, "
-                                                  f"{100 * dev:.0f}% from the size"))
+                passed.append((t.rank, t.mesh_id, f"mean edge about {est:.4g}, {100 * dev:.0f}% from the size"))
                 continue
         rm = refine_and_place(t, mult)
-        if not rm.valid:
-            if folded is None:
-                folded = (t, rm)
-            passed.append((t.rank, t.mesh_id, f"refined mesh folds ({rm.inverted} inverted quads)"))
-            continue
-        return RefineChoice(rm, t, _merge(passed, rejected, t.rank))
+        if rm.valid and rm.min_scaled_jacobian >= SJ_FLOOR:
+            return RefineChoice(rm, t, _merge(passed, rejected, t.rank))
+        why = (f"refined mesh folds ({rm.inverted} inverted quads)" if not rm.valid
+               else f"refined mesh has min scaled Jacobian {rm.min_scaled_jacobian:.3f} < {SJ_FLOOR}")
+        key = (rm.inverted, -rm.min_scaled_jacobian)
+        if fallback is None or key < fallback[0]:
+            fallback = (key, t, rm, why)
+        passed.append((t.rank, t.mesh_id, why))
+    if fallback is not None:
+        _, t, rm, why = fallback
+        return RefineChoice(rm, t, _merge([p for p in passed if p[0] != t.rank], rejected, t.rank),
+                            f"no refinement that meets the request has min scaled Jacobian >= {SJ_FLOOR} without "
+                            f"folds; kept the best, {t.mesh_id} ({why})")
     if size is not None and best_size is not None:
         _, t, mult = best_size
         rm = refine_and_place(t, mult)
-        passed = [p for p in passed if p[0] != t.rank]
         note = (f"no template meets size {float(size):g} within {100 * SIZE_TOLERANCE:.0f}%; "
-                f"took the closest, {t.mesh_id} (mean boundary edge {perimeter / int(rm.counts.sum()):.4g})")
-        return RefineChoice(rm, t, _merge(passed, rejected, t.rank), note)
-    if folded is not None:
-        t, rm = folded
-        return RefineChoice(rm, t, _merge([p for p in passed if p[0] != t.rank], rejected, t.rank),
-                            f"every refinement that meets the request folds; kept {t.mesh_id}")
+                f"took the closest, {t.mesh_id} (mean edge {rm.mean_edge_length():.4g})")
+        return RefineChoice(rm, t, _merge([p for p in passed if p[0] != t.rank], rejected, t.rank), note)
     if best_fail is not None:
-        _, t, e = best_fail
+        _, t, near = best_fail
         c = np.asarray(sides, np.int64)
-        near = e.nearest
-        why = e.problem.split(": ", 1)[1].rsplit("; nearest", 1)[0]
-        raise InfeasibleRequest(f"edge counts {_fmt(c)} cannot be met by any of the {len(passed)} templates; "
-                                f"closest template {t.mesh_id}: {why}; nearest feasible counts {_fmt(near)}",
+        tried = sum(1 for p in passed if p[2].startswith("cannot meet"))
+        why = _infeasible_text(t, c, near).split(": ", 1)[1].rsplit("; nearest", 1)[0]
+        raise InfeasibleRequest(f"edge counts {_fmt(c)} cannot be met by any of the {tried} templates that keep the "
+                                f"corners; closest template {t.mesh_id}: {why}; nearest feasible counts {_fmt(near)}",
                                 shape.source, near)
     raise InfeasibleRequest("no catalogue mesh keeps every corner of the shape without folding"
-                            + (f" (tried {len(rejected)})" if rejected else ""), shape.source)
+                            + (f" (tried {len(passed)})" if passed else ""), shape.source)
+
+
+def _given(templates, passed: list, check) -> Iterator[PatchTemplate]:
+    for t in templates:
+        why = check(t)
+        if why is None:
+            yield t
+        else:
+            passed.append((t.rank, t.mesh_id, why))
 
 
 def _merge(passed: list, rejected: list, upto: int) -> list:

@@ -1,0 +1,415 @@
+"""Refinement of templates by chord multiplicities (``jaxmatch.placement.refine``, ``mesh --sides/--size``).
+
+Specification checked here, each against an independent reference:
+
+* chords equal those found by walking strips quad by quad (plain Python);
+* the refined topology is a valid quad mesh of a disk with ``sum ma * mb`` quads and no new
+  irregular vertex;
+* the integer program says "feasible" exactly when brute-force enumeration of the
+  multiplicities reaches the counts, and its solutions meet them exactly;
+* requests: feasible ones are met exactly (counts per side, corners on input corners,
+  boundary vertices on the input boundary, no fold); infeasible ones raise an error naming
+  the sides and the nearest feasible counts;
+* ``size``: mean edge length within 20 %, min scaled Jacobian >= 0.3, no inverted quad, boundary
+  vertices on the input boundary (point-to-segment distances computed here);
+* two squares sharing a side get bit-identical vertices on it.
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from jaxmatch.catalogue.mesh import QuadMesh, edges, from_quads, valences, validate
+from jaxmatch.errors import EXIT_BAD_INPUT, InputError
+from jaxmatch.placement import refine as R
+from jaxmatch.scoring.lattice import load_lattice
+from jaxmatch.shape import load_shape, make_shape
+
+ROOT = Path(__file__).resolve().parent.parent
+EXAMPLES = ROOT / "examples"
+LABELLED = EXAMPLES / "labels" / "shapes"
+_TEMPLATES: dict = {}
+
+
+@pytest.fixture(scope="module")
+def lat():
+    return load_lattice("fine")
+
+
+@pytest.fixture(scope="module")
+def templates(cat, lat):
+    """``templates(path) -> (shape, [PatchTemplate])``, computed once per shape (limit 4 per size)."""
+
+    def get(path):
+        path = Path(path)
+        if path not in _TEMPLATES:
+            shp = load_shape(path)
+            _TEMPLATES[path] = (shp, R.patch_templates(shp, cat, lat, limit=4))
+        return _TEMPLATES[path]
+
+    return get
+
+
+# ---------------------------------------------------------------------------------------------
+# independent references
+
+
+def strips(quads) -> set[frozenset]:
+    """Chords by walking: from an edge, through each quad holding it, to the opposite edge."""
+    q = np.asarray(quads).tolist()
+    holders: dict[tuple, list] = {}
+    for f, quad in enumerate(q):
+        for k in range(4):
+            e = tuple(sorted((quad[k], quad[(k + 1) % 4])))
+            holders.setdefault(e, []).append((f, k))
+    seen, out = set(), set()
+    for e0 in holders:
+        if e0 in seen:
+            continue
+        chord, todo = set(), [e0]
+        while todo:
+            e = todo.pop()
+            if e in chord:
+                continue
+            chord.add(e)
+            for f, k in holders[e]:
+                quad = q[f]
+                todo.append(tuple(sorted((quad[(k + 2) % 4], quad[(k + 3) % 4]))))
+        seen |= chord
+        out.add(frozenset(chord))
+    return out
+
+
+def reachable(A: np.ndarray, cap: int) -> set[tuple]:
+    """Every count vector ``A @ m`` with integer ``m >= 1`` and all counts <= cap (enumeration)."""
+    n, C = A.shape
+    states = {tuple([0] * n)}
+    for c in range(C):
+        col = A[:, c]
+        if not col.any():
+            continue
+        nxt = set()
+        for s in states:
+            for k in range(1, cap + 1):
+                v = tuple(int(a + k * b) for a, b in zip(s, col))
+                if max(v) > cap:
+                    break
+                nxt.add(v)
+        states = nxt
+    return states
+
+
+def boundary_distance(points_xy, loop_xy) -> np.ndarray:
+    """Distance of each point ``(k, 2)`` to the closed polyline ``loop_xy (P, 2)``."""
+    a = np.asarray(loop_xy, float)
+    b = np.roll(a, -1, axis=0)
+    p = np.asarray(points_xy, float)[:, None, :]
+    d = b - a
+    t = np.clip(np.sum((p - a) * d, axis=-1) / np.sum(d * d, axis=-1), 0.0, 1.0)
+    return np.min(np.linalg.norm(p - (a + t[..., None] * d), axis=-1), axis=1)
+
+
+def check_refined(rm: R.RefinedMesh, shape) -> None:
+    """What every refined mesh must satisfy, measured independently of the code under test."""
+    user = shape.input_points
+    diam = float(np.ptp(user, axis=0).max())
+    loop = from_quads(rm.quads).boundary  # the boundary as found from the quads
+    assert sorted(loop.tolist()) == sorted(rm.boundary.tolist())
+    assert boundary_distance(rm.xy[rm.boundary], user).max() <= 1e-9 * diam
+    for i, sv in enumerate(rm.side_vertices):
+        assert sv.shape[0] == rm.counts[i] + 1
+    polys = R.side_polylines(shape)
+    for sv, poly in zip(rm.side_vertices, polys):  # corners exactly on the input corners
+        assert np.array_equal(rm.xy[sv[0]], poly[0]) and np.array_equal(rm.xy[sv[-1]], poly[-1])
+    area = 0.5 * abs(np.sum(user[:, 0] * np.roll(user[:, 1], -1) - np.roll(user[:, 0], -1) * user[:, 1]))
+    p = rm.xy[rm.quads]
+    qa = 0.5 * np.sum(p[..., 0] * np.roll(p[..., 1], -1, axis=1) - np.roll(p[..., 0], -1, axis=1) * p[..., 1], axis=1)
+    assert rm.area_ratio == pytest.approx(qa.sum() / area)
+    assert validate(QuadMesh(rm.quads.astype(np.int32), rm.boundary.astype(np.int32)), invariant_i=False) == []
+
+
+# ---------------------------------------------------------------------------------------------
+# sides
+
+
+@settings(max_examples=60)
+@given(st.lists(st.floats(-1e3, 1e3, allow_nan=False, width=64), min_size=4, max_size=4), st.integers(1, 60))
+def test_straight_side_points_do_not_depend_on_direction(xy, count):
+    a, b = np.array(xy[:2]), np.array(xy[2:])
+    if np.array_equal(a, b):
+        return
+    fwd = R.side_points(np.stack([a, b]), count)
+    back = R.side_points(np.stack([b, a]), count)
+    assert np.array_equal(fwd, back[::-1])  # bit-identical
+    assert np.array_equal(fwd[0], a) and np.array_equal(fwd[-1], b)
+    gaps = np.linalg.norm(np.diff(fwd, axis=0), axis=1)
+    assert np.allclose(gaps, np.linalg.norm(b - a) / count, rtol=1e-9, atol=1e-9)
+
+
+@settings(max_examples=40)
+@given(st.integers(3, 8), st.integers(1, 40), st.integers(0, 2**31))
+def test_curved_side_points_lie_on_the_polyline_evenly(k, count, seed):
+    rng = np.random.default_rng(seed)
+    poly = np.cumsum(rng.uniform(0.1, 1.0, (k, 2)) * [1, 1], axis=0)
+    pts = R.side_points(poly, count)
+    seg_a, seg_b = poly[:-1], poly[1:]
+    d = seg_b - seg_a
+    t = np.clip(np.sum((pts[:, None] - seg_a) * d, -1) / np.sum(d * d, -1), 0, 1)
+    dist = np.linalg.norm(pts[:, None] - (seg_a + t[..., None] * d), axis=-1).min(axis=1)
+    assert dist.max() <= 1e-12 * np.abs(poly).max()
+    # arc-length parameter of each point: equal steps
+    cum = np.concatenate([[0], np.cumsum(np.linalg.norm(d, axis=1))])
+    j = np.argmin(np.linalg.norm(pts[:, None] - (seg_a + t[..., None] * d), axis=-1), axis=1)
+    s = cum[j] + t[np.arange(len(j)), j] * np.linalg.norm(d[j], axis=1)
+    assert np.allclose(np.diff(s), cum[-1] / count, rtol=1e-9, atol=1e-12)
+    assert np.array_equal(pts[0], poly[0]) and np.array_equal(pts[-1], poly[-1])
+
+
+@pytest.mark.parametrize("clockwise", [False, True])
+@pytest.mark.parametrize("explicit", [None, [2, 3, 0, 1]])
+def test_sides_follow_the_users_corners(clockwise, explicit):
+    pts = [[0.0, 0.0], [2.0, 0.0], [2.0, 1.0], [0.0, 1.0]]
+    if clockwise:
+        pts = [pts[0], pts[3], pts[2], pts[1]]
+    shp = make_shape(pts, explicit)
+    order = explicit if explicit is not None else [0, 1, 2, 3]
+    polys = R.side_polylines(shp)
+    for i, poly in enumerate(polys):
+        assert np.array_equal(poly[0], pts[order[i]]) and np.array_equal(poly[-1], pts[order[(i + 1) % 4]])
+    assert np.allclose(R.side_lengths(shp), [np.linalg.norm(np.subtract(pts[order[(i + 1) % 4]], pts[order[i]]))
+                                           for i in range(4)])
+
+
+def test_corners_out_of_boundary_order_are_refused():
+    shp = make_shape([[0, 0], [2, 0], [2, 1], [0, 1]], [0, 2, 1, 3], source="s.json")
+    with pytest.raises(InputError, match="s.json: corners are not listed in boundary order"):
+        R.side_polylines(shp)
+
+
+# ---------------------------------------------------------------------------------------------
+# chords and refinement topology
+
+
+def _sample_meshes(cat, per_k=4):
+    out = []
+    for b in cat.buckets(None):
+        for k, mid in zip(b.k.tolist(), b.ids.tolist()):
+            if k <= 2 or len([1 for kk, _ in out if kk == k]) < per_k:
+                out.append((k, str(mid)))
+    return [mid for _, mid in out]
+
+
+def test_chords_equal_walked_strips(cat):
+    for mid in _sample_meshes(cat):
+        mesh = cat.mesh(mid)
+        loop = mesh.boundary.tolist()
+        first = list(zip(loop, loop[1:] + loop[:1]))
+        e, chord, qc, nc = R._chords(mesh.quads, mesh.boundary, first)
+        mine = {frozenset(tuple(x) for x in e[chord == c].tolist()) for c in range(nc)}
+        assert mine == strips(mesh.quads), mid
+        # quad_chords: chord of edges 0/2 and 1/3
+        q = np.asarray(mesh.quads)
+        key = {tuple(x): c for x, c in zip(e.tolist(), chord.tolist())}
+        for f, quad in enumerate(q.tolist()):
+            for k in range(4):
+                assert key[tuple(sorted((quad[k], quad[(k + 1) % 4])))] == qc[f, k % 2]
+        # chords numbered by first boundary edge along the sides; every open chord has two ends
+        bch = [key[tuple(sorted(x))] for x in first]
+        assert [c for i, c in enumerate(bch) if c not in bch[:i]] == list(range(len(set(bch))))
+        assert all(bch.count(c) == 2 for c in set(bch))
+
+
+@settings(max_examples=30)
+@given(st.data())
+def test_refined_topology_is_a_disk_without_new_irregular_vertices(cat, data):
+    ids = _sample_meshes(cat, per_k=3)
+    mid = data.draw(st.sampled_from(ids))
+    mesh = cat.mesh(mid)
+    loop = mesh.boundary.tolist()
+    e, chord, qc, nc = R._chords(mesh.quads, mesh.boundary, list(zip(loop, loop[1:] + loop[:1])))
+    mult = np.array(data.draw(st.lists(st.integers(1, 4), min_size=nc, max_size=nc)), np.int64)
+    nv, quads, along, W, VV = R._refine_topology(np.asarray(mesh.quads, np.int64), e, chord, qc, mult)
+    assert quads.shape[0] == int(np.sum(mult[qc[:, 0]] * mult[qc[:, 1]]))
+    assert quads.max() + 1 == nv
+    fine = from_quads(quads)
+    assert validate(fine, invariant_i=False) == []
+    bnd_old = set(loop)
+    assert fine.n_boundary == sum(int(mult[c]) for c in [chord[np.flatnonzero((e[:, 0] == min(a, b)) & (e[:, 1] == max(a, b)))[0]]
+                                                         for a, b in zip(loop, loop[1:] + loop[:1])])
+    val_old, val_new = valences(mesh.quads), valences(quads)
+    internal_new = np.setdiff1d(np.arange(nv), fine.boundary)
+    irregular_new = {int(v) for v in internal_new if val_new[v] != 4}
+    irregular_old = {v for v in range(mesh.n_vertices) if v not in bnd_old and val_old[v] != 4}
+    assert irregular_new == irregular_old
+    assert np.allclose(W.sum(axis=1), 1.0)
+
+
+# ---------------------------------------------------------------------------------------------
+# integer programs
+
+
+@pytest.mark.parametrize("name, cap", [("square.json", 4), ("triangle.json", 6)])
+def test_milp_feasibility_equals_enumeration(templates, name, cap):
+    shp, ts = templates(EXAMPLES / name)
+    n = max(shp.n_corners, 1)
+    for t in ts[:5]:
+        A = t.side_matrix()
+        reach = reachable(A, cap)
+        for c in itertools.product(range(1, cap + 1), repeat=n):
+            ok = R.feasible(t, c)
+            assert ok == (c in reach), (t.mesh_id, c)
+            if ok:
+                m = R.solve_multiplicities(t, counts=c)
+                assert m.min() >= 1 and np.array_equal(A @ m, c)
+
+
+def test_infeasible_request_names_sides_and_nearest(templates):
+    shp, ts = templates(EXAMPLES / "square.json")
+    t = next(t for t in ts if t.side_matrix().sum(axis=1).min() >= 2)
+    low = t.side_matrix().sum(axis=1)
+    with pytest.raises(R.InfeasibleRequest) as err:  # odd total
+        R.solve_multiplicities(t, counts=[int(low[0]) + 1, *low[1:].tolist()])
+    msg = str(err.value)
+    assert "odd" in msg and "nearest feasible counts" in msg and msg.count("\n") == 0
+    assert sum(err.value.nearest) % 2 == 0 and R.feasible(t, err.value.nearest)
+    with pytest.raises(R.InfeasibleRequest) as err:  # too coarse
+        R.solve_multiplicities(t, counts=[1, 1, 1, 1])
+    assert f"side 0 needs at least {low[0]} edges" in str(err.value)
+    near = np.array(err.value.nearest)
+    assert R.feasible(t, near) and np.all(near >= low)
+    with pytest.raises(InputError, match="expected one count per side"):
+        R.solve_multiplicities(t, counts=[2, 2])
+
+
+# ---------------------------------------------------------------------------------------------
+# requests on the examples and labelled shapes
+
+SIDES_SHAPES = [EXAMPLES / "triangle.json", EXAMPLES / "square.json", LABELLED / "pentagon.json",
+                EXAMPLES / "hexagon.json", LABELLED / "lshape.json", LABELLED / "arch.json",
+                LABELLED / "disk.json", LABELLED / "trapezoid.json"]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("path", SIDES_SHAPES, ids=lambda p: p.name)
+def test_sampled_side_requests_are_met_exactly_or_refused(templates, path):
+    shp, ts = templates(path)
+    n = max(shp.n_corners, 1)
+    union = set().union(*(reachable(t.side_matrix(), 8) for t in ts))
+    rng = np.random.default_rng(len(path.name))
+    feas = sorted(union)
+    picks = [feas[i] for i in rng.choice(len(feas), size=min(3, len(feas)), replace=False)]
+    picks += [tuple(int(x) for x in rng.integers(1, 9, n)) for _ in range(3)]
+    for c in picks:
+        if c in union:
+            ch = R.refine_mesh(shp, sides=list(c), templates=ts)
+            assert tuple(ch.mesh.counts.tolist()) == c
+            assert ch.mesh.inverted == 0
+            check_refined(ch.mesh, shp)
+        else:
+            with pytest.raises(R.InfeasibleRequest, match="nearest feasible counts") as err:
+                R.refine_mesh(shp, sides=list(c), templates=ts)
+            assert err.value.nearest in union
+
+
+SIZE_SHAPES = sorted(EXAMPLES.glob("*.json")) + [EXAMPLES / "lshape.txt"]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("path", SIZE_SHAPES, ids=lambda p: p.name)
+def test_size_requests_on_every_example(templates, path):
+    shp, ts = templates(path)
+    perimeter = float(R.side_lengths(shp).sum())
+    for parts in (16, 32, 64):
+        h = perimeter / parts
+        ch = R.refine_mesh(shp, size=h, templates=ts)
+        rm = ch.mesh
+        e = edges(rm.quads)
+        mean = float(np.linalg.norm(rm.xy[e[:, 0]] - rm.xy[e[:, 1]], axis=1).mean())
+        assert abs(mean / h - 1) <= 0.2, (parts, mean / h)
+        assert rm.inverted == 0 and rm.min_scaled_jacobian >= 0.3
+        check_refined(rm, shp)
+
+
+def test_two_squares_sharing_a_side_get_identical_vertices(cat, lat):
+    left = make_shape([[0.1, 0.3], [0.7, 0.3], [0.7, 0.9], [0.1, 0.9]])
+    right = make_shape([[0.7, 0.3], [1.3, 0.3], [1.3, 0.9], [0.7, 0.9]])
+    a = R.refine_mesh(left, cat, lat, sides=[2, 5, 2, 5], limit=3).mesh
+    b = R.refine_mesh(right, cat, lat, sides=[4, 5, 4, 5], limit=3).mesh
+    shared_a = a.xy[a.side_vertices[1]]  # (0.7, 0.3) -> (0.7, 0.9)
+    shared_b = b.xy[b.side_vertices[3]]  # (0.7, 0.9) -> (0.7, 0.3)
+    assert np.array_equal(shared_a, shared_b[::-1])
+    assert np.allclose(np.diff(shared_a[:, 1]), 0.6 / 5)
+
+
+def test_refine_and_place_counts_and_json(templates):
+    shp, ts = templates(EXAMPLES / "square.json")
+    t = ts[0]
+    m = np.arange(1, t.n_chords + 1) % 3 + 1
+    rm = R.refine_and_place(t, m)
+    assert np.array_equal(rm.counts, t.side_matrix() @ m) and np.array_equal(rm.mult, m)
+    check_refined(rm, shp)
+    d = R.refined_json(R.RefineChoice(rm, t, []))
+    assert d["sides"] == rm.counts.tolist() and d["quads"] == rm.n_quads
+    assert [c["multiplicity"] for c in d["chords"]] == m.tolist()
+    with pytest.raises(ValueError):
+        R.refine_and_place(t, np.zeros(t.n_chords, np.int64))
+
+
+# ---------------------------------------------------------------------------------------------
+# command line
+
+
+@pytest.fixture
+def cli(capsys, monkeypatch, tmp_path):
+    from jaxmatch.cli import main
+
+    monkeypatch.setenv("JAXMATCH_CACHE", str(tmp_path / "cache"))
+
+    def run(*args):
+        monkeypatch.setattr(sys, "argv", ["jaxmatch", *map(str, args)])
+        capsys.readouterr()
+        try:
+            main()
+            code = 0
+        except SystemExit as e:
+            code = e.code if isinstance(e.code, int) else 1
+        out, err = capsys.readouterr()
+        return code, out, err
+
+    return run
+
+
+def test_cli_mesh_sides_json_and_errors(cli, tmp_path):
+    out = tmp_path / "m.vtk"
+    code, stdout, err = cli("mesh", EXAMPLES / "square.json", "--sides", "4,2,4,2", "--json", "--out", out)
+    assert code == 0, err
+    d = json.loads(stdout)
+    assert d["sides"] == [4, 2, 4, 2] and d["inverted"] == 0 and out.exists()
+    assert sum(c["multiplicity"] * c["edges_per_side"][0] for c in d["chords"]) == 4
+    for args, words in ((["--sides", "1,2,1,1"], ["--sides", "odd", "nearest feasible counts"]),
+                        (["--sides", "4,2"], ["--sides", "one count per side (4 sides)"]),
+                        (["--sides", "4,x,4,2"], ["--sides", "comma-separated"]),
+                        (["--size", "0"], ["--size", "positive"]),
+                        (["--sides", "4,2,4,2", "--size", "1"], ["either --sides or --size"])):
+        code, stdout, err = cli("mesh", EXAMPLES / "square.json", *args, "--out", tmp_path / "bad.vtk")
+        assert code == EXIT_BAD_INPUT, args
+        line = err.strip()
+        assert "\n" not in line and "Traceback" not in line and all(w in line for w in words), line
+        assert not (tmp_path / "bad.vtk").exists()
+
+
+def test_cli_annotate_lists_sides(cli):
+    code, stdout, _ = cli("annotate", EXAMPLES / "lshape.json", "--json")
+    assert code == 0
+    sides = json.loads(stdout)["sides"]
+    assert [s["length"] for s in sides] == pytest.approx([2, 1, 1, 1, 1, 2])
+    code, stdout, _ = cli("annotate", EXAMPLES / "lshape.json")
+    assert "mesh --sides" in stdout
