@@ -416,6 +416,26 @@ def test_two_blocks_msh_read_back(cat, lat, tmp_path):
     check_msh(out, m)
 
 
+@pytest.mark.parametrize("suffix", [".vtu", ".json"])
+def test_two_blocks_other_formats_keep_patch_and_lines(cat, lat, tmp_path, suffix):
+    import meshio
+
+    m = mesh_layout(load_layout(LAYOUTS / "two-blocks.json"), cat, lat, size=0.5)
+    out = write_layout_mesh(tmp_path / f"t{suffix}", m)
+    if suffix == ".json":
+        d = json.loads(out.read_text())
+        assert d["patch"] == m.patch.tolist() and d["quads"] == m.quads.tolist()
+        assert len(d["groups"]["boundary"]) == m.outer.size and d["quad_groups"]["names"] == ["patch 0", "patch 1"]
+        return
+    r = meshio.read(out)
+    assert np.array_equal(r.cells_dict["quad"], m.quads)
+    assert np.array_equal(r.cell_data_dict["patch"]["quad"], m.patch)
+    lines = r.cells_dict["line"]
+    group = r.cell_data_dict["line_group"]["line"]
+    assert np.sum(group == 0) == m.outer.size  # "boundary" is the first line group
+    assert lines.shape[0] == m.outer.size + int(m.counts.sum())
+
+
 def test_notched_plate_many_patches(cat, lat, tmp_path):
     """The >= 10-patch example: one conforming mesh that gmsh reads with its physical groups."""
     lay = load_layout(LAYOUTS / "notched-plate.json")

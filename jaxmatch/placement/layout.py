@@ -950,6 +950,8 @@ def draw_meshes(path, panels: Sequence[tuple], *, title: str | None = None, ncol
         ax.autoscale_view()
         ax.set_xticks([])
         ax.set_yticks([])
+        for spine in ax.spines.values():
+            spine.set_visible(False)
         ax.set_title(f"{head}\n{mesh_quality_line(xy, quads)}, {irr.size} irregular", fontsize=9)
     if title:
         fig.suptitle(title)
