@@ -45,6 +45,14 @@ ROOT = Path(__file__).resolve().parent.parent
 LAYOUTS = ROOT / "examples" / "layouts"
 
 SQUARE2 = [[0, 0], [1, 0], [2, 0], [2, 1], [1, 1], [0, 1]]
+TJ = {"points": [[0, 0], [2, 0], [2, 1], [1, 1], [0, 1], [1, 2], [0, 2], [2, 2]],
+      "patches": [[0, 1, 2, 3, 4], [4, 3, 5, 6], [3, 2, 7, 5]]}
+
+
+def sid_name(sides, name: str) -> str:
+    """The name of side ``"a-b"`` as the layout spells it (either direction)."""
+    rev = "-".join(name.split("-")[::-1])
+    return next(n for n in sides.names if n in (name, rev))
 
 
 @pytest.fixture(scope="module")
@@ -144,7 +152,6 @@ BAD = [
     ({"points": [[0, 0], [1, 0], [1, 1], [0, 1], [1, 1e-13]], "patches": [[0, 4, 2, 3]]}, "same place"),
     ({"points": [[0, 0], [3, 0], [0, 1], [1, 2]], "patches": [[0, 1, 2, 3]]}, "crosses"),
     ({"points": [[0, 0], [1, 0], [2, 0]], "patches": [[0, 1, 2]]}, "zero area"),
-    ({"points": SQUARE2 + [[1, -1]], "patches": [[0, 1, 2, 3, 4, 5], [0, 6, 1]], "corners": [0, 2, 3, 5, 6]}, "not the whole side"),
     ({"points": SQUARE2, "patches": [[0, 1, 4, 5], [1, 2, 3, 4]], "sides": {"0-3": 2}}, "not a side"),
     ({"points": SQUARE2, "patches": [[0, 1, 4, 5], [1, 2, 3, 4]], "sides": {"0-1": 0}}, "positive integer"),
     ({"points": SQUARE2, "patches": [[0, 1, 4, 5]], "colour": 1}, "unknown key"),
@@ -179,6 +186,17 @@ def test_orientation_and_corners_are_normalised():
     assert len(sd.chains) == 7 and int((~sd.outer).sum()) == 1
     shared = int(np.flatnonzero(~sd.outer)[0])
     assert sd.names[shared] in ("1-4", "4-1") and sorted(sd.users[shared].tolist()) == [0, 1]
+
+
+def test_t_junction_splits_a_patch_side():
+    # a 2 x 1 block below two unit squares: point 3 is a corner of both squares and lies on the
+    # block's top side, which is made of two sides
+    lay = make_layout(TJ["points"], TJ["patches"])
+    assert lay.patch_corner[0].sum() == 4  # (1, 1) is not a corner of the block
+    sd = layout_sides(lay)
+    top = [parts for parts in sd.patch_sides[0] if len(parts) > 1]
+    assert len(top) == 1 and sorted(sd.names[s] for s in top[0]) == sorted([sid_name(sd, "2-3"), sid_name(sd, "3-4")])
+    assert all(sd.users[s, 1] >= 0 for s in top[0])
 
 
 def test_side_names_by_chain_when_ends_repeat():
@@ -219,7 +237,7 @@ def brute(sides, matrices, counts, size, bound=7):
     n = np.full((m.shape[0], S), -1)
     ok = np.ones(m.shape[0], bool)
     for p, (A, mp) in enumerate(zip(matrices, parts)):
-        for i, s in enumerate(sides.patch_sides[p]):
+        for i, (s,) in enumerate(sides.patch_sides[p]):
             v = mp @ A[i]
             ok &= (n[:, s] < 0) | (n[:, s] == v)
             n[:, s] = v
@@ -249,7 +267,7 @@ def test_program_matches_brute_force(widths, size, data):
     mults, n = solve_counts(sd, mats, counts=req, size=size)
     for p, (A, m) in enumerate(zip(mats, mults)):
         assert np.all(m >= 1)
-        assert np.array_equal(A @ m, n[sd.patch_sides[p]])  # shared sides: one count
+        assert np.array_equal(A @ m, [n[parts].sum() for parts in sd.patch_sides[p]])  # shared sides: one count
     assert all(n[s] == c for s, c in req.items())
     got = sum(abs(n[s] - sd.lengths[s] / size) for s in range(S) if s not in req) + 0.01 * sum(float(np.sum(m - 1)) for m in mults)
     assert got == pytest.approx(want, abs=1e-6)
@@ -315,7 +333,7 @@ def test_merge_grids_is_conforming():
     patches = []
     for p, loop in enumerate(lay.patches):
         g = grid_patch(lay.points[loop], nx[p], ny)
-        for i, s in enumerate(sd.patch_sides[p]):
+        for i, (s,) in enumerate(sd.patch_sides[p]):
             n[s] = g.counts[i]
         patches.append(g)
     xy, quads, patch, side_ids, gap = merge_patches(lay, sd, patches, n)
@@ -363,6 +381,19 @@ def test_requested_counts_and_triangle_patch(cat, lat):
     with pytest.raises(LayoutInfeasible, match="asked, nearest feasible") as e:
         mesh_layout(lay, cat, lat, counts=odd)
     assert sum(e.value.nearest.values()) % 2 == 0
+
+
+def test_t_junction_mesh_is_conforming(cat, lat):
+    lay = make_layout(TJ["points"], TJ["patches"])
+    m = mesh_layout(lay, cat, lat, size=0.25)
+    check_conforming(m.xy, m.quads, outline_of(lay))
+    assert m.inverted == 0 and m.shared_gap == 0.0
+    assert np.min(np.linalg.norm(m.xy - [1.0, 1.0], axis=1)) == 0.0  # the junction is a vertex
+    # the block's top side carries the squares' bottom sides, evenly spaced on each
+    for name in ("2-3", "3-4"):
+        ids = m.side_vertices[m.sides.names.index(sid_name(m.sides, name))]
+        step = np.linalg.norm(np.diff(m.xy[ids], axis=0), axis=1)
+        assert np.allclose(step, step[0])
 
 
 def read_gmsh(path):

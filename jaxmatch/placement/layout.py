@@ -8,10 +8,13 @@ Layout file (JSON)::
      "corners": [i, ...],                     # optional: the points that are patch corners (default: all)
      "sides": {"i-j": count, ...}}            # optional: edges wanted on a side
 
-A *side* is the chain of points of a patch between two consecutive corners; it is named by its
-end points ``"i-j"`` (either order; when two sides have the same ends, by the whole chain
-``"i-k-j"``). Two patches share a side when they share its consecutive point indices, and a
-shared side must be the same chain in both (a point where two patches part is a corner).
+A point listed in ``corners`` is a corner of each patch that turns there; a point on a
+straight run of a patch (e.g. where two neighbours meet along its side: a T-junction) is not.
+A *side* is a chain of points between two *nodes* (points that are a corner of some patch, or
+where the patches along the boundary change); it is named by its end points ``"i-j"`` (either
+order; when two sides have the same ends, by the whole chain ``"i-k-j"``), and is shared by the
+patches that run along it. A patch side (between two consecutive corners of the patch) is one
+side, or several where neighbours meet along it.
 Rules checked by :func:`make_layout` (each failure is one :class:`InputError` line): indices in
 range, no point listed twice in a patch, no two points at the same place, simple patches of
 non-zero area, no segment used by three patches or twice in the same direction, no overlapping
@@ -25,8 +28,9 @@ template refined is better shaped than a fine one); ONE integer program
 (:func:`solve_counts`, ``scipy.optimize.milp``/HiGHS) chooses the chord multiplicities of all
 patches at once: each patch's side counts are its ``side_matrix @ multiplicities``, a shared
 side has one count, requested counts are met exactly, and without them the counts are closest
-to ``side length / size``. Each patch is refined (:func:`jaxmatch.placement.refine.refine_and_place`)
-and the patches are merged (:func:`merge_patches`): the vertices of a side get one global id
+to ``side length / size``. Each patch is refined (:func:`jaxmatch.placement.refine.refine_and_place`),
+patch sides made of several sides are fitted to them (:func:`fit_sides`), and the patches are
+merged (:func:`merge_patches`): the vertices of a side get one global id
 each, so shared sides carry identical vertices and there is no hanging node. A patch whose
 refinement folds (or has a scaled Jacobian below :data:`MIN_SJ`) is given its next template and
 the program is solved again; the best round is kept (fewest inverted quads, then the highest
@@ -64,6 +68,7 @@ __all__ = [
     "CHORD_WEIGHT",
     "boundary_edges",
     "draw_meshes",
+    "fit_sides",
     "layout_groups",
     "layout_panel",
     "layout_sides",
@@ -120,7 +125,10 @@ class Layout:
     points: ``(P, 2) float64`` user coordinates.
     patches: patch ``p`` is ``(k_p,) int64`` point ids, a counter-clockwise loop that starts at
         its first corner.
-    corner: ``(P,) bool``, the point is a corner of every patch it belongs to.
+    corner: ``(P,) bool``, the point may be a patch corner (the file's ``corners``; default all).
+    patch_corner: patch ``p``: ``(k_p,) bool`` along its loop, the point is a corner of the
+        patch: a ``corner`` point where the patch's outline turns (a point on a straight run of
+        a patch, e.g. where two neighbours meet along its side, is not its corner).
     requested: ``{side name: edge count}`` as given in the file (names checked).
     source: where the layout came from (used in messages).
     """
@@ -128,6 +136,7 @@ class Layout:
     points: np.ndarray
     patches: tuple[np.ndarray, ...]
     corner: np.ndarray
+    patch_corner: tuple[np.ndarray, ...]
     requested: Mapping[str, int]
     source: str = "<layout>"
 
@@ -137,23 +146,25 @@ class Layout:
 
 
 class Sides(NamedTuple):
-    """The sides of a layout (chains of points between consecutive corners of a patch).
+    """The sides of a layout: chains of points between *nodes* (points that are a corner of a
+    patch containing them, or where the patches along the boundary change). A patch side
+    (between two consecutive corners of the patch) is one or more layout sides: more than one
+    where neighbours meet along it (a T-junction).
 
-    chains: side ``s`` is ``(k_s,) int64`` point ids from one corner to the next, in the
+    chains: side ``s`` is ``(k_s,) int64`` point ids from one node to the next, in the
         direction of the first patch (lowest index) that runs along it.
     names: side names (``"i-j"``, or the whole chain when two sides have the same ends).
-    patch_sides: patch ``p``: ``(n_p,) int64`` side id of the patch's side ``i`` (from its
-        corner ``i`` to ``i + 1``).
-    patch_reversed: patch ``p``: ``(n_p,) bool``, the patch runs side ``i`` against the
-        side's direction.
+    patch_sides: patch ``p``, its side ``i`` (from its corner ``i`` to ``i + 1``): ``(k,) int64``
+        the layout sides along it, in the patch's direction.
+    patch_reversed: the same shape, ``bool``: the patch runs that side against its direction.
     users: ``(S, 2) int64`` the patches along each side (``-1``: none; one patch = outer side).
     lengths: ``(S,) float64`` side lengths (user units).
     """
 
     chains: tuple[np.ndarray, ...]
     names: tuple[str, ...]
-    patch_sides: tuple[np.ndarray, ...]
-    patch_reversed: tuple[np.ndarray, ...]
+    patch_sides: tuple[tuple[np.ndarray, ...], ...]
+    patch_reversed: tuple[tuple[np.ndarray, ...], ...]
     users: np.ndarray
     lengths: np.ndarray
 
@@ -333,6 +344,7 @@ def make_layout(points, patches, corners=None, sides=None, *, source: str = "<la
             corner[c] = True
 
     loops: list[np.ndarray] = []
+    pcorners: list[np.ndarray] = []
     polys = []
     for p, loop in enumerate(patches):
         if not isinstance(loop, list) or len(loop) < 3:
@@ -351,19 +363,31 @@ def make_layout(points, patches, corners=None, sides=None, *, source: str = "<la
             raise InputError(f"patch {p} crosses or touches itself ({shapely.is_valid_reason(poly)})", where=source)
         if polygon_area(pts[ids]) < 0:
             ids = ids[::-1]
-        cpos = np.flatnonzero(corner[ids])
+        pc = corner[ids] & ~_straight(pts[ids])
+        cpos = np.flatnonzero(pc)
         if cpos.size < 2:
             raise InputError(f"patch {p} has {cpos.size} corner(s); a patch needs at least 2", where=source)
         loops.append(np.roll(ids, -int(cpos[0])))
+        pcorners.append(np.roll(pc, -int(cpos[0])))
         polys.append(poly)
 
     _check_segments(loops, source)
     _check_cover(pts, loops, polys, tol, source)
-    layout = Layout(points=pts, patches=tuple(loops), corner=corner, requested={}, source=source)
-    sd = layout_sides(layout)  # checks that shared sides are the same chains
+    layout = Layout(points=pts, patches=tuple(loops), corner=corner, patch_corner=tuple(pcorners), requested={},
+                    source=source)
+    sd = layout_sides(layout)
     requested = parse_counts(sides, sd, source) if sides is not None else {}
-    return Layout(points=pts, patches=tuple(loops), corner=corner,
+    return Layout(points=pts, patches=tuple(loops), corner=corner, patch_corner=tuple(pcorners),
                   requested={sd.names[s]: c for s, c in requested.items()}, source=source)
+
+
+def _straight(loop_xy: np.ndarray) -> np.ndarray:
+    """``(k,) bool``: the closed loop goes straight on at the point (turn below 1e-9 rad)."""
+    e_in = loop_xy - np.roll(loop_xy, 1, axis=0)
+    e_out = np.roll(loop_xy, -1, axis=0) - loop_xy
+    cross = e_in[:, 0] * e_out[:, 1] - e_in[:, 1] * e_out[:, 0]
+    dot = np.sum(e_in * e_out, axis=1)
+    return (np.abs(np.arctan2(cross, dot)) <= 1e-9)
 
 
 def _check_coincident(pts: np.ndarray, tol: float, source: str) -> None:
@@ -433,46 +457,50 @@ def _check_cover(pts, loops, polys, tol: float, source: str):
 
 
 def layout_sides(layout: Layout) -> Sides:
-    """The sides of ``layout`` (see :class:`Sides`). Raises :class:`InputError` when two patches
-    share a segment but not the whole side (a point where they part is not a corner)."""
-    pts, corner = layout.points, layout.corner
-    chains: list[np.ndarray] = []
-    patch_sides, patch_rev = [], []
-    users: list[list[int]] = []
-    seg_side: dict[tuple[int, int], tuple[int, bool]] = {}  # directed segment -> (side, reversed)
+    """The sides of ``layout`` (see :class:`Sides`)."""
+    pts = layout.points
+    users: dict[tuple[int, int], list[int]] = {}
     for p, loop in enumerate(layout.patches):
-        cpos = np.flatnonzero(corner[loop])
-        ends = np.append(cpos, loop.size)
+        for a, b in _segments(loop).tolist():
+            users.setdefault((min(a, b), max(a, b)), []).append(p)
+    node = np.zeros(pts.shape[0], bool)
+    for loop, pc in zip(layout.patches, layout.patch_corner):
+        node[loop[pc]] = True
+        seg = [tuple(users[(min(a, b), max(a, b))]) for a, b in _segments(loop).tolist()]
+        change = np.array([seg[i - 1] != seg[i] for i in range(len(seg))])  # users differ before/after point i
+        node[loop[change]] = True
+    chains: list[np.ndarray] = []
+    owner: list[list[int]] = []
+    by_first: dict[tuple[int, int], int] = {}  # first directed segment of a chain -> side id
+    patch_sides, patch_rev = [], []
+    for p, (loop, pc) in enumerate(zip(layout.patches, layout.patch_corner)):
+        k = loop.size
+        nodes = np.flatnonzero(node[loop])  # starts with 0: the loop starts at a corner
+        corners = set(np.flatnonzero(pc).tolist())
         ids, rev = [], []
-        for i in range(cpos.size):
-            chain = np.append(loop[ends[i]:ends[i + 1]], loop[ends[i + 1] % loop.size])
-            first = (int(chain[1]), int(chain[0]))  # the other patch runs it backwards
-            if first in seg_side:
-                s, _ = seg_side[first]
-                if not np.array_equal(chains[s], chain[::-1]):
-                    q = users[s][0]
-                    raise InputError(f"patches {q} and {p} share segment {first[1]}-{first[0]} but not the whole side "
-                                     f"({_chain_name(chains[s])} and {_chain_name(chain)}); make the point where they part "
-                                     "a corner", where=layout.source)
-                users[s].append(p)
-                ids.append(s)
-                rev.append(True)
+        cur_ids, cur_rev = [], []
+        for j, start in enumerate(nodes.tolist()):
+            stop = nodes[j + 1] if j + 1 < nodes.size else k
+            chain = loop[np.arange(start, stop + 1) % k]
+            back = (int(chain[-1]), int(chain[-2]))  # the other patch's first segment, if it ran it before
+            if back in by_first and np.array_equal(chains[by_first[back]], chain[::-1]):
+                sid = by_first[back]
+                owner[sid].append(p)
+                cur_ids.append(sid)
+                cur_rev.append(True)
             else:
-                for a, b in zip(chain[:-1].tolist(), chain[1:].tolist()):
-                    if (b, a) in seg_side:
-                        s, _ = seg_side[(b, a)]
-                        raise InputError(f"patches {users[s][0]} and {p} share segment {a}-{b} but not the whole side "
-                                         f"({_chain_name(chains[s])} and {_chain_name(chain)}); make the point where they "
-                                         "part a corner", where=layout.source)
-                s = len(chains)
+                sid = len(chains)
                 chains.append(chain)
-                users.append([p])
-                for a, b in zip(chain[:-1].tolist(), chain[1:].tolist()):
-                    seg_side[(a, b)] = (s, False)
-                ids.append(s)
-                rev.append(False)
-        patch_sides.append(np.asarray(ids, np.int64))
-        patch_rev.append(np.asarray(rev, bool))
+                owner.append([p])
+                by_first[(int(chain[0]), int(chain[1]))] = sid
+                cur_ids.append(sid)
+                cur_rev.append(False)
+            if int(stop) % k in corners:
+                ids.append(np.asarray(cur_ids, np.int64))
+                rev.append(np.asarray(cur_rev, bool))
+                cur_ids, cur_rev = [], []
+        patch_sides.append(tuple(ids))
+        patch_rev.append(tuple(rev))
     ends_count: dict[tuple[int, int], int] = {}
     for c in chains:
         key = (min(int(c[0]), int(c[-1])), max(int(c[0]), int(c[-1])))
@@ -481,8 +509,10 @@ def layout_sides(layout: Layout) -> Sides:
         f"{int(c[0])}-{int(c[-1])}" if ends_count[(min(int(c[0]), int(c[-1])), max(int(c[0]), int(c[-1])))] == 1
         else _chain_name(c) for c in chains)
     u = np.full((len(chains), 2), -1, np.int64)
-    for s, us in enumerate(users):
-        u[s, : len(us)] = us
+    for sid, us in enumerate(owner):
+        if len(us) > 2:  # cannot happen after _check_segments
+            raise InputError(f"side {names[sid]} is used by {len(us)} patches", where=layout.source)
+        u[sid, : len(us)] = us
     lengths = np.array([float(np.linalg.norm(np.diff(pts[c], axis=0), axis=1).sum()) for c in chains])
     return Sides(tuple(chains), names, tuple(patch_sides), tuple(patch_rev), u, lengths)
 
@@ -530,12 +560,12 @@ def load_counts(path, sides: Sides) -> dict[int, int]:
 
 
 def patch_shapes(layout: Layout) -> list[Shape]:
-    """One :class:`Shape` per patch, with the patch's corners as explicit corners in loop
-    order, so that the shape's side ``i`` is the patch's side ``i`` (:attr:`Sides.patch_sides`)."""
+    """One :class:`Shape` per patch, with the patch's corners (:attr:`Layout.patch_corner`) as
+    explicit corners in loop order, so that the shape's side ``i`` is the patch's side ``i``
+    (:attr:`Sides.patch_sides`)."""
     out = []
-    for p, loop in enumerate(layout.patches):
-        cpos = np.flatnonzero(layout.corner[loop])
-        out.append(make_shape(layout.points[loop], corners=cpos.tolist(), source=f"{layout.source} patch {p}"))
+    for p, (loop, pc) in enumerate(zip(layout.patches, layout.patch_corner)):
+        out.append(make_shape(layout.points[loop], corners=np.flatnonzero(pc).tolist(), source=f"{layout.source} patch {p}"))
     return out
 
 
@@ -560,9 +590,10 @@ def solve_counts(sides: Sides, matrices: Sequence[np.ndarray], *, counts: Mappin
     patch ``(c_p,)`` chord widths (user units, :meth:`PatchTemplate.chord_widths`).
 
     Variables: ``m_p >= 1`` integer per patch and chord, ``n_s >= 1`` integer per side.
-    Constraints: ``A_p[i] @ m_p = n_{side(p, i)}`` for every patch side (so a shared side has
-    one count in both patches, and each patch's total is even), ``n_s = counts[s]`` when
-    requested. Objective: ``sum_s |n_s - length_s / size|`` over the sides not requested, plus
+    Constraints: ``A_p[i] @ m_p = sum of n_s over the layout sides along patch side i`` for
+    every patch side (so a shared side has one count in both patches, a side along which two
+    neighbours meet is split between them, and each patch's total is even), ``n_s = counts[s]``
+    when requested. Objective: ``sum_s |n_s - length_s / size|`` over the sides not requested, plus
     :data:`CHORD_WEIGHT` ``* sum_c |m_c - max(width_c / size, 1)|``.
 
     Returns ``(multiplicities per patch ((c_p,) int64), counts per side ((S,) int64))``.
@@ -602,10 +633,10 @@ def solve_counts(sides: Sides, matrices: Sequence[np.ndarray], *, counts: Mappin
 
         for p, A in enumerate(matrices):
             A = np.asarray(A, dtype=np.float64)
-            for i, s in enumerate(sides.patch_sides[p]):
+            for i, parts in enumerate(sides.patch_sides[p]):
                 r = row()
                 r[off[p]:off[p + 1]] = A[i]
-                r[M + s] = -1.0
+                r[M + parts] = -1.0
                 lo.append(0.0)
                 hi.append(0.0)
         for j, (s, tau) in enumerate(targets.items()):
@@ -659,38 +690,40 @@ def merge_patches(layout: Layout, sides: Sides, refined: Sequence, counts: np.nd
     """Merge refined patches into one mesh with one vertex per side position.
 
     refined: per patch a :class:`jaxmatch.placement.refine.RefinedMesh` (``xy``, ``quads``,
-    ``side_vertices`` from the patch's corner ``i`` to ``i + 1``, ``counts``).
-    Returns ``(xy (V, 2) float64, quads (Q, 4) int64, patch (Q,) int64, side_vertices per side,
-    shared_gap float)``. Every side's vertices get global ids once (its end points are the
-    layout's corner points), so a shared side is one set of vertices; positions come from the
-    first patch along the side, and ``shared_gap`` is the largest distance to the other
-    patch's own position of the same vertex. Raises ValueError when a patch's side counts
-    disagree with ``counts`` (a bug, not bad input).
+    ``side_vertices`` from the patch's corner ``i`` to ``i + 1``). Returns ``(xy (V, 2)
+    float64, quads (Q, 4) int64, patch (Q,) int64, side_vertices per layout side, shared_gap
+    float)``. Every layout side's vertices get global ids once (its end points are layout
+    points), so a shared side is one set of vertices; a patch side made of several layout sides
+    is cut into them by their counts. Positions come from the first patch along the side, and
+    ``shared_gap`` is the largest distance to the other patch's own position of the same vertex
+    (use :func:`fit_sides` first so that the patches agree). Raises ValueError when a patch's
+    side counts disagree with ``counts`` (a bug, not bad input).
     """
     S = len(sides.chains)
-    cid = np.full(layout.points.shape[0], -1, np.int64)
-    used_corners = np.unique(np.concatenate([c[[0, -1]] for c in sides.chains]))
-    cid[used_corners] = np.arange(used_corners.size)
-    nxt = used_corners.size
+    node_pts = np.unique(np.concatenate([c[[0, -1]] for c in sides.chains]))
+    nid = np.full(layout.points.shape[0], -1, np.int64)
+    nid[node_pts] = np.arange(node_pts.size)
+    nxt = node_pts.size
     side_ids = []
     for s in range(S):
         n = int(counts[s])
         ids = np.empty(n + 1, np.int64)
-        ids[0], ids[-1] = cid[sides.chains[s][0]], cid[sides.chains[s][-1]]
+        ids[0], ids[-1] = nid[sides.chains[s][0]], nid[sides.chains[s][-1]]
         ids[1:-1] = np.arange(nxt, nxt + n - 1)
         nxt += n - 1
         side_ids.append(ids)
-    n_side_vertices = nxt
-    xy_side = np.full((n_side_vertices, 2), np.nan)
+    xy_side = np.full((nxt, 2), np.nan)
     gap = 0.0
     xy_parts, quad_parts, patch_parts = [], [], []
     for p, rm in enumerate(refined):
         local = np.full(rm.xy.shape[0], -1, np.int64)
-        for i, s in enumerate(sides.patch_sides[p]):
+        for i, (parts, revs) in enumerate(zip(sides.patch_sides[p], sides.patch_reversed[p])):
             sv = np.asarray(rm.side_vertices[i], dtype=np.int64)
-            if sv.size != counts[s] + 1:
-                raise ValueError(f"patch {p} side {i} has {sv.size - 1} edges, the program chose {counts[s]}")
-            g = side_ids[s][::-1] if sides.patch_reversed[p][i] else side_ids[s]
+            want = int(sum(int(counts[s]) for s in parts))
+            if sv.size != want + 1:
+                raise ValueError(f"patch {p} side {i} has {sv.size - 1} edges, the program chose {want}")
+            g = np.concatenate([(side_ids[s][::-1] if r else side_ids[s])[:-1] for s, r in zip(parts, revs)]
+                               + [[(side_ids[parts[-1]][::-1] if revs[-1] else side_ids[parts[-1]])[-1]]])
             clash = (local[sv] >= 0) & (local[sv] != g)
             if clash.any():
                 raise ValueError(f"patch {p}: a vertex is on two sides at different places")
@@ -707,9 +740,51 @@ def merge_patches(layout: Layout, sides: Sides, refined: Sequence, counts: np.nd
         quad_parts.append(local[np.asarray(rm.quads, dtype=np.int64)])
         patch_parts.append(np.full(len(rm.quads), p, np.int64))
     xy = np.concatenate([xy_side] + xy_parts)
-    # corner points: exactly the layout's coordinates
-    xy[cid[used_corners]] = layout.points[used_corners]
+    xy[nid[node_pts]] = layout.points[node_pts]  # nodes: exactly the layout's coordinates
     return xy, np.concatenate(quad_parts), np.concatenate(patch_parts), tuple(side_ids), gap
+
+
+def fit_sides(layout: Layout, sides: Sides, p: int, refined, counts: np.ndarray, *, smooth_iters: int = 200) -> np.ndarray:
+    """Positions ``(V, 2)`` of patch ``p``'s refined mesh with every side vertex where the
+    layout side it belongs to puts it: ``counts[s]`` edges evenly spaced by arc length on each
+    layout side (:func:`jaxmatch.placement.refine.side_points`, the formula the refinement uses,
+    so a patch side made of one layout side does not move). Where a patch side is made of
+    several layout sides (neighbours meet along it), its vertices move so that one lands on
+    each node; then the interior follows (harmonic extension of the boundary displacement, one
+    sparse solve) and is untangled and smoothed (:func:`jaxmatch.placement.embed.smooth`,
+    never lowering the minimum scaled Jacobian from there)."""
+    from jaxmatch.placement.embed import tutte
+    from jaxmatch.placement.refine import side_points
+
+    xy = np.array(refined.xy, dtype=np.float64)
+    moved = False
+    bverts = []
+    for i, (parts, revs) in enumerate(zip(sides.patch_sides[p], sides.patch_reversed[p])):
+        sv = np.asarray(refined.side_vertices[i], dtype=np.int64)
+        bverts.append(sv)
+        if len(parts) == 1:
+            continue
+        pos = []
+        for s, r in zip(parts, revs):
+            q = side_points(layout.points[sides.chains[s]], int(counts[s]))
+            pos.append((q[::-1] if r else q)[:-1])
+        last = sides.chains[parts[-1]][0 if revs[-1] else -1]  # the end corner of the patch side
+        new = np.concatenate(pos + [layout.points[last][None]])
+        moved |= not np.array_equal(new, xy[sv])
+        xy[sv] = new
+    if not moved:
+        return xy
+    b = np.unique(np.concatenate(bverts))
+    quads = np.asarray(refined.quads, dtype=np.int64)
+    target = xy[b].copy()
+    disp = tutte(quads, xy.shape[0], b, target - np.asarray(refined.xy)[b])
+    xy = np.asarray(refined.xy) + disp
+    xy[b] = target
+    c = target.mean(axis=0)
+    r = float(np.sqrt(np.mean(np.sum((xy[b] - c) ** 2, axis=1)))) or 1.0
+    out = smooth((xy - c) / r, quads, b, iters=smooth_iters) * r + c
+    out[b] = target
+    return out
 
 
 def boundary_edges(quads: np.ndarray) -> np.ndarray:
@@ -725,8 +800,8 @@ def boundary_edges(quads: np.ndarray) -> np.ndarray:
 def _outer_loop(layout: Layout, sides: Sides, side_ids) -> np.ndarray:
     """Vertex ids of the outer boundary, ccw, from the outer sides."""
     nxt: dict[int, np.ndarray] = {}
-    for p, loop in enumerate(layout.patches):
-        for s, rev in zip(sides.patch_sides[p], sides.patch_reversed[p]):
+    for p in range(layout.n_patches):
+        for s, rev in zip(np.concatenate(sides.patch_sides[p]), np.concatenate(sides.patch_reversed[p])):
             if sides.users[s, 1] < 0:
                 ids = side_ids[s][::-1] if rev else side_ids[s]
                 nxt[int(ids[0])] = ids
@@ -829,7 +904,10 @@ def mesh_layout(layout: Layout, catalogue: Catalogue, lattice: Lattice, *, size:
             key = (p, choice[p], tuple(m.tolist()))
             if key not in cache:
                 cache[key] = refine_and_place(t, m)
-            refined.append(cache[key])
+            rm = cache[key]
+            if any(len(parts) > 1 for parts in sides.patch_sides[p]):  # neighbours meet along a side
+                rm = rm._replace(xy=fit_sides(layout, sides, p, rm, n))
+            refined.append(rm)
         keys = [_key(r) for r in refined]
         total = (sum(k[0] for k in keys), max(k[1] for k in keys))  # inverted quads, then the worst patch
         if best is None or total < best[0]:
