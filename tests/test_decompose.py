@@ -48,11 +48,11 @@ def turns(p) -> np.ndarray:
 def test_pieces_cover_the_shape(name, strategy):
     shp = load_shape(SHAPES[name])
     lay = decompose(shp, strategy)
-    whole = abs(area(shp.user_points))
+    whole = abs(area(shp.input_points))
     parts = [area(lay.points[loop]) for loop in lay.patches]
     assert all(a > 0 for a in parts)
     assert sum(parts) == pytest.approx(whole, rel=1e-12)
-    corners = {tuple(c) for c in shp.user_points[shp.corners].tolist()}
+    corners = {tuple(c) for c in shp.input_points[shp.corners].tolist()}
     have = {tuple(p) for p in lay.points[lay.corner].tolist()}
     assert corners <= have
     n_concave = int((~shp.convex).sum())
@@ -74,7 +74,7 @@ def test_continuations_give_convex_pieces(name):
 
 def test_cuts_start_at_concave_corners_and_end_on_the_outline():
     shp = load_shape(LAB / "notched-rectangle.json")
-    concave = shp.user_points[shp.corners[~shp.convex]]
+    concave = shp.input_points[shp.corners[~shp.convex]]
     for strategy, per_corner in (("continuations", 2), ("bisectors", 1)):
         cuts = cut_segments(shp, strategy)
         assert len(cuts) == per_corner * len(concave)
@@ -101,8 +101,8 @@ def check_done(shp, choice):
     assert m.area_ratio == pytest.approx(1.0, abs=1e-9)
     q = m.xy[m.quads]
     areas = 0.5 * np.sum(q[..., 0] * np.roll(q[..., 1], -1, axis=1) - np.roll(q[..., 0], -1, axis=1) * q[..., 1], axis=1)
-    assert areas.sum() / abs(area(shp.user_points)) == pytest.approx(1.0, abs=1e-9)  # independently of the code
-    for c in shp.user_points[shp.corners]:
+    assert areas.sum() / abs(area(shp.input_points)) == pytest.approx(1.0, abs=1e-9)  # independently of the code
+    for c in shp.input_points[shp.corners]:
         assert np.min(np.linalg.norm(m.xy - c, axis=1)) <= 1e-12  # every corner is a mesh vertex
     assert choice.chosen in ("single",) + STRATEGIES
     assert min(choice_key(t[1]) for t in choice.tried if t[1] is not None) == choice_key(m)

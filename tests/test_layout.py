@@ -555,6 +555,11 @@ def test_cli_bad_input_one_line_exit_2(cli, tmp_path, args, words):
     assert not out.exists()
 
 
+def test_cli_shape_without_corners(cli):
+    code, _, err = cli("layout", ROOT / "examples" / "circle.json", "--size", 0.5)
+    assert code == EXIT_BAD_INPUT and "corner" in err and len(err.strip().splitlines()) == 1
+
+
 def test_cli_sides_file_errors(cli, tmp_path):
     sides = tmp_path / "s.json"
     sides.write_text(json.dumps({"0-9": 2}))

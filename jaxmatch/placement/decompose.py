@@ -43,11 +43,16 @@ SINGLE = "single"
 
 
 
+def _xy(shape: Shape) -> np.ndarray:
+    """``(P, 2)`` the shape's points in user coordinates, exactly as given when known."""
+    return shape.input_points if shape.input_points is not None else shape.user_points
+
+
 def _rays(shape: Shape, strategy: str) -> list[tuple[np.ndarray, np.ndarray]]:
     """(start (2,), unit direction (2,)) of every cut, user coordinates."""
     if strategy not in STRATEGIES:
         raise ValueError(f"strategy must be one of {STRATEGIES}, got {strategy!r}")
-    pts = shape.user_points
+    pts = _xy(shape)
     P = pts.shape[0]
     out = []
     for c, convex in zip(shape.corners.tolist(), shape.convex.tolist()):
@@ -71,7 +76,7 @@ def _hits(shape: Shape, strategy: str) -> tuple[list[np.ndarray], list[tuple[int
     an outline point are moved onto that point)."""
     import shapely
 
-    pts = shape.user_points
+    pts = _xy(shape)
     ring = shapely.LinearRing(pts)
     extent = float(np.max(pts.max(axis=0) - pts.min(axis=0)))
     tol = 1e-9 * extent
@@ -112,10 +117,14 @@ def cut_segments(shape: Shape, strategy: str = "continuations") -> list[np.ndarr
 
 
 def single_patch(shape: Shape) -> Layout:
-    """The shape as a layout of one patch (its corners as given)."""
-    pts = shape.user_points
-    corners = shape.corners.tolist() if shape.n_corners >= 2 else None
-    return make_layout(pts.tolist(), [list(range(pts.shape[0]))], corners, source=shape.source)
+    """The shape as a layout of one patch (its corners as given). Raises :class:`InputError`
+    for a shape with fewer than 2 corners (a layout patch needs 2; such a shape has no concave
+    corner either: mesh it whole with :func:`jaxmatch.placement.refine.refine_mesh`)."""
+    if shape.n_corners < 2:
+        raise InputError(f"the shape has {shape.n_corners} corner(s); a patch needs at least 2 (a shape without "
+                         "concave corners is meshed whole by 'jaxmatch mesh --size')", where=shape.source)
+    pts = _xy(shape)
+    return make_layout(pts.tolist(), [list(range(pts.shape[0]))], shape.corners.tolist(), source=shape.source)
 
 
 def decompose(shape: Shape, strategy: str = "continuations") -> Layout:
@@ -125,7 +134,7 @@ def decompose(shape: Shape, strategy: str = "continuations") -> Layout:
     import shapely
     from shapely.ops import polygonize
 
-    pts = shape.user_points
+    pts = _xy(shape)
     cuts, inserts = _hits(shape, strategy)
     if not cuts:
         return single_patch(shape)
