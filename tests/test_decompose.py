@@ -18,6 +18,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
 
 from jaxmatch.placement.decompose import STRATEGIES, choice_key, cut_segments, decompose, mesh_shape, single_patch
 from jaxmatch.scoring.lattice import load_lattice
@@ -64,10 +66,10 @@ def test_continuations_give_convex_pieces(name):
     shp = load_shape(SHAPES[name])
     lay = decompose(shp, "continuations")
     scale = float(np.ptp(lay.points, axis=0).max())
-    for loop in lay.patches:
+    for loop, pc in zip(lay.patches, lay.patch_corner):
         assert np.all(turns(lay.points[loop]) >= -1e-12 * scale ** 2)
         if name in RECTILINEAR:
-            c = lay.points[loop][lay.corner[loop]]
+            c = lay.points[loop][pc]
             assert c.shape[0] == 4
             assert len(np.unique(c[:, 0])) == 2 and len(np.unique(c[:, 1])) == 2  # an axis-aligned rectangle
 
@@ -125,3 +127,35 @@ def test_done_when_every_shape_two_sizes(cat, lat, name):
     for size in (0.25, 0.125):
         check_done(shp, mesh_shape(shp, cat, lat, size=size, template_cache=cache))
     assert cache  # the second size reused the templates
+
+
+@st.composite
+def polyominoes(draw):
+    """Outline ``(k, 2)`` of a random simply connected union of unit cells (grown from one cell)."""
+    import shapely
+
+    cells = {(0, 0)}
+    for _ in range(draw(st.integers(1, 7))):
+        x, y = draw(st.sampled_from(sorted(cells)))
+        dx, dy = draw(st.sampled_from([(1, 0), (-1, 0), (0, 1), (0, -1)]))
+        cells.add((x + dx, y + dy))
+    u = shapely.union_all([shapely.box(x, y, x + 1, y + 1) for x, y in cells]).simplify(0)
+    assume(u.geom_type == "Polygon" and not u.interiors)
+    return np.asarray(u.exterior.coords)[:-1]
+
+
+@settings(max_examples=40)
+@given(outline=polyominoes())
+def test_random_rectilinear_shapes_become_rectangles(outline):
+    from jaxmatch.errors import InputError
+    from jaxmatch.shape import make_shape
+
+    try:
+        shp = make_shape(outline)
+    except InputError:  # the outline touches itself at a point (cells meeting at a corner)
+        assume(False)
+    lay = decompose(shp, "continuations")
+    assert sum(area(lay.points[loop]) for loop in lay.patches) == pytest.approx(abs(area(outline)), rel=1e-12)
+    for loop, pc in zip(lay.patches, lay.patch_corner):
+        c = lay.points[loop][pc]
+        assert c.shape[0] == 4 and len(np.unique(c[:, 0])) == 2 and len(np.unique(c[:, 1])) == 2
