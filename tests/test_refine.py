@@ -349,6 +349,17 @@ def test_two_squares_sharing_a_side_get_identical_vertices(cat, lat):
     assert np.allclose(np.diff(shared_a[:, 1]), 0.6 / 5)
 
 
+def test_clockwise_file_counts_follow_the_users_sides(cat, lat):
+    pts = [[0.0, 0.0], [0.0, 1.0], [2.0, 1.0], [2.0, 0.0]]  # clockwise: sides 1, 2, 1, 2 long
+    shp = make_shape(pts)
+    rm = R.refine_mesh(shp, cat, lat, sides=[2, 4, 2, 4], limit=2).mesh
+    assert rm.counts.tolist() == [2, 4, 2, 4]
+    for i, sv in enumerate(rm.side_vertices):
+        assert np.array_equal(rm.xy[sv[0]], pts[i]) and np.array_equal(rm.xy[sv[-1]], pts[(i + 1) % 4])
+        assert np.allclose(np.linalg.norm(np.diff(rm.xy[sv], axis=0), axis=1), 0.5)
+    check_refined(rm, shp)
+
+
 def test_refine_and_place_counts_and_json(templates):
     shp, ts = templates(EXAMPLES / "square.json")
     t = ts[0]

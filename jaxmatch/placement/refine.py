@@ -55,6 +55,7 @@ if TYPE_CHECKING:  # pragma: no cover
     from jaxmatch.scoring.rank import Match
 
 __all__ = [
+    "DEFAULT_LIMIT",
     "InfeasibleRequest",
     "PatchTemplate",
     "RefineChoice",
@@ -74,6 +75,9 @@ __all__ = [
     "side_points",
     "solve_multiplicities",
 ]
+
+DEFAULT_LIMIT = 10
+"""Templates per size (k) that :func:`refine_mesh` tries (``jaxmatch mesh --sides/--size``)."""
 
 SIZE_TOLERANCE = 0.2
 """A ``size`` request is met when the mean boundary edge length is within this fraction of it."""
@@ -877,7 +881,7 @@ class RefineChoice(NamedTuple):
 
 
 def refine_mesh(shape: Shape, catalogue: "Catalogue" = None, lattice: "Lattice" = None, *, sides=None, size=None,
-                internal=None, limit: int = 10, templates: Sequence[PatchTemplate] | None = None) -> RefineChoice:
+                internal=None, limit: int = None, templates: Sequence[PatchTemplate] | None = None) -> RefineChoice:
     """A quad mesh of ``shape`` with the requested number of edges per side, or edges of about
     the requested length: the Python API of ``jaxmatch mesh --sides/--size``.
 
@@ -887,11 +891,11 @@ def refine_mesh(shape: Shape, catalogue: "Catalogue" = None, lattice: "Lattice" 
     closest to ``side length / size``. Exactly one of the two.
 
     The templates (:func:`patch_templates`: ranked catalogue meshes of every size, ``limit``
-    per size, that keep every corner and place without folds) are tried best first; the first
-    whose refinement meets the request (:func:`solve_multiplicities`) and places without
-    inverted quads with a min scaled Jacobian >= :data:`SJ_FLOOR` (:func:`refine_and_place`) is
-    taken; better-ranked ones passed over are listed with the reason. When every refinement
-    that meets the request is below that quality, the best of them is taken and ``note`` says
+    per size, default :data:`DEFAULT_LIMIT`, that keep every corner and place without folds)
+    are tried best first; the first whose refinement meets the request
+    (:func:`solve_multiplicities`) and places without inverted quads with a min scaled Jacobian
+    >= :data:`SJ_FLOOR` (:func:`refine_and_place`) is taken; better-ranked ones passed over are
+    listed with the reason. When every refinement that meets the request is below that quality, the best of them is taken and ``note`` says
     so. For ``size``, "meets" means an estimated mean edge length (:func:`estimated_mean_edge`)
     within :data:`SIZE_TOLERANCE` of ``size``; when no template does, the closest is taken and
     ``note`` says so.
@@ -905,6 +909,7 @@ def refine_mesh(shape: Shape, catalogue: "Catalogue" = None, lattice: "Lattice" 
     """
     if (sides is None) == (size is None):
         raise ValueError("give exactly one of sides and size")
+    limit = DEFAULT_LIMIT if limit is None else int(limit)
     n_sides = max(shape.n_corners, 1)
     if sides is not None:
         _check_counts(sides, n_sides, shape.source)
