@@ -45,7 +45,7 @@ ROOT = Path(__file__).resolve().parent.parent
 LAYOUTS = ROOT / "examples" / "layouts"
 
 SQUARE2 = [[0, 0], [1, 0], [2, 0], [2, 1], [1, 1], [0, 1]]
-TJ = {"points": [[0, 0], [2, 0], [2, 1], [1, 1], [0, 1], [1, 2], [0, 2], [2, 2]],
+TJ = {"points": [[0, 0], [2, 0], [2, 1], [0.7, 1], [0, 1], [0.7, 2], [0, 2], [2, 2]],
       "patches": [[0, 1, 2, 3, 4], [4, 3, 5, 6], [3, 2, 7, 5]]}
 
 
@@ -388,7 +388,8 @@ def test_t_junction_mesh_is_conforming(cat, lat):
     m = mesh_layout(lay, cat, lat, size=0.25)
     check_conforming(m.xy, m.quads, outline_of(lay))
     assert m.inverted == 0 and m.shared_gap == 0.0
-    assert np.min(np.linalg.norm(m.xy - [1.0, 1.0], axis=1)) == 0.0  # the junction is a vertex
+    assert np.min(np.linalg.norm(m.xy - [0.7, 1.0], axis=1)) == 0.0  # the junction is a vertex
+    assert m.min_scaled_jacobian >= 0.3
     # the block's top side carries the squares' bottom sides, evenly spaced on each
     for name in ("2-3", "3-4"):
         ids = m.side_vertices[m.sides.names.index(sid_name(m.sides, name))]
