@@ -62,14 +62,15 @@ def test_pieces_cover_the_shape(name, strategy):
 
 
 @pytest.mark.parametrize("name", list(SHAPES))
-def test_continuations_give_convex_pieces(name):
+@pytest.mark.parametrize("strategy", ["continuations", "recursive"])
+def test_pieces_are_convex(name, strategy):
     shp = load_shape(SHAPES[name])
-    lay = decompose(shp, "continuations")
+    lay = decompose(shp, strategy)
     scale = float(np.ptp(lay.points, axis=0).max())
     for loop, pc in zip(lay.patches, lay.patch_corner):
         assert np.all(turns(lay.points[loop]) >= -1e-12 * scale ** 2)
         if name in RECTILINEAR:
-            c = lay.points[loop][pc]
+            c = lay.points[loop][pc]  # the patch's corners (not its T-junction points)
             assert c.shape[0] == 4
             assert len(np.unique(c[:, 0])) == 2 and len(np.unique(c[:, 1])) == 2  # an axis-aligned rectangle
 
@@ -115,8 +116,9 @@ def test_l_shape_choice_between_decompositions(cat, lat):
     choice = mesh_shape(shp, cat, lat, size=0.25, strategies=STRATEGIES)
     check_done(shp, choice)
     assert [t[0] for t in choice.tried] == list(STRATEGIES)
-    # the rectangles of the continuations are meshed as grids: every quad a square
-    assert choice.chosen == "continuations" and choice.mesh.min_scaled_jacobian == pytest.approx(1.0)
+    # rectangles meshed as grids (every quad a square); the recursive cut needs only 2 of them
+    assert choice.chosen == "recursive" and choice.mesh.layout.n_patches == 2
+    assert choice.mesh.min_scaled_jacobian == pytest.approx(1.0)
 
 
 @pytest.mark.slow
@@ -145,8 +147,8 @@ def polyominoes(draw):
 
 
 @settings(max_examples=40)
-@given(outline=polyominoes())
-def test_random_rectilinear_shapes_become_rectangles(outline):
+@given(outline=polyominoes(), strategy=st.sampled_from(["continuations", "recursive"]))
+def test_random_rectilinear_shapes_become_rectangles(outline, strategy):
     from jaxmatch.errors import InputError
     from jaxmatch.shape import make_shape
 
@@ -154,7 +156,7 @@ def test_random_rectilinear_shapes_become_rectangles(outline):
         shp = make_shape(outline)
     except InputError:  # the outline touches itself at a point (cells meeting at a corner)
         assume(False)
-    lay = decompose(shp, "continuations")
+    lay = decompose(shp, strategy)
     assert sum(area(lay.points[loop]) for loop in lay.patches) == pytest.approx(abs(area(outline)), rel=1e-12)
     for loop, pc in zip(lay.patches, lay.patch_corner):
         c = lay.points[loop][pc]

@@ -534,7 +534,7 @@ def test_cli_shape_is_decomposed(cli, tmp_path):
     assert code == 0, err
     d = json.loads(stdout)
     assert d["chosen"] in ("single", "continuations", "bisectors")
-    assert {c["name"] for c in d["candidates"]} == {"single", "continuations", "bisectors"}
+    assert {c["name"] for c in d["candidates"]} == {"single", "continuations", "bisectors", "recursive"}
     assert d["inverted"] == 0 and d["area_ratio"] == pytest.approx(1, abs=1e-9)
 
 

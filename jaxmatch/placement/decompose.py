@@ -6,7 +6,10 @@ the first point where they meet its boundary again:
 
 * ``"continuations"``: both sides at the corner, continued past it (a rectilinear shape becomes
   rectangles; every piece is convex, since each reflex angle is split in three);
-* ``"bisectors"``: one cut along the bisector of the reflex angle (fewer, larger pieces).
+* ``"bisectors"``: one cut along the bisector of the reflex angle (fewer, larger pieces);
+* ``"recursive"``: one concave corner at a time, along the shorter continuation of its sides to
+  the boundary of the piece it is in, until no piece has a concave corner (fewest pieces; a cut
+  may end on an earlier one, a T-junction, which the layout handles).
 
 The outline and the cuts are noded and polygonized with shapely (:func:`decompose`); the pieces
 become a :class:`~jaxmatch.placement.layout.Layout` whose corners are the shape's corners and
@@ -35,8 +38,8 @@ if TYPE_CHECKING:  # pragma: no cover
 
 __all__ = ["STRATEGIES", "ShapeChoice", "cut_segments", "decompose", "mesh_shape", "single_patch", "choice_key"]
 
-STRATEGIES = ("continuations", "bisectors")
-"""The ways :func:`cut_segments` cuts at concave corners."""
+STRATEGIES = ("continuations", "bisectors", "recursive")
+"""The ways :func:`decompose` cuts at concave corners."""
 
 SINGLE = "single"
 """Name of the one-patch candidate in :func:`mesh_shape`."""
@@ -50,8 +53,8 @@ def _xy(shape: Shape) -> np.ndarray:
 
 def _rays(shape: Shape, strategy: str) -> list[tuple[np.ndarray, np.ndarray]]:
     """(start (2,), unit direction (2,)) of every cut, user coordinates."""
-    if strategy not in STRATEGIES:
-        raise ValueError(f"strategy must be one of {STRATEGIES}, got {strategy!r}")
+    if strategy not in ("continuations", "bisectors"):
+        raise ValueError(f"strategy must be 'continuations' or 'bisectors', got {strategy!r}")
     pts = _xy(shape)
     P = pts.shape[0]
     out = []
@@ -127,49 +130,129 @@ def single_patch(shape: Shape) -> Layout:
     return make_layout(pts.tolist(), [list(range(pts.shape[0]))], shape.corners.tolist(), source=shape.source)
 
 
-def decompose(shape: Shape, strategy: str = "continuations") -> Layout:
-    """Split ``shape`` by the cuts of ``strategy`` (:func:`cut_segments`) into a
-    :class:`Layout`. A shape without concave corners gives one patch. Raises
-    :class:`InputError` when the pieces do not make a valid layout."""
+def _faces(pts: np.ndarray, cuts: list[np.ndarray], inserts: list, overshoot: list[bool]) -> list:
+    """The pieces (shapely Polygons) of the outline ``pts`` cut by ``cuts``: cut ends listed in
+    ``inserts`` become outline points exactly; cuts flagged in ``overshoot`` (ending on an
+    earlier cut) are extended by ``1e-7`` of the extent so that noding finds the crossing (the
+    stub outside is a dangle that polygonize drops)."""
     import shapely
     from shapely.ops import polygonize
 
-    pts = _xy(shape)
-    cuts, inserts = _hits(shape, strategy)
-    if not cuts:
-        return single_patch(shape)
+    extent = float(np.max(pts.max(axis=0) - pts.min(axis=0)))
     ring_pts = []
     for k in range(pts.shape[0]):  # the outline with the cut ends inserted (exact end points)
         ring_pts.append(pts[k])
         ring_pts += [e for _, _, e in sorted((i for i in inserts if i[0] == k), key=lambda i: i[1])]
     ring_pts = np.array(ring_pts)
-    lines = [shapely.LineString(np.vstack([ring_pts, ring_pts[:1]]))] + [shapely.LineString(c) for c in cuts]
+    lines = [shapely.LineString(np.vstack([ring_pts, ring_pts[:1]]))]
+    for (a, b), over in zip(cuts, overshoot):
+        if over:
+            b = b + 1e-7 * extent * (b - a) / np.linalg.norm(b - a)
+        lines.append(shapely.LineString([a, b]))
     noded = shapely.union_all(lines)
     outline = shapely.Polygon(pts)
-    faces = [f for f in polygonize(shapely.get_parts(noded)) if outline.contains(f.representative_point())]
+    return [f for f in polygonize(shapely.get_parts(noded)) if outline.contains(f.representative_point())]
+
+
+def _layout(shape: Shape, faces: list, name: str) -> Layout:
+    """A :class:`Layout` of the pieces: corners are the shape's corners and every point where
+    three or more piece edges meet."""
+    pts = _xy(shape)
     index: dict[tuple[float, float], int] = {}
     points: list[tuple[float, float]] = []
     loops: list[list[int]] = []
-    degree: dict[frozenset, int] = {}
+    edges: set[frozenset] = set()
     for f in faces:
-        ring = np.asarray(f.exterior.coords)[:-1]
         loop = []
-        for x, y in ring.tolist():
-            key = (x, y)
-            if key not in index:
-                index[key] = len(points)
-                points.append(key)
-            loop.append(index[key])
+        for x, y in np.asarray(f.exterior.coords)[:-1].tolist():
+            if (x, y) not in index:
+                index[(x, y)] = len(points)
+                points.append((x, y))
+            loop.append(index[(x, y)])
         loops.append(loop)
-        for a, b in zip(loop, loop[1:] + loop[:1]):
-            degree[frozenset((a, b))] = 1
+        edges.update(frozenset((a, b)) for a, b in zip(loop, loop[1:] + loop[:1]))
     nbrs = np.zeros(len(points), np.int64)
-    for e in degree:
+    for e in edges:
         for v in e:
             nbrs[v] += 1
     shape_corners = {tuple(p) for p in pts[shape.corners].tolist()}
     corners = [i for i, p in enumerate(points) if p in shape_corners or nbrs[i] >= 3]
-    return make_layout([list(p) for p in points], loops, corners, source=f"{shape.source} ({strategy} cuts)")
+    return make_layout([list(p) for p in points], loops, corners, source=f"{shape.source} ({name} cuts)")
+
+
+def _recursive(shape: Shape) -> Layout:
+    """Cut one concave corner at a time, along the shorter continuation of its two sides to the
+    boundary of the piece it is in (an earlier cut, or the outline), until no piece has a
+    concave corner."""
+    import shapely
+
+    pts = _xy(shape)
+    ring = shapely.LinearRing(pts)
+    extent = float(np.max(pts.max(axis=0) - pts.min(axis=0)))
+    tol = 1e-9 * extent
+    cuts: list[np.ndarray] = []
+    inserts: list = []
+    over: list[bool] = []
+    for _ in range(int((~shape.convex).sum()) + 1):
+        faces = _faces(pts, cuts, inserts, over)
+        found = None
+        for f in faces:
+            f = shapely.orient_polygons(f) if hasattr(shapely, "orient_polygons") else shapely.geometry.polygon.orient(f)
+            xy = np.asarray(f.exterior.coords)[:-1]
+            e_in, e_out = xy - np.roll(xy, 1, axis=0), np.roll(xy, -1, axis=0) - xy
+            turn = np.arctan2(e_in[:, 0] * e_out[:, 1] - e_in[:, 1] * e_out[:, 0], np.sum(e_in * e_out, axis=1))
+            reflex = np.flatnonzero(turn < -1e-9)
+            if reflex.size:
+                found = (f, xy, int(reflex[0]))
+                break
+        if found is None:
+            break
+        f, xy, i = found
+        v = xy[i]
+        best = None
+        for d in (e_in[i] / np.linalg.norm(e_in[i]), -e_out[i] / np.linalg.norm(e_out[i])):
+            hit = f.exterior.intersection(shapely.LineString([v, v + 4.0 * extent * d]))
+            c = shapely.get_coordinates(hit)
+            dist = (c - v) @ d
+            ok = dist > tol
+            if ok.any() and (best is None or dist[ok].min() < best[0]):
+                best = (float(dist[ok].min()), c[ok][np.argmin(dist[ok])])
+        if best is None:  # pragma: no cover - a reflex vertex always sees the boundary
+            break
+        end = best[1]
+        near = np.linalg.norm(pts - end, axis=1)
+        j = int(np.argmin(near))
+        if near[j] <= tol:
+            end, on_cut = pts[j], False
+        elif ring.distance(shapely.Point(end)) <= tol:
+            a, b = pts, np.roll(pts, -1, axis=0)
+            ab = b - a
+            fr = np.clip(np.sum((end - a) * ab, axis=1) / np.sum(ab * ab, axis=1), 0.0, 1.0)
+            k = int(np.argmin(np.linalg.norm(a + fr[:, None] * ab - end, axis=1)))
+            inserts.append((k, float(fr[k]), end))
+            on_cut = False
+        else:
+            on_cut = True
+        cuts.append(np.array([v, end]))
+        over.append(on_cut)
+    return _layout(shape, _faces(pts, cuts, inserts, over), "recursive")
+
+
+def decompose(shape: Shape, strategy: str = "continuations") -> Layout:
+    """Split ``shape`` into a :class:`Layout`: by the cuts of ``strategy`` (:func:`cut_segments`,
+    all at once), or, for ``"recursive"``, one concave corner at a time along the shorter
+    continuation of its sides to the piece's boundary (later cuts may end on earlier ones:
+    T-junctions). A shape without concave corners gives one patch. Raises
+    :class:`InputError` when the pieces do not make a valid layout."""
+    if strategy == "recursive":
+        if not (~shape.convex).any():
+            return single_patch(shape)
+        return _recursive(shape)
+    pts = _xy(shape)
+    cuts, inserts = _hits(shape, strategy)
+    if not cuts:
+        return single_patch(shape)
+    return _layout(shape, _faces(pts, cuts, inserts, [False] * len(cuts)), strategy)
 
 
 class ShapeChoice(NamedTuple):
