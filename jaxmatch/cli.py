@@ -379,8 +379,8 @@ def layout(
     png: Optional[Path] = typer.Option(None, "--png", help="Picture of the merged mesh (.png)."),
     catalogue: Optional[Path] = typer.Option(None, help="Catalogue file (default: the shipped k=0..5 catalogue)."),
     lattice: str = typer.Option("fine", help="Lattice: fine, coarse, or a TOML path."),
-    strategy: str = typer.Option("best", "--strategy", help="Shapes only: single, continuations, bisectors, or best "
-                                 "(mesh all three, keep the best)."),
+    strategy: str = typer.Option("best", "--strategy", help="Shapes only: single, continuations, bisectors, recursive, "
+                                 "or best (mesh them all, keep the best)."),
     corner_angle: float = typer.Option(30.0, help="Shapes only: corner threshold when the shape lists no corners."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object."),
 ) -> None:
