@@ -533,7 +533,7 @@ def test_cli_shape_is_decomposed(cli, tmp_path):
     code, stdout, err = cli("layout", ROOT / "examples" / "lshape.json", "--size", 0.5, "--json")
     assert code == 0, err
     d = json.loads(stdout)
-    assert d["chosen"] in ("single", "continuations", "bisectors")
+    assert d["chosen"] in ("single", "continuations", "bisectors", "recursive")
     assert {c["name"] for c in d["candidates"]} == {"single", "continuations", "bisectors", "recursive"}
     assert d["inverted"] == 0 and d["area_ratio"] == pytest.approx(1, abs=1e-9)
 
