@@ -20,7 +20,8 @@ are those the command meets). Per request ``c`` in ``{1..MAX}^n``:
   infeasible one, :func:`feasible` must say no on every template;
 * **placed** (``--place`` random feasible and as many infeasible requests): :func:`refine_mesh`
   must return exactly ``c`` edges per side with no inverted quad, or raise
-  :class:`InfeasibleRequest` whose nearest counts are feasible.
+  :class:`InfeasibleRequest` whose nearest counts are feasible (None when no template keeps
+  every corner).
 
 Prints one row per shape; ``--out`` writes the JSON report atomically. Exit status 1 when a
 check fails.
@@ -51,7 +52,7 @@ from jaxmatch.scoring.lattice import load_lattice  # noqa: E402
 from jaxmatch.shape import load_shape  # noqa: E402
 
 app = typer.Typer(add_completion=False)
-out = Console(soft_wrap=True)
+out = Console(soft_wrap=True, width=None if sys.stdout.isatty() else 140)
 
 CONVEX = [ROOT / "examples" / "triangle.json", ROOT / "examples" / "square.json",
           ROOT / "examples" / "labels" / "shapes" / "pentagon.json", ROOT / "examples" / "hexagon.json"]
@@ -111,7 +112,7 @@ def check_shape(path: Path, cat, lat, *, cap: int, limit: int, full_up_to: int, 
         try:
             ch = R.refine_mesh(shp, sides=list(c), templates=ts)
         except R.InfeasibleRequest as e:
-            if c in union or e.nearest not in union:
+            if c in union or (union and e.nearest not in union) or (not union and e.nearest is not None):
                 failures.append({"request": c, "problem": f"refused: {e}"})
             placed["infeasible"] += 1
             continue
@@ -148,7 +149,7 @@ def main(shapes: Optional[List[Path]] = typer.Argument(None, help="Shape files (
         rows.append(r)
         print(json.dumps({k: r[k] for k in ("shape", "sides", "templates", "feasible", "requests", "solver_checked")}),
               file=sys.stderr, flush=True)
-        table.add_row(r["shape"], str(r["sides"]), str(r["templates"]), f"{r['feasible']} / {r['requests']}",
+        table.add_row(Path(r["shape"]).name, str(r["sides"]), str(r["templates"]), f"{r['feasible']} / {r['requests']}",
                       f"{r['solver_checked']}{' (all)' if r['solver_checked_all'] else ''}",
                       f"{r['placed']['feasible']} + {r['placed']['infeasible']} refused", str(len(r["failures"])),
                       f"{r['seconds']:.0f}")
