@@ -368,6 +368,99 @@ def _mesh_refined(shape: Path, sides: Optional[str], size: Optional[float], *, c
 
 
 @app.command()
+def layout(
+    file: Path = typer.Argument(..., help="Layout JSON {points, patches, corners?, sides?}, or a shape file "
+                                "(then the shape is meshed whole and split at its concave corners, and the better is kept)."),
+    size: Optional[float] = typer.Option(None, "--size", help="Target edge length (the file's units) for sides without a count."),
+    sides_file: Optional[Path] = typer.Option(None, "--sides-file", help='JSON {"i-j": count, ...}: edges on the named sides '
+                                              "(i, j: the side's corner points; layouts only)."),
+    out_path: Optional[Path] = typer.Option(None, "--out", help="Mesh file: .msh (physical groups) .vtk .vtu .obj or .json, "
+                                            "written atomically."),
+    png: Optional[Path] = typer.Option(None, "--png", help="Picture of the merged mesh (.png)."),
+    catalogue: Optional[Path] = typer.Option(None, help="Catalogue file (default: the shipped k=0..5 catalogue)."),
+    lattice: str = typer.Option("fine", help="Lattice: fine, coarse, or a TOML path."),
+    strategy: str = typer.Option("best", "--strategy", help="Shapes only: single, continuations, bisectors, recursive, "
+                                 "or best (mesh them all, keep the best)."),
+    corner_angle: float = typer.Option(30.0, help="Shapes only: corner threshold when the shape lists no corners."),
+    as_json: bool = typer.Option(False, "--json", help="Print one JSON object."),
+) -> None:
+    """Mesh a multi-patch layout (or a concave shape, split into patches) into one conforming quad mesh.
+
+    Shared sides carry identical vertices; the .msh file has the patch id as cell data and physical
+    groups for every patch, the outer boundary and every side. Exit status 3 when the mesh has inverted quads.
+    """
+    from jaxmatch.files import read_limited
+    from jaxmatch.placement.choose import check_outputs
+    from jaxmatch.placement import decompose as dec
+    from jaxmatch.placement import layout as lay
+    from jaxmatch.scoring.lattice import load_lattice
+    from jaxmatch.shape import parse_shape
+
+    check_outputs(out_path, png)
+    if size is not None and not (size > 0 and size < float("inf")):
+        raise InputError(f"must be a positive number, got {size}", "--size")
+    strategies = {"best": (dec.SINGLE,) + dec.STRATEGIES, dec.SINGLE: (dec.SINGLE,)}
+    strategies.update({name: (name,) for name in dec.STRATEGIES})
+    if strategy not in strategies:
+        raise InputError(f"expected one of {', '.join(strategies)}, got {strategy!r}", "--strategy")
+    raw = read_limited(file, lay.MAX_BYTES, "layout file")
+    try:
+        is_layout = file.suffix.lower() == ".json" and isinstance(doc := json.loads(raw.decode("utf-8-sig")), dict) \
+            and "patches" in doc
+    except ValueError:
+        is_layout = False
+    enable_compile_cache()
+    cat, lat = _open_catalogue(catalogue), load_lattice(lattice)
+    chosen = None
+    if is_layout:
+        layout_ = lay.parse_layout(raw, str(file))
+        sides = lay.layout_sides(layout_)
+        counts = lay.load_counts(sides_file, sides) if sides_file is not None else {}
+        if size is None and not counts and not layout_.requested:
+            raise InputError("give a target edge length or edge counts (--sides-file, or \"sides\" in the layout)", "--size")
+        mesh_ = lay.mesh_layout(layout_, cat, lat, size=size, counts=counts)
+    else:
+        if sides_file is not None:
+            raise InputError("edge counts per side are for layout files; use --size for a shape", "--sides-file")
+        if size is None:
+            raise InputError("a shape needs a target edge length", "--size")
+        shp = parse_shape(raw, str(file), corner_angle=corner_angle)
+        choice = dec.mesh_shape(shp, cat, lat, size=size, strategies=strategies[strategy])
+        mesh_, chosen = choice.mesh, choice
+    written = {}
+    if out_path is not None:
+        written["out"] = str(lay.write_layout_mesh(out_path, mesh_))
+    if png is not None:
+        head = file.name if chosen is None else f"{file.name}: {chosen.chosen} ({mesh_.layout.n_patches} patches)"
+        written["png"] = str(lay.draw_meshes(png, [lay.layout_panel(mesh_, head)]))
+    info = mesh_.summary()
+    if chosen is not None:
+        info["chosen"] = chosen.chosen
+        info["candidates"] = [{"name": n, "note": note, **({} if m is None else {
+            "patches": m.layout.n_patches, "quads": int(m.quads.shape[0]), "min_scaled_jacobian": m.min_scaled_jacobian,
+            "mean_scaled_jacobian": m.mean_scaled_jacobian, "inverted": m.inverted, "irregular": int(m.irregular.size)})}
+            for n, m, note in chosen.tried]
+    if as_json:
+        print(json.dumps({"file": str(file), **info, "out": written.get("out"), "png": written.get("png")}))
+    else:
+        if chosen is not None:
+            for c in info["candidates"]:
+                line = (f"{c['name']}: {c['patches']} patches, {c['quads']} quads, SJ min {c['min_scaled_jacobian']:.3f} "
+                        f"mean {c['mean_scaled_jacobian']:.3f}, {c['inverted']} inverted, {c['irregular']} irregular"
+                        if "quads" in c else f"{c['name']}: not meshed ({c['note']})")
+                out.print(line, markup=False, highlight=False)
+            out.print(f"chosen: {chosen.chosen}", markup=False, highlight=False)
+        out.print(f"{file}: {info['patches']} patches, {info['quads']} quads, {info['vertices']} vertices, "
+                  f"{info['irregular']} irregular internal; scaled Jacobian min {info['min_scaled_jacobian']:.3f} "
+                  f"mean {info['mean_scaled_jacobian']:.3f}; inverted quads: {info['inverted']}; "
+                  f"mesh area / region area {info['area_ratio']:.9f}", markup=False, highlight=False)
+        for path in written.values():
+            out.print(f"wrote {path}", markup=False, highlight=False)
+    if mesh_.inverted:
+        raise typer.Exit(EXIT_INVERTED)
+
+
+@app.command()
 def annotate(
     shape: Path = typer.Argument(..., help="Shape file."),
     points: Optional[int] = typer.Option(None, min=1, help="Number m of points (default: for the default catalogue)."),

@@ -19,6 +19,20 @@ store them 1-based, as their formats require; meshio converts back). Gmsh is wri
 because meshio 5.3 writes ASCII ``$ElementData`` values that it cannot read back under
 numpy 2; every element gets physical and geometrical tag 1.
 
+Meshes of several patches (:func:`write_quads`, used by ``jaxmatch layout``) add more cell data
+(e.g. ``patch``, the patch id of every quad) and named groups: quad groups (each quad in one)
+and line groups (boundary edges, e.g. the outer boundary and each input side; an edge may be in
+several). In ``.msh`` every group is a physical group with its name in ``$PhysicalNames``
+(quads: dimension 2, group ``i`` has physical tag ``i + 1``; lines: dimension 1, 2-node line
+elements); an element's geometrical tag equals its physical tag, and a line in several groups
+is written once per group (MSH 2 gives an element one physical tag, and gmsh itself writes such
+elements this way). A ``.msh`` file with line groups carries no ``$ElementData`` (cell data):
+meshio 5.3.5 splits element data by the wrong lengths when reading a file with more than one
+cell block and fails, so the quad groups (physical tags) carry e.g. the patch of each quad. ``.vtk``/``.vtu``
+get the lines as a second cell block with cell data ``line_group`` (index into the names, in
+the order given) and ``-1``/NaN for the quads' cell data; ``.json`` gets ``"groups": {name:
+[[a, b], ...]}`` and ``"quad_groups"``; ``.obj`` keeps only the quads.
+
 Every file is written atomically (:mod:`jaxmatch.files`): a failed write leaves no file and
 no temporary behind, and keeps any previous file at ``path`` intact.
 """
@@ -28,6 +42,7 @@ from __future__ import annotations
 import json
 import os
 from pathlib import Path
+from typing import Mapping, NamedTuple, Sequence
 
 import numpy as np
 
@@ -35,7 +50,7 @@ from jaxmatch.placement.embed import Placement
 from jaxmatch.errors import InputError
 from jaxmatch.files import atomic_open, atomic_path
 
-__all__ = ["MESH_FORMATS", "mesh_format", "read_json_mesh", "write_mesh"]
+__all__ = ["LineGroup", "MESH_FORMATS", "mesh_format", "read_json_mesh", "write_mesh", "write_quads"]
 
 MESH_FORMATS: dict[str, str] = {
     ".vtk": "vtk",
@@ -62,27 +77,95 @@ def _points3d(xy: np.ndarray) -> np.ndarray:
     return np.column_stack([xy, np.zeros(xy.shape[0])])
 
 
-def _meshio_mesh(placement: Placement, fmt: str):
+class LineGroup(NamedTuple):
+    """A named set of mesh edges, written as line cells (e.g. a boundary side).
+
+    name: the group's name (a ``.msh`` physical name); edges: ``(L, 2) int64`` vertex ids.
+    """
+
+    name: str
+    edges: np.ndarray
+
+
+def _meshio_mesh(xy, quads, cell_data, quad_groups, quad_group_names, line_groups, fmt: str):
     import meshio  # imported lazily: only mesh output needs it
 
-    quads = np.asarray(placement.mesh.quads, dtype=np.int64)
-    cell_data: dict[str, list[np.ndarray]] = {}
-    if fmt != "obj":
-        cell_data["scaled_jacobian"] = [np.asarray(placement.scaled_jacobian, dtype=np.float64)]
+    F = quads.shape[0]
+    lines = [np.asarray(g.edges, dtype=np.int64).reshape(-1, 2) for g in line_groups]
+    if fmt == "obj":
+        return meshio.Mesh(_points3d(xy), [("quad", quads)])
+    cells = [("quad", quads)]
+    data: dict[str, list[np.ndarray]] = {k: [np.asarray(v)] for k, v in cell_data.items()}
     if fmt == "gmsh22":
-        ones = np.ones(quads.shape[0], dtype=np.int32)
-        cell_data["gmsh:physical"] = [ones]
-        cell_data["gmsh:geometrical"] = [ones.copy()]
-    return meshio.Mesh(_points3d(placement.xy), [("quad", quads)], cell_data=cell_data)
+        qtag = (np.asarray(quad_groups, dtype=np.int32) + 1) if quad_groups is not None else np.ones(F, np.int32)
+        tags = [qtag]
+        field_data = {name: np.array([i + 1, 2]) for i, name in enumerate(quad_group_names)}
+        first = max(len(quad_group_names), int(qtag.max()) if F else 0) + 1
+        for j, (g, e) in enumerate(zip(line_groups, lines)):
+            if e.shape[0] == 0:
+                continue
+            cells.append(("line", e))
+            tags.append(np.full(e.shape[0], first + j, np.int32))
+            field_data[g.name] = np.array([first + j, 1])
+        if len(cells) > 1:  # meshio 5.3 cannot read $ElementData back once there are several cell blocks
+            data = {}
+        data["gmsh:physical"] = tags
+        data["gmsh:geometrical"] = [t.copy() for t in tags]
+        return meshio.Mesh(_points3d(xy), cells, cell_data=data, field_data=field_data)
+    if lines:
+        every = np.concatenate(lines) if lines else np.zeros((0, 2), np.int64)
+        gid = np.concatenate([np.full(e.shape[0], j, np.int64) for j, e in enumerate(lines)])
+        if every.shape[0]:
+            cells.append(("line", every))
+            for k, v in cell_data.items():
+                fill = np.nan if np.asarray(v).dtype.kind == "f" else -1
+                data[k].append(np.full(every.shape[0], fill, dtype=np.asarray(v).dtype))
+            data["line_group"] = [np.full(F, -1, np.int64), gid]
+    return meshio.Mesh(_points3d(xy), cells, cell_data=data)
 
 
-def _json_text(placement: Placement) -> str:
+def _json_text(xy, quads, cell_data, quad_groups, quad_group_names, line_groups) -> str:
     data = {
-        "points": np.asarray(placement.xy, dtype=np.float64).tolist(),
-        "quads": np.asarray(placement.mesh.quads, dtype=np.int64).tolist(),
-        "scaled_jacobian": np.asarray(placement.scaled_jacobian, dtype=np.float64).tolist(),
+        "points": np.asarray(xy, dtype=np.float64).tolist(),
+        "quads": np.asarray(quads, dtype=np.int64).tolist(),
     }
+    for k, v in cell_data.items():
+        data[k] = np.asarray(v).tolist()
+    if quad_groups is not None:
+        data["quad_groups"] = {"names": list(quad_group_names), "group": np.asarray(quad_groups, dtype=np.int64).tolist()}
+    if line_groups:
+        data["groups"] = {g.name: np.asarray(g.edges, dtype=np.int64).reshape(-1, 2).tolist() for g in line_groups}
     return json.dumps(data, allow_nan=False) + "\n"
+
+
+def write_quads(path: str | os.PathLike, xy: np.ndarray, quads: np.ndarray, *,
+                cell_data: Mapping[str, np.ndarray] | None = None, quad_groups: np.ndarray | None = None,
+                quad_group_names: Sequence[str] = (), line_groups: Sequence[LineGroup] = ()) -> Path:
+    """Write a quad mesh with cell data and named groups to ``path`` atomically.
+
+    xy: ``(V, 2) float64`` user coordinates; quads: ``(F, 4) int`` ccw vertex ids;
+    cell_data: name -> ``(F,)`` array per quad (floats or ints); quad_groups: ``(F,) int``
+    index into ``quad_group_names`` of each quad (``.msh``: physical group ``index + 1``;
+    None: every quad in group 1, unnamed); line_groups: named edge sets (see the module
+    docstring for how each format stores them). Raises :class:`InputError` for an unknown
+    suffix, before anything is written. Returns the path written.
+    """
+    fmt = mesh_format(path)
+    final = Path(path)
+    quads = np.asarray(quads, dtype=np.int64)
+    cell_data = dict(cell_data or {})
+    if fmt == "json":
+        text = _json_text(xy, quads, cell_data, quad_groups, quad_group_names, line_groups)
+        with atomic_open(final, "w") as fh:
+            fh.write(text)
+        return final
+    import meshio
+
+    mesh = _meshio_mesh(xy, quads, cell_data, quad_groups, quad_group_names, line_groups, fmt)
+    kwargs = {"binary": True} if fmt in ("vtk", "gmsh22") else {}
+    with atomic_path(final) as tmp:
+        meshio.write(tmp, mesh, file_format=fmt, **kwargs)
+    return final
 
 
 def write_mesh(path: str | os.PathLike, placement: Placement) -> Path:
@@ -91,20 +174,8 @@ def write_mesh(path: str | os.PathLike, placement: Placement) -> Path:
     The format comes from the suffix (see the module docstring). Raises :class:`InputError`
     for an unknown suffix, before anything is written. Returns the path written.
     """
-    fmt = mesh_format(path)
-    final = Path(path)
-    if fmt == "json":
-        text = _json_text(placement)
-        with atomic_open(final, "w") as fh:
-            fh.write(text)
-        return final
-    import meshio
-
-    mesh = _meshio_mesh(placement, fmt)
-    kwargs = {"binary": True} if fmt in ("vtk", "gmsh22") else {}
-    with atomic_path(final) as tmp:
-        meshio.write(tmp, mesh, file_format=fmt, **kwargs)
-    return final
+    sj = {"scaled_jacobian": np.asarray(placement.scaled_jacobian, dtype=np.float64)}
+    return write_quads(path, placement.xy, placement.mesh.quads, cell_data=sj)
 
 
 def read_json_mesh(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

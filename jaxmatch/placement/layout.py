@@ -1,0 +1,1042 @@
+"""Multi-patch layouts: several patches of one planar region, each meshed by a refined catalogue
+template (:mod:`jaxmatch.placement.refine`), merged into one conforming quad mesh.
+
+Layout file (JSON)::
+
+    {"points": [[x, y], ...],                 # shared points, user coordinates
+     "patches": [[i, j, k, ...], ...],        # each patch a loop of point indices (either orientation)
+     "corners": [i, ...],                     # optional: the points that are patch corners (default: all)
+     "sides": {"i-j": count, ...}}            # optional: edges wanted on a side
+
+A point listed in ``corners`` is a corner of each patch that turns there; a point on a
+straight run of a patch (e.g. where two neighbours meet along its side: a T-junction) is not.
+A *side* is a chain of points between two *nodes* (points that are a corner of some patch, or
+where the patches along the boundary change); it is named by its end points ``"i-j"`` (either
+order; when two sides have the same ends, by the whole chain ``"i-k-j"``), and is shared by the
+patches that run along it. A patch side (between two consecutive corners of the patch) is one
+side, or several where neighbours meet along it.
+Rules checked by :func:`make_layout` (each failure is one :class:`InputError` line): indices in
+range, no point listed twice in a patch, no two points at the same place, simple patches of
+non-zero area, no segment used by three patches or twice in the same direction, no overlapping
+patches, one connected region without holes (gaps), and every segment used by only one patch on
+the outer boundary of the union (patches meeting without sharing their points there would leave
+hanging nodes).
+
+Meshing (:func:`mesh_layout`): every patch gets candidate templates
+(:func:`jaxmatch.placement.refine.patch_templates`, fewest internal vertices first: a coarse
+template refined is better shaped than a fine one); ONE integer program
+(:func:`solve_counts`, ``scipy.optimize.milp``/HiGHS) chooses the chord multiplicities of all
+patches at once: each patch's side counts are its ``side_matrix @ multiplicities``, a shared
+side has one count, requested counts are met exactly, and without them the counts are closest
+to ``side length / size``. Each patch is refined (:func:`jaxmatch.placement.refine.refine_and_place`),
+patch sides made of several sides are fitted to them (:func:`fit_sides`), and the patches are
+merged (:func:`merge_patches`): the vertices of a side get one global id
+each, so shared sides carry identical vertices and there is no hanging node. A patch whose
+refinement folds (or has a scaled Jacobian below :data:`MIN_SJ`) is given its next template and
+the program is solved again; the best round is kept (fewest inverted quads, then the highest
+minimum scaled Jacobian of the worst patch).
+
+All lengths are in the user's units.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Mapping, NamedTuple, Sequence
+
+import numpy as np
+
+from jaxmatch.errors import InputError
+from jaxmatch.files import read_limited
+from jaxmatch.placement.embed import inverted_mask, polygon_area, quad_areas, quality, smooth
+from jaxmatch.catalogue.mesh import valences
+from jaxmatch.shape import Shape, make_shape
+
+if TYPE_CHECKING:  # pragma: no cover
+    from jaxmatch.catalogue.store import Catalogue
+    from jaxmatch.scoring.lattice import Lattice
+
+__all__ = [
+    "Layout",
+    "LayoutInfeasible",
+    "LayoutMesh",
+    "Sides",
+    "TEMPLATE_SIZES",
+    "CHORD_WEIGHT",
+    "boundary_edges",
+    "draw_meshes",
+    "fit_sides",
+    "layout_groups",
+    "layout_panel",
+    "layout_sides",
+    "load_counts",
+    "load_layout",
+    "make_layout",
+    "mesh_quality_line",
+    "merge_patches",
+    "mesh_layout",
+    "parse_layout",
+    "patch_shapes",
+    "parse_counts",
+    "solve_counts",
+    "write_layout_mesh",
+]
+
+MAX_BYTES = 16 * 2**20
+"""Largest accepted layout or sides file (bytes)."""
+
+MAX_POINTS = 100_000
+"""Largest accepted number of layout points."""
+
+TEMPLATE_SIZES = ((0, 1), (2, 3))
+"""Groups of internal-vertex counts tried for a patch's templates, in this order: the first
+group with a template that keeps the patch's corners gives the candidates (coarse templates
+refine into better-shaped meshes, and each size costs placements)."""
+
+ALL_SIZES = ((0, 1), (2, 3), (4, 5), (6, 7))
+"""The groups used for a shape meshed as one patch (it may need large templates)."""
+
+TEMPLATES_PER_PATCH = 3
+"""How many candidate templates of each size a patch keeps (tried in order when a refinement
+folds)."""
+
+ROUNDS = 8
+"""Largest number of (integer program, refine) rounds :func:`mesh_layout` runs."""
+
+MIN_SJ = 0.3
+"""A refined patch whose minimum scaled Jacobian is below this (or that has inverted quads)
+gets its next template in the next round of :func:`mesh_layout` (the best round is kept)."""
+
+_TOL = 1e-9  # relative (to the layout's extent) tolerance for coincident points and areas
+_KEYS = ("points", "patches", "corners", "sides")
+
+
+# ---------------------------------------------------------------------------------------------
+# data
+
+
+@dataclass(frozen=True, eq=False)
+class Layout:
+    """A validated layout (see the module docstring).
+
+    points: ``(P, 2) float64`` user coordinates.
+    patches: patch ``p`` is ``(k_p,) int64`` point ids, a counter-clockwise loop that starts at
+        its first corner.
+    corner: ``(P,) bool``, the point may be a patch corner (the file's ``corners``; default all).
+    patch_corner: patch ``p``: ``(k_p,) bool`` along its loop, the point is a corner of the
+        patch: a ``corner`` point where the patch's outline turns (a point on a straight run of
+        a patch, e.g. where two neighbours meet along its side, is not its corner).
+    requested: ``{side name: edge count}`` as given in the file (names checked).
+    source: where the layout came from (used in messages).
+    """
+
+    points: np.ndarray
+    patches: tuple[np.ndarray, ...]
+    corner: np.ndarray
+    patch_corner: tuple[np.ndarray, ...]
+    requested: Mapping[str, int]
+    source: str = "<layout>"
+
+    @property
+    def n_patches(self) -> int:
+        return len(self.patches)
+
+
+class Sides(NamedTuple):
+    """The sides of a layout: chains of points between *nodes* (points that are a corner of a
+    patch containing them, or where the patches along the boundary change). A patch side
+    (between two consecutive corners of the patch) is one or more layout sides: more than one
+    where neighbours meet along it (a T-junction).
+
+    chains: side ``s`` is ``(k_s,) int64`` point ids from one node to the next, in the
+        direction of the first patch (lowest index) that runs along it.
+    names: side names (``"i-j"``, or the whole chain when two sides have the same ends).
+    patch_sides: patch ``p``, its side ``i`` (from its corner ``i`` to ``i + 1``): ``(k,) int64``
+        the layout sides along it, in the patch's direction.
+    patch_reversed: the same shape, ``bool``: the patch runs that side against its direction.
+    users: ``(S, 2) int64`` the patches along each side (``-1``: none; one patch = outer side).
+    lengths: ``(S,) float64`` side lengths (user units).
+    """
+
+    chains: tuple[np.ndarray, ...]
+    names: tuple[str, ...]
+    patch_sides: tuple[tuple[np.ndarray, ...], ...]
+    patch_reversed: tuple[tuple[np.ndarray, ...], ...]
+    users: np.ndarray
+    lengths: np.ndarray
+
+    @property
+    def outer(self) -> np.ndarray:
+        """``(S,) bool``: the side is on the outer boundary (one patch uses it)."""
+        return self.users[:, 1] < 0
+
+
+class LayoutInfeasible(InputError):
+    """No choice of chord multiplicities meets the requested side counts.
+
+    nearest: ``{side name: count}`` the closest feasible counts for the requested sides
+    (least total absolute difference), or None when even those do not exist.
+    """
+
+    def __init__(self, problem: str, where: str | None = None, nearest: dict[str, int] | None = None):
+        super().__init__(problem, where)
+        self.nearest = nearest
+
+
+@dataclass(frozen=True, eq=False)
+class LayoutMesh:
+    """A layout meshed into one conforming quad mesh.
+
+    xy: ``(V, 2) float64`` user coordinates; quads: ``(Q, 4) int64`` ccw; patch: ``(Q,) int64``
+    the patch of each quad; side_vertices: side ``s``: ``(counts[s] + 1,) int64`` vertex ids
+    along the side's direction; counts: ``(S,) int64`` edges per side; outer: ``(B,) int64``
+    outer boundary loop (ccw); templates: catalogue id per patch; multiplicities: per patch
+    ``(n_chords,) int64``; shared_gap: largest distance between the two patches' own positions
+    of a shared side vertex before merging (0.0 when bit-identical); region_area: area of the
+    union of the patches.
+    """
+
+    layout: Layout
+    sides: Sides
+    xy: np.ndarray
+    quads: np.ndarray
+    patch: np.ndarray
+    side_vertices: tuple[np.ndarray, ...]
+    counts: np.ndarray
+    outer: np.ndarray
+    templates: tuple[str, ...]
+    multiplicities: tuple[np.ndarray, ...]
+    shared_gap: float
+    region_area: float
+
+    @property
+    def scaled_jacobian(self) -> np.ndarray:
+        """``(Q,) float64`` Verdict scaled Jacobian per quad."""
+        return quality(self.xy, self.quads)[0]
+
+    @property
+    def min_scaled_jacobian(self) -> float:
+        return float(self.scaled_jacobian.min())
+
+    @property
+    def mean_scaled_jacobian(self) -> float:
+        return float(self.scaled_jacobian.mean())
+
+    @property
+    def inverted(self) -> int:
+        return int(inverted_mask(self.xy, self.quads).sum())
+
+    @property
+    def irregular(self) -> np.ndarray:
+        """Internal vertices (not on the outer loop) whose valence is not 4."""
+        val = valences(self.quads, self.xy.shape[0])
+        internal = np.ones(self.xy.shape[0], bool)
+        internal[self.outer] = False
+        return np.flatnonzero(internal & (val != 4))
+
+    @property
+    def area_ratio(self) -> float:
+        """Sum of the quads' signed areas / area of the region."""
+        return float(quad_areas(self.xy, self.quads).sum() / self.region_area)
+
+    def summary(self) -> dict:
+        """JSON-ready figures: quads, vertices, patches, quality, counts per side."""
+        return {
+            "quads": int(self.quads.shape[0]), "vertices": int(self.xy.shape[0]), "patches": self.layout.n_patches,
+            "min_scaled_jacobian": self.min_scaled_jacobian, "mean_scaled_jacobian": self.mean_scaled_jacobian,
+            "inverted": self.inverted, "irregular": int(self.irregular.size), "area_ratio": self.area_ratio,
+            "shared_gap": self.shared_gap,
+            "counts": {n: int(c) for n, c in zip(self.sides.names, self.counts)},
+            "templates": list(self.templates),
+        }
+
+
+# ---------------------------------------------------------------------------------------------
+# reading and validation
+
+
+def load_layout(path) -> Layout:
+    """Read a layout JSON file; see :func:`parse_layout`."""
+    return parse_layout(read_limited(path, MAX_BYTES, "layout file"), str(path))
+
+
+def parse_layout(data, source: str = "<layout>") -> Layout:
+    """Parse layout JSON (bytes or text) into a validated :class:`Layout` (see
+    :func:`make_layout`). Raises :class:`InputError` naming ``source``."""
+    doc = _json(data, source)
+    if not isinstance(doc, dict):
+        raise InputError('top level must be a JSON object {"points": ..., "patches": ...}', where=source)
+    unknown = [k for k in doc if k not in _KEYS]
+    if unknown:
+        raise InputError(f"unknown key {unknown[0]!r} (allowed: {', '.join(_KEYS)})", where=source)
+    for key in ("points", "patches"):
+        if key not in doc:
+            raise InputError(f"missing key {key!r}", where=source)
+    return make_layout(doc["points"], doc["patches"], doc.get("corners"), doc.get("sides"), source=source)
+
+
+def _json(data, source: str):
+    try:
+        text = data if isinstance(data, str) else bytes(data).decode("utf-8-sig")
+    except UnicodeDecodeError as err:
+        raise InputError(f"not UTF-8 text (byte {err.start})", where=source) from None
+
+    def no_constants(name):
+        raise ValueError(f"{name} is not a finite number")
+
+    try:
+        return json.loads(text, parse_constant=no_constants)
+    except json.JSONDecodeError as err:
+        raise InputError(f"not valid JSON: {err.msg} (line {err.lineno}, column {err.colno})", where=source) from None
+    except (ValueError, RecursionError) as err:
+        raise InputError(f"not valid JSON ({err})", where=source) from None
+
+
+def _int(value, what: str, source: str) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise InputError(f"{what} must be an integer point index, got {value!r:.40}", where=source)
+    return int(value)
+
+
+def make_layout(points, patches, corners=None, sides=None, *, source: str = "<layout>") -> Layout:
+    """Validate a layout (see the module docstring for the rules) and normalise it: patches
+    counter-clockwise, each starting at its first corner.
+
+    points: ``(P, 2)`` numbers; patches: lists of point indices; corners: point indices (None:
+    every point is a corner); sides: ``{name: count}`` (None: none requested).
+    Raises :class:`InputError` (``where=source``) with one line naming the patch, point or side.
+    """
+    import shapely
+
+    try:
+        pts = np.array(points, dtype=np.float64)
+    except (TypeError, ValueError, OverflowError):
+        raise InputError('"points" must be a list of [x, y] number pairs', where=source) from None
+    if pts.ndim != 2 or pts.shape[1] != 2 or pts.shape[0] < 3:
+        raise InputError(f'"points" must be at least 3 [x, y] pairs, got an array of shape {pts.shape}', where=source)
+    if pts.shape[0] > MAX_POINTS:
+        raise InputError(f"{pts.shape[0]} points, more than the maximum {MAX_POINTS}", where=source)
+    bad = ~np.isfinite(pts).all(axis=1)
+    if bad.any():
+        raise InputError(f"point {int(np.flatnonzero(bad)[0])} is not finite", where=source)
+    P = pts.shape[0]
+    extent = float(np.max(pts.max(axis=0) - pts.min(axis=0)))
+    if not extent > 0:
+        raise InputError("all points are at the same place", where=source)
+    tol = _TOL * extent
+    _check_coincident(pts, tol, source)
+
+    if not isinstance(patches, list) or not patches:
+        raise InputError('"patches" must be a non-empty list of point-index loops', where=source)
+    if corners is None:
+        corner = np.ones(P, bool)
+    else:
+        if not isinstance(corners, list):
+            raise InputError('"corners" must be a list of point indices', where=source)
+        corner = np.zeros(P, bool)
+        for j, c in enumerate(corners):
+            c = _int(c, f"corners[{j}]", source)
+            if not 0 <= c < P:
+                raise InputError(f"corners[{j}] = {c} is out of range (there are {P} points)", where=source)
+            corner[c] = True
+
+    loops: list[np.ndarray] = []
+    pcorners: list[np.ndarray] = []
+    polys = []
+    for p, loop in enumerate(patches):
+        if not isinstance(loop, list) or len(loop) < 3:
+            raise InputError(f"patch {p} must be a list of at least 3 point indices", where=source)
+        ids = np.array([_int(v, f"patch {p} entry {i}", source) for i, v in enumerate(loop)], dtype=np.int64)
+        out = ids[(ids < 0) | (ids >= P)]
+        if out.size:
+            raise InputError(f"patch {p}: point index {int(out[0])} is out of range (there are {P} points)", where=source)
+        uniq, cnt = np.unique(ids, return_counts=True)
+        if (cnt > 1).any():
+            raise InputError(f"patch {p} lists point {int(uniq[cnt > 1][0])} twice", where=source)
+        if not abs(polygon_area(pts[ids])) > tol * extent:
+            raise InputError(f"patch {p} has zero area", where=source)
+        poly = shapely.Polygon(pts[ids])
+        if not poly.is_valid:
+            raise InputError(f"patch {p} crosses or touches itself ({shapely.is_valid_reason(poly)})", where=source)
+        if polygon_area(pts[ids]) < 0:
+            ids = ids[::-1]
+        pc = corner[ids] & ~_straight(pts[ids])
+        cpos = np.flatnonzero(pc)
+        if cpos.size < 2:
+            raise InputError(f"patch {p} has {cpos.size} corner(s); a patch needs at least 2", where=source)
+        loops.append(np.roll(ids, -int(cpos[0])))
+        pcorners.append(np.roll(pc, -int(cpos[0])))
+        polys.append(poly)
+
+    _check_segments(loops, source)
+    _check_cover(pts, loops, polys, tol, source)
+    layout = Layout(points=pts, patches=tuple(loops), corner=corner, patch_corner=tuple(pcorners), requested={},
+                    source=source)
+    sd = layout_sides(layout)
+    requested = parse_counts(sides, sd, source) if sides is not None else {}
+    return Layout(points=pts, patches=tuple(loops), corner=corner, patch_corner=tuple(pcorners),
+                  requested={sd.names[s]: c for s, c in requested.items()}, source=source)
+
+
+def _straight(loop_xy: np.ndarray) -> np.ndarray:
+    """``(k,) bool``: the closed loop goes straight on at the point (turn below 1e-9 rad)."""
+    e_in = loop_xy - np.roll(loop_xy, 1, axis=0)
+    e_out = np.roll(loop_xy, -1, axis=0) - loop_xy
+    cross = e_in[:, 0] * e_out[:, 1] - e_in[:, 1] * e_out[:, 0]
+    dot = np.sum(e_in * e_out, axis=1)
+    return (np.abs(np.arctan2(cross, dot)) <= 1e-9)
+
+
+def _check_coincident(pts: np.ndarray, tol: float, source: str) -> None:
+    from scipy.spatial import cKDTree
+
+    pairs = cKDTree(pts).query_pairs(tol, output_type="ndarray")
+    if len(pairs):
+        i, j = sorted(int(v) for v in pairs[0])
+        raise InputError(f"points {i} and {j} are at the same place", where=source)
+
+
+def _segments(loop: np.ndarray) -> np.ndarray:
+    """``(k, 2) int64`` directed segments of a closed loop."""
+    return np.stack([loop, np.roll(loop, -1)], axis=1)
+
+
+def _check_segments(loops: Sequence[np.ndarray], source: str) -> None:
+    """No segment used by three patches, or twice in the same direction."""
+    users: dict[tuple[int, int], list[tuple[int, bool]]] = {}
+    for p, loop in enumerate(loops):
+        for a, b in _segments(loop).tolist():
+            users.setdefault((min(a, b), max(a, b)), []).append((p, a < b))
+    for (a, b), us in users.items():
+        if len(us) > 2:
+            raise InputError(f"side {a}-{b} is used by {len(us)} patches ({', '.join(str(u[0]) for u in us)}); "
+                             "a side belongs to at most 2 patches", where=source)
+        if len(us) == 2 and us[0][1] == us[1][1]:
+            raise InputError(f"patches {us[0][0]} and {us[1][0]} overlap (both lie on the same side of segment {a}-{b})",
+                             where=source)
+
+
+def _check_cover(pts, loops, polys, tol: float, source: str):
+    """Patches do not overlap, form one region without holes, and every segment used by one
+    patch lies on the region's outer boundary. Returns the union (a shapely Polygon)."""
+    import shapely
+
+    tree = shapely.STRtree(polys)
+    left, right = tree.query(polys, predicate="intersects")
+    for i, j in zip(left.tolist(), right.tolist()):
+        if i < j:
+            inter = polys[i].intersection(polys[j]).area
+            if inter > tol * max(math.sqrt(min(polys[i].area, polys[j].area)), tol):
+                raise InputError(f"patches {i} and {j} overlap (common area {inter:.3g})", where=source)
+    union = shapely.union_all(polys)
+    if union.geom_type != "Polygon":
+        raise InputError("the patches do not form one connected region (some patch touches the others only at a point, "
+                         "or not at all)", where=source)
+    if len(union.interiors):
+        hx, hy = union.interiors[0].coords[0]
+        raise InputError(f"the patches leave a gap (a hole in the region near ({hx:.6g}, {hy:.6g}))", where=source)
+    count: dict[tuple[int, int], int] = {}
+    owner: dict[tuple[int, int], int] = {}
+    for p, loop in enumerate(loops):
+        for a, b in _segments(loop).tolist():
+            key = (min(a, b), max(a, b))
+            count[key] = count.get(key, 0) + 1
+            owner[key] = p
+    ring = union.exterior
+    for (a, b), c in count.items():
+        if c != 1:
+            continue
+        mid = shapely.Point(0.5 * (pts[a] + pts[b]))
+        if ring.distance(mid) > 10 * tol:
+            raise InputError(f"segment {a}-{b} of patch {owner[(a, b)]} lies inside the region but no other patch uses it "
+                             "(patches meet there without sharing their points: a hanging node, or a gap)", where=source)
+    return union
+
+
+def layout_sides(layout: Layout) -> Sides:
+    """The sides of ``layout`` (see :class:`Sides`)."""
+    pts = layout.points
+    users: dict[tuple[int, int], list[int]] = {}
+    for p, loop in enumerate(layout.patches):
+        for a, b in _segments(loop).tolist():
+            users.setdefault((min(a, b), max(a, b)), []).append(p)
+    node = np.zeros(pts.shape[0], bool)
+    for loop, pc in zip(layout.patches, layout.patch_corner):
+        node[loop[pc]] = True
+        seg = [tuple(users[(min(a, b), max(a, b))]) for a, b in _segments(loop).tolist()]
+        change = np.array([seg[i - 1] != seg[i] for i in range(len(seg))])  # users differ before/after point i
+        node[loop[change]] = True
+    chains: list[np.ndarray] = []
+    owner: list[list[int]] = []
+    by_first: dict[tuple[int, int], int] = {}  # first directed segment of a chain -> side id
+    patch_sides, patch_rev = [], []
+    for p, (loop, pc) in enumerate(zip(layout.patches, layout.patch_corner)):
+        k = loop.size
+        nodes = np.flatnonzero(node[loop])  # starts with 0: the loop starts at a corner
+        corners = set(np.flatnonzero(pc).tolist())
+        ids, rev = [], []
+        cur_ids, cur_rev = [], []
+        for j, start in enumerate(nodes.tolist()):
+            stop = nodes[j + 1] if j + 1 < nodes.size else k
+            chain = loop[np.arange(start, stop + 1) % k]
+            back = (int(chain[-1]), int(chain[-2]))  # the other patch's first segment, if it ran it before
+            if back in by_first and np.array_equal(chains[by_first[back]], chain[::-1]):
+                sid = by_first[back]
+                owner[sid].append(p)
+                cur_ids.append(sid)
+                cur_rev.append(True)
+            else:
+                sid = len(chains)
+                chains.append(chain)
+                owner.append([p])
+                by_first[(int(chain[0]), int(chain[1]))] = sid
+                cur_ids.append(sid)
+                cur_rev.append(False)
+            if int(stop) % k in corners:
+                ids.append(np.asarray(cur_ids, np.int64))
+                rev.append(np.asarray(cur_rev, bool))
+                cur_ids, cur_rev = [], []
+        patch_sides.append(tuple(ids))
+        patch_rev.append(tuple(rev))
+    ends_count: dict[tuple[int, int], int] = {}
+    for c in chains:
+        key = (min(int(c[0]), int(c[-1])), max(int(c[0]), int(c[-1])))
+        ends_count[key] = ends_count.get(key, 0) + 1
+    names = tuple(
+        f"{int(c[0])}-{int(c[-1])}" if ends_count[(min(int(c[0]), int(c[-1])), max(int(c[0]), int(c[-1])))] == 1
+        else _chain_name(c) for c in chains)
+    u = np.full((len(chains), 2), -1, np.int64)
+    for sid, us in enumerate(owner):
+        if len(us) > 2:  # cannot happen after _check_segments
+            raise InputError(f"side {names[sid]} is used by {len(us)} patches", where=layout.source)
+        u[sid, : len(us)] = us
+    lengths = np.array([float(np.linalg.norm(np.diff(pts[c], axis=0), axis=1).sum()) for c in chains])
+    return Sides(tuple(chains), names, tuple(patch_sides), tuple(patch_rev), u, lengths)
+
+
+def _chain_name(chain) -> str:
+    return "-".join(str(int(v)) for v in chain)
+
+
+def parse_counts(counts, sides: Sides, source: str) -> dict[int, int]:
+    """``{name: count}`` (names ``"i-j"`` in either order, or whole chains) as
+    ``{side id: count}``. Raises :class:`InputError` for unknown sides or counts < 1."""
+    if not isinstance(counts, dict):
+        raise InputError('"sides" must be an object {"i-j": count, ...}', where=source)
+    lookup: dict[tuple[int, ...], int] = {}
+    for s, (c, name) in enumerate(zip(sides.chains, sides.names)):
+        for key in (tuple(int(v) for v in name.split("-")), tuple(int(v) for v in c)):
+            lookup[key] = s
+            lookup[key[::-1]] = s
+    out: dict[int, int] = {}
+    for name, value in counts.items():
+        try:
+            key = tuple(int(v) for v in str(name).split("-"))
+        except ValueError:
+            key = ()
+        if len(key) < 2 or key not in lookup:
+            raise InputError(f"side {str(name)[:40]!r} is not a side of the layout (sides are named 'i-j' by their "
+                             "corner points)", where=source)
+        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+            raise InputError(f"side {name}: the edge count must be a positive integer, got {value!r:.40}", where=source)
+        s = lookup[key]
+        if s in out and out[s] != value:
+            raise InputError(f"side {name} is given twice with different counts", where=source)
+        out[s] = int(value)
+    return out
+
+
+def load_counts(path, sides: Sides) -> dict[int, int]:
+    """Read a sides file ``{"i-j": count, ...}`` (JSON) as ``{side id: count}``."""
+    src = str(path)
+    return parse_counts(_json(read_limited(path, MAX_BYTES, "sides file"), src), sides, src)
+
+
+# ---------------------------------------------------------------------------------------------
+# patches as shapes
+
+
+def patch_shapes(layout: Layout) -> list[Shape]:
+    """One :class:`Shape` per patch, with the patch's corners (:attr:`Layout.patch_corner`) as
+    explicit corners in loop order, so that the shape's side ``i`` is the patch's side ``i``
+    (:attr:`Sides.patch_sides`)."""
+    out = []
+    for p, (loop, pc) in enumerate(zip(layout.patches, layout.patch_corner)):
+        out.append(make_shape(layout.points[loop], corners=np.flatnonzero(pc).tolist(), source=f"{layout.source} patch {p}"))
+    return out
+
+
+# ---------------------------------------------------------------------------------------------
+# the integer program
+
+
+CHORD_WEIGHT = 0.01
+"""Weight of the secondary objective of :func:`solve_counts` (multiplicities close to
+``chord width / size``, so that strips without boundary sides, and wide strips, are split to
+about the size too) against the primary one (edges per side close to ``length / size``)."""
+
+
+def solve_counts(sides: Sides, matrices: Sequence[np.ndarray], *, counts: Mapping[int, int] | None = None,
+                 size: float | None = None, widths: Sequence[np.ndarray] | None = None,
+                 source: str = "<layout>") -> tuple[list[np.ndarray], np.ndarray]:
+    """Chord multiplicities of every patch from ONE integer program (``scipy.optimize.milp``).
+
+    matrices: per patch ``(n_p, c_p) int64`` side matrix (edges of chord ``c`` on the patch's
+    side ``i``); counts: ``{side id: count}`` required exactly; size: target edge length (user
+    units; default: the requested sides' total length over their total count); widths: per
+    patch ``(c_p,)`` chord widths (user units, :meth:`PatchTemplate.chord_widths`).
+
+    Variables: ``m_p >= 1`` integer per patch and chord, ``n_s >= 1`` integer per side.
+    Constraints: ``A_p[i] @ m_p = sum of n_s over the layout sides along patch side i`` for
+    every patch side (so a shared side has one count in both patches, a side along which two
+    neighbours meet is split between them, and each patch's total is even), ``n_s = counts[s]``
+    when requested. Objective: ``sum_s |n_s - length_s / size|`` over the sides not requested, plus
+    :data:`CHORD_WEIGHT` ``* sum_c |m_c - max(width_c / size, 1)|``.
+
+    Returns ``(multiplicities per patch ((c_p,) int64), counts per side ((S,) int64))``.
+    Raises :class:`LayoutInfeasible` (naming the requested sides and the nearest feasible
+    counts) when the requested counts cannot be met; :class:`InputError` for a bad size or when
+    neither a size nor counts are given.
+    """
+    from scipy.optimize import Bounds, LinearConstraint, milp
+
+    counts = dict(counts or {})
+    S = len(sides.chains)
+    nc = [int(np.asarray(A).shape[1]) for A in matrices]
+    off = np.concatenate([[0], np.cumsum(nc)]).astype(int)
+    M = int(off[-1])
+    if size is None:
+        if not counts:
+            raise InputError("give an element size or edge counts for some sides", where=source)
+        size = float(sum(sides.lengths[s] for s in counts) / sum(counts.values()))
+    h = float(size)
+    if not (h > 0 and math.isfinite(h)):
+        raise InputError(f"element size must be a positive number, got {size!r}", where=source)
+    if float(np.sum(sides.lengths)) / h > 1_000_000:
+        raise InputError(f"element size {h:g} gives more than 1000000 side edges", where=source)
+    tau_m = np.concatenate([np.maximum(np.asarray(w, np.float64) / h, 1.0) for w in widths]) if widths is not None \
+        else np.ones(M)
+
+    def program(fixed: Mapping[int, int], targets: Mapping[int, float]):
+        """Variables: m (M), n (S), t (T side deviations), u (M chord deviations)."""
+        T = len(targets)
+        nv = M + S + T + M
+        rows, lo, hi = [], [], []
+
+        def row():
+            r = np.zeros(nv)
+            rows.append(r)
+            return r
+
+        for p, A in enumerate(matrices):
+            A = np.asarray(A, dtype=np.float64)
+            for i, parts in enumerate(sides.patch_sides[p]):
+                r = row()
+                r[off[p]:off[p + 1]] = A[i]
+                r[M + parts] = -1.0
+                lo.append(0.0)
+                hi.append(0.0)
+        for j, (s, tau) in enumerate(targets.items()):
+            for sign in (1.0, -1.0):  # t_j >= sign * (n_s - tau)
+                r = row()
+                r[M + s] = -sign
+                r[M + S + j] = 1.0
+                lo.append(-sign * tau)
+                hi.append(np.inf)
+        for c in range(M):
+            for sign in (1.0, -1.0):  # u_c >= sign * (m_c - tau_c)
+                r = row()
+                r[c] = -sign
+                r[M + S + T + c] = 1.0
+                lo.append(-sign * tau_m[c])
+                hi.append(np.inf)
+        cost = np.concatenate([np.zeros(M + S), np.ones(T), np.full(M, CHORD_WEIGHT)])
+        lb = np.concatenate([np.ones(M + S), np.zeros(T + M)])
+        ub = np.full(nv, np.inf)
+        for s, v in fixed.items():
+            lb[M + s] = ub[M + s] = float(v)
+        integrality = np.concatenate([np.ones(M + S), np.zeros(T + M)])
+        res = milp(cost, constraints=LinearConstraint(np.array(rows), lo, hi), integrality=integrality,
+                   bounds=Bounds(lb, ub), options={"time_limit": 60.0})
+        if res.status != 0 or res.x is None:
+            return None
+        x = np.rint(res.x).astype(np.int64)
+        return [x[off[p]:off[p + 1]] for p in range(len(matrices))], x[M:M + S]
+
+    targets = {s: float(sides.lengths[s]) / h for s in range(S) if s not in counts}
+    sol = program(counts, targets)
+    if sol is not None:
+        return sol
+    names = sides.names
+    near = program({}, {**targets, **{s: float(v) for s, v in counts.items()}}) if counts else None
+    if near is None:  # the templates' chords tie shared sides together in contradictory ways
+        raise LayoutInfeasible("no chord multiplicities give shared sides equal counts", where=source)
+    nearest = {names[s]: int(near[1][s]) for s in counts}
+    wrong = [s for s in counts if near[1][s] != counts[s]] or list(counts)
+    detail = ", ".join(f"side {names[s]}: {counts[s]} asked, nearest feasible {nearest[names[s]]}" for s in wrong)
+    raise LayoutInfeasible(f"the requested edge counts cannot be met together ({detail}; every patch needs an even "
+                           "number of boundary edges, and both ends of a strip of quads get the same count)",
+                           where=source, nearest=nearest)
+
+
+# ---------------------------------------------------------------------------------------------
+# merging
+
+
+def merge_patches(layout: Layout, sides: Sides, refined: Sequence, counts: np.ndarray):
+    """Merge refined patches into one mesh with one vertex per side position.
+
+    refined: per patch a :class:`jaxmatch.placement.refine.RefinedMesh` (``xy``, ``quads``,
+    ``side_vertices`` from the patch's corner ``i`` to ``i + 1``). Returns ``(xy (V, 2)
+    float64, quads (Q, 4) int64, patch (Q,) int64, side_vertices per layout side, shared_gap
+    float)``. Every layout side's vertices get global ids once (its end points are layout
+    points), so a shared side is one set of vertices; a patch side made of several layout sides
+    is cut into them by their counts. Positions come from the first patch along the side, and
+    ``shared_gap`` is the largest distance to the other patch's own position of the same vertex
+    (use :func:`fit_sides` first so that the patches agree). Raises ValueError when a patch's
+    side counts disagree with ``counts`` (a bug, not bad input).
+    """
+    S = len(sides.chains)
+    node_pts = np.unique(np.concatenate([c[[0, -1]] for c in sides.chains]))
+    nid = np.full(layout.points.shape[0], -1, np.int64)
+    nid[node_pts] = np.arange(node_pts.size)
+    nxt = node_pts.size
+    side_ids = []
+    for s in range(S):
+        n = int(counts[s])
+        ids = np.empty(n + 1, np.int64)
+        ids[0], ids[-1] = nid[sides.chains[s][0]], nid[sides.chains[s][-1]]
+        ids[1:-1] = np.arange(nxt, nxt + n - 1)
+        nxt += n - 1
+        side_ids.append(ids)
+    xy_side = np.full((nxt, 2), np.nan)
+    gap = 0.0
+    xy_parts, quad_parts, patch_parts = [], [], []
+    for p, rm in enumerate(refined):
+        local = np.full(rm.xy.shape[0], -1, np.int64)
+        for i, (parts, revs) in enumerate(zip(sides.patch_sides[p], sides.patch_reversed[p])):
+            sv = np.asarray(rm.side_vertices[i], dtype=np.int64)
+            want = int(sum(int(counts[s]) for s in parts))
+            if sv.size != want + 1:
+                raise ValueError(f"patch {p} side {i} has {sv.size - 1} edges, the program chose {want}")
+            g = np.concatenate([(side_ids[s][::-1] if r else side_ids[s])[:-1] for s, r in zip(parts, revs)]
+                               + [[(side_ids[parts[-1]][::-1] if revs[-1] else side_ids[parts[-1]])[-1]]])
+            clash = (local[sv] >= 0) & (local[sv] != g)
+            if clash.any():
+                raise ValueError(f"patch {p}: a vertex is on two sides at different places")
+            local[sv] = g
+            pos = np.asarray(rm.xy, dtype=np.float64)[sv]
+            have = ~np.isnan(xy_side[g, 0])
+            if have.any():
+                gap = max(gap, float(np.max(np.linalg.norm(xy_side[g][have] - pos[have], axis=1))))
+            xy_side[g[~have]] = pos[~have]
+        inner = np.flatnonzero(local < 0)
+        local[inner] = nxt + np.arange(inner.size)
+        nxt += inner.size
+        xy_parts.append(np.asarray(rm.xy, dtype=np.float64)[inner])
+        quad_parts.append(local[np.asarray(rm.quads, dtype=np.int64)])
+        patch_parts.append(np.full(len(rm.quads), p, np.int64))
+    xy = np.concatenate([xy_side] + xy_parts)
+    xy[nid[node_pts]] = layout.points[node_pts]  # nodes: exactly the layout's coordinates
+    return xy, np.concatenate(quad_parts), np.concatenate(patch_parts), tuple(side_ids), gap
+
+
+def fit_sides(layout: Layout, sides: Sides, p: int, refined, counts: np.ndarray, *, smooth_iters: int = 200) -> np.ndarray:
+    """Positions ``(V, 2)`` of patch ``p``'s refined mesh with every side vertex where the
+    layout side it belongs to puts it: ``counts[s]`` edges evenly spaced by arc length on each
+    layout side (:func:`jaxmatch.placement.refine.side_points`, the formula the refinement uses,
+    so a patch side made of one layout side does not move). Where a patch side is made of
+    several layout sides (neighbours meet along it), its vertices move so that one lands on
+    each node; then the interior follows (harmonic extension of the boundary displacement, one
+    sparse solve) and is untangled and smoothed (:func:`jaxmatch.placement.embed.smooth`,
+    never lowering the minimum scaled Jacobian from there)."""
+    from jaxmatch.placement.embed import tutte
+    from jaxmatch.placement.refine import side_points
+
+    xy = np.array(refined.xy, dtype=np.float64)
+    moved = False
+    bverts = []
+    for i, (parts, revs) in enumerate(zip(sides.patch_sides[p], sides.patch_reversed[p])):
+        sv = np.asarray(refined.side_vertices[i], dtype=np.int64)
+        bverts.append(sv)
+        if len(parts) == 1:
+            continue
+        pos = []
+        for s, r in zip(parts, revs):
+            q = side_points(layout.points[sides.chains[s]], int(counts[s]))
+            pos.append((q[::-1] if r else q)[:-1])
+        last = sides.chains[parts[-1]][0 if revs[-1] else -1]  # the end corner of the patch side
+        new = np.concatenate(pos + [layout.points[last][None]])
+        moved |= not np.array_equal(new, xy[sv])
+        xy[sv] = new
+    if not moved:
+        return xy
+    b = np.unique(np.concatenate(bverts))
+    quads = np.asarray(refined.quads, dtype=np.int64)
+    target = xy[b].copy()
+    disp = tutte(quads, xy.shape[0], b, target - np.asarray(refined.xy)[b])
+    xy = np.asarray(refined.xy) + disp
+    xy[b] = target
+    c = target.mean(axis=0)
+    r = float(np.sqrt(np.mean(np.sum((xy[b] - c) ** 2, axis=1)))) or 1.0
+    out = smooth((xy - c) / r, quads, b, iters=smooth_iters) * r + c
+    out[b] = target
+    return out
+
+
+def boundary_edges(quads: np.ndarray) -> np.ndarray:
+    """``(B, 2) int64`` directed edges used by exactly one quad (ccw quads: the region's
+    boundary runs counter-clockwise along them)."""
+    q = np.asarray(quads, dtype=np.int64)
+    d = np.stack([q, np.roll(q, -1, axis=1)], axis=-1).reshape(-1, 2)
+    key = np.sort(d, axis=1)
+    _, inv, cnt = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    return d[cnt[inv.ravel()] == 1]
+
+
+def _outer_loop(layout: Layout, sides: Sides, side_ids) -> np.ndarray:
+    """Vertex ids of the outer boundary, ccw, from the outer sides."""
+    nxt: dict[int, np.ndarray] = {}
+    for p in range(layout.n_patches):
+        for s, rev in zip(np.concatenate(sides.patch_sides[p]), np.concatenate(sides.patch_reversed[p])):
+            if sides.users[s, 1] < 0:
+                ids = side_ids[s][::-1] if rev else side_ids[s]
+                nxt[int(ids[0])] = ids
+    start = min(nxt)
+    out, v = [], start
+    for _ in range(len(nxt)):
+        ids = nxt[v]
+        out.append(ids[:-1])
+        v = int(ids[-1])
+        if v == start:
+            break
+    return np.concatenate(out)
+
+
+# ---------------------------------------------------------------------------------------------
+# meshing
+
+
+def _templates(shape: Shape, catalogue, lattice, limit: int, sizes=TEMPLATE_SIZES) -> list:
+    """Candidate templates for one patch: :func:`jaxmatch.placement.refine.patch_templates` of
+    the first group of ``sizes`` that has one (at most ``limit`` per size), fewest internal
+    vertices first, then in their ranked order."""
+    from jaxmatch.errors import UnmatchableError
+    from jaxmatch.placement.refine import patch_templates
+
+    for group in sizes:
+        ks = [k for k in group if k in catalogue.internal]
+        if not ks:
+            continue
+        try:
+            found = patch_templates(shape, catalogue, lattice, limit=limit, internal=ks)
+        except UnmatchableError:
+            continue
+        if found:
+            return sorted(found, key=lambda t: (t.match.internal_vertices, t.rank))
+    return []
+
+
+def _key(refined_mesh) -> tuple:
+    sj = quality(refined_mesh.xy, refined_mesh.quads)[0]
+    return (int(inverted_mask(refined_mesh.xy, refined_mesh.quads).sum()), -round(float(sj.min()), 3))
+
+
+def mesh_layout(layout: Layout, catalogue: Catalogue, lattice: Lattice, *, size: float | None = None,
+                counts: Mapping[int, int] | None = None, templates_per_patch: int = TEMPLATES_PER_PATCH,
+                sizes=TEMPLATE_SIZES, smooth_cuts: bool = False, template_cache: dict | None = None,
+                progress=None) -> LayoutMesh:
+    """Mesh every patch of ``layout`` and merge them into one conforming :class:`LayoutMesh`.
+
+    size: target edge length (user units) for sides without a requested count; counts:
+    ``{side id: edges}`` requested (added to ``layout.requested``, which they override).
+    sizes: groups of template sizes (internal vertices) tried per patch, see :data:`TEMPLATE_SIZES`.
+    template_cache: optional dict, read and filled, of each patch's candidate templates (keyed by
+    the patch's points, corners, ``sizes`` and ``templates_per_patch``; valid for one catalogue
+    and lattice), so that meshing the same layout at another size does not rank again.
+    smooth_cuts: after merging, untangle/smooth all vertices except the outer boundary
+    (:func:`jaxmatch.placement.embed.smooth`; for decompositions, whose inner sides are not
+    the user's): it never lowers the minimum scaled Jacobian.
+
+    Raises :class:`InputError` when a patch has no template that keeps its corners, and
+    :class:`LayoutInfeasible` when the requested counts cannot be met.
+    """
+    from jaxmatch.placement.refine import refine_and_place
+
+    sides = layout_sides(layout)
+    want = {s: c for s, c in parse_counts(dict(layout.requested), sides, layout.source).items()}
+    want.update(counts or {})
+    shapes = patch_shapes(layout)
+    cands = []
+    for p, shp in enumerate(shapes):
+        key = (layout.points[layout.patches[p]].tobytes(), layout.corner[layout.patches[p]].tobytes(), sizes,
+               templates_per_patch)
+        if template_cache is not None and key in template_cache:
+            t = template_cache[key]
+        else:
+            t = _templates(shp, catalogue, lattice, templates_per_patch, sizes)
+            if template_cache is not None:
+                template_cache[key] = t
+        if not t:
+            ks = sorted({k for g in sizes for k in g if k in catalogue.internal})
+            raise InputError(f"patch {p}: no catalogue template with {ks[0]}..{ks[-1]} internal vertices keeps its "
+                             f"{shp.n_corners} corners without folding (split the patch)", where=layout.source)
+        cands.append(t)
+        if progress:
+            progress(p + 1, len(shapes))
+    choice = [0] * len(shapes)
+    cache: dict = {}
+    best = None
+    for _ in range(ROUNDS):
+        tmpl = [cands[p][choice[p]] for p in range(len(shapes))]
+        try:
+            mults, n = solve_counts(sides, [t.side_matrix() for t in tmpl], counts=want, size=size,
+                                    widths=[t.chord_widths() for t in tmpl], source=layout.source)
+        except LayoutInfeasible:
+            if not _advance_for_feasibility(sides, cands, choice, want, size, layout.source):
+                raise
+            continue
+        refined = []
+        for p, (t, m) in enumerate(zip(tmpl, mults)):
+            key = (p, choice[p], tuple(m.tolist()))
+            if key not in cache:
+                cache[key] = refine_and_place(t, m)
+            rm = cache[key]
+            if any(len(parts) > 1 for parts in sides.patch_sides[p]):  # neighbours meet along a side
+                rm = rm._replace(xy=fit_sides(layout, sides, p, rm, n))
+            refined.append(rm)
+        keys = [_key(r) for r in refined]
+        total = (sum(k[0] for k in keys), max(k[1] for k in keys))  # inverted quads, then the worst patch
+        if best is None or total < best[0]:
+            best = (total, list(tmpl), mults, n, refined)
+        bad = [p for p, k in enumerate(keys) if (k[0] > 0 or -k[1] < MIN_SJ) and choice[p] + 1 < len(cands[p])]
+        if not bad:
+            break
+        for p in bad:
+            choice[p] += 1
+    _, tmpl, mults, n, refined = best
+    xy, quads, patch, side_ids, gap = merge_patches(layout, sides, refined, n)
+    outer = _outer_loop(layout, sides, side_ids)
+    if smooth_cuts:
+        xy = _smooth_all(xy, quads, outer)
+    import shapely
+
+    region = shapely.union_all([shapely.Polygon(layout.points[lp]) for lp in layout.patches]).area
+    return LayoutMesh(layout=layout, sides=sides, xy=xy, quads=quads, patch=patch, side_vertices=side_ids,
+                      counts=n, outer=outer, templates=tuple(t.mesh_id for t in tmpl),
+                      multiplicities=tuple(mults), shared_gap=gap, region_area=float(region))
+
+
+def _advance_for_feasibility(sides, cands, choice, want, size, source) -> bool:
+    """Switch one patch to another template so that the program becomes feasible; True when
+    one was found (``choice`` is changed in place)."""
+    for p in range(len(cands)):
+        for j in range(len(cands[p])):
+            if j == choice[p]:
+                continue
+            trial = list(choice)
+            trial[p] = j
+            try:
+                solve_counts(sides, [cands[q][trial[q]].side_matrix() for q in range(len(cands))], counts=want,
+                             size=size, widths=[cands[q][trial[q]].chord_widths() for q in range(len(cands))],
+                             source=source)
+            except LayoutInfeasible:
+                continue
+            choice[p] = j
+            return True
+    return False
+
+
+def _smooth_all(xy: np.ndarray, quads: np.ndarray, fixed: np.ndarray) -> np.ndarray:
+    """:func:`jaxmatch.placement.embed.smooth` in a normalised frame (centred, unit RMS radius)."""
+    c = xy.mean(axis=0)
+    r = float(np.sqrt(np.mean(np.sum((xy - c) ** 2, axis=1)))) or 1.0
+    out = smooth((xy - c) / r, quads, fixed) * r + c
+    out[fixed] = xy[fixed]
+    return out
+
+
+# ---------------------------------------------------------------------------------------------
+# output
+
+
+def layout_groups(mesh: LayoutMesh):
+    """Named line groups for a mesh file: ``"boundary"`` (the outer loop) and ``"side i-j"``
+    for every side of the layout (shared sides included), as
+    :class:`jaxmatch.io.meshfile.LineGroup`."""
+    from jaxmatch.io.meshfile import LineGroup
+
+    loop = mesh.outer
+    groups = [LineGroup("boundary", np.stack([loop, np.roll(loop, -1)], axis=1))]
+    for name, ids in zip(mesh.sides.names, mesh.side_vertices):
+        groups.append(LineGroup(f"side {name}", np.stack([ids[:-1], ids[1:]], axis=1)))
+    return groups
+
+
+def write_layout_mesh(path, mesh: LayoutMesh) -> Path:
+    """Write ``mesh`` atomically (format by suffix, :func:`jaxmatch.io.meshfile.write_quads`):
+    cell data ``patch`` and ``scaled_jacobian``, quad groups ``"patch p"``, line groups from
+    :func:`layout_groups`."""
+    from jaxmatch.io.meshfile import write_quads
+
+    names = [f"patch {p}" for p in range(mesh.layout.n_patches)]
+    return write_quads(path, mesh.xy, mesh.quads, cell_data={"patch": mesh.patch, "scaled_jacobian": mesh.scaled_jacobian},
+                       quad_groups=mesh.patch, quad_group_names=names, line_groups=layout_groups(mesh))
+
+
+def mesh_quality_line(xy: np.ndarray, quads: np.ndarray) -> str:
+    """``"240 quads, SJ min 0.812 mean 0.951, 0 inverted"``."""
+    sj = quality(xy, quads)[0]
+    return (f"{quads.shape[0]} quads, SJ min {sj.min():.3f} mean {sj.mean():.3f}, "
+            f"{int(inverted_mask(xy, quads).sum())} inverted")
+
+
+def draw_meshes(path, panels: Sequence[tuple], *, title: str | None = None, ncols: int | None = None) -> Path:
+    """Draw quad meshes side by side and save to ``path`` (.png or .svg, atomically).
+
+    panels: ``(panel title, xy (V, 2), quads (Q, 4), patch (Q,) int or None, lines)`` with
+    ``lines`` a list of ``(k, 2)`` polylines drawn thick (e.g. the layout's sides) or None.
+    Quads are filled by patch (pale colours), inverted quads red; internal vertices whose
+    valence is not 4 are marked. Each panel's title ends with its :func:`mesh_quality_line`.
+    """
+    from matplotlib.collections import LineCollection, PolyCollection
+
+    from jaxmatch.io.plot import figure_format, new_figure, save_figure
+
+    figure_format(path)
+    fig, axes = new_figure(len(panels), ncols)
+    for ax, (head, xy, quads, patch, lines) in zip(axes, panels):
+        xy = np.asarray(xy, np.float64)
+        quads = np.asarray(quads, np.int64)
+        pal = np.array([[0.80, 0.88, 0.97], [0.98, 0.88, 0.75], [0.83, 0.94, 0.82], [0.94, 0.84, 0.94],
+                        [0.98, 0.96, 0.76], [0.85, 0.93, 0.93]])
+        face = pal[np.asarray(patch) % len(pal)] if patch is not None else np.tile(pal[0], (quads.shape[0], 1))
+        face = np.where(inverted_mask(xy, quads)[:, None], np.array([0.95, 0.3, 0.3]), face)
+        ax.add_collection(PolyCollection(xy[quads], facecolors=face, edgecolors="0.25", linewidths=0.4))
+        if lines:
+            ax.add_collection(LineCollection([np.asarray(line) for line in lines], colors="k", linewidths=1.4))
+        be = boundary_edges(quads)
+        on_b = np.zeros(xy.shape[0], bool)
+        on_b[be.ravel()] = True
+        irr = np.flatnonzero(~on_b & (valences(quads, xy.shape[0]) != 4))
+        if irr.size:
+            ax.plot(xy[irr, 0], xy[irr, 1], "o", ms=3.5, color="tab:red")
+        ax.set_aspect("equal")
+        ax.autoscale_view()
+        ax.set_xticks([])
+        ax.set_yticks([])
+        for spine in ax.spines.values():
+            spine.set_visible(False)
+        ax.set_title(f"{head}\n{mesh_quality_line(xy, quads)}, {irr.size} irregular", fontsize=9)
+    if title:
+        fig.suptitle(title)
+    return save_figure(fig, path)
+
+
+def layout_panel(mesh: LayoutMesh, head: str) -> tuple:
+    """A :func:`draw_meshes` panel for a layout mesh (sides drawn thick)."""
+    lines = [mesh.xy[ids] for ids in mesh.side_vertices]
+    return (head, mesh.xy, mesh.quads, mesh.patch, lines)

@@ -1,0 +1,570 @@
+"""Multi-patch layouts (:mod:`jaxmatch.placement.layout`) and the ``jaxmatch layout`` command.
+
+Specification:
+
+* bad layouts are refused with one line naming the patch, point or side (and the CLI exits 2,
+  writing nothing);
+* ONE integer program chooses all multiplicities: shared sides get one count, requested counts
+  are met exactly, and its optimum equals a brute-force search over small multiplicities;
+* merged meshes are conforming, checked independently of the code: every edge lies in one or
+  two quads, the edges of one quad lie exactly on the region's outer boundary and cover it, no
+  quad is inverted, the quads' areas add up to the region's area;
+* ``.msh`` files are read back by meshio and by gmsh itself: element types and counts, and the
+  physical groups (one per patch, the outer boundary, every side).
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+import sys
+from collections import Counter
+from pathlib import Path
+from typing import NamedTuple
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from jaxmatch.errors import EXIT_BAD_INPUT, InputError
+from jaxmatch.placement.layout import (
+    LayoutInfeasible,
+    layout_sides,
+    load_layout,
+    make_layout,
+    merge_patches,
+    mesh_layout,
+    parse_layout,
+    solve_counts,
+    write_layout_mesh,
+)
+from jaxmatch.scoring.lattice import load_lattice
+
+ROOT = Path(__file__).resolve().parent.parent
+LAYOUTS = ROOT / "examples" / "layouts"
+
+SQUARE2 = [[0, 0], [1, 0], [2, 0], [2, 1], [1, 1], [0, 1]]
+TJ = {"points": [[0, 0], [2, 0], [2, 1], [0.7, 1], [0, 1], [0.7, 2], [0, 2], [2, 2]],
+      "patches": [[0, 1, 2, 3, 4], [4, 3, 5, 6], [3, 2, 7, 5]]}
+
+
+def sid_name(sides, name: str) -> str:
+    """The name of side ``"a-b"`` as the layout spells it (either direction)."""
+    rev = "-".join(name.split("-")[::-1])
+    return next(n for n in sides.names if n in (name, rev))
+
+
+@pytest.fixture(scope="module")
+def lat():
+    return load_lattice("fine")
+
+
+# ---------------------------------------------------------------------------------------------
+# independent checks
+
+
+def edge_use(quads) -> Counter:
+    """Undirected edge -> number of quads using it (plain Python)."""
+    c: Counter = Counter()
+    for q in np.asarray(quads).tolist():
+        for a, b in zip(q, q[1:] + q[:1]):
+            c[(min(a, b), max(a, b))] += 1
+    return c
+
+
+def dist_to_polyline(p, loop) -> float:
+    """Distance from point ``p`` to the closed polyline ``loop (k, 2)``."""
+    a = np.asarray(loop, float)
+    b = np.roll(a, -1, axis=0)
+    ab = b - a
+    t = np.clip(np.sum((p - a) * ab, axis=1) / np.sum(ab * ab, axis=1), 0, 1)
+    return float(np.min(np.linalg.norm(a + t[:, None] * ab - p, axis=1)))
+
+
+def signed_areas(xy, quads) -> np.ndarray:
+    p = np.asarray(xy)[np.asarray(quads)]
+    q = np.roll(p, -1, axis=1)
+    return 0.5 * np.sum(p[..., 0] * q[..., 1] - p[..., 1] * q[..., 0], axis=1)
+
+
+def scaled_jacobians(xy, quads) -> np.ndarray:
+    """Verdict scaled Jacobian, computed here (min over corners of sin of the corner angle)."""
+    out = []
+    for q in np.asarray(quads).tolist():
+        vals = []
+        for k in range(4):
+            o, n, p = (np.asarray(xy[q[k]]), np.asarray(xy[q[(k + 1) % 4]]), np.asarray(xy[q[k - 1]]))
+            e1, e2 = n - o, p - o
+            vals.append((e1[0] * e2[1] - e1[1] * e2[0]) / (np.linalg.norm(e1) * np.linalg.norm(e2)))
+        out.append(min(vals))
+    return np.asarray(out)
+
+
+def check_conforming(xy, quads, outline, tol=1e-9):
+    """Every edge in 1 or 2 quads; the 1-quad edges lie on ``outline`` (closed (k, 2) loop) and
+    their total length is its perimeter (so they cover it); every quad ccw; areas add up."""
+    xy = np.asarray(xy)
+    use = edge_use(quads)
+    assert set(use.values()) <= {1, 2}, "an edge is in more than 2 quads"
+    scale = float(np.max(np.ptp(outline, axis=0)))
+    length = 0.0
+    for (a, b), n in use.items():
+        if n == 1:
+            for p in (xy[a], xy[b], 0.5 * (xy[a] + xy[b])):
+                assert dist_to_polyline(p, outline) <= tol * scale, f"boundary edge {a}-{b} is not on the outline"
+            length += float(np.linalg.norm(xy[a] - xy[b]))
+    perimeter = float(np.sum(np.linalg.norm(np.roll(outline, -1, axis=0) - outline, axis=1)))
+    assert length == pytest.approx(perimeter, rel=1e-9)
+    areas = signed_areas(xy, quads)
+    assert np.all(areas > 0)
+    o = np.asarray(outline, float)
+    region = 0.5 * abs(np.sum(o[:, 0] * np.roll(o[:, 1], -1) - np.roll(o[:, 0], -1) * o[:, 1]))
+    assert areas.sum() / region == pytest.approx(1.0, abs=1e-9)
+    used = np.unique(np.asarray(quads))
+    assert used.size == xy.shape[0], "unused vertices"
+
+
+def outline_of(layout) -> np.ndarray:
+    import shapely
+
+    u = shapely.union_all([shapely.Polygon(layout.points[p]) for p in layout.patches])
+    return np.asarray(u.exterior.coords)[:-1]
+
+
+# ---------------------------------------------------------------------------------------------
+# reading and validation
+
+BAD = [
+    ({"points": SQUARE2, "patches": [[0, 1, 9]]}, "out of range"),
+    ({"points": SQUARE2, "patches": [[0, 1, 1, 4]]}, "twice"),
+    ({"points": SQUARE2, "patches": [[0, 1, 4, 5], [0, 1, 4, 5]]}, "overlap"),
+    ({"points": [[0, 0], [2, 0], [2, 2], [0, 2], [1, 1], [3, 1], [3, 3], [1, 3]], "patches": [[0, 1, 2, 3], [4, 5, 6, 7]]},
+     "overlap"),
+    ({"points": [[0, 0], [1, 0], [0.5, 1], [0.5, -1], [0.4, 0.5]], "patches": [[0, 1, 2], [1, 0, 3], [0, 1, 4]]},
+     "used by 3 patches"),
+    ({"points": [[0, 0], [3, 0], [3, 3], [0, 3], [1, 1], [2, 1], [2, 2], [1, 2]],
+      "patches": [[0, 1, 5, 4], [1, 2, 6, 5], [2, 3, 7, 6], [3, 0, 4, 7]]}, "gap"),
+    ({"points": [[0, 0], [1, 0], [1, 1], [0, 1], [2, 0], [3, 0], [3, 1], [2, 1]], "patches": [[0, 1, 2, 3], [4, 5, 6, 7]]},
+     "connected"),
+    ({"points": [[0, 0], [2, 0], [2, 1], [0, 1], [1, 1], [1, 2], [0, 2], [2, 2]], "patches": [[0, 1, 2, 3], [3, 4, 5, 6], [4, 2, 7, 5]]},
+     "hanging node"),
+    ({"points": [[0, 0], [1, 0], [1, 1], [0, 1], [1, 1e-13]], "patches": [[0, 4, 2, 3]]}, "same place"),
+    ({"points": [[0, 0], [3, 0], [0, 1], [1, 2]], "patches": [[0, 1, 2, 3]]}, "crosses"),
+    ({"points": [[0, 0], [1, 0], [2, 0]], "patches": [[0, 1, 2]]}, "zero area"),
+    ({"points": SQUARE2, "patches": [[0, 1, 4, 5], [1, 2, 3, 4]], "sides": {"0-3": 2}}, "not a side"),
+    ({"points": SQUARE2, "patches": [[0, 1, 4, 5], [1, 2, 3, 4]], "sides": {"0-1": 0}}, "positive integer"),
+    ({"points": SQUARE2, "patches": [[0, 1, 4, 5]], "colour": 1}, "unknown key"),
+    ({"points": SQUARE2}, "missing key"),
+    ({"points": [[0, 0], [1, "a"]], "patches": [[0, 1]]}, "points"),
+    ({"points": SQUARE2, "patches": [[0, 1, 4, 5]], "corners": [0, 99]}, "out of range"),
+]
+
+
+@pytest.mark.parametrize("doc,words", BAD, ids=[w for _, w in BAD])
+def test_bad_layouts_get_one_line_errors(doc, words):
+    with pytest.raises(InputError) as e:
+        parse_layout(json.dumps(doc), "bad.json")
+    msg = str(e.value)
+    assert msg.startswith("bad.json: ") and "\n" not in msg
+    assert words in msg
+
+
+def test_not_json_names_file():
+    with pytest.raises(InputError, match=r"^x\.json: not valid JSON"):
+        parse_layout("{nope", "x.json")
+
+
+def test_orientation_and_corners_are_normalised():
+    # the second patch listed clockwise, starting at a non-corner point
+    lay = make_layout(SQUARE2 + [[1, 0.5]], [[0, 1, 4, 5], [4, 3, 2, 1]], corners=[0, 1, 2, 3, 4, 5])
+    for loop in lay.patches:
+        p = lay.points[loop]
+        area = 0.5 * np.sum(p[:, 0] * np.roll(p[:, 1], -1) - np.roll(p[:, 0], -1) * p[:, 1])
+        assert area > 0 and lay.corner[loop[0]]
+    sd = layout_sides(lay)
+    assert len(sd.chains) == 7 and int((~sd.outer).sum()) == 1
+    shared = int(np.flatnonzero(~sd.outer)[0])
+    assert sd.names[shared] in ("1-4", "4-1") and sorted(sd.users[shared].tolist()) == [0, 1]
+
+
+def test_t_junction_splits_a_patch_side():
+    # a 2 x 1 block below two unit squares: point 3 is a corner of both squares and lies on the
+    # block's top side, which is made of two sides
+    lay = make_layout(TJ["points"], TJ["patches"])
+    assert lay.patch_corner[0].sum() == 4  # (1, 1) is not a corner of the block
+    sd = layout_sides(lay)
+    top = [parts for parts in sd.patch_sides[0] if len(parts) > 1]
+    assert len(top) == 1 and sorted(sd.names[s] for s in top[0]) == sorted([sid_name(sd, "2-3"), sid_name(sd, "3-4")])
+    assert all(sd.users[s, 1] >= 0 for s in top[0])
+
+
+def test_side_names_by_chain_when_ends_repeat():
+    # a square with two corners: both sides run between points 0 and 2
+    pts = [[0, 0], [1, 0], [1, 1], [0, 1]]
+    sd = layout_sides(make_layout(pts, [[0, 1, 2, 3]], corners=[0, 2]))
+    assert sd.names == ("0-1-2", "2-3-0")
+    doc = {"points": pts, "patches": [[0, 1, 2, 3]], "corners": [0, 2], "sides": {"2-1-0": 4}}
+    assert dict(parse_layout(json.dumps(doc), "s.json").requested) == {"0-1-2": 4}
+    with pytest.raises(InputError, match="not a side"):
+        parse_layout(json.dumps({**doc, "sides": {"0-2": 4}}), "s.json")
+
+
+# ---------------------------------------------------------------------------------------------
+# the integer program against brute force
+
+QUAD = np.array([[1, 0], [0, 1], [1, 0], [0, 1]])  # one quad: opposite sides share a chord
+TRI = np.array([[1, 0, 1], [1, 1, 0], [0, 1, 1]])  # three quads around a vertex
+
+
+def strip(widths):
+    """A row of rectangles of the given widths (height 1): (layout, sides)."""
+    xs = np.concatenate([[0.0], np.cumsum(widths)])
+    k = len(widths)
+    pts = [[x, 0.0] for x in xs] + [[x, 1.0] for x in xs]
+    patches = [[i, i + 1, k + 2 + i, k + 1 + i] for i in range(k)]
+    lay = make_layout(pts, patches)
+    return lay, layout_sides(lay)
+
+
+def brute(sides, matrices, counts, size, bound=7):
+    """Min objective of :func:`solve_counts` by enumerating every ``m`` in ``1..bound`` (numpy;
+    widths None: chord targets 1), or None when no ``m`` meets the constraints."""
+    nc = [A.shape[1] for A in matrices]
+    m = np.array(list(itertools.product(range(1, bound + 1), repeat=sum(nc))))  # (N, M)
+    parts = np.split(m, np.cumsum(nc)[:-1], axis=1)
+    S = len(sides.chains)
+    n = np.full((m.shape[0], S), -1)
+    ok = np.ones(m.shape[0], bool)
+    for p, (A, mp) in enumerate(zip(matrices, parts)):
+        for i, (s,) in enumerate(sides.patch_sides[p]):
+            v = mp @ A[i]
+            ok &= (n[:, s] < 0) | (n[:, s] == v)
+            n[:, s] = v
+    for s, c in counts.items():
+        ok &= n[:, s] == c
+    if not ok.any():
+        return None
+    free = [s for s in range(S) if s not in counts]
+    obj = np.abs(n[:, free] - sides.lengths[free] / size).sum(axis=1) + 0.01 * (m - 1).sum(axis=1)
+    return float(obj[ok].min())
+
+
+@settings(max_examples=25)
+@given(widths=st.lists(st.sampled_from([0.5, 1.0, 1.5, 2.0]), min_size=1, max_size=3),
+       size=st.sampled_from([0.5, 0.75, 1.0]), data=st.data())
+def test_program_matches_brute_force(widths, size, data):
+    lay, sd = strip(widths)
+    mats = [QUAD] * lay.n_patches
+    S = len(sd.chains)
+    req = data.draw(st.dictionaries(st.integers(0, S - 1), st.integers(1, 5), max_size=2))
+    want = brute(sd, mats, req, size)
+    if want is None:
+        with pytest.raises(LayoutInfeasible) as e:
+            solve_counts(sd, mats, counts=req, size=size)
+        assert "nearest feasible" in str(e.value) and e.value.nearest is not None
+        return
+    mults, n = solve_counts(sd, mats, counts=req, size=size)
+    for p, (A, m) in enumerate(zip(mats, mults)):
+        assert np.all(m >= 1)
+        assert np.array_equal(A @ m, [n[parts].sum() for parts in sd.patch_sides[p]])  # shared sides: one count
+    assert all(n[s] == c for s, c in req.items())
+    got = sum(abs(n[s] - sd.lengths[s] / size) for s in range(S) if s not in req) + 0.01 * sum(float(np.sum(m - 1)) for m in mults)
+    assert got == pytest.approx(want, abs=1e-6)
+
+
+def sid(sides, name: str) -> int:
+    """Side id of ``"a-b"`` in either direction."""
+    rev = "-".join(name.split("-")[::-1])
+    return next(s for s, n in enumerate(sides.names) if n in (name, rev))
+
+
+def test_program_couples_patches_through_shared_sides():
+    # a square next to a 2-wide rectangle: the shared vertical side forces both heights equal
+    lay, sd = strip([1.0, 2.0])
+    left, right, top_right = sid(sd, "0-3"), sid(sd, "2-5"), sid(sd, "4-5")
+    mults, n = solve_counts(sd, [QUAD, QUAD], counts={left: 3, top_right: 7})
+    assert n[left] == 3 and n[top_right] == 7
+    assert n[right] == 3 and n[sid(sd, "1-4")] == 3 and n[sid(sd, "1-2")] == 7
+    with pytest.raises(LayoutInfeasible, match="asked, nearest feasible"):
+        # the right edge is the same chord as the left one: 3 and 4 cannot both hold
+        solve_counts(sd, [QUAD, QUAD], counts={left: 3, right: 4})
+
+
+def test_program_triangle_parity():
+    # a triangle patch: every side count is a sum of two chords, so the total is even
+    lay = make_layout([[0, 0], [1, 0], [0, 1]], [[0, 1, 2]])
+    sd = layout_sides(lay)
+    with pytest.raises(LayoutInfeasible) as e:
+        solve_counts(sd, [TRI], counts={0: 2, 1: 2, 2: 3})
+    assert sum(e.value.nearest.values()) % 2 == 0
+    _, n = solve_counts(sd, [TRI], counts={0: 2, 1: 3, 2: 3})
+    assert n.tolist() == [2, 3, 3]
+
+
+# ---------------------------------------------------------------------------------------------
+# merging (with structured grids standing in for refined templates)
+
+
+class Grid(NamedTuple):
+    xy: np.ndarray
+    quads: np.ndarray
+    side_vertices: tuple
+    counts: np.ndarray
+
+
+def grid_patch(corners, nx, ny) -> Grid:
+    """Bilinear nx x ny grid in the quad ``corners (4, 2)`` (ccw), sides from corner i to i+1."""
+    c = np.asarray(corners, float)
+    u, v = np.meshgrid(np.arange(nx + 1) / nx, np.arange(ny + 1) / ny)
+    u, v = u.ravel(), v.ravel()
+    xy = ((1 - u) * (1 - v))[:, None] * c[0] + (u * (1 - v))[:, None] * c[1] + (u * v)[:, None] * c[2] + ((1 - u) * v)[:, None] * c[3]
+    idx = np.arange((nx + 1) * (ny + 1)).reshape(ny + 1, nx + 1)
+    quads = np.stack([idx[:-1, :-1], idx[:-1, 1:], idx[1:, 1:], idx[1:, :-1]], axis=-1).reshape(-1, 4)
+    sides = (idx[0, :], idx[:, -1], idx[-1, ::-1], idx[::-1, 0])
+    # side points recomputed exactly as a straight side would be (bit-identical on both patches)
+    return Grid(xy, quads, sides, np.array([nx, ny, nx, ny]))
+
+
+def test_merge_grids_is_conforming():
+    lay, sd = strip([1.0, 2.0])
+    n = np.zeros(len(sd.chains), np.int64)
+    nx, ny = (3, 5), 4
+    patches = []
+    for p, loop in enumerate(lay.patches):
+        g = grid_patch(lay.points[loop], nx[p], ny)
+        for i, (s,) in enumerate(sd.patch_sides[p]):
+            n[s] = g.counts[i]
+        patches.append(g)
+    xy, quads, patch, side_ids, gap = merge_patches(lay, sd, patches, n)
+    check_conforming(xy, quads, outline_of(lay))
+    assert xy.shape[0] == (sum(nx) + 1) * (ny + 1)  # the shared side's vertices once
+    assert quads.shape[0] == sum(nx) * ny and np.bincount(patch).tolist() == [nx[0] * ny, nx[1] * ny]
+    assert gap < 1e-15
+
+
+def test_merge_refuses_counts_that_disagree():
+    lay, sd = strip([1.0, 1.0])
+    patches = [grid_patch(lay.points[lay.patches[0]], 2, 2), grid_patch(lay.points[lay.patches[1]], 2, 3)]
+    n = np.full(len(sd.chains), 2)
+    with pytest.raises(ValueError, match="edges"):
+        merge_patches(lay, sd, patches, n)
+
+
+# ---------------------------------------------------------------------------------------------
+# meshing with the catalogue
+
+
+def test_two_blocks_mesh_conforming(cat, lat):
+    lay = load_layout(LAYOUTS / "two-blocks.json")
+    m = mesh_layout(lay, cat, lat, size=0.25)
+    check_conforming(m.xy, m.quads, outline_of(lay))
+    assert m.shared_gap == 0.0  # both patches put the shared side's vertices at the same points
+    assert m.inverted == 0 and m.counts.tolist() == [4] * len(m.counts)
+    sj = scaled_jacobians(m.xy, m.quads)
+    assert sj.min() == pytest.approx(m.min_scaled_jacobian)
+    # every side's vertices are evenly spaced on the side
+    for ids in m.side_vertices:
+        step = np.linalg.norm(np.diff(m.xy[ids], axis=0), axis=1)
+        assert np.allclose(step, step[0])
+
+
+def test_requested_counts_and_triangle_patch(cat, lat):
+    lay = load_layout(LAYOUTS / "house.json")
+    sd = layout_sides(lay)
+    bottom = sid(sd, "0-1")
+    m = mesh_layout(lay, cat, lat, size=0.3, counts={bottom: 6})
+    check_conforming(m.xy, m.quads, outline_of(lay))
+    assert m.counts[bottom] == 6 and m.inverted == 0
+    # the quad patch's four sides with an odd total: no template can do it
+    odd = {sid(sd, "0-1"): 2, sid(sd, "1-2"): 2, sid(sd, "2-4"): 2, sid(sd, "0-4"): 1}
+    with pytest.raises(LayoutInfeasible, match="asked, nearest feasible") as e:
+        mesh_layout(lay, cat, lat, counts=odd)
+    assert sum(e.value.nearest.values()) % 2 == 0
+
+
+def test_t_junction_mesh_is_conforming(cat, lat):
+    lay = make_layout(TJ["points"], TJ["patches"])
+    m = mesh_layout(lay, cat, lat, size=0.25)
+    check_conforming(m.xy, m.quads, outline_of(lay))
+    assert m.inverted == 0 and m.shared_gap == 0.0
+    assert np.min(np.linalg.norm(m.xy - [0.7, 1.0], axis=1)) == 0.0  # the junction is a vertex
+    assert m.min_scaled_jacobian >= 0.3
+    # the block's top side carries the squares' bottom sides, evenly spaced on each
+    for name in ("2-3", "3-4"):
+        ids = m.side_vertices[m.sides.names.index(sid_name(m.sides, name))]
+        step = np.linalg.norm(np.diff(m.xy[ids], axis=0), axis=1)
+        assert np.allclose(step, step[0])
+
+
+def read_gmsh(path):
+    """(physical groups {name: (dim, tag)}, {name: (element type names, element count)}) via gmsh."""
+    gmsh = pytest.importorskip("gmsh")
+    gmsh.initialize(readConfigFiles=False, interruptible=False)
+    try:
+        gmsh.option.setNumber("General.Terminal", 0)
+        gmsh.open(str(path))
+        groups, elems = {}, {}
+        for dim, tag in gmsh.model.getPhysicalGroups():
+            name = gmsh.model.getPhysicalName(dim, tag)
+            groups[name] = (dim, tag)
+            types, count = set(), 0
+            for ent in gmsh.model.getEntitiesForPhysicalGroup(dim, tag):
+                ts, tags, _ = gmsh.model.mesh.getElements(dim, int(ent))
+                for t, tg in zip(ts, tags):
+                    types.add(gmsh.model.mesh.getElementProperties(int(t))[0])
+                    count += len(tg)
+            elems[name] = (types, count)
+        nodes = gmsh.model.mesh.getNodes()[0].size
+        return groups, elems, nodes
+    finally:
+        gmsh.finalize()
+
+
+def check_msh(path, m):
+    """The .msh file against the mesh: meshio and gmsh read the same groups and counts."""
+    import meshio
+
+    r = meshio.read(path)
+    assert r.cells_dict["quad"].shape == m.quads.shape
+    assert np.array_equal(r.cell_data_dict["gmsh:physical"]["quad"], m.patch + 1)  # physical group "patch p" is tag p + 1
+    assert np.allclose(r.points[:, :2], m.xy)
+    groups, elems, nodes = read_gmsh(path)
+    assert nodes == m.xy.shape[0]
+    P = m.layout.n_patches
+    for p in range(P):
+        assert groups[f"patch {p}"][0] == 2
+        assert elems[f"patch {p}"] == ({"Quadrilateral 4"}, int(np.sum(m.patch == p)))
+    assert groups["boundary"][0] == 1 and elems["boundary"] == ({"Line 2"}, int(m.outer.size))
+    for name, c in zip(m.sides.names, m.counts):
+        assert elems[f"side {name}"] == ({"Line 2"}, int(c))
+    assert len(groups) == P + 1 + len(m.sides.names)
+
+
+def test_two_blocks_msh_read_back(cat, lat, tmp_path):
+    lay = load_layout(LAYOUTS / "two-blocks.json")
+    m = mesh_layout(lay, cat, lat, size=0.5)
+    out = write_layout_mesh(tmp_path / "t.msh", m)
+    check_msh(out, m)
+
+
+@pytest.mark.parametrize("suffix", [".vtu", ".json"])
+def test_two_blocks_other_formats_keep_patch_and_lines(cat, lat, tmp_path, suffix):
+    import meshio
+
+    m = mesh_layout(load_layout(LAYOUTS / "two-blocks.json"), cat, lat, size=0.5)
+    out = write_layout_mesh(tmp_path / f"t{suffix}", m)
+    if suffix == ".json":
+        d = json.loads(out.read_text())
+        assert d["patch"] == m.patch.tolist() and d["quads"] == m.quads.tolist()
+        assert len(d["groups"]["boundary"]) == m.outer.size and d["quad_groups"]["names"] == ["patch 0", "patch 1"]
+        return
+    r = meshio.read(out)
+    assert np.array_equal(r.cells_dict["quad"], m.quads)
+    assert np.array_equal(r.cell_data_dict["patch"]["quad"], m.patch)
+    lines = r.cells_dict["line"]
+    group = r.cell_data_dict["line_group"]["line"]
+    assert np.sum(group == 0) == m.outer.size  # "boundary" is the first line group
+    assert lines.shape[0] == m.outer.size + int(m.counts.sum())
+
+
+def test_notched_plate_many_patches(cat, lat, tmp_path):
+    """The >= 10-patch example: one conforming mesh that gmsh reads with its physical groups."""
+    lay = load_layout(LAYOUTS / "notched-plate.json")
+    assert lay.n_patches >= 10
+    m = mesh_layout(lay, cat, lat, size=0.25)
+    check_conforming(m.xy, m.quads, outline_of(lay))
+    assert m.inverted == 0 and m.shared_gap == 0.0
+    assert m.counts[sid(m.sides, "14-15")] == 4  # the file's requested count
+    sj = scaled_jacobians(m.xy, m.quads)
+    assert sj.min() >= 0.3
+    check_msh(write_layout_mesh(tmp_path / "plate.msh", m), m)
+
+
+# ---------------------------------------------------------------------------------------------
+# the command
+
+
+@pytest.fixture
+def cli(capsys, monkeypatch, tmp_path):
+    from jaxmatch.cli import main
+
+    monkeypatch.setenv("JAXMATCH_CACHE", str(tmp_path / "cache"))
+
+    def run(*args):
+        monkeypatch.setattr(sys, "argv", ["jaxmatch", *map(str, args)])
+        capsys.readouterr()
+        try:
+            main()
+            code = 0
+        except SystemExit as e:
+            code = e.code if isinstance(e.code, int) else 1
+        out, err = capsys.readouterr()
+        return code, out, err
+
+    return run
+
+
+def test_cli_layout_msh_png_json(cli, tmp_path):
+    out, png = tmp_path / "m.msh", tmp_path / "m.png"
+    sides = tmp_path / "s.json"
+    sides.write_text(json.dumps({"0-1": 2}))
+    code, stdout, err = cli("layout", LAYOUTS / "two-blocks.json", "--size", 0.5, "--sides-file", sides,
+                            "--out", out, "--png", png, "--json")
+    assert code == 0, err
+    d = json.loads(stdout)
+    assert d["patches"] == 2 and d["inverted"] == 0 and d["counts"]["0-1"] == 2 and d["out"] == str(out)
+    assert png.read_bytes().startswith(b"\x89PNG")
+    import meshio
+
+    r = meshio.read(out)
+    assert r.cells_dict["quad"].shape[0] == d["quads"]
+    assert {"boundary", "patch 0", "patch 1", "side 1-4"} <= set(r.field_data)
+
+
+def test_cli_shape_one_strategy(cli, tmp_path):
+    code, stdout, err = cli("layout", ROOT / "examples" / "tshape.json", "--size", 0.5, "--strategy", "continuations")
+    assert code == 0, err
+    assert "chosen: continuations" in stdout and "4 patches" in stdout and "inverted quads: 0" in stdout
+
+
+@pytest.mark.slow
+def test_cli_shape_is_decomposed(cli, tmp_path):
+    code, stdout, err = cli("layout", ROOT / "examples" / "lshape.json", "--size", 0.5, "--json")
+    assert code == 0, err
+    d = json.loads(stdout)
+    assert d["chosen"] in ("single", "continuations", "bisectors", "recursive")
+    assert {c["name"] for c in d["candidates"]} == {"single", "continuations", "bisectors", "recursive"}
+    assert d["inverted"] == 0 and d["area_ratio"] == pytest.approx(1, abs=1e-9)
+
+
+@pytest.mark.parametrize("args,words", [
+    (["--size", "0.5"], "overlap"),
+    (["--size", "-1"], "--size"),
+    ([], "--size"),
+    (["--size", "0.5", "--strategy", "zigzag"], "--strategy"),
+])
+def test_cli_bad_input_one_line_exit_2(cli, tmp_path, args, words):
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps({"points": SQUARE2, "patches": [[0, 1, 4, 5], [0, 1, 4, 5]]} if words == "overlap"
+                              else {"points": SQUARE2, "patches": [[0, 1, 4, 5], [1, 2, 3, 4]]}))
+    out = tmp_path / "o.msh"
+    code, stdout, err = cli("layout", bad, *args, "--out", out)
+    assert code == EXIT_BAD_INPUT
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and words in lines[0] and "Traceback" not in err
+    assert not out.exists()
+
+
+def test_cli_shape_without_corners(cli):
+    code, _, err = cli("layout", ROOT / "examples" / "circle.json", "--size", 0.5)
+    assert code == EXIT_BAD_INPUT and "corner" in err and len(err.strip().splitlines()) == 1
+
+
+def test_cli_sides_file_errors(cli, tmp_path):
+    sides = tmp_path / "s.json"
+    sides.write_text(json.dumps({"0-9": 2}))
+    code, _, err = cli("layout", LAYOUTS / "two-blocks.json", "--sides-file", sides)
+    assert code == EXIT_BAD_INPUT and str(sides) in err and "not a side" in err
+    code, _, err = cli("layout", ROOT / "examples" / "lshape.json", "--sides-file", sides)
+    assert code == EXIT_BAD_INPUT and "--sides-file" in err
