@@ -57,7 +57,9 @@ __all__ = [
     "Annotation",
     "DEFAULT_CORNER_ANGLE",
     "MAX_ANNOTATED",
+    "MAX_COORDINATE",
     "MAX_POINTS",
+    "MIN_EXTENT",
     "S",
     "SYMBOLS",
     "Shape",
@@ -92,6 +94,12 @@ MAX_POINTS = 10_000
 
 MAX_BYTES = 16 * 2**20
 """Largest accepted input file (bytes)."""
+
+MAX_COORDINATE = 1e150
+"""Largest accepted absolute coordinate (user units): squares (areas) stay finite floats."""
+
+MIN_EXTENT = 1e-150
+"""Smallest accepted bounding-box extent (user units): squares (areas) stay normal floats."""
 
 MAX_ANNOTATED = 100_000
 """Largest accepted number ``m`` of annotated points (a memory bound; scoring time grows
@@ -299,6 +307,13 @@ def _make_shape(points, corners, angle: float, source: str) -> Shape:
     scale = float(extent.max())
     if not np.isfinite(extent).all() or not (scale > 0):
         raise InputError("coordinates are too large (extent overflows)", where=source)
+    big = np.abs(p).max()
+    if big > MAX_COORDINATE:
+        raise InputError(f"coordinates are too large ({big:.3g}; at most {MAX_COORDINATE:g} in absolute value, so that "
+                         "areas and squared lengths of the placed mesh stay finite): rescale the shape", where=source)
+    if scale < MIN_EXTENT:
+        raise InputError(f"the shape is too small (extent {scale:.3g}; at least {MIN_EXTENT:g}, so that areas of the "
+                         "placed mesh do not vanish): rescale the shape", where=source)
     unit = (p - offset) / scale
     if not np.isfinite(unit).all():
         raise InputError("coordinates cannot be normalised (extent too small)", where=source)

@@ -186,6 +186,8 @@ BAD = [
     (js({"boundary": [[0, 0], [2, 0], [2, 2], [1, 0], [0, 2]]}), "x.json", "crosses"),  # touches
     (js({"boundary": [[0, 0], [2, 0], [1, 0], [1, 1]]}), "x.json", "crosses"),  # folds back
     (js({"boundary": [[-1e308, 0], [1e308, 0], [0, 1]]}), "x.json", "too large"),
+    (js({"boundary": [[1e308, 1e308], [1.5e308, 1e308], [1.5e308, 1.5e308]]}), "x.json", "too large"),  # areas overflow
+    (js({"boundary": [[0, 0], [1e-200, 0], [0, 1e-200]]}), "x.json", "too small"),  # areas vanish
     (js({"boundary": SQUARE, "corners": [0, 4]}), "x.json", "out of range"),
     (js({"boundary": SQUARE, "corners": [0, -1]}), "x.json", "out of range"),
     (js({"boundary": SQUARE, "corners": [1, 1]}), "x.json", "twice"),

@@ -252,16 +252,17 @@ def _read_json(doc, source: str):
     if not isinstance(doc, dict):
         raise InputError('top level must be a JSON object {"boundary": [[x, y], ...]} (or GeoJSON)', where=source)
     unknown = [k for k in doc if k not in JSON_KEYS]
-    if unknown:
-        names = ", ".join(_short(k) for k in unknown[:5]) + (f" and {len(unknown) - 5} more" if len(unknown) > 5 else "")
-        warnings.warn(InputWarning(f"ignored key{'s' if len(unknown) > 1 else ''} {names} (known keys: {', '.join(JSON_KEYS)})",
-                                   where=source), stacklevel=2)
+    names = ", ".join(_short(k) for k in unknown[:5]) + (f" and {len(unknown) - 5} more" if len(unknown) > 5 else "")
     if "boundary" not in doc:
-        raise InputError('missing key "boundary"', where=source)
+        found = f" (found: {names})" if unknown else ""
+        raise InputError(f'missing key "boundary"{found}', where=source)
     points = _number_pairs(doc["boundary"], source, "boundary")
     corners = doc.get("corners")
     if "corners" in doc and not isinstance(corners, list):
         raise InputError('"corners" must be a list of integer point indices', where=source)
+    if unknown:  # warned once the file is known to be good (a bad file gets its one error line only)
+        warnings.warn(InputWarning(f"ignored key{'s' if len(unknown) > 1 else ''} {names} (known keys: {', '.join(JSON_KEYS)})",
+                                   where=source), stacklevel=2)
     return points, corners
 
 
