@@ -14,13 +14,15 @@ Formats (detected by the file's suffix, else by its content; see :func:`detect_f
   column names (a header) is allowed: the columns named ``x`` and ``y`` are read (any other
   columns are ignored), or the two columns when there are only two.
 * ``svg``: one closed shape element (``<path>``, ``<polygon>``, ``<rect>``, ``<circle>``,
-  ``<ellipse>``, ...) parsed with `svgelements` (transforms applied). Straight segments keep
+  ``<ellipse>``, ...) parsed with `svgelements` (transforms applied, in the units of the
+  ``viewBox``). Straight segments keep
   their end points; curves are sampled evenly by arc length (:data:`SVG_SAMPLES` points over
   the loop's perimeter, at least :data:`MIN_CURVE_SAMPLES` per curve). With several shape
   elements, ``element`` names the one to read by its ``id``. Coordinates are the SVG's user
-  units (y down, as drawn).
+  units (y down, as drawn; jaxmatch tries mirror images anyway).
 * ``dxf``: one closed ``LWPOLYLINE`` or 2D ``POLYLINE`` of the model space, read with
-  `ezdxf`; arcs (bulges) are flattened to within 1/1000 of the drawing's extent. With several,
+  `ezdxf`; arcs (bulges) are sampled at equal angles, exactly on the arc, as densely as SVG
+  curves. With several,
   ``element`` names the one to read by its handle or layer.
 
 In every format the loop may be closed (last point = first): the repeated point is dropped.
@@ -77,8 +79,6 @@ SVG_SAMPLES = 200
 MIN_CURVE_SAMPLES = 4
 """Fewest intervals one curved SVG segment is cut into."""
 
-DXF_FLATTEN = 1e-3
-"""DXF arcs are flattened to within this fraction of the polyline's larger extent."""
 
 
 def split_element(path) -> tuple[str, str | None]:
@@ -407,7 +407,11 @@ def _read_svg(data, source: str, element: str | None) -> np.ndarray:
         ids = [str(e.id) for e in shapes if e.id is not None]
         listing = f"; ids: {', '.join(ids[:10])}" if ids else " (none has an id)"
         raise InputError(f"the SVG has {len(shapes)} shape elements; choose one with FILE#ID{listing}", where=source)
-    return _svg_loop(se.Path(shapes[0]), source)
+    path = se.Path(shapes[0])
+    if doc.viewbox_transform:  # back from the viewport (px) to the drawing's own units (the viewBox)
+        path = path * ~se.Matrix(doc.viewbox_transform)
+        path.reify()
+    return _svg_loop(path, source)
 
 
 def _svg_loop(path, source: str) -> np.ndarray:
@@ -462,7 +466,6 @@ def _by_arc_length(segment, k: int) -> np.ndarray:
 
 def _read_dxf(data, source: str, element: str | None) -> np.ndarray:
     import ezdxf
-    from ezdxf import path as dxf_path
 
     text = _text(data, source) if not isinstance(data, str) else data
     try:
@@ -488,19 +491,56 @@ def _read_dxf(data, source: str, element: str | None) -> np.ndarray:
                          f"{', '.join(f'{e.dxf.handle} (layer {e.dxf.layer})' for e in lines[:10])}", where=source)
     e = lines[0]
     try:
-        path = dxf_path.make_path(e)
-        corners = np.array([(v.x, v.y) for v in path.control_vertices()], dtype=np.float64)
-        extent = float(np.ptp(corners, axis=0).max()) if corners.size else 0.0
-        pts = np.array([(v.x, v.y) for v in path.flattening(distance=max(extent, 1e-300) * DXF_FLATTEN)], dtype=np.float64)
+        if e.dxftype() == "LWPOLYLINE":
+            xyb = np.array([(x, y, b) for x, y, b in e.get_points("xyb")], dtype=np.float64).reshape(-1, 3)
+            closed = bool(e.closed)
+        else:
+            xyb = np.array([(v.dxf.location.x, v.dxf.location.y, v.dxf.bulge) for v in e.vertices], dtype=np.float64).reshape(-1, 3)
+            closed = bool(e.is_closed)
     except Exception as err:
         raise InputError(f"DXF polyline {e.dxf.handle} cannot be read ({type(err).__name__}: {_short(str(err), 60)})",
                          where=source) from None
-    closed = bool(e.closed) if e.dxftype() == "LWPOLYLINE" else bool(e.is_closed)
-    if pts.shape[0] and not closed and not np.array_equal(pts[0], pts[-1]):
+    if xyb.shape[0] > MAX_POINTS + 1:
+        raise InputError(f"DXF polyline {e.dxf.handle} has {xyb.shape[0]} points, more than the maximum {MAX_POINTS}", where=source)
+    if not np.isfinite(xyb).all():
+        raise InputError(f"DXF polyline {e.dxf.handle} has a number that is not finite", where=source)
+    if xyb.shape[0] and not closed and not np.array_equal(xyb[0, :2], xyb[-1, :2]):
         raise InputError(f"DXF polyline {e.dxf.handle} is open (set its closed flag, or end it at its first point)", where=source)
-    if pts.shape[0] > 1 and np.array_equal(pts[0], pts[-1]):
-        pts = pts[:-1]
+    if xyb.shape[0] > 1 and np.array_equal(xyb[0, :2], xyb[-1, :2]):
+        xyb = xyb[:-1]
+    pts = _flatten_bulges(xyb)
     if pts.shape[0] > MAX_POINTS:
         raise InputError(f"DXF polyline {e.dxf.handle} has {pts.shape[0]} points after flattening arcs, "
                          f"more than the maximum {MAX_POINTS}", where=source)
     return pts
+
+
+def _flatten_bulges(xyb: np.ndarray) -> np.ndarray:
+    """Vertices of a closed polyline ``xyb (P, 3)`` (x, y, bulge of the segment to the next
+    vertex) with every arc segment sampled at equal angles: the same spacing as SVG curves
+    (:data:`SVG_SAMPLES` per perimeter, at least :data:`MIN_CURVE_SAMPLES` per arc). A bulge
+    ``b`` is ``tan(sweep / 4)``, positive counter-clockwise."""
+    p, bulge = xyb[:, :2], xyb[:, 2]
+    q = np.roll(p, -1, axis=0)
+    chord = np.linalg.norm(q - p, axis=1)
+    sweep = 4.0 * np.arctan(bulge)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        radius = np.where(bulge != 0, chord / (2.0 * np.abs(np.sin(sweep / 2.0))), 0.0)
+    length = np.where(bulge != 0, radius * np.abs(sweep), chord)
+    total = float(length.sum())
+    spacing = total / SVG_SAMPLES if math.isfinite(total) and total > 0 else 1.0
+    out = []
+    for i in range(p.shape[0]):
+        out.append(p[i])
+        if bulge[i] == 0 or chord[i] == 0 or not math.isfinite(radius[i]):
+            continue
+        k = max(MIN_CURVE_SAMPLES, math.ceil(length[i] / spacing))
+        mid, d = (p[i] + q[i]) / 2.0, (q[i] - p[i]) / chord[i]
+        normal = np.array([-d[1], d[0]])  # left of the chord
+        # the centre is on the left of the chord for a ccw arc of less than a half turn
+        h = radius[i] * np.cos(sweep[i] / 2.0) * np.sign(sweep[i])
+        centre = mid + normal * h
+        a0 = math.atan2(p[i][1] - centre[1], p[i][0] - centre[0])
+        a = a0 + sweep[i] * np.arange(1, k) / k
+        out.extend(centre + radius[i] * np.c_[np.cos(a), np.sin(a)])
+    return np.array(out, dtype=np.float64).reshape(-1, 2)
