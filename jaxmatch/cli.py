@@ -67,8 +67,8 @@ class Heartbeat:
     ``"<task>: <done>/<total> (<seconds> s)"`` at most every ``interval`` seconds, so that a
     long piped run shows it is alive. Same calls as :class:`rich.progress.Progress`."""
 
-    def __init__(self, interval: float = HEARTBEAT_S, stream=None):
-        self.interval = float(interval)
+    def __init__(self, interval: float | None = None, stream=None):
+        self.interval = HEARTBEAT_S if interval is None else float(interval)
         self.stream = stream
         self.tasks: dict[int, list] = {}
         self.start = self.last = time.monotonic()
@@ -319,7 +319,7 @@ def score_many(
             prog.advance(task)
     write_jsonl(out_path, records)
     note = f", {failed} failed (records with \"error\")" if failed else ""
-    err.print(f"wrote {out_path}: {len(records)} shapes, {len(records) - failed} scored{note}", markup=False, highlight=False)
+    print(f"wrote {out_path}: {len(records)} shapes, {len(records) - failed} scored{note}", file=sys.stderr)  # one line
 
 
 @app.command()
@@ -538,13 +538,24 @@ def _no_type(ctx=None) -> None:
     return None
 
 
+_METAVARS = {"path": "FILE", "str": "TEXT", "int": "INTEGER", "int range": "INTEGER", "float": "NUMBER", "float range": "NUMBER"}
+"""Option value placeholders in help (typer's type labels -> conventional metavars)."""
+
+
 def tidy_help(command) -> None:
     """Conventional help and usage for a typer/click command tree: flags show no ``<bool>``
-    type (they take no value), arguments show as their metavar (``SHAPE``, ``SHAPES...``;
+    type (they take no value), options without a metavar show one from their type (``FILE``,
+    ``TEXT``, ``INTEGER``, ``NUMBER``), arguments show as their metavar (``SHAPE``, ``SHAPES...``;
     optional ones in brackets) instead of ``{shape}`` and ``<list[Path]>``."""
     for param in getattr(command, "params", []):
         if getattr(param, "is_flag", False):
             param.display_type_rich = _no_type
+        elif getattr(param, "param_type_name", "") == "option" and param.metavar is None and hasattr(param, "display_type"):
+            def placeholder(ctx=None, _param=param):
+                kind = str(_param.display_type(ctx)).strip("<>")
+                return _METAVARS.get(kind, kind.split()[0].upper())
+
+            param.display_type_rich = placeholder
         elif getattr(param, "param_type_name", "") == "argument":
             name = param.metavar or (param.name.upper() + ("..." if param.nargs != 1 else ""))
             param.metavar = name
