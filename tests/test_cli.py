@@ -270,4 +270,4 @@ def test_make_labels_refuses_bad_variants_and_empty_output(tmp_path):
     assert r.returncode == 2 and "--variants" in r.stderr and not out.exists()
     r = subprocess.run([sys.executable, script, "synthetic", "--internal", "9", "--out", out], capture_output=True, text=True,
                        cwd=ROOT, timeout=300)
-    assert r.returncode == 2 and "--internal" in r.stderr and not out.exists()
+    assert r.returncode == 2 and "9 internal vertices" in r.stderr and not out.exists()
