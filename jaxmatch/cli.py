@@ -324,10 +324,10 @@ def score_many(
 
 @app.command()
 def mesh(
-    shape: Path = typer.Argument(..., help="Shape file: JSON {boundary, corners} or text rows 'x y'."),
+    shape: Path = typer.Argument(..., metavar="SHAPE", help=SHAPE_HELP),
     catalogue: Optional[Path] = typer.Option(None, help="Catalogue file (default: the shipped k=0..5 catalogue)."),
     internal: Optional[str] = typer.Option(None, help="Mesh size: K or K1..K2 internal vertices (default: all sizes compete)."),
-    lattice: str = typer.Option("fine", help="Lattice: fine, coarse, or a TOML path."),
+    lattice: str = typer.Option(DEFAULT_LATTICE, help="Lattice: fine, coarse, or a TOML path."),
     points: Optional[int] = typer.Option(None, min=1, help="Number m of annotated shape points (default: 2 x longest boundary)."),
     rank_: int = typer.Option(1, "--rank", min=1, help="Place the R-th ranked mesh."),
     out_path: Optional[Path] = typer.Option(None, "--out", help="Mesh file: .vtk .vtu .obj .msh or .json (written atomically)."),
@@ -335,8 +335,8 @@ def mesh(
     svg: Optional[Path] = typer.Option(None, "--svg", help="Picture of the placed mesh in the shape (.svg)."),
     require_valid: bool = typer.Option(False, "--require-valid", help="Walk down the ranking (up to 50 meshes) and place the first "
                                        "mesh that embeds with zero inverted quads."),
-    tie_break: str = typer.Option("geometry", "--tie-break", help=TIE_BREAK_HELP),
-    corner_angle: float = typer.Option(30.0, help="Corner threshold (degrees from straight) when the shape lists no corners."),
+    tie_break: str = typer.Option(DEFAULT_TIE_BREAK, "--tie-break", help=TIE_BREAK_HELP),
+    corner_angle: float = typer.Option(DEFAULT_CORNER_ANGLE, help="Corner threshold (degrees from straight) when the shape lists no corners."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object."),
 ) -> None:
     """Rank like 'score', place the R-th mesh in SHAPE and write it (and/or a picture).

@@ -271,3 +271,23 @@ def test_make_labels_refuses_bad_variants_and_empty_output(tmp_path):
     r = subprocess.run([sys.executable, script, "synthetic", "--internal", "9", "--out", out], capture_output=True, text=True,
                        cwd=ROOT, timeout=300)
     assert r.returncode == 2 and "9 internal vertices" in r.stderr and not out.exists()
+
+
+def test_commands_share_their_defaults():
+    """score, score-many, mesh and annotate take their defaults from jaxmatch.defaults (as the API does)."""
+    import typer
+
+    from jaxmatch import defaults
+    from jaxmatch.api import rank
+    from jaxmatch.cli import app
+    from jaxmatch.shape import DEFAULT_CORNER_ANGLE
+
+    want = {"lattice": defaults.DEFAULT_LATTICE, "tie_break": defaults.DEFAULT_TIE_BREAK, "top": defaults.DEFAULT_TOP,
+            "corner_angle": DEFAULT_CORNER_ANGLE, "points": None, "internal": None, "catalogue": None}
+    commands = typer.main.get_command(app).commands
+    for name in ("score", "score-many", "mesh", "annotate"):
+        got = {p.name: p.default for p in commands[name].params if p.name in want}
+        assert got == {k: v for k, v in want.items() if k in got}, name
+        assert {"corner_angle", "internal", "catalogue", "points"} <= set(got), name
+    api = rank.__kwdefaults__
+    assert (api["top"], api["tie_break"], api["prune"]) == (defaults.DEFAULT_TOP, defaults.DEFAULT_TIE_BREAK, True)
