@@ -61,10 +61,14 @@ def corner_points(shape):
         ("curved.json", 4, 0),
         ("dshape.json", 2, 0),
         ("circle.json", 0, 0),
+        ("lshape.csv", 5, 1),
+        ("plate.geojson", 5, 0),
+        ("bracket.svg#outline", 3, 0),  # the notch is a smooth S-curve (a cubic): no concave corner
+        ("slot.dxf", 2, 0),
     ],
 )
 def test_examples_load_with_expected_corners(name, n_convex, n_concave):
-    shape = load_shape(EXAMPLES / name)
+    shape = load_shape(f"{EXAMPLES / name}")
     assert int(shape.convex.sum()) == n_convex
     assert int((~shape.convex).sum()) == n_concave
     assert signed_area(shape.points) > 0
