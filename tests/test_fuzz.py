@@ -107,6 +107,7 @@ def assert_one_line_exit_2(r, *needles):
 # shapes
 
 
+@pytest.mark.filterwarnings("ignore::jaxmatch.errors.InputWarning")  # random keys are warned, tested elsewhere
 @pytest.mark.parametrize("path", SHAPE_FILES, ids=lambda p: p.name)
 def test_shape_truncated_at_any_byte(path):
     """Every prefix of every example: a valid (smaller) shape or a one-line InputError."""
@@ -121,6 +122,7 @@ def test_shape_truncated_at_any_byte(path):
             assert data[cut:].strip() == b"" and np.array_equal(got.points, full.points)
 
 
+@pytest.mark.filterwarnings("ignore::jaxmatch.errors.InputWarning")  # random keys are warned, tested elsewhere
 @few(0.5)
 @given(data=st.data())
 def test_shape_byte_edits(data):
@@ -160,6 +162,7 @@ def _replace(doc, path, value):
     return doc
 
 
+@pytest.mark.filterwarnings("ignore::jaxmatch.errors.InputWarning")  # random keys are warned, tested elsewhere
 @few(0.5)
 @given(data=st.data())
 def test_shape_json_wrong_types_anywhere(data):

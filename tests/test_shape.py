@@ -272,6 +272,7 @@ def test_extra_json_keys_warn_once_naming_them():
     assert shape.n_corners == 4
 
 
+@pytest.mark.filterwarnings("ignore::jaxmatch.errors.InputWarning")  # random keys are warned, tested elsewhere
 @pytest.mark.parametrize("name", ["r.json", "r.txt", "r.shape"])
 @given(data=st.binary(max_size=300))
 def test_random_bytes_never_crash(name, data):
@@ -288,6 +289,7 @@ json_values = st.recursive(
 )
 
 
+@pytest.mark.filterwarnings("ignore::jaxmatch.errors.InputWarning")  # random keys are warned, tested elsewhere
 @given(doc=json_values)
 def test_random_json_never_crashes(doc):
     try:
