@@ -3,6 +3,65 @@
 Method: Surynkova, "Selecting the Best Quadrilateral Mesh for Given Planar Shape"
 (weighted longest-common-subsequence between the shape's s/x/v annotation and the
 mesh boundary's valence triples, scored by lattices).
+
+The Python API (documented in :mod:`jaxmatch.api` and the README's "Python API")::
+
+    import jaxmatch
+    shape = jaxmatch.load_shape("examples/lshape.json")   # JSON, GeoJSON, CSV/TXT, SVG, DXF
+    ranking = jaxmatch.rank(shape, internal=4, top=3)
+    placement = jaxmatch.place(shape, ranking)            # the #1 mesh in the shape
+    jaxmatch.write_mesh("lshape.vtk", placement)
+
+The names are imported on first use, so ``import jaxmatch`` itself is quick (JAX is loaded
+by the first call that scores).
 """
 
+from __future__ import annotations
+
+import importlib
+
 __version__ = "0.1.0"
+
+_API = {
+    # shapes
+    "load_shape": "jaxmatch.api",
+    "parse_shape": "jaxmatch.api",
+    "make_shape": "jaxmatch.api",
+    "annotate_shape": "jaxmatch.api",
+    "Shape": "jaxmatch.shape",
+    "Annotation": "jaxmatch.shape",
+    # catalogue and lattices
+    "load_catalogue": "jaxmatch.api",
+    "load_lattice": "jaxmatch.api",
+    "Catalogue": "jaxmatch.catalogue.store",
+    "Lattice": "jaxmatch.scoring.lattice",
+    # ranking and placing
+    "rank": "jaxmatch.api",
+    "place": "jaxmatch.api",
+    "choose_mesh": "jaxmatch.api",
+    "Ranking": "jaxmatch.scoring.rank",
+    "Match": "jaxmatch.scoring.rank",
+    "Placement": "jaxmatch.placement.embed",
+    "MeshChoice": "jaxmatch.placement.choose",
+    # writing
+    "write_mesh": "jaxmatch.api",
+    # errors
+    "InputError": "jaxmatch.errors",
+    "InputWarning": "jaxmatch.errors",
+    "UnmatchableError": "jaxmatch.errors",
+}
+
+__all__ = ["__version__", *sorted(_API)]
+
+
+def __getattr__(name: str):
+    module = _API.get(name)
+    if module is None:
+        raise AttributeError(f"module 'jaxmatch' has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_API))

@@ -1,30 +1,203 @@
-"""The Python entry points that combine the pipeline's stages (scoring, then placement).
+"""The Python API: the functions ``import jaxmatch`` gives, combining the pipeline's stages.
 
-:func:`rank` is :func:`jaxmatch.scoring.rank.rank` with the tie-break named by a string
-(``"id"`` or ``"geometry"``, as the CLI's ``--tie-break``); ``"geometry"`` places tied meshes
-(:func:`jaxmatch.placement.choose.geometry_tie_breaker`).
+A session (the README's "Python API" section runs this, as a test)::
+
+    import jaxmatch
+
+    shape = jaxmatch.load_shape("examples/lshape.json")         # or make_shape([[x, y], ...])
+    ranking = jaxmatch.rank(shape, internal=4, top=3)           # default catalogue and lattice
+    best = ranking.results[0]                                   # a Match: mesh_id, utility, ...
+    placement = jaxmatch.place(shape, ranking)                  # the #1 mesh, user coordinates
+    jaxmatch.write_mesh("lshape.vtk", placement)                # .vtk .vtu .obj .msh .json
+
+Defaults are those of the ``jaxmatch`` command (``score``, ``score-many`` and ``mesh``), all
+from :mod:`jaxmatch.defaults`: the shipped catalogue (k = 0..5), lattice ``"fine"``, top 5,
+ties broken by ``"geometry"`` (quality of the placed meshes), the pruned top-K search
+(same ranking as exhaustive scoring), ``m`` = twice the longest boundary scored, corner angle
+:data:`jaxmatch.shape.DEFAULT_CORNER_ANGLE`.
+
+Errors: bad input raises :class:`jaxmatch.errors.InputError` (one line naming the file or
+the argument); a shape no selected mesh can match raises
+:class:`jaxmatch.errors.UnmatchableError`.
 """
 
 from __future__ import annotations
 
-from jaxmatch.catalogue.store import Catalogue
-from jaxmatch.placement.choose import choose_mesh, geometry_tie_breaker
-from jaxmatch.scoring.lattice import Lattice
-from jaxmatch.scoring.rank import Ranking
+import os
+from typing import Callable, Iterable, Union
+
+from jaxmatch.catalogue.store import Catalogue, default_catalogue, parse_range
+from jaxmatch.defaults import DEFAULT_LATTICE, DEFAULT_PRUNE, DEFAULT_TIE_BREAK, DEFAULT_TOP, TIE_BREAKS
+from jaxmatch.catalogue.store import load as _load_catalogue
+from jaxmatch.errors import InputError
+from jaxmatch.io.meshfile import write_mesh
+from jaxmatch.io.readers import load_shape, parse_shape
+from jaxmatch.placement.choose import MeshChoice, choose_mesh as _choose_mesh, geometry_tie_breaker, place_match
+from jaxmatch.placement.embed import Placement
+from jaxmatch.scoring.lattice import Lattice, load_lattice
+from jaxmatch.scoring.rank import Match, Ranking
 from jaxmatch.scoring.rank import rank as _rank
-from jaxmatch.shape import Shape
+from jaxmatch.shape import DEFAULT_CORNER_ANGLE, Annotation, Shape, annotate, default_points, make_shape
 
-__all__ = ["TIE_BREAKS", "choose_mesh", "rank"]
+__all__ = [
+    "DEFAULT_CORNER_ANGLE",
+    "DEFAULT_LATTICE",
+    "DEFAULT_PRUNE",
+    "DEFAULT_TIE_BREAK",
+    "DEFAULT_TOP",
+    "TIE_BREAKS",
+    "annotate_shape",
+    "check_sizes",
+    "choose_mesh",
+    "load_catalogue",
+    "load_lattice",
+    "load_shape",
+    "make_shape",
+    "parse_shape",
+    "place",
+    "rank",
+    "sizes_text",
+    "write_mesh",
+]
 
-TIE_BREAKS = ("id", "geometry")
-"""Orders among equal utilities (see :func:`jaxmatch.scoring.rank.rank`)."""
+Sizes = Union[int, str, Iterable[int], None]
+"""Mesh sizes (numbers of internal vertices): ``4``, ``"3..5"``, ``[3, 4]``, or None for all."""
 
 
-def rank(shape: Shape, catalogue: Catalogue, lattice: Lattice, *, tie_break: str = "id", **options) -> Ranking:
-    """:func:`jaxmatch.scoring.rank.rank` with ``tie_break`` one of :data:`TIE_BREAKS`
-    (``"geometry"``: ties ordered by the quality of the placed meshes). Other keyword
-    arguments as there. Raises ValueError for an unknown ``tie_break``."""
+def load_catalogue(path: str | os.PathLike | Catalogue | None = None) -> Catalogue:
+    """A catalogue: ``None`` for the shipped one (k = 0..5), a path to a ``.npz`` built with
+    ``jaxmatch catalogue build``, or a :class:`Catalogue` (returned as is)."""
+    if isinstance(path, Catalogue):
+        return path
+    return default_catalogue() if path is None else _load_catalogue(path)
+
+
+def _lattice(lattice: str | os.PathLike | Lattice) -> Lattice:
+    return lattice if isinstance(lattice, Lattice) else load_lattice(lattice)
+
+
+def sizes_text(ks: Iterable[int]) -> str:
+    """``[0, 1, 2, 5]`` -> ``"0..2, 5"``: numbers of internal vertices, runs collapsed."""
+    ks = sorted(set(int(k) for k in ks))
+    parts, i = [], 0
+    while i < len(ks):
+        j = i
+        while j + 1 < len(ks) and ks[j + 1] == ks[j] + 1:
+            j += 1
+        parts.append(str(ks[i]) if i == j else f"{ks[i]}..{ks[j]}")
+        i = j + 1
+    return ", ".join(parts) or "none"
+
+
+def check_sizes(catalogue: Catalogue, internal: Sizes) -> list[int] | None:
+    """``internal`` as a sorted list of k (None: all sizes), each present in ``catalogue``.
+
+    internal: an int ``K``, a string ``"K"`` or ``"K1..K2"``, a sequence of ints, or None.
+    Raises :class:`InputError` (no ``where``: the caller names the argument) when a size is
+    not in the catalogue, saying which sizes it has.
+    """
+    if internal is None:
+        return None
+    if isinstance(internal, str):
+        try:
+            ks = parse_range(internal)
+        except InputError as e:
+            raise InputError(e.problem) from None
+    elif isinstance(internal, (int,)) and not isinstance(internal, bool):
+        ks = [int(internal)]
+    else:
+        try:
+            ks = sorted({int(k) for k in internal})
+        except (TypeError, ValueError):
+            raise InputError(f"sizes must be K, 'K1..K2' or a list of ints, got {internal!r}") from None
+    have = set(catalogue.internal)
+    missing = [k for k in ks if k not in have]
+    if missing:
+        raise InputError(f"the catalogue has no meshes with {sizes_text(missing)} internal vertices; "
+                         f"it has k = {sizes_text(have)} (build more with 'jaxmatch catalogue build')")
+    return ks
+
+
+def rank(shape: Shape, catalogue: str | os.PathLike | Catalogue | None = None, lattice: str | os.PathLike | Lattice = DEFAULT_LATTICE,
+         *, internal: Sizes = None, top: int = DEFAULT_TOP, points: int | None = None, per_size: bool = False,
+         tie_break: str = DEFAULT_TIE_BREAK, prune: bool = DEFAULT_PRUNE, devices: int | None = None,
+         progress: Callable[[int, int], None] | None = None, tie_cap: int | None = None) -> Ranking:
+    """Rank catalogue meshes for ``shape`` (best first): :func:`jaxmatch.scoring.rank.rank`
+    with the command line's defaults.
+
+    catalogue: None (the shipped one), a path or a :class:`Catalogue`. lattice: ``"fine"``,
+    ``"coarse"``, a TOML path or a :class:`Lattice`. internal: mesh sizes (``4``, ``"3..5"``,
+    ``[3, 4]``; None: all sizes compete). top: how many matches in ``Ranking.results``.
+    points: annotated shape points ``m`` (default twice the longest boundary scored).
+    per_size: the best ``top`` of each size. tie_break: one of :data:`TIE_BREAKS`
+    (``"geometry"``: equal utilities ordered by the quality of the placed meshes; ``"id"``:
+    the paper's combinatorial order). prune: pruned top-K search (same results as
+    ``prune=False``, faster). devices: shard the scoring over that many JAX devices.
+    progress(done, total): called as meshes are scored.
+
+    Returns a :class:`~jaxmatch.scoring.rank.Ranking`: ``annotation`` (the s/x/v sequence
+    used), ``results`` (a list of :class:`~jaxmatch.scoring.rank.Match`: ``mesh_id``,
+    ``internal_vertices``, ``boundary_length``, ``utility``, ``rotation``, ``reflected``,
+    ``alignment (n,)``, ``triples (n, 3)``), counts ``scored``/``unmatchable``/``pruned``.
+    Raises ValueError for an unknown ``tie_break``; :class:`InputError` for sizes the
+    catalogue does not have.
+    """
     if tie_break not in TIE_BREAKS:
         raise ValueError(f"tie_break must be one of {TIE_BREAKS}, got {tie_break!r}")
-    tb = geometry_tie_breaker(catalogue) if tie_break == "geometry" else "id"
-    return _rank(shape, catalogue, lattice, tie_break=tb, **options)
+    cat = load_catalogue(catalogue)
+    ks = check_sizes(cat, internal)
+    tb = geometry_tie_breaker(cat) if tie_break == "geometry" else "id"
+    return _rank(shape, cat, _lattice(lattice), internal=ks, top=top, points=points, per_size=per_size, tie_break=tb,
+                 prune=prune, devices=devices, progress=progress, tie_cap=tie_cap)
+
+
+def place(shape: Shape, ranking: Ranking, which: int | Match = 1,
+          catalogue: str | os.PathLike | Catalogue | None = None) -> Placement:
+    """Place a ranked mesh in ``shape`` (user coordinates).
+
+    which: the rank (1-based, within ``ranking.results``) or a :class:`Match` of ``ranking``.
+    catalogue: the one ``ranking`` was computed with (default: the shipped one).
+    Returns a :class:`~jaxmatch.placement.embed.Placement`: ``xy (V, 2)`` vertex positions,
+    ``mesh.quads (F, 4)``, ``scaled_jacobian (F,)``, ``min_scaled_jacobian``, ``inverted``
+    (count of inverted quads), ``area_ratio``, ...; write it with :func:`write_mesh`.
+    """
+    if isinstance(which, Match):
+        match = which
+    else:
+        r = int(which)
+        if not 1 <= r <= len(ranking.results):
+            raise InputError(f"rank {r} is not in the ranking (it holds {len(ranking.results)} results; raise top)")
+        match = ranking.results[r - 1]
+    cache = ranking.placements if ranking.placements is not None else None
+    return place_match(shape, ranking.annotation, load_catalogue(catalogue), match, placements=cache)
+
+
+def choose_mesh(shape: Shape, catalogue: str | os.PathLike | Catalogue | None = None,
+                lattice: str | os.PathLike | Lattice = DEFAULT_LATTICE, *, rank: int = 1, internal: Sizes = None,
+                points: int | None = None, tie_break: str = DEFAULT_TIE_BREAK, require_valid: bool = False,
+                progress: Callable[[int, int], None] | None = None) -> MeshChoice:
+    """Rank, take the ``rank``-th mesh and place it (what ``jaxmatch mesh`` does):
+    :func:`jaxmatch.placement.choose.choose_mesh` with the command line's defaults.
+
+    require_valid: walk down the ranking to the first mesh that embeds without inverted
+    quads. Returns a :class:`~jaxmatch.placement.choose.MeshChoice` (``match``,
+    ``placement``, ``rank``, ``valid``, ``alternative``).
+    """
+    if tie_break not in TIE_BREAKS:
+        raise ValueError(f"tie_break must be one of {TIE_BREAKS}, got {tie_break!r}")
+    cat = load_catalogue(catalogue)
+    ks = check_sizes(cat, internal)
+    return _choose_mesh(shape, cat, _lattice(lattice), rank=rank, internal=ks, points=points, tie_break=tie_break,
+                        require_valid=require_valid, progress=progress)
+
+
+def annotate_shape(shape: Shape, catalogue: str | os.PathLike | Catalogue | None = None, *, internal: Sizes = None,
+                   points: int | None = None) -> Annotation:
+    """The s/x/v annotation :func:`rank` would score for these options: ``points`` annotated
+    points, by default twice the longest boundary among the selected catalogue sizes."""
+    cat = load_catalogue(catalogue)
+    ks = check_sizes(cat, internal)
+    if points is None:
+        lengths = [b.n for b in cat.buckets(ks)]
+        points = default_points(shape, max(lengths) if lengths else 0)
+    return annotate(shape, points)

@@ -8,6 +8,8 @@ from __future__ import annotations
 import json
 import os
 import sys
+import time
+import warnings
 from pathlib import Path
 from typing import Optional
 
@@ -16,32 +18,106 @@ from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
+from jaxmatch import __version__
 from jaxmatch.catalogue import store as cat_mod
-from jaxmatch.errors import EXIT_BAD_INPUT, EXIT_INVERTED, EXIT_UNMATCHABLE, InputError, UnmatchableError
+from jaxmatch.errors import EXIT_BAD_INPUT, EXIT_INVERTED, EXIT_UNMATCHABLE, InputError, InputWarning, UnmatchableError
+from jaxmatch.defaults import DEFAULT_LATTICE, DEFAULT_TIE_BREAK, DEFAULT_TOP, TIE_BREAKS
+from jaxmatch.shape import DEFAULT_CORNER_ANGLE
 
 try:  # typer >= 0.2x vendors click as typer._click and no longer installs click
     from typer._click.exceptions import ClickException
 except ImportError:  # pragma: no cover - older typer with click
     from click.exceptions import ClickException
 
+
+ENV_HELP = ("Environment: JAXMATCH_PROGRESS=1 shows progress bars even when stderr is not a terminal, 0 hides all "
+            "progress; JAXMATCH_CACHE=DIR holds the compiled-code cache (default ~/.cache/jaxmatch); "
+            "JAXMATCH_DEBUG=1 shows a traceback for internal errors.")
+
+
+def _version(value: bool) -> None:
+    if value:
+        print(f"jaxmatch {__version__}")
+        raise typer.Exit()
+
+
 app = typer.Typer(add_completion=False, pretty_exceptions_enable=False, no_args_is_help=True,
-                  help="Pick the best quadrilateral mesh from a catalogue for a planar shape.")
+                  help="Pick the best quadrilateral mesh from a catalogue for a planar shape.\n\n" + ENV_HELP)
 lattice_app = typer.Typer(no_args_is_help=True, help="Inspect lattice weight files.")
 catalogue_app = typer.Typer(no_args_is_help=True, help="Build and inspect mesh catalogues.")
 app.add_typer(lattice_app, name="lattice")
 app.add_typer(catalogue_app, name="catalogue")
 
+
+@app.callback()
+def _main(version: bool = typer.Option(False, "--version", callback=_version, is_eager=True,
+                                       help="Print the version and exit.")) -> None:
+    """Pick the best quadrilateral mesh from a catalogue for a planar shape."""
+
+
 out = Console(soft_wrap=True, width=None if sys.stdout.isatty() else 120)
 err = Console(stderr=True)
 
+HEARTBEAT_S = 10.0
+"""Seconds between the plain progress lines printed when stderr is not a terminal."""
 
-def _progress() -> Progress:
-    return Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-                    console=err, transient=True, disable=not err.is_terminal and not os.environ.get("JAXMATCH_PROGRESS"))
+
+class Heartbeat:
+    """Progress for a stderr that is not a terminal (a pipe, a log file): one plain line
+    ``"<task>: <done>/<total> (<seconds> s)"`` at most every ``interval`` seconds, so that a
+    long piped run shows it is alive. Same calls as :class:`rich.progress.Progress`."""
+
+    def __init__(self, interval: float | None = None, stream=None):
+        self.interval = HEARTBEAT_S if interval is None else float(interval)
+        self.stream = stream
+        self.tasks: dict[int, list] = {}
+        self.start = self.last = time.monotonic()
+
+    def __enter__(self) -> "Heartbeat":
+        return self
+
+    def __exit__(self, *exc) -> bool:
+        return False
+
+    def add_task(self, description: str, total=None, **_) -> int:
+        self.tasks[len(self.tasks)] = [description, 0, total]
+        return len(self.tasks) - 1
+
+    def update(self, task: int, *, completed=None, total=None, description=None, advance=None, **_) -> None:
+        t = self.tasks[task]
+        if description is not None:
+            t[0] = description
+        if total is not None:
+            t[2] = total
+        if completed is not None:
+            t[1] = completed
+        if advance is not None:
+            t[1] += advance
+        now = time.monotonic()
+        if now - self.last >= self.interval:
+            self.last = now
+            done = f"{t[1]:g}/{t[2]:g}" if t[2] else f"{t[1]:g}"
+            print(f"{t[0]}: {done} ({now - self.start:.0f} s)", file=self.stream or sys.stderr, flush=True)
+
+    def advance(self, task: int, advance: float = 1) -> None:
+        self.update(task, advance=advance)
+
+
+def _progress():
+    """A progress display: rich bars on a terminal (or with JAXMATCH_PROGRESS=1), else
+    :class:`Heartbeat` lines; JAXMATCH_PROGRESS=0 shows nothing."""
+    env = os.environ.get("JAXMATCH_PROGRESS", "").strip()
+    if env == "0":
+        return Progress(console=err, disable=True)
+    if err.is_terminal or env:
+        return Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                        console=err, transient=True)
+    return Heartbeat()
 
 
 def enable_compile_cache() -> None:
-    """JAX's persistent compilation cache, so a second run does not compile again."""
+    """JAX's persistent compilation cache (``JAXMATCH_CACHE``, default ``~/.cache/jaxmatch``),
+    so a second run does not compile again."""
     import jax
 
     cache = Path(os.environ.get("JAXMATCH_CACHE", Path.home() / ".cache" / "jaxmatch")) / "xla"
@@ -54,28 +130,68 @@ def enable_compile_cache() -> None:
         pass
 
 
-def _inputs(shape: Optional[Path], corner_angle: float, lattice: str, catalogue: Optional[Path], internal: Optional[str]):
-    """(shape or None, lattice, catalogue, k list or None): the inputs every scoring command reads."""
-    from jaxmatch.scoring.lattice import load_lattice
-    from jaxmatch.shape import load_shape
+def _corner_angle(value) -> float:
+    from jaxmatch.shape import check_corner_angle
 
-    shp = load_shape(shape, corner_angle=corner_angle) if shape is not None else None
-    ks = cat_mod.parse_range(internal) if internal is not None else None
-    return shp, load_lattice(lattice), _open_catalogue(catalogue), ks
+    try:
+        return check_corner_angle(value)
+    except InputError as e:
+        raise InputError(e.problem.replace("corner angle must be", "must be"), "--corner-angle") from None
+
+
+def _sizes(cat, internal: Optional[str]):
+    from jaxmatch.api import check_sizes
+
+    try:
+        return check_sizes(cat, internal)
+    except InputError as e:
+        raise InputError(e.problem, "--internal") from None
+
+
+def _load(shape: Path, corner_angle: float):
+    """The shape file, read; its warnings (ignored keys) are shown only when it is good, so
+    that bad input stays one line."""
+    from jaxmatch.io.readers import load_shape
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", InputWarning)
+        shp = load_shape(shape, corner_angle=corner_angle)
+    for w in caught:
+        warnings.showwarning(w.message, w.category, w.filename, w.lineno)
+    return shp
+
+
+def _inputs(shape: Optional[Path], corner_angle: float, lattice: str, catalogue: Optional[Path], internal: Optional[str]):
+    """(shape or None, lattice, catalogue, k list or None): the inputs every scoring command
+    reads, options checked first (the option is named in errors)."""
+    from jaxmatch.scoring.lattice import load_lattice
+
+    angle = _corner_angle(corner_angle)
+    cat = _open_catalogue(catalogue)
+    ks = _sizes(cat, internal)
+    shp = _load(shape, angle) if shape is not None else None
+    return shp, load_lattice(lattice), cat, ks
 
 
 def _open_catalogue(path: Optional[Path]):
     return cat_mod.load(path) if path is not None else cat_mod.default_catalogue()
 
 
+SHAPE_HELP = ("Shape file: jaxmatch JSON {boundary, corners}, GeoJSON polygon, CSV/TSV/text rows 'x y' (header optional), "
+              "SVG or DXF; FILE#ID picks one element of an SVG/DXF/GeoJSON file.")
+CATALOGUE_HELP = "Catalogue file (default: the shipped k=0..5 catalogue)."
+INTERNAL_HELP = ("Mesh size: K or K1..K2 internal vertices. Without it all sizes compete, and larger meshes "
+                 "(more boundary vertices, more matched points) get larger raw utilities.")
+LATTICE_HELP = "Lattice: fine, coarse, or a TOML path."
+POINTS_HELP = "Number m of annotated shape points (default: 2 x longest boundary of the selected sizes)."
+ANGLE_HELP = "Corner threshold: a point is a corner when the outline turns there by more than this many degrees (shapes without explicit corners)."
+JSON_HELP = "Print one JSON object instead of a table."
 TIE_BREAK_HELP = ("Order among equal utilities: 'geometry' places the tied meshes and prefers the higher min scaled "
                   "Jacobian, then fewer irregular internal vertices (beyond the paper); 'id' keeps the paper's "
                   "combinatorial order (fewer internal vertices, shorter boundary, id).")
 
 
 def _tie_break(text: str) -> str:
-    from jaxmatch.api import TIE_BREAKS
-
     if text not in TIE_BREAKS:
         raise InputError(f"expected one of {', '.join(TIE_BREAKS)}, got {text!r}", "--tie-break")
     return text
@@ -83,20 +199,19 @@ def _tie_break(text: str) -> str:
 
 @app.command()
 def score(
-    shape: Path = typer.Argument(..., help="Shape file: JSON {boundary, corners} or text rows 'x y'."),
-    catalogue: Optional[Path] = typer.Option(None, help="Catalogue file (default: the shipped k=0..5 catalogue)."),
-    internal: Optional[str] = typer.Option(None, help="Mesh size: K or K1..K2 internal vertices. Without it all sizes compete, "
-                                           "and larger meshes (more boundary vertices, more matched points) get larger raw utilities."),
-    lattice: str = typer.Option("fine", help="Lattice: fine, coarse, or a TOML path."),
-    top: int = typer.Option(5, min=1, help="How many meshes to show."),
-    points: Optional[int] = typer.Option(None, min=1, help="Number m of annotated shape points (default: 2 x longest boundary)."),
+    shape: Path = typer.Argument(..., metavar="SHAPE", help=SHAPE_HELP),
+    catalogue: Optional[Path] = typer.Option(None, metavar="FILE", help=CATALOGUE_HELP),
+    internal: Optional[str] = typer.Option(None, metavar="K|K1..K2", help=INTERNAL_HELP),
+    lattice: str = typer.Option(DEFAULT_LATTICE, metavar="NAME|FILE", help=LATTICE_HELP),
+    top: int = typer.Option(DEFAULT_TOP, min=1, metavar="N", help="How many meshes to show."),
+    points: Optional[int] = typer.Option(None, min=1, metavar="M", help=POINTS_HELP),
     per_size: bool = typer.Option(False, "--per-size", help="Show the best --top meshes of each size k (utilities only compare within a size)."),
-    corner_angle: float = typer.Option(30.0, help="Corner threshold (degrees from straight) when the shape lists no corners."),
-    tie_break: str = typer.Option("geometry", "--tie-break", help=TIE_BREAK_HELP),
-    png: Optional[Path] = typer.Option(None, "--png", help="Also draw the listed meshes placed in the shape, side by side, to this .png file."),
-    svg: Optional[Path] = typer.Option(None, "--svg", help="Same picture as --png, as .svg."),
-    as_json: bool = typer.Option(False, "--json", help="Print one JSON object instead of a table."),
-    devices: Optional[int] = typer.Option(None, min=1, help="Shard the scoring over N JAX devices (GPUs, or N CPU host devices)."),
+    corner_angle: float = typer.Option(DEFAULT_CORNER_ANGLE, metavar="DEGREES", help=ANGLE_HELP),
+    tie_break: str = typer.Option(DEFAULT_TIE_BREAK, "--tie-break", metavar="geometry|id", help=TIE_BREAK_HELP),
+    png: Optional[Path] = typer.Option(None, "--png", metavar="FILE", help="Also draw the listed meshes placed in the shape, side by side, to this .png file."),
+    svg: Optional[Path] = typer.Option(None, "--svg", metavar="FILE", help="Same picture as --png, as .svg."),
+    as_json: bool = typer.Option(False, "--json", help=JSON_HELP),
+    devices: Optional[int] = typer.Option(None, min=1, metavar="N", help="Shard the scoring over N JAX devices (GPUs, or N CPU host devices)."),
     exhaustive: bool = typer.Option(False, "--exhaustive", help="Score every mesh instead of the pruned top-K search (same results, slower)."),
 ) -> None:
     """Rank catalogue meshes for SHAPE by the paper's modified LCS utility."""
@@ -144,19 +259,24 @@ def score(
 
 @app.command("score-many")
 def score_many(
-    shapes: list[Path] = typer.Argument(..., help="Shape files."),
-    out_path: Path = typer.Option(..., "--out", help="Results as JSON lines (one per shape, the fields of score --json), written atomically."),
-    catalogue: Optional[Path] = typer.Option(None, help="Catalogue file (default: the shipped k=0..5 catalogue)."),
-    internal: Optional[str] = typer.Option(None, help="Mesh size: K or K1..K2 internal vertices."),
-    lattice: str = typer.Option("fine", help="Lattice: fine, coarse, or a TOML path."),
-    top: int = typer.Option(5, min=1, help="How many meshes per shape."),
-    points: Optional[int] = typer.Option(None, min=1, help="Number m of annotated points per shape."),
+    shapes: list[Path] = typer.Argument(..., metavar="SHAPES...", help="Shape files (any format 'score' reads)."),
+    out_path: Path = typer.Option(..., "--out", metavar="FILE", help="Results as JSON lines (one per shape, the fields of score --json), written atomically."),
+    catalogue: Optional[Path] = typer.Option(None, metavar="FILE", help=CATALOGUE_HELP),
+    internal: Optional[str] = typer.Option(None, metavar="K|K1..K2", help=INTERNAL_HELP),
+    lattice: str = typer.Option(DEFAULT_LATTICE, metavar="NAME|FILE", help=LATTICE_HELP),
+    top: int = typer.Option(DEFAULT_TOP, min=1, metavar="N", help="How many meshes per shape."),
+    points: Optional[int] = typer.Option(None, min=1, metavar="M", help=POINTS_HELP),
     per_size: bool = typer.Option(False, "--per-size", help="The best --top meshes of each size k."),
-    corner_angle: float = typer.Option(30.0, help="Corner threshold in degrees."),
-    tie_break: str = typer.Option("id", "--tie-break", help=TIE_BREAK_HELP),
-    devices: Optional[int] = typer.Option(None, min=1, help="Shard the scoring over N JAX devices."),
+    corner_angle: float = typer.Option(DEFAULT_CORNER_ANGLE, metavar="DEGREES", help=ANGLE_HELP),
+    tie_break: str = typer.Option(DEFAULT_TIE_BREAK, "--tie-break", metavar="geometry|id", help=TIE_BREAK_HELP),
+    devices: Optional[int] = typer.Option(None, min=1, metavar="N", help="Shard the scoring over N JAX devices."),
+    skip_bad: bool = typer.Option(False, "--skip-bad", help="Record a bad or unmatchable shape as {shape, error} and go on "
+                                  "(exit 0); without it the first bad shape stops the run before any scoring (exit 2)."),
 ) -> None:
-    """Score many shapes in one run (bulk mode); every shape is read and checked before scoring."""
+    """Score many shapes in one run (bulk mode), with the same defaults and records as 'score --json'.
+
+    Every shape is read and checked before scoring. A summary line goes to stderr at the end.
+    """
     if devices is not None:
         from jaxmatch.scoring.bulk import configure_host_devices
 
@@ -164,32 +284,50 @@ def score_many(
     from jaxmatch.scoring.bulk import write_jsonl
     from jaxmatch.api import rank
     from jaxmatch.scoring.rank import ranking_json
-    from jaxmatch.shape import load_shape
 
     tb = _tie_break(tie_break)
     if out_path.suffix.lower() not in (".jsonl", ".json", ".ndjson"):
         raise InputError("results are JSON lines: use a .jsonl file", str(out_path))
     enable_compile_cache()
-    loaded = [(p, load_shape(p, corner_angle=corner_angle)) for p in shapes]  # bad input fails before any work
     _, lat, cat, ks = _inputs(None, corner_angle, lattice, catalogue, internal)
-    records = []
+    angle = _corner_angle(corner_angle)
+    loaded = []  # (path, Shape or the error message); bad input fails before any work unless --skip-bad
+    for p in shapes:
+        try:
+            loaded.append((p, _load(p, angle)))
+        except InputError as e:
+            if not skip_bad:
+                raise
+            loaded.append((p, str(e)))
+    records, failed = [], 0
     with _progress() as prog:
         task = prog.add_task("shapes", total=len(loaded))
         for p, shp in loaded:
-            ranking = rank(shp, cat, lat, internal=ks, top=top, points=points, per_size=per_size, tie_break=tb,
-                           prune=True, devices=devices)
-            records.append(ranking_json(str(p), ranking, lat.name, tb))
+            if isinstance(shp, str):
+                records.append({"shape": str(p), "error": shp})
+                failed += 1
+            else:
+                try:
+                    ranking = rank(shp, cat, lat, internal=ks, top=top, points=points, per_size=per_size, tie_break=tb,
+                                   prune=True, devices=devices)
+                    records.append(ranking_json(str(p), ranking, lat.name, tb))
+                except UnmatchableError as e:
+                    if not skip_bad:
+                        raise UnmatchableError(f"{p}: {e}") from None
+                    records.append({"shape": str(p), "error": f"no match: {e}"})
+                    failed += 1
             prog.advance(task)
     write_jsonl(out_path, records)
-    err.print(f"wrote {out_path}: {len(records)} shapes", markup=False, highlight=False)
+    note = f", {failed} failed (records with \"error\")" if failed else ""
+    print(f"wrote {out_path}: {len(records)} shapes, {len(records) - failed} scored{note}", file=sys.stderr)  # one line
 
 
 @app.command()
 def mesh(
-    shape: Path = typer.Argument(..., help="Shape file: JSON {boundary, corners} or text rows 'x y'."),
+    shape: Path = typer.Argument(..., metavar="SHAPE", help=SHAPE_HELP),
     catalogue: Optional[Path] = typer.Option(None, help="Catalogue file (default: the shipped k=0..5 catalogue)."),
     internal: Optional[str] = typer.Option(None, help="Mesh size: K or K1..K2 internal vertices (default: all sizes compete)."),
-    lattice: str = typer.Option("fine", help="Lattice: fine, coarse, or a TOML path."),
+    lattice: str = typer.Option(DEFAULT_LATTICE, help="Lattice: fine, coarse, or a TOML path."),
     points: Optional[int] = typer.Option(None, min=1, help="Number m of annotated shape points (default: 2 x longest boundary)."),
     rank_: int = typer.Option(1, "--rank", min=1, help="Place the R-th ranked mesh."),
     out_path: Optional[Path] = typer.Option(None, "--out", help="Mesh file: .vtk .vtu .obj .msh or .json (written atomically)."),
@@ -197,8 +335,8 @@ def mesh(
     svg: Optional[Path] = typer.Option(None, "--svg", help="Picture of the placed mesh in the shape (.svg)."),
     require_valid: bool = typer.Option(False, "--require-valid", help="Walk down the ranking (up to 50 meshes) and place the first "
                                        "mesh that embeds with zero inverted quads."),
-    tie_break: str = typer.Option("geometry", "--tie-break", help=TIE_BREAK_HELP),
-    corner_angle: float = typer.Option(30.0, help="Corner threshold (degrees from straight) when the shape lists no corners."),
+    tie_break: str = typer.Option(DEFAULT_TIE_BREAK, "--tie-break", help=TIE_BREAK_HELP),
+    corner_angle: float = typer.Option(DEFAULT_CORNER_ANGLE, help="Corner threshold (degrees from straight) when the shape lists no corners."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object."),
     sides: Optional[str] = typer.Option(None, "--sides", help="Edges per side, e.g. 4,2,4,2: side i runs from corner i to "
                                         "corner i+1 in the file's order (see 'jaxmatch annotate'); one total count for a "
@@ -276,8 +414,8 @@ def mesh(
                   f"{'reflected' if m.reflected else 'not reflected'}", markup=False, highlight=False)
         out.print(f"scaled Jacobian: min {pl.min_scaled_jacobian:.3f}, mean {pl.mean_scaled_jacobian:.3f}; "
                   f"inverted quads: {pl.inverted}; mesh area / shape area {pl.area_ratio:.3f}", markup=False, highlight=False)
-        for note in notes:
-            out.print(note, markup=False, highlight=False)
+        for note in notes:  # warnings (FOLDED, next valid mesh) go to stderr, as in --json mode
+            err.print(note, markup=False, highlight=False)
         for path in written.values():
             out.print(f"wrote {path}", markup=False, highlight=False)
     if not choice.valid:
@@ -462,17 +600,23 @@ def layout(
 
 @app.command()
 def annotate(
-    shape: Path = typer.Argument(..., help="Shape file."),
-    points: Optional[int] = typer.Option(None, min=1, help="Number m of points (default: for the default catalogue)."),
-    corner_angle: float = typer.Option(30.0, help="Corner threshold in degrees."),
-    as_json: bool = typer.Option(False, "--json"),
+    shape: Path = typer.Argument(..., metavar="SHAPE", help=SHAPE_HELP),
+    catalogue: Optional[Path] = typer.Option(None, metavar="FILE", help=CATALOGUE_HELP + " Sets the default --points."),
+    internal: Optional[str] = typer.Option(None, metavar="K|K1..K2", help="Mesh size scored (as in 'score'); sets the default --points."),
+    points: Optional[int] = typer.Option(None, min=1, metavar="M", help=POINTS_HELP),
+    corner_angle: float = typer.Option(DEFAULT_CORNER_ANGLE, metavar="DEGREES", help=ANGLE_HELP),
+    as_json: bool = typer.Option(False, "--json", help=JSON_HELP),
 ) -> None:
-    """Print the shape's s/x/v sequence and where each point lies (user coordinates)."""
-    from jaxmatch.shape import annotate as annotate_shape, default_points, load_shape
+    """Print the s/x/v sequence 'score' would use for SHAPE (same options) and where each point lies (user coordinates)."""
+    from jaxmatch.shape import annotate as annotate_shape, default_points
 
-    shp = load_shape(shape, corner_angle=corner_angle)
-    m = points if points is not None else default_points(shp, max(_open_catalogue(None).lengths))
-    ann = annotate_shape(shp, m)
+    angle = _corner_angle(corner_angle)
+    cat = _open_catalogue(catalogue)
+    ks = _sizes(cat, internal)
+    shp = _load(shape, angle)
+    if points is None:
+        points = default_points(shp, max(b.n for b in cat.buckets(ks)))
+    ann = annotate_shape(shp, points)
     xy = shp.to_user(ann.positions)
     from jaxmatch.placement.refine import side_lengths, side_polylines
 
@@ -503,7 +647,7 @@ def annotate(
 
 
 @lattice_app.command("show")
-def lattice_show(name: str = typer.Argument(..., help="fine, coarse, or a TOML path."),
+def lattice_show(name: str = typer.Argument(..., metavar="NAME|FILE", help="fine, coarse, or a TOML path."),
                  as_json: bool = typer.Option(False, "--json", help="All 64 triples per type; null means -inf.")) -> None:
     """Show a lattice's weight table."""
     from jaxmatch.scoring.lattice import lattice_json, lattice_text, load_lattice
@@ -516,14 +660,14 @@ def lattice_show(name: str = typer.Argument(..., help="fine, coarse, or a TOML p
 
 
 @catalogue_app.command("build")
-def catalogue_build(internal: str = typer.Option(..., help="K or K1..K2."),
-                    out_path: Path = typer.Option(..., "--out", help="Output .npz file (written atomically)."),
-                    workers: int = typer.Option(os.cpu_count() or 1, min=1, help="Processes used to expand each level."),
+def catalogue_build(internal: str = typer.Option(..., metavar="K|K1..K2", help="Numbers of internal vertices to enumerate: K or K1..K2."),
+                    out_path: Path = typer.Option(..., "--out", metavar="FILE", help="Output .npz file (written atomically)."),
+                    workers: int = typer.Option(os.cpu_count() or 1, min=1, metavar="N", help="Processes used to expand each level."),
                     allow_large: bool = typer.Option(False, "--allow-large", help=f"Allow k > {cat_mod.LARGE_K} (hours and many GB).")) -> None:
     """Enumerate every catalogue mesh for the given numbers of internal vertices."""
     ks = cat_mod.parse_range(internal)
     if max(ks) > cat_mod.LARGE_K and not allow_large:
-        raise InputError(f"k up to {max(ks)} would take hours or days (counts grow about 15x per k); "
+        raise InputError(f"k up to {max(ks)} would take hours or days (counts grow about 19x per k); "
                          f"pass --allow-large to try anyway", "--internal")
     with _progress() as prog:
         task = prog.add_task("closing vertices", total=max(ks))
@@ -536,7 +680,8 @@ def catalogue_build(internal: str = typer.Option(..., help="K or K1..K2."),
 
 
 @catalogue_app.command("info")
-def catalogue_info(path: Path = typer.Argument(...), as_json: bool = typer.Option(False, "--json")) -> None:
+def catalogue_info(path: Path = typer.Argument(..., metavar="FILE", help="Catalogue file (.npz)."),
+                   as_json: bool = typer.Option(False, "--json", help=JSON_HELP)) -> None:
     """Counts per number of internal vertices and per boundary length."""
     c = cat_mod.load(path).counts()
     if as_json:
@@ -558,8 +703,9 @@ def catalogue_info(path: Path = typer.Argument(...), as_json: bool = typer.Optio
 
 
 @catalogue_app.command("export")
-def catalogue_export(path: Path = typer.Argument(...), mesh_id: str = typer.Option(..., "--id"),
-                     fmt: str = typer.Option("json", "--format", help="json")) -> None:
+def catalogue_export(path: Path = typer.Argument(..., metavar="FILE", help="Catalogue file (.npz)."),
+                     mesh_id: str = typer.Option(..., "--id", metavar="ID", help="Mesh id, e.g. k2-045f3977f5d8 (from 'score')."),
+                     fmt: str = typer.Option("json", "--format", metavar="json", help="Output format (only json).")) -> None:
     """Print one mesh: {id, internal_vertices, quads, boundary, triples}."""
     if fmt != "json":
         raise InputError(f"unknown format {fmt!r} (supported: json)", "--format")
@@ -583,6 +729,52 @@ def _interrupted(e: BaseException) -> bool:
     return False
 
 
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """Warnings as one line on stderr: ``warning: <file>: <what>`` (no source location)."""
+    print(" ".join(f"warning: {message}".split()), file=sys.stderr)
+
+
+def _no_type(ctx=None) -> None:
+    return None
+
+
+_METAVARS = {"path": "FILE", "str": "TEXT", "int": "INTEGER", "int range": "INTEGER", "float": "NUMBER", "float range": "NUMBER"}
+"""Option value placeholders in help (typer's type labels -> conventional metavars)."""
+
+
+def tidy_help(command) -> None:
+    """Conventional help and usage for a typer/click command tree: flags show no ``<bool>``
+    type (they take no value), options without a metavar show one from their type (``FILE``,
+    ``TEXT``, ``INTEGER``, ``NUMBER``), arguments show as their metavar (``SHAPE``, ``SHAPES...``;
+    optional ones in brackets) instead of ``{shape}`` and ``<list[Path]>``."""
+    for param in getattr(command, "params", []):
+        if getattr(param, "is_flag", False):
+            param.display_type_rich = _no_type
+        elif getattr(param, "param_type_name", "") == "option" and param.metavar is None and hasattr(param, "display_type"):
+            def placeholder(ctx=None, _param=param):
+                kind = str(_param.display_type(ctx)).strip("<>")
+                return _METAVARS.get(kind, kind.split()[0].upper())
+
+            param.display_type_rich = placeholder
+        elif getattr(param, "param_type_name", "") == "argument":
+            name = param.metavar or (param.name.upper() + ("..." if param.nargs != 1 else ""))
+            param.metavar = name
+            param.display_type_rich = _no_type
+            param._usage_display_name = (lambda n=name: n) if param.required else (lambda n=name: f"[{n}]")
+    get_help = getattr(command, "get_help_option", None)
+    if get_help is not None and not getattr(get_help, "_tidy", False):
+        def get_help_option(ctx, _orig=get_help):
+            opt = _orig(ctx)
+            if opt is not None:
+                opt.display_type_rich = _no_type
+            return opt
+
+        get_help_option._tidy = True
+        command.get_help_option = get_help_option
+    for sub in getattr(command, "commands", {}).values():
+        tidy_help(sub)
+
+
 def main() -> None:
     """Console entry point: run the app; bad input -> one line on stderr, exit 2."""
     run_typer(app)
@@ -596,7 +788,12 @@ def run_typer(typer_app: typer.Typer) -> None:
     shows the traceback).
     """
     try:
-        code = typer_app(standalone_mode=False)  # a command's typer.Exit(code) comes back as the return value
+        command = typer.main.get_command(typer_app)
+        tidy_help(command)
+        with warnings.catch_warnings():
+            warnings.simplefilter("always", InputWarning)
+            warnings.showwarning = _show_warning
+            code = command(standalone_mode=False, prog_name="jaxmatch" if typer_app is app else None)  # typer.Exit(code) comes back
     except InputError as e:
         _fail(f"error: {e}", EXIT_BAD_INPUT)
     except UnmatchableError as e:

@@ -30,3 +30,13 @@ class InputError(Exception):
 
 class UnmatchableError(Exception):
     """No mesh of the requested catalogue part has a finite matching with the shape."""
+
+
+class InputWarning(UserWarning):
+    """Input that is read, with something ignored (e.g. unknown JSON keys). ``str(w)`` is one
+    line, ``"<where>: <what>"``; the CLI prints it on stderr as ``warning: ...``."""
+
+    def __init__(self, problem: str, where: str | None = None):
+        self.problem = " ".join(str(problem).split())
+        self.where = None if where is None else " ".join(str(where).split())
+        super().__init__(self.problem if self.where is None else f"{self.where}: {self.problem}")

@@ -1,15 +1,15 @@
 """Planar shape input and its s/x/v annotation (paper, section 4).
 
-A shape is one closed polyline loop (the first point is not repeated) split into ``n``
-*sides* by its *corners*. Input formats:
+A shape is one closed polyline loop (the first point is not repeated; a repeated first
+point at the end is dropped) split into ``n`` *sides* by its *corners*. The file formats
+(jaxmatch JSON with optional explicit ``corners``, GeoJSON, CSV/TSV/text, SVG, DXF) are read by
+:mod:`jaxmatch.io.readers`; :func:`load_shape` and :func:`parse_shape` here call it.
 
-* JSON: ``{"boundary": [[x, y], ...], "corners": [i, ...]}``; ``corners`` is optional and
-  lists indices into ``boundary`` where sides meet. No other keys are allowed.
-* Text / CSV: one ``x y`` or ``x,y`` row per point; ``#`` starts a comment; blank lines are
-  skipped. Corners are always detected from angles.
-
-Without explicit corners a point is a corner when its interior angle differs from 180 degrees
-by more than ``corner_angle`` (default 30 degrees).
+Without explicit corners a point is a corner when its turning angle (180 degrees minus the
+interior angle) exceeds ``corner_angle`` (default 30 degrees; a turn within ``1e-7`` degrees of
+it is not a corner, so round-off cannot decide). The turn at a point is measured between its
+neighbouring non-straight points (:func:`corner_turns`), so points added on a side change no
+corner.
 
 Normalisation done by :func:`make_shape` (every reader goes through it):
 
@@ -44,29 +44,30 @@ units; multiply by ``shape.scale`` for user units, and map positions with
 
 from __future__ import annotations
 
-import json
 import math
-import re
 from dataclasses import dataclass
-from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
 
 from jaxmatch.errors import InputError
-from jaxmatch.files import read_limited
+from jaxmatch.geometry import cumulative_length, first_crossing, point_at, signed_area, turning_angles
 
 __all__ = [
     "Annotation",
     "DEFAULT_CORNER_ANGLE",
     "MAX_ANNOTATED",
+    "MAX_COORDINATE",
     "MAX_POINTS",
+    "MIN_EXTENT",
     "S",
     "SYMBOLS",
     "Shape",
     "V",
     "X",
     "annotate",
+    "check_corner_angle",
+    "corner_turns",
     "cumulative_length",
     "default_points",
     "interior_angles",
@@ -89,10 +90,16 @@ DEFAULT_CORNER_ANGLE = 30.0
 """Degrees: a point is a corner when its interior angle differs from 180 by more than this."""
 
 MAX_POINTS = 10_000
-"""Largest accepted number of boundary points (keeps the O(P^2) crossing test bounded)."""
+"""Largest accepted number of boundary points."""
 
 MAX_BYTES = 16 * 2**20
 """Largest accepted input file (bytes)."""
+
+MAX_COORDINATE = 1e150
+"""Largest accepted absolute coordinate (user units): squares (areas) stay finite floats."""
+
+MIN_EXTENT = 1e-150
+"""Smallest accepted bounding-box extent (user units): squares (areas) stay normal floats."""
 
 MAX_ANNOTATED = 100_000
 """Largest accepted number ``m`` of annotated points (a memory bound; scoring time grows
@@ -100,9 +107,7 @@ linearly in ``m``, and the default is twice the longest mesh boundary, a few doz
 
 _TINY = 1e-12  # unit-box tolerance for coincident points (length) and zero area (area)
 _STRAIGHT = 1e-9  # radians: smaller turns are round-off on a straight run (never corners, convex)
-_ERRBOUND = 4e-16  # relative error bound of a floating 2x2 orientation determinant
-_JSON_KEYS = ("boundary", "corners")
-_TEXT_SUFFIXES = {".txt", ".csv", ".xy", ".dat", ".tsv"}
+_ANGLE_TIE = 1e-7  # degrees: a turn this close to the corner angle is not a corner (round-off)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -185,55 +190,12 @@ class Annotation(NamedTuple):
 
 
 # ---------------------------------------------------------------------------------------------
-# geometry helpers (pure, numpy)
-
-
-def signed_area(points) -> float:
-    """Shoelace area of the closed loop ``(P, 2)``; positive when counter-clockwise."""
-    p = np.asarray(points, dtype=np.float64)
-    q = np.roll(p, -1, axis=0)
-    return float(0.5 * np.sum(p[:, 0] * q[:, 1] - q[:, 0] * p[:, 1]))
-
-
-def turning_angles(points) -> np.ndarray:
-    """Signed turning angle at each point of a closed loop, ``(P,) float64`` radians.
-
-    In ``(-pi, pi]``; positive is a left turn (convex for a ccw loop).
-    """
-    p = np.asarray(points, dtype=np.float64)
-    e_in = p - np.roll(p, 1, axis=0)
-    e_out = np.roll(p, -1, axis=0) - p
-    cross = e_in[:, 0] * e_out[:, 1] - e_in[:, 1] * e_out[:, 0]
-    dot = np.sum(e_in * e_out, axis=1)
-    return np.arctan2(cross, dot)
+# geometry helpers (see jaxmatch.geometry)
 
 
 def interior_angles(points) -> np.ndarray:
     """Interior angle at each point of a ccw loop, ``(P,) float64`` degrees in ``[0, 360)``."""
     return 180.0 - np.degrees(turning_angles(points))
-
-
-def cumulative_length(points) -> np.ndarray:
-    """Arc length from ``points[0]`` to each point, ``(P + 1,) float64``; the last entry is
-    the perimeter (closing segment back to ``points[0]`` included)."""
-    p = np.asarray(points, dtype=np.float64)
-    seg = np.linalg.norm(np.roll(p, -1, axis=0) - p, axis=1)
-    return np.concatenate([[0.0], np.cumsum(seg)])
-
-
-def point_at(points, t) -> np.ndarray:
-    """Positions ``(..., 2)`` at arc-length parameters ``t`` (any shape; taken modulo the
-    perimeter) measured from ``points[0]`` along the closed loop ``points (P, 2)``."""
-    p = np.asarray(points, dtype=np.float64)
-    cum = cumulative_length(p)
-    per = cum[-1]
-    tt = np.mod(np.asarray(t, dtype=np.float64), per)
-    idx = np.clip(np.searchsorted(cum, tt, side="right") - 1, 0, p.shape[0] - 1)
-    seg = cum[idx + 1] - cum[idx]
-    frac = np.where(seg > 0, (tt - cum[idx]) / np.where(seg > 0, seg, 1.0), 0.0)
-    a = p[idx]
-    b = p[(idx + 1) % p.shape[0]]
-    return a + frac[..., None] * (b - a)
 
 
 def largest_remainder(weights, total: int) -> np.ndarray:
@@ -255,24 +217,6 @@ def largest_remainder(weights, total: int) -> np.ndarray:
     return base
 
 
-def _orient(a, b, c):
-    """Orientation determinant of (a, b, c) and its error bound (broadcast ``(..., 2)``)."""
-    l = (a[..., 0] - c[..., 0]) * (b[..., 1] - c[..., 1])
-    r = (a[..., 1] - c[..., 1]) * (b[..., 0] - c[..., 0])
-    det = l - r
-    return np.where(np.abs(det) <= _ERRBOUND * (np.abs(l) + np.abs(r)), 0.0, np.sign(det))
-
-
-def _on_segment(a, b, p):
-    """``p`` inside the bounding box of segment ``a b`` (use with collinear points)."""
-    return (
-        (np.minimum(a[..., 0], b[..., 0]) <= p[..., 0])
-        & (p[..., 0] <= np.maximum(a[..., 0], b[..., 0]))
-        & (np.minimum(a[..., 1], b[..., 1]) <= p[..., 1])
-        & (p[..., 1] <= np.maximum(a[..., 1], b[..., 1]))
-    )
-
-
 def _collinear(points) -> bool:
     """All points within ``_TINY`` of the line through ``points[0]`` and the farthest point."""
     p = np.asarray(points, dtype=np.float64) - points[0]
@@ -284,81 +228,49 @@ def _collinear(points) -> bool:
     return bool(dist.max() <= _TINY)
 
 
-def _crossing(points) -> tuple[int, int] | None:
-    """First pair ``(i, j)`` of segments ``i -> i+1`` and ``j -> j+1`` that meet, or None.
-
-    Non-adjacent segments must not touch at all; adjacent ones must not overlap (a fold back
-    at their common point). O(P^2) bounding-box filter over the pairs ``j >= i + 2`` in row
-    blocks, exact-ish orientation tests on the candidates only. Worst case (every bounding box
-    overlapping every other, e.g. 10,000 thin spikes meeting in the middle) a few seconds.
-    """
-    p = np.asarray(points, dtype=np.float64)
-    n = p.shape[0]
-    a, b = p, np.roll(p, -1, axis=0)
-    # folds at a shared vertex: consecutive segments collinear and pointing back
-    e_in, e_out = p - np.roll(p, 1, axis=0), b - p
-    collinear = _orient(np.roll(p, 1, axis=0), p, b) == 0
-    fold = collinear & (np.sum(e_in * e_out, axis=1) < 0)
-    if fold.any():
-        i = int(np.flatnonzero(fold)[0])
-        return ((i - 1) % n, i)
-    lo, hi = np.minimum(a, b), np.maximum(a, b)
-    lox, loy, hix, hiy = (np.ascontiguousarray(v) for v in (lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1]))
-    start = 0
-    while start < n - 2:
-        col = start + 2  # rows i >= start only need columns j >= i + 2 >= col
-        stop = min(n, start + max(1, 1_000_000 // (n - col)))
-        r = slice(start, stop)
-        cand = (lox[r, None] <= hix[None, col:]) & (lox[None, col:] <= hix[r, None])
-        cand &= (loy[r, None] <= hiy[None, col:]) & (loy[None, col:] <= hiy[r, None])
-        ii, jj = np.nonzero(cand)
-        ii, jj = ii + start, jj + col
-        keep = (jj > ii + 1) & ~((ii == 0) & (jj == n - 1))
-        ii, jj = ii[keep], jj[keep]
-        start = stop
-        if ii.size == 0:
-            continue
-        A, B, C, D = a[ii], b[ii], a[jj], b[jj]
-        d1, d2 = _orient(C, D, A), _orient(C, D, B)
-        d3, d4 = _orient(A, B, C), _orient(A, B, D)
-        hit = ((d1 * d2 < 0) & (d3 * d4 < 0)) | (
-            ((d1 == 0) & _on_segment(C, D, A))
-            | ((d2 == 0) & _on_segment(C, D, B))
-            | ((d3 == 0) & _on_segment(A, B, C))
-            | ((d4 == 0) & _on_segment(A, B, D))
-        )
-        if hit.any():
-            k = int(np.flatnonzero(hit)[0])
-            return int(ii[k]), int(jj[k])
-    return None
+def corner_turns(points) -> np.ndarray:
+    """Turning angle used for corner detection at each point of a loop, ``(P,) float64``
+    radians: exactly 0 on straight runs (local turn within ``1e-9``), elsewhere the turn
+    between the neighbouring *non-straight* points, so that points added on a side change
+    no corner (the turn at a vertex does not depend on how its sides are subdivided)."""
+    turn = turning_angles(points)
+    straight = np.abs(turn) <= _STRAIGHT
+    turn[straight] = 0.0
+    bent = np.flatnonzero(~straight)
+    if 3 <= bent.size < turn.size:
+        turn[bent] = turning_angles(np.asarray(points, dtype=np.float64)[bent])
+    return turn
 
 
 # ---------------------------------------------------------------------------------------------
 # construction and validation
 
 
-def _check_angle(corner_angle) -> float:
+def check_corner_angle(corner_angle) -> float:
+    """``corner_angle`` as a float in ``[0, 180)`` degrees; :class:`InputError` (no ``where``:
+    the caller names the option or argument) otherwise."""
     try:
         a = float(corner_angle)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         a = math.nan
     if not (0.0 <= a < 180.0):
-        raise InputError(f"corner angle must be a number in [0, 180) degrees, got {corner_angle!r}", where="corner angle")
+        raise InputError(f"corner angle must be a number of degrees in [0, 180), got {corner_angle!r}")
     return a
 
 
 def make_shape(points, corners=None, *, corner_angle: float = DEFAULT_CORNER_ANGLE, source: str = "<shape>") -> Shape:
     """Validate and normalise a loop into a :class:`Shape` (see the module docstring).
 
-    points: ``(P, 2)`` numbers in user coordinates, closed loop, first point not repeated,
-        either orientation.
+    points: ``(P, 2)`` numbers in user coordinates, a loop in either orientation; a closed
+        ring (last point equal to the first, as GeoJSON and SVG write it) has its last point
+        dropped (a corner index naming it means the first point).
     corners: optional sequence of int indices into ``points`` (any order); ``None`` detects
         corners from interior angles (``|angle - 180| > corner_angle`` degrees).
     Raises :class:`InputError` (``where=source``) for any problem; indices in messages refer
     to the input order.
     """
     with np.errstate(over="ignore", invalid="ignore", divide="ignore", under="ignore"):
-        return _make_shape(points, corners, _check_angle(corner_angle), str(source))
+        return _make_shape(points, corners, check_corner_angle(corner_angle), str(source))
 
 
 def _make_shape(points, corners, angle: float, source: str) -> Shape:
@@ -369,9 +281,7 @@ def _make_shape(points, corners, angle: float, source: str) -> Shape:
     if p.ndim != 2 or p.shape[1] != 2:
         raise InputError(f"boundary must be a list of [x, y] pairs, got array of shape {p.shape}", where=source)
     n = p.shape[0]
-    if n < 3:
-        raise InputError(f"boundary needs at least 3 points, got {n}", where=source)
-    if n > MAX_POINTS:
+    if n > MAX_POINTS + 1 or (n == MAX_POINTS + 1 and not _closes(p)):
         raise InputError(f"boundary has {n} points, more than the maximum {MAX_POINTS}", where=source)
     bad = ~np.isfinite(p).all(axis=1)
     if bad.any():
@@ -380,6 +290,12 @@ def _make_shape(points, corners, angle: float, source: str) -> Shape:
     corner_idx = None
     if corners is not None:
         corner_idx = _check_corners(corners, n, source)
+    if n >= 3 and _closes(p):  # closed ring (last point = first): drop the repeated point
+        p, n = p[:-1], n - 1
+        if corner_idx is not None:
+            corner_idx = np.unique(np.where(corner_idx == n, 0, corner_idx))
+    if n < 3:
+        raise InputError(f"boundary needs at least 3 points, got {n}", where=source)
 
     def repeated(q, tol):
         if tol == 0:
@@ -390,7 +306,7 @@ def _make_shape(points, corners, angle: float, source: str) -> Shape:
         if hit.size:
             i = int(hit[0])
             if i == n - 1:
-                raise InputError(f"last point repeats the first (point {n - 1} equals point 0); do not close the loop", where=source)
+                raise InputError(f"the first point is repeated more than once at the end (point {n - 1} equals point 0)", where=source)
             raise InputError(f"repeated consecutive points {i} and {i + 1}", where=source)
 
     repeated(p, 0.0)
@@ -399,6 +315,13 @@ def _make_shape(points, corners, angle: float, source: str) -> Shape:
     scale = float(extent.max())
     if not np.isfinite(extent).all() or not (scale > 0):
         raise InputError("coordinates are too large (extent overflows)", where=source)
+    big = np.abs(p).max()
+    if big > MAX_COORDINATE:
+        raise InputError(f"coordinates are too large ({big:.3g}; at most {MAX_COORDINATE:g} in absolute value, so that "
+                         "areas and squared lengths of the placed mesh stay finite): rescale the shape", where=source)
+    if scale < MIN_EXTENT:
+        raise InputError(f"the shape is too small (extent {scale:.3g}; at least {MIN_EXTENT:g}, so that areas of the "
+                         "placed mesh do not vanish): rescale the shape", where=source)
     unit = (p - offset) / scale
     if not np.isfinite(unit).all():
         raise InputError("coordinates cannot be normalised (extent too small)", where=source)
@@ -409,7 +332,7 @@ def _make_shape(points, corners, angle: float, source: str) -> Shape:
     if area < 0:  # clockwise: reverse keeping point 0 first
         index = (-index) % n
         unit = unit[index]
-    hit = _crossing(unit)
+    hit = first_crossing(unit)
     if not (abs(area) > _TINY) and (hit is None or _collinear(unit)):
         raise InputError("boundary has zero area (all points on one line)" if _collinear(unit) else "boundary has zero area", where=source)
     if hit is not None:
@@ -418,10 +341,9 @@ def _make_shape(points, corners, angle: float, source: str) -> Shape:
         sj = f"{index[j]}-{index[(j + 1) % n]}"
         raise InputError(f"boundary crosses or touches itself: segment {si} meets segment {sj}", where=source)
 
-    turn = turning_angles(unit)
-    turn[np.abs(turn) <= _STRAIGHT] = 0.0
+    turn = corner_turns(unit)
     if corner_idx is None:
-        is_corner = np.abs(np.degrees(turn)) > angle
+        is_corner = np.abs(np.degrees(turn)) > angle + _ANGLE_TIE
     else:
         inverse = np.empty(n, np.int64)
         inverse[index] = np.arange(n)
@@ -450,6 +372,15 @@ def _make_shape(points, corners, angle: float, source: str) -> Shape:
         corner_order=corner_of_point[position[np.asarray(user_list, np.int64)]],
         input_clockwise=bool(area < 0),
     )
+
+
+def _closes(p: np.ndarray) -> bool:
+    """The last point of ``p (P, 2)`` (finite) repeats the first (exactly, or within ``_TINY`` of the
+    bounding box's larger extent)."""
+    if np.array_equal(p[0], p[-1]):
+        return True
+    scale = float(np.max(p.max(axis=0) - p.min(axis=0)))
+    return bool(np.isfinite(scale) and scale > 0 and np.max(np.abs(p[-1] - p[0])) <= _TINY * scale)
 
 
 def _lowest(xy) -> int:
@@ -486,141 +417,22 @@ def _short(value, limit: int = 40) -> str:
 
 
 # ---------------------------------------------------------------------------------------------
-# readers
+# readers (jaxmatch.io.readers has the formats)
 
 
-def load_shape(path, *, corner_angle: float = DEFAULT_CORNER_ANGLE) -> Shape:
-    """Read a shape file (JSON, or text/CSV rows); see :func:`parse_shape`."""
-    return parse_shape(read_limited(path, MAX_BYTES, "shape file"), str(path), corner_angle=corner_angle)
+def load_shape(path, *, corner_angle: float = DEFAULT_CORNER_ANGLE, element: str | None = None) -> Shape:
+    """Read a shape file of any supported format: :func:`jaxmatch.io.readers.load_shape`."""
+    from jaxmatch.io.readers import load_shape as _load
+
+    return _load(path, corner_angle=corner_angle, element=element)
 
 
-def parse_shape(data, source: str = "<input>", *, corner_angle: float = DEFAULT_CORNER_ANGLE, fmt: str | None = None) -> Shape:
-    """Parse shape bytes/text into a :class:`Shape`.
+def parse_shape(data, source: str = "<input>", *, corner_angle: float = DEFAULT_CORNER_ANGLE, fmt: str | None = None,
+                element: str | None = None) -> Shape:
+    """Parse shape bytes/text: :func:`jaxmatch.io.readers.parse_shape`."""
+    from jaxmatch.io.readers import parse_shape as _parse
 
-    fmt: ``"json"``, ``"text"`` or None: by the suffix of ``source`` (``.json``; ``.txt``,
-    ``.csv``, ``.xy``, ``.dat``, ``.tsv``), else JSON when the first non-blank character is
-    ``{`` or ``[``, else text. Any problem raises :class:`InputError` with ``source``.
-    """
-    _check_angle(corner_angle)
-    if isinstance(data, str):
-        text = data
-    else:
-        if len(data) > MAX_BYTES:
-            raise InputError(f"file is larger than {MAX_BYTES} bytes", where=source)
-        try:
-            text = bytes(data).decode("utf-8-sig")
-        except UnicodeDecodeError as err:
-            raise InputError(f"not UTF-8 text (byte {err.start})", where=source) from None
-    if fmt is None:
-        suffix = Path(source).suffix.lower()
-        if suffix == ".json":
-            fmt = "json"
-        elif suffix in _TEXT_SUFFIXES:
-            fmt = "text"
-        else:
-            fmt = "json" if text.lstrip()[:1] in ("{", "[") else "text"
-    if fmt == "json":
-        points, corners = _read_json(text, source)
-    elif fmt == "text":
-        points, corners = _read_text(text, source), None
-    else:
-        raise ValueError(f"unknown shape format {fmt!r}")
-    return make_shape(points, corners, corner_angle=corner_angle, source=source)
-
-
-def _no_duplicate_keys(pairs):
-    out = {}
-    for k, v in pairs:
-        if k in out:
-            raise _Dup(k)
-        out[k] = v
-    return out
-
-
-class _Dup(Exception):
-    pass
-
-
-def _reject_constant(name):
-    raise _Const(name)
-
-
-class _Const(Exception):
-    pass
-
-
-def _read_json(text: str, source: str):
-    try:
-        doc = json.loads(text, object_pairs_hook=_no_duplicate_keys, parse_constant=_reject_constant)
-    except json.JSONDecodeError as err:
-        raise InputError(f"not valid JSON: {err.msg} (column {err.colno})", where=f"{source}:{err.lineno}") from None
-    except _Dup as err:
-        raise InputError(f"duplicate key {_short(str(err.args[0]))}", where=source) from None
-    except _Const as err:
-        raise InputError(f"{err.args[0]} is not a finite number", where=source) from None
-    except (ValueError, RecursionError) as err:  # huge integers, absurd nesting
-        raise InputError(f"not valid JSON ({type(err).__name__}: {_short(str(err), 60)})", where=source) from None
-    if not isinstance(doc, dict):
-        raise InputError('top level must be a JSON object {"boundary": [[x, y], ...]}', where=source)
-    unknown = [k for k in doc if k not in _JSON_KEYS]
-    if unknown:
-        raise InputError(f"unknown key {_short(unknown[0])} (allowed: boundary, corners)", where=source)
-    if "boundary" not in doc:
-        raise InputError('missing key "boundary"', where=source)
-    boundary = doc["boundary"]
-    if not isinstance(boundary, list):
-        raise InputError('"boundary" must be a list of [x, y] pairs', where=source)
-    if len(boundary) > MAX_POINTS:
-        raise InputError(f"boundary has {len(boundary)} points, more than the maximum {MAX_POINTS}", where=source)
-    points = []
-    for i, row in enumerate(boundary):
-        if not isinstance(row, list) or len(row) != 2:
-            raise InputError(f"boundary[{i}] must be a pair [x, y], got {_short(row)}", where=source)
-        xy = []
-        for value in row:
-            if isinstance(value, bool) or not isinstance(value, (int, float)):
-                raise InputError(f"boundary[{i}] has a non-number {_short(value)}", where=source)
-            try:
-                f = float(value)
-            except OverflowError:
-                f = math.inf
-            if not math.isfinite(f):
-                raise InputError(f"boundary[{i}] has a number that is not finite", where=source)
-            xy.append(f)
-        points.append(xy)
-    corners = doc.get("corners")
-    if "corners" in doc and not isinstance(corners, list):
-        raise InputError('"corners" must be a list of integer point indices', where=source)
-    return points, corners
-
-
-_SPLIT = re.compile(r"\s*,\s*|\s+")
-
-
-def _read_text(text: str, source: str):
-    points = []
-    for lineno, line in enumerate(text.splitlines(), start=1):
-        body = line.split("#", 1)[0].strip()
-        if not body:
-            continue
-        if len(points) >= MAX_POINTS:
-            raise InputError(f"more than the maximum {MAX_POINTS} points", where=f"{source}:{lineno}")
-        tokens = _SPLIT.split(body)
-        if len(tokens) != 2:
-            raise InputError(f"expected two numbers 'x y' or 'x,y', got {_short(body)}", where=f"{source}:{lineno}")
-        xy = []
-        for tok in tokens:
-            try:
-                f = float(tok)
-            except ValueError:
-                raise InputError(f"not a number: {_short(tok)}", where=f"{source}:{lineno}") from None
-            if not math.isfinite(f):
-                raise InputError(f"{_short(tok)} is not a finite number", where=f"{source}:{lineno}")
-            xy.append(f)
-        points.append(xy)
-    if not points:
-        raise InputError("no points (expected rows 'x y' or 'x,y')", where=source)
-    return points
+    return _parse(data, source, corner_angle=corner_angle, fmt=fmt, element=element)
 
 
 # ---------------------------------------------------------------------------------------------

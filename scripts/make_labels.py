@@ -1,8 +1,8 @@
 #!/usr/bin/env python3
 """Write label files for lattice tuning (JSON lines; see jaxmatch/labels.py).
 
-    scripts/make_labels.py designer --shapes examples/labels/shapes --k 3 --out examples/labels/designer-k3.jsonl
-    scripts/make_labels.py synthetic --k 3 --variants 2 --seed 0 --out examples/labels/synthetic-k3.jsonl
+    scripts/make_labels.py designer --shapes examples/labels/shapes --internal 3 --out examples/labels/designer-k3.jsonl
+    scripts/make_labels.py synthetic --internal 3 --variants 2 --seed 0 --out examples/labels/synthetic-k3.jsonl
 
 designer: label every shape file of a folder with the designer rule (jaxmatch.tuning.labels.design_ranking:
 turning-function fit of the meshes' ideal outlines, then fewest irregular internal vertices, then id).
@@ -35,11 +35,11 @@ def _catalogue(path: Path | None):
 
 @app.command()
 def designer(
-    shapes: Path = typer.Option(Path("examples/labels/shapes"), help="folder of shape files (*.json, *.txt)"),
-    k: int = typer.Option(3, "--k", help="mesh size (internal vertices)"),
-    out: Path = typer.Option(..., help="label file to write (JSON lines)"),
+    shapes: Path = typer.Option(Path("examples/labels/shapes"), metavar="FOLDER", help="folder of shape files (*.json, *.txt, *.csv)"),
+    k: int = typer.Option(3, "--internal", min=0, metavar="K", help="mesh size (internal vertices), as jaxmatch's --internal"),
+    out: Path = typer.Option(..., metavar="FILE", help="label file to write (JSON lines)"),
     tolerance: float = typer.Option(0.10, help="relative fit tolerance before regularity decides"),
-    catalogue: Path = typer.Option(None, help="catalogue file (default: the shipped one)"),
+    catalogue: Path = typer.Option(None, metavar="FILE", help="catalogue file (default: the shipped one)"),
 ) -> None:
     """Label each shape of a folder with the designer rule."""
     cat = _catalogue(catalogue)
@@ -66,15 +66,18 @@ def designer(
 
 @app.command()
 def synthetic(
-    k: int = typer.Option(3, "--k", help="mesh size (internal vertices)"),
-    variants: int = typer.Option(2, help="shapes per catalogue mesh"),
-    seed: int = typer.Option(0, help="random seed (same seed, same file)"),
-    out: Path = typer.Option(..., help="label file to write (JSON lines)"),
-    catalogue: Path = typer.Option(None, help="catalogue file (default: the shipped one)"),
+    k: int = typer.Option(3, "--internal", min=0, metavar="K", help="mesh size (internal vertices), as jaxmatch's --internal"),
+    variants: int = typer.Option(2, min=1, metavar="N", help="shapes per catalogue mesh (at least 1)"),
+    seed: int = typer.Option(0, metavar="N", help="random seed (same seed, same file)"),
+    out: Path = typer.Option(..., metavar="FILE", help="label file to write (JSON lines)"),
+    catalogue: Path = typer.Option(None, metavar="FILE", help="catalogue file (default: the shipped one)"),
 ) -> None:
     """Perturbed outlines of every catalogue mesh of size k, labelled with their source."""
     cat = _catalogue(catalogue)
     records, skipped = synthetic_examples(cat, k, variants=variants, seed=seed)
+    if not records:
+        raise InputError(f"no labels: the catalogue has no mesh with {k} internal vertices that gives a valid outline "
+                         f"(it has k = {', '.join(map(str, cat.internal))})", "--internal")
     write_text_atomic(out, dump_labels(records))
     if skipped:
         err.print(f"no valid outline for {len(set(skipped))} meshes: {' '.join(sorted(set(skipped)))}")

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -142,9 +144,9 @@ def test_score_many_writes_one_line_per_shape(small_cat, tmp_path):
     assert r.returncode == 0, r.stderr
     lines = [json.loads(x) for x in out.read_text().splitlines()]
     assert [d["shape"] for d in lines] == [str(s) for s in shapes]
-    single = json.loads(run("score", shapes[1], "--catalogue", small_cat, "--internal", "2", "--top", "2", "--json",
-                            "--tie-break", "id").stdout)
-    assert lines[1]["results"] == single["results"]
+    single = json.loads(run("score", shapes[1], "--catalogue", small_cat, "--internal", "2", "--top", "2", "--json").stdout)
+    assert lines[1] == dict(single, shape=str(shapes[1]))  # same defaults (tie-break included): the same record
+    assert "3 shapes, 3 scored" in r.stderr
 
 
 def test_score_many_bad_shape_writes_nothing(small_cat, tmp_path):
@@ -153,3 +155,139 @@ def test_score_many_bad_shape_writes_nothing(small_cat, tmp_path):
     out = tmp_path / "r.jsonl"
     r = run("score-many", EXAMPLES / "square.json", bad, "--catalogue", small_cat, "--out", out)
     assert r.returncode == 2 and str(bad) in r.stderr and not out.exists()
+
+
+def test_score_many_skip_bad_records_errors_and_goes_on(small_cat, tmp_path):
+    bad, crossing = tmp_path / "bad.json", tmp_path / "cross.txt"
+    bad.write_text("{")
+    crossing.write_text("0 0\n1 1\n1 0\n0 1\n")
+    out = tmp_path / "r.jsonl"
+    shapes = [EXAMPLES / "square.json", bad, EXAMPLES / "lshape.csv", crossing]
+    r = run("score-many", *shapes, "--catalogue", small_cat, "--internal", "2", "--top", "1", "--out", out, "--skip-bad")
+    assert r.returncode == 0, r.stderr
+    recs = [json.loads(x) for x in out.read_text().splitlines()]
+    assert [d["shape"] for d in recs] == [str(s) for s in shapes]
+    assert "results" in recs[0] and "results" in recs[2]
+    assert str(bad) in recs[1]["error"] and "JSON" in recs[1]["error"]
+    assert "crosses" in recs[3]["error"]
+    assert r.stderr.strip().splitlines()[-1] == f"wrote {out}: 4 shapes, 2 scored, 2 failed (records with \"error\")"
+
+
+def test_one_answer_annotate_uses_the_points_score_uses():
+    """Regression: annotate showed 68 points where 'score --internal 4' scores 56."""
+    a = json.loads(run("annotate", EXAMPLES / "lshape.json", "--internal", "4", "--json").stdout)
+    s = json.loads(run("score", EXAMPLES / "lshape.json", "--internal", "4", "--top", "1", "--json").stdout)
+    assert len(a["points"]) == s["points"] == 56 and a["sequence"] == s["sequence"]
+
+
+@pytest.mark.parametrize("args, option, fragment", [
+    (["score", "examples/square.json", "--corner-angle", "200"], "--corner-angle", "[0, 180)"),
+    (["annotate", "examples/square.json", "--corner-angle", "-1"], "--corner-angle", "[0, 180)"),
+    (["score", "examples/square.json", "--internal", "9"], "--internal", "it has k = 0..5"),
+    (["annotate", "examples/square.json", "--internal", "7"], "--internal", "it has k = 0..5"),
+    (["score", "examples/square.json", "--tie-break", "best"], "--tie-break", "geometry"),
+])
+def test_option_errors_name_the_option_once(args, option, fragment):
+    r = run(*args)
+    assert r.returncode == 2
+    line = r.stderr.strip()
+    assert line.startswith(f"error: {option}: ") and fragment in line and "\n" not in line
+    assert line.count("corner angle") == 0 and line.count(option) == 1
+
+
+def test_version_and_python_m():
+    for cmd in ([sys.executable, "-m", "jaxmatch", "--version"], [sys.executable, "-m", "jaxmatch.cli", "--version"]):
+        r = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT, timeout=120)
+        assert r.returncode == 0 and r.stdout.strip() == "jaxmatch 0.1.0"
+
+
+HELP = [[], ["score"], ["score-many"], ["mesh"], ["annotate"], ["lattice", "show"], ["catalogue", "build"],
+        ["catalogue", "info"], ["catalogue", "export"]]
+
+
+@pytest.mark.parametrize("cmd", HELP, ids=lambda c: " ".join(c) or "jaxmatch")
+def test_help_is_conventional(cmd):
+    """Flags show no '<bool>' (they take no value), arguments show as NAME, not '{name}' or
+    '<list[Path]>'; every option and argument has a help text."""
+    r = subprocess.run([sys.executable, "-m", "jaxmatch", *cmd, "--help"], capture_output=True, text=True, cwd=ROOT,
+                       timeout=120, env={**os.environ, "COLUMNS": "200"})
+    assert r.returncode == 0, r.stderr
+    text = r.stdout
+    usage = next(ln for ln in text.splitlines() if "Usage:" in ln)
+    assert "Usage: jaxmatch" in usage and "{" not in usage and "<" not in usage, usage
+    for bad in ("<bool>", "<list[", "<path>", "<str>"):
+        assert bad not in text, (bad, text)
+    rows = [ln for ln in text.splitlines() if re.match(r"^│\s+(\*\s+)?(--[a-z-]+|[A-Z|.]+)\s", ln)]
+    assert rows and all(len(re.split(r"\s{2,}", ln.strip("│ ").strip())) >= 2 for ln in rows), text
+
+
+def test_json_flag_takes_no_value():
+    r = run("score", EXAMPLES / "square.json", "--json", "true")
+    assert r.returncode == 2 and "unexpected extra argument" in r.stderr
+
+
+def test_extra_json_keys_warn_on_stderr_only(tmp_path, small_cat):
+    f = tmp_path / "named.json"
+    f.write_text(json.dumps({"boundary": [[0, 0], [1, 0], [1, 1], [0, 1]], "name": "plate", "units": "mm"}))
+    r = run("score", f, "--catalogue", small_cat, "--internal", "1", "--top", "1", "--json")
+    assert r.returncode == 0, r.stderr
+    json.loads(r.stdout)
+    assert r.stderr.strip() == f"warning: {f}: ignored keys 'name', 'units' (known keys: boundary, corners)"
+
+
+def test_heartbeat_lines_when_not_a_terminal():
+    import io
+
+    from jaxmatch.cli import Heartbeat
+
+    buf = io.StringIO()
+    with Heartbeat(interval=0.0, stream=buf) as hb:
+        task = hb.add_task("scoring meshes", total=None)
+        hb.update(task, completed=10, total=40)
+        hb.advance(task, 5)
+    lines = buf.getvalue().splitlines()
+    assert lines[0].startswith("scoring meshes: 10/40 (") and lines[1].startswith("scoring meshes: 15/40 (")
+    quiet = io.StringIO()
+    hb = Heartbeat(interval=3600.0, stream=quiet)
+    hb.update(hb.add_task("x", total=3), completed=1)
+    assert quiet.getvalue() == ""
+
+
+def test_piped_run_says_it_is_alive(small_cat):
+    env = {**os.environ, "JAXMATCH_PROGRESS": ""}
+    r = subprocess.run([sys.executable, "-c", "import jaxmatch.cli as c; c.HEARTBEAT_S = 0.0; c.main()", "score",
+                        str(EXAMPLES / "square.json"), "--catalogue", str(small_cat), "--top", "1"],
+                       capture_output=True, text=True, cwd=ROOT, timeout=300, env=env)
+    assert r.returncode == 0, r.stderr
+    assert re.search(r"^scoring meshes: \d+/\d+ \(\d+ s\)$", r.stderr, re.M), r.stderr
+
+
+def test_make_labels_refuses_bad_variants_and_empty_output(tmp_path):
+    script = ROOT / "scripts" / "make_labels.py"
+    out = tmp_path / "l.jsonl"
+    r = subprocess.run([sys.executable, script, "synthetic", "--variants", "-1", "--out", out], capture_output=True, text=True,
+                       cwd=ROOT, timeout=300)
+    assert r.returncode == 2 and "--variants" in r.stderr and not out.exists()
+    r = subprocess.run([sys.executable, script, "synthetic", "--internal", "9", "--out", out], capture_output=True, text=True,
+                       cwd=ROOT, timeout=300)
+    assert r.returncode == 2 and "9 internal vertices" in r.stderr and not out.exists()
+
+
+def test_commands_share_their_defaults():
+    """score, score-many, mesh and annotate take their defaults from jaxmatch.defaults (as the API does)."""
+    import typer
+
+    from jaxmatch import defaults
+    from jaxmatch.api import rank
+    from jaxmatch.cli import app
+    from jaxmatch.shape import DEFAULT_CORNER_ANGLE
+
+    want = {"lattice": defaults.DEFAULT_LATTICE, "tie_break": defaults.DEFAULT_TIE_BREAK, "top": defaults.DEFAULT_TOP,
+            "corner_angle": DEFAULT_CORNER_ANGLE, "points": None, "internal": None, "catalogue": None}
+    commands = typer.main.get_command(app).commands
+    for name in ("score", "score-many", "mesh", "annotate"):
+        got = {p.name: p.default for p in commands[name].params if p.name in want}
+        assert got == {k: v for k, v in want.items() if k in got}, name
+        assert {"corner_angle", "internal", "catalogue", "points"} <= set(got), name
+    api = rank.__kwdefaults__
+    assert (api["top"], api["tie_break"], api["prune"]) == (defaults.DEFAULT_TOP, defaults.DEFAULT_TIE_BREAK, True)

@@ -123,8 +123,8 @@ def test_mesh_folded_exit_3_still_writes_and_names_next_valid(cli, small_cat, tm
     out = tmp_path / "f.json"
     code, stdout, err = cli("mesh", EXAMPLES / "triangle.json", "--catalogue", small_cat, "--rank", bad, "--out", out)
     assert code == EXIT_INVERTED
-    assert "FOLDED" in stdout and "inverted" in stdout
-    assert f"#{want} {want_id}" in stdout
+    assert "inverted" in stdout and "FOLDED" not in stdout  # the warning and the advice go to stderr
+    assert "FOLDED" in err and f"#{want} {want_id}" in err
     assert out.exists() and read_json_mesh(out)[1].shape[0] > 0
 
     code, stdout, err = cli("mesh", EXAMPLES / "triangle.json", "--catalogue", small_cat, "--rank", bad, "--json")
@@ -196,5 +196,5 @@ def test_real_process_exit_3(small_cat, tmp_path, folded):
     r = subprocess.run([sys.executable, "-m", "jaxmatch.cli", "mesh", str(EXAMPLES / "triangle.json"), "--catalogue", str(small_cat),
                         "--rank", str(bad), "--out", str(out)], capture_output=True, text=True, cwd=ROOT, timeout=300)
     assert r.returncode == EXIT_INVERTED, r.stderr
-    assert "FOLDED" in r.stdout and out.exists()
+    assert "FOLDED" in r.stderr and "FOLDED" not in r.stdout and out.exists()
     assert meshio.read(out).cells_dict["quad"].shape[1] == 4

@@ -6,7 +6,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from jaxmatch.errors import InputError
+from jaxmatch.errors import InputError, InputWarning
 from jaxmatch.tuning.labels import (
     boundary_key,
     corner_cycle,
@@ -73,7 +73,6 @@ BAD = [
     ({"shape": "missing.json", "preferred": "K3"}, "shape missing.json"),
     ({"shape": {"boundary": [[0, 0], [1, 1], [1, 0], [0, 1]]}, "preferred": "K3"}, "crosses"),
     ({"shape": {"boundary": [[0, 0], [1, 0]]}, "preferred": "K3"}, "at least 3"),
-    ({"shape": {"boundary": [[0, 0], [1, 0], [0, 1]], "extra": 1}, "preferred": "K3"}, "unknown key"),
     ('{"shape": {"boundary": [[0, 0], [1, 0], [0, NaN]]}, "preferred": "K3"}', "not"),
 ]
 
@@ -96,6 +95,13 @@ def test_bad_line_is_reported_with_its_line_number(tmp_path, index, k3, line, me
     kept = load_labels(p, index, skip_bad=True)
     assert [e.where for e in kept.examples] == [f"{p}:2", f"{p}:4"]
     assert [e.where for e in kept.problems] == [f"{p}:3"]
+
+
+def test_extra_key_in_an_embedded_shape_is_warned_not_refused(tmp_path, index, k3):
+    """As in shape files (jaxmatch.io.readers): unknown shape keys are ignored with a warning."""
+    p = write(tmp_path, [{"shape": dict(SQUARE, extra=1), "preferred": k3}])
+    with pytest.warns(InputWarning, match="ignored key 'extra'"):
+        assert len(load_labels(p, index).examples) == 1
 
 
 def test_skip_bad_collects_every_bad_line_and_an_all_bad_file_fails(tmp_path, index, k3):

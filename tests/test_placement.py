@@ -51,7 +51,7 @@ def ranked(cat, lat):
     out = {}
     for name in ("triangle", "lshape", "square"):
         shp = load_shape(EXAMPLES / f"{name}.json")
-        out[name] = (shp, rank(shp, cat, lat, top=8), rank(shp, cat, lat, top=8, tie_break="geometry"))
+        out[name] = (shp, rank(shp, cat, lat, top=8, tie_break="id"), rank(shp, cat, lat, top=8, tie_break="geometry"))
     return out
 
 
@@ -157,8 +157,11 @@ def test_spread_never_worse_than_given_alignment_on_examples(ranked, cat):
 # ties
 
 
-def test_rank_default_is_id_order(ranked, cat, lat):
-    shp, r_id, _ = ranked["triangle"]
+def test_rank_default_is_geometry_order(ranked, cat, lat):
+    """jaxmatch.api.rank has the CLI's defaults (tie_break="geometry"); "id" is the paper's order."""
+    shp, r_id, r_geo = ranked["triangle"]
+    default = rank(shp, cat, lat, top=8)
+    assert [m.mesh_id for m in default.results] == [m.mesh_id for m in r_geo.results]
     again = rank(shp, cat, lat, top=8, tie_break="id")
     assert [m.mesh_id for m in again.results] == [m.mesh_id for m in r_id.results]
     assert r_id.placements is None
@@ -184,7 +187,7 @@ def test_geometry_tie_break_only_reorders_ties(ranked):
 
 def test_geometry_ranking_is_prefix_consistent_and_following_continues(ranked, cat, lat):
     shp, _, r8 = ranked["lshape"]
-    r3 = rank(shp, cat, lat, top=3, tie_break="geometry")
+    r3 = rank(shp, cat, lat, top=3, tie_break="geometry", prune=False)  # following: every row
     assert [m.mesh_id for m in r3.results] == [m.mesh_id for m in r8.results[:3]]
     nxt = list(islice(r3.following, 5))
     assert [m.mesh_id for m in nxt] == [m.mesh_id for m in r8.results[3:8]]

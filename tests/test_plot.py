@@ -174,3 +174,18 @@ def test_failed_save_leaves_nothing(tmp_path, panels, monkeypatch, suffix):
         draw_many([panels["star"]], path)
     assert path.read_bytes() == b"old"
     assert [p.name for p in tmp_path.iterdir()] == [path.name]
+
+
+def test_panel_title_keeps_the_whole_mesh_id():
+    """Regression: 15-character ids were cut to 14, so an id copied from a picture was not found."""
+    from jaxmatch.placement.choose import panel_title
+    from jaxmatch.scoring.rank import Match
+
+    mesh_id = "k5-b2b65fa5f3b0"
+    assert len(mesh_id) == 15
+    title = panel_title(1, Match(mesh_id, 5, 12, 24.0, 0, True, np.arange(3), np.zeros((3, 3), int)))
+    assert mesh_id in title.split()
+    panel = star_match()
+    fig, axes = new_figure(1)
+    draw_match(axes[0], panel.points, panel.positions, panel.codes, panel.placement, title)
+    assert mesh_id in axes[0].get_title().split()

@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from jaxmatch.errors import InputError
+from jaxmatch.errors import InputError, InputWarning
 from jaxmatch.shape import (
     MAX_POINTS,
     S,
@@ -61,10 +61,14 @@ def corner_points(shape):
         ("curved.json", 4, 0),
         ("dshape.json", 2, 0),
         ("circle.json", 0, 0),
+        ("lshape.csv", 5, 1),
+        ("plate.geojson", 5, 0),
+        ("bracket.svg#outline", 3, 0),  # the notch is a smooth S-curve (a cubic): no concave corner
+        ("slot.dxf", 2, 0),
     ],
 )
 def test_examples_load_with_expected_corners(name, n_convex, n_concave):
-    shape = load_shape(EXAMPLES / name)
+    shape = load_shape(f"{EXAMPLES / name}")
     assert int(shape.convex.sum()) == n_convex
     assert int((~shape.convex).sum()) == n_concave
     assert signed_area(shape.points) > 0
@@ -167,7 +171,6 @@ BAD = [
     (b"{not json", "x.json", "JSON"),
     (b"[]", "x.json", "object"),
     (js({"boundary": [[0, 0], [1, 0]]}), "x.json", "at least 3"),
-    (js({"boundary": SQUARE, "colour": "red"}), "x.json", "unknown key"),
     (js({"corners": [0]}), "x.json", "missing"),
     (js({"boundary": {"a": 1}}), "x.json", "list"),
     (js({"boundary": [[0, 0], [1, 0], [1]]}), "x.json", "pair"),
@@ -180,12 +183,15 @@ BAD = [
     (js({"boundary": [[0, 0], [1, 0], [10**400, 1]]}), "x.json", "finite"),
     (b'{"boundary": [[0,0],[1,0],[1,1]], "boundary": [[0,0],[1,0],[1,1]]}', "x.json", "duplicate"),
     (js({"boundary": [[0, 0], [1, 0], [1, 0], [0, 1]]}), "x.json", "repeated"),
-    (js({"boundary": [[0, 0], [1, 0], [1, 1], [0, 0]]}), "x.json", "repeats the first"),
+    (js({"boundary": [[0, 0], [1, 0], [0, 0]]}), "x.json", "at least 3"),  # a closed ring of 2 points
+    (js({"boundary": [[0, 0], [1, 0], [1, 1], [0, 0], [0, 0]]}), "x.json", "repeated more than once"),
     (js({"boundary": [[0, 0], [1, 0], [2, 0]]}), "x.json", "zero area"),
     (js({"boundary": [[0, 0], [1, 1], [1, 0], [0, 1]]}), "x.json", "crosses"),
     (js({"boundary": [[0, 0], [2, 0], [2, 2], [1, 0], [0, 2]]}), "x.json", "crosses"),  # touches
     (js({"boundary": [[0, 0], [2, 0], [1, 0], [1, 1]]}), "x.json", "crosses"),  # folds back
     (js({"boundary": [[-1e308, 0], [1e308, 0], [0, 1]]}), "x.json", "too large"),
+    (js({"boundary": [[1e308, 1e308], [1.5e308, 1e308], [1.5e308, 1.5e308]]}), "x.json", "too large"),  # areas overflow
+    (js({"boundary": [[0, 0], [1e-200, 0], [0, 1e-200]]}), "x.json", "too small"),  # areas vanish
     (js({"boundary": SQUARE, "corners": [0, 4]}), "x.json", "out of range"),
     (js({"boundary": SQUARE, "corners": [0, -1]}), "x.json", "out of range"),
     (js({"boundary": SQUARE, "corners": [1, 1]}), "x.json", "twice"),
@@ -230,11 +236,43 @@ def test_unreadable_file(tmp_path):
         load_shape(tmp_path)  # a directory
 
 
-def test_bad_corner_angle():
-    with pytest.raises(InputError, match="corner angle"):
-        make_shape(SQUARE, corner_angle=200)
+@pytest.mark.parametrize("angle", [200, -1, 180, float("nan"), "wide"])
+def test_bad_corner_angle_is_said_once(angle):
+    with pytest.raises(InputError) as info:
+        make_shape(SQUARE, corner_angle=angle)
+    assert str(info.value).count("corner angle") == 1 and info.value.where is None
 
 
+# ---------------------------------------------------------------------------------------------
+# closed rings, extra keys
+
+
+@pytest.mark.parametrize("loop", [SQUARE, L_SHAPE, TRIANGLE, HEXAGON])
+def test_closed_ring_equals_open_loop(loop):
+    """A ring whose last point repeats the first (GeoJSON, SVG) is the same shape."""
+    open_ = make_shape(loop)
+    closed = make_shape(list(loop) + [loop[0]])
+    np.testing.assert_array_equal(closed.points, open_.points)
+    np.testing.assert_array_equal(closed.corners, open_.corners)
+    assert annotate(closed, 20).symbols == annotate(open_, 20).symbols
+
+
+def test_closed_ring_corner_on_the_repeated_point_means_the_first():
+    closed = make_shape(SQUARE + [SQUARE[0]], corners=[1, 2, 3, 4])
+    assert corner_points(closed) == corner_points(make_shape(SQUARE))
+
+
+def test_extra_json_keys_warn_once_naming_them():
+    doc = {"boundary": SQUARE, "name": "plate", "units": "mm"}
+    with pytest.warns(InputWarning) as record:
+        shape = parse_shape(js(doc), "p.json")
+    assert len(record) == 1
+    msg = str(record[0].message)
+    assert msg.startswith("p.json: ") and "'name'" in msg and "'units'" in msg and "boundary, corners" in msg
+    assert shape.n_corners == 4
+
+
+@pytest.mark.filterwarnings("ignore::jaxmatch.errors.InputWarning")  # random keys are warned, tested elsewhere
 @pytest.mark.parametrize("name", ["r.json", "r.txt", "r.shape"])
 @given(data=st.binary(max_size=300))
 def test_random_bytes_never_crash(name, data):
@@ -251,6 +289,7 @@ json_values = st.recursive(
 )
 
 
+@pytest.mark.filterwarnings("ignore::jaxmatch.errors.InputWarning")  # random keys are warned, tested elsewhere
 @given(doc=json_values)
 def test_random_json_never_crashes(doc):
     try:
@@ -381,3 +420,21 @@ def test_cumulative_length_and_point_at():
     cum = cumulative_length(SQUARE)
     np.testing.assert_allclose(cum, [0, 1, 2, 3, 4])
     np.testing.assert_allclose(point_at(SQUARE, [0.5, 4.25, -0.5]), [[0.5, 0], [0.25, 0], [0, 0.5]])
+
+
+@pytest.mark.parametrize("n", [12, 11, 7])
+@pytest.mark.parametrize("fractions", [(0.125,), (0.25, 0.5), (0.125, 0.25, 0.75)])
+def test_points_added_on_sides_change_no_corner_of_a_near_regular_polygon(n, fractions):
+    """A regular 12-gon turns exactly 30 degrees (the default corner angle) at every vertex:
+    subdividing its sides must not move round-off across the threshold (regression: 4 vs 5
+    corners)."""
+    deg = sorted({round(k * 360 / n) % 360 for k in range(n)})
+    pts = np.array([[1000 * math.cos(math.radians(d)), 1000 * math.sin(math.radians(d))] for d in deg])
+    loop = []
+    for k in range(len(pts)):
+        a, b = pts[k], pts[(k + 1) % len(pts)]
+        loop.append(a)
+        loop.extend(a + f * (b - a) for f in fractions)
+    base, fine = make_shape(pts), make_shape(np.array(loop))
+    assert fine.n_corners == base.n_corners
+    assert corner_points(fine) == corner_points(base)

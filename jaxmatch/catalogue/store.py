@@ -266,6 +266,15 @@ class Catalogue:
         return {"format_version": self.format_version, "per_k": per_k, "per_boundary_length": per_n}
 
 
+def _sizes_of(meta: dict) -> str:
+    """``"K1..K2"`` for the sizes a catalogue's metadata lists (``0..DEFAULT_MAX_INTERNAL`` when
+    it lists none readable), for rebuild advice."""
+    ks = meta.get("internal")
+    if isinstance(ks, list) and ks and all(isinstance(k, int) and not isinstance(k, bool) and 0 <= k <= 99 for k in ks):
+        return f"{min(ks)}..{max(ks)}" if min(ks) != max(ks) else str(ks[0])
+    return f"0..{DEFAULT_MAX_INTERNAL}"
+
+
 def load(path: str | os.PathLike) -> Catalogue:
     """Open a catalogue file; refuse corrupted, truncated, foreign or old-version files."""
     p = Path(path)
@@ -295,7 +304,7 @@ def load(path: str | os.PathLike) -> Catalogue:
     if isinstance(version, bool) or version != FORMAT_VERSION:
         raise InputError(
             f"catalogue format version {meta.get('format_version')} is not the supported {FORMAT_VERSION}; "
-            "rebuild it with 'jaxmatch catalogue build --internal 0..5 --out PATH'", str(p))
+            f"rebuild it with 'jaxmatch catalogue build --internal {_sizes_of(meta)} --out {p}'", str(p))
     for key in ("internal", "lengths", "checksums"):
         if key not in meta:
             raise InputError(f"catalogue metadata lacks {key!r}", str(p))

@@ -376,7 +376,7 @@ def draw_placements(path: str | os.PathLike, shape: Shape, annotation: Annotatio
 
 
 def panel_title(rank: int, match: Match) -> str:
-    """``"#1 k5-b2b65fa5f3 (utility 24)"``: short title line for a picture panel."""
-    short = match.mesh_id if len(match.mesh_id) <= 14 else match.mesh_id[:14]
+    """``"#1 k5-b2b65fa5f3b0 (utility 24, rot 0)"``: title line for a picture panel (the full
+    mesh id, so that it can be copied into ``catalogue export --id``)."""
     refl = ", reflected" if match.reflected else ""
-    return f"#{rank} {short} (utility {match.utility:g}, rot {match.rotation}{refl})"
+    return f"#{rank} {match.mesh_id} (utility {match.utility:g}, rot {match.rotation}{refl})"

@@ -50,6 +50,7 @@ import scipy.sparse
 import scipy.sparse.linalg
 
 from jaxmatch.catalogue.mesh import QuadMesh, edges, valences
+from jaxmatch.geometry import cumulative_length, point_at, signed_area, sub_polyline
 
 __all__ = [
     "Placement",
@@ -145,45 +146,8 @@ def oriented_boundary(mesh: QuadMesh, rotation: int, reflected: bool) -> tuple[Q
 # polylines
 
 
-def arc_lengths(points: np.ndarray) -> np.ndarray:
-    """Cumulative arc length of the closed loop ``points`` (P, 2): ``(P+1,)``, starts at 0,
-    ends at the perimeter (the closing segment back to ``points[0]`` included)."""
-    p = np.asarray(points, dtype=np.float64)
-    seg = np.linalg.norm(np.roll(p, -1, axis=0) - p, axis=1)
-    return np.concatenate([[0.0], np.cumsum(seg)])
-
-
-def point_at(points: np.ndarray, t) -> np.ndarray:
-    """Points at arc-length parameters ``t`` (any shape, taken modulo the perimeter) along the
-    closed loop ``points`` (P, 2). Returns ``t.shape + (2,)``.
-
-    Parameters within ``1e-9 * perimeter`` of a polyline vertex return that vertex exactly.
-    """
-    p = np.asarray(points, dtype=np.float64)
-    cum = arc_lengths(p)
-    per = cum[-1]
-    tt = np.mod(np.asarray(t, dtype=np.float64), per) if per > 0 else np.zeros_like(t, dtype=np.float64)
-    P = p.shape[0]
-    idx = np.clip(np.searchsorted(cum, tt, side="right") - 1, 0, P - 1)
-    seg = cum[idx + 1] - cum[idx]
-    frac = np.where(seg > 0, (tt - cum[idx]) / np.where(seg > 0, seg, 1.0), 0.0)
-    a, b = p[idx], p[(idx + 1) % P]
-    out = a + frac[..., None] * (b - a)
-    tol = 1e-9 * per
-    out = np.where((np.abs(tt - cum[idx]) <= tol)[..., None], a, out)
-    out = np.where((np.abs(cum[idx + 1] - tt) <= tol)[..., None], b, out)
-    return out
-
-
-def _piece(points: np.ndarray, cum: np.ndarray, t0: float, t1: float) -> np.ndarray:
-    """Polyline from parameter t0 to t1 (t1 > t0, at most one lap later), ends included."""
-    per = cum[-1]
-    tol = 1e-9 * per
-    c2 = np.concatenate([cum[:-1], cum[:-1] + per, cum[:-1] + 2 * per])
-    p2 = np.concatenate([points, points, points])
-    inner = p2[(c2 > t0 + tol) & (c2 < t1 - tol)]
-    ends = point_at(points, np.array([t0, t1]))
-    return np.concatenate([ends[:1], inner, ends[1:]])
+arc_lengths = cumulative_length
+"""Cumulative arc length of a closed loop (:func:`jaxmatch.geometry.cumulative_length`)."""
 
 
 def boundary_paths(points: np.ndarray, t_aligned: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -205,15 +169,12 @@ def boundary_paths(points: np.ndarray, t_aligned: np.ndarray) -> tuple[np.ndarra
         t1 = float(ta[(j + 1) % n])
         if t1 <= t0:
             t1 += per
-        out.append(_piece(p, cum, t0, t1))
+        out.append(sub_polyline(p, t0, t1, cum))
     return tuple(out)
 
 
-def polygon_area(xy: np.ndarray) -> float:
-    """Signed (shoelace) area of the closed polygon ``xy`` (k, 2); positive when ccw."""
-    p = np.asarray(xy, dtype=np.float64)
-    q = np.roll(p, -1, axis=0)
-    return float(0.5 * np.sum(p[:, 0] * q[:, 1] - p[:, 1] * q[:, 0]))
+polygon_area = signed_area
+"""Signed area of a closed polygon, positive when ccw (:func:`jaxmatch.geometry.signed_area`)."""
 
 
 def quad_areas(xy: np.ndarray, quads: np.ndarray) -> np.ndarray:

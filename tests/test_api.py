@@ -1,0 +1,119 @@
+"""The Python API (``import jaxmatch``): the README example runs, the exported names are
+documented, and the API answers what the command line answers (same defaults)."""
+
+from __future__ import annotations
+
+import json
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import jaxmatch
+from jaxmatch import api
+from jaxmatch.catalogue import store as cm
+from jaxmatch.errors import InputError
+
+ROOT = Path(__file__).resolve().parents[1]
+EXAMPLES = ROOT / "examples"
+
+
+def readme_example() -> str:
+    text = (ROOT / "README.md").read_text()
+    found = re.search(r"<!-- api-example -->\s*```python\n(.*?)```", text, re.S)
+    assert found, "README lost its Python API example"
+    return found.group(1)
+
+
+def test_readme_python_example_runs(tmp_path, monkeypatch, capsys):
+    shutil.copytree(EXAMPLES, tmp_path / "examples")
+    monkeypatch.chdir(tmp_path)
+    exec(compile(readme_example(), "README.md", "exec"), {})
+    lines = capsys.readouterr().out.splitlines()
+    assert len(lines) == 5 and lines[0].startswith("k4-")
+    assert (tmp_path / "lshape.vtk").stat().st_size > 0
+    assert "quads, min scaled Jacobian" in lines[3]
+
+
+def test_exported_names_resolve_and_are_documented():
+    assert jaxmatch.__version__
+    for name in jaxmatch.__all__:
+        obj = getattr(jaxmatch, name)
+        if name != "__version__":
+            assert (obj.__doc__ or "").strip(), name
+    assert {"load_shape", "make_shape", "rank", "place", "choose_mesh", "write_mesh"} <= set(dir(jaxmatch))
+    with pytest.raises(AttributeError):
+        jaxmatch.no_such_name  # noqa: B018
+
+
+def test_import_is_light():
+    """``import jaxmatch`` does not load JAX (the first call that scores does)."""
+    code = "import sys, jaxmatch; print('jax' in sys.modules, jaxmatch.__version__)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=120).stdout.split()
+    assert out == ["False", jaxmatch.__version__]
+
+
+@pytest.fixture(scope="module")
+def small_cat(tmp_path_factory):
+    p = tmp_path_factory.mktemp("cat") / "c3.npz"
+    cm.save(cm.generate(3), p)
+    return p
+
+
+def test_api_answers_what_score_answers(small_cat):
+    """Same defaults: jaxmatch.rank and 'jaxmatch score --json' (no options beyond the inputs)."""
+    shape = jaxmatch.load_shape(EXAMPLES / "tshape.json")
+    got = jaxmatch.rank(shape, small_cat)
+    r = subprocess.run([sys.executable, "-m", "jaxmatch", "score", str(EXAMPLES / "tshape.json"), "--catalogue", str(small_cat),
+                        "--json"], capture_output=True, text=True, cwd=ROOT, timeout=300)
+    assert r.returncode == 0, r.stderr
+    cli = json.loads(r.stdout)
+    assert cli["tie_break"] == api.DEFAULT_TIE_BREAK == "geometry" and cli["lattice"] == api.DEFAULT_LATTICE
+    assert [m.as_json() for m in got.results] == cli["results"]
+    assert len(got.results) == api.DEFAULT_TOP and got.pruned > 0  # the pruned search, as the CLI
+
+
+@pytest.mark.parametrize("internal, want", [(2, [2]), ("1..2", [1, 2]), ([3, 1], [1, 3]), (None, None)])
+def test_sizes_accepted_forms(small_cat, internal, want):
+    assert api.check_sizes(cm.load(small_cat), internal) == want
+
+
+def test_missing_size_names_the_sizes_the_catalogue_has(small_cat):
+    with pytest.raises(InputError) as info:
+        api.check_sizes(cm.load(small_cat), "2..5")
+    msg = str(info.value)
+    assert "4..5 internal vertices" in msg and "k = 0..3" in msg and info.value.where is None
+
+
+def test_place_and_choose_mesh_agree(small_cat):
+    shape = jaxmatch.load_shape(EXAMPLES / "lshape.json")
+    ranking = jaxmatch.rank(shape, small_cat, internal=3, top=2)
+    first = jaxmatch.place(shape, ranking, catalogue=small_cat)
+    again = jaxmatch.place(shape, ranking, ranking.results[0], catalogue=small_cat)
+    choice = jaxmatch.choose_mesh(shape, small_cat, internal=3)
+    assert choice.match.mesh_id == ranking.results[0].mesh_id
+    np.testing.assert_allclose(first.xy, choice.placement.xy)
+    np.testing.assert_allclose(first.xy, again.xy)
+    with pytest.raises(InputError, match="rank 3 is not in the ranking"):
+        jaxmatch.place(shape, ranking, 3, catalogue=small_cat)
+
+
+def test_annotation_matches_the_ranking(small_cat):
+    shape = jaxmatch.load_shape(EXAMPLES / "lshape.json")
+    ann = jaxmatch.annotate_shape(shape, small_cat, internal=3)
+    assert ann.symbols == jaxmatch.rank(shape, small_cat, internal=3, top=1).annotation.symbols
+
+
+def test_huge_coordinates_place_with_finite_areas(small_cat):
+    """Regression: coordinates near 1e308 ended in OverflowError; now the largest accepted
+    coordinates (1e150) still give finite areas and quality, and larger ones a clear error."""
+    pts = np.array([[0, 0], [2, 0], [2, 1], [1, 1], [1, 2], [0, 2]], float)
+    shape = jaxmatch.make_shape(pts * 4e149)
+    pl = jaxmatch.place(shape, jaxmatch.rank(shape, small_cat, internal=2, top=1), catalogue=small_cat)
+    assert np.isfinite([pl.region_area, pl.mesh_area, pl.min_scaled_jacobian]).all() and pl.area_ratio > 0
+    with pytest.raises(InputError, match="too large"):
+        jaxmatch.make_shape(pts * 1e300)
