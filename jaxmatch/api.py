@@ -26,5 +26,5 @@ def rank(shape: Shape, catalogue: Catalogue, lattice: Lattice, *, tie_break: str
     arguments as there. Raises ValueError for an unknown ``tie_break``."""
     if tie_break not in TIE_BREAKS:
         raise ValueError(f"tie_break must be one of {TIE_BREAKS}, got {tie_break!r}")
-    tb = geometry_tie_breaker(catalogue) if tie_break == "geometry" else "id"
+    tb = geometry_tie_breaker(catalogue, lattice) if tie_break == "geometry" else "id"
     return _rank(shape, catalogue, lattice, tie_break=tb, **options)

@@ -22,7 +22,7 @@ from jaxmatch.errors import EXIT_BAD_INPUT, EXIT_INVERTED
 from jaxmatch.scoring.lattice import load_lattice
 from jaxmatch.io.meshfile import read_json_mesh
 from jaxmatch.api import rank
-from jaxmatch.placement.choose import place_top
+from jaxmatch.placement.choose import acceptable, place_top
 from jaxmatch.shape import load_shape
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -39,13 +39,16 @@ def small_cat(tmp_path_factory):
 
 @pytest.fixture(scope="session")
 def folded(small_cat):
-    """(rank of a folded mesh, rank of the next mesh that embeds without folds) for the
-    triangle under the small catalogue and the CLI's default ranking."""
-    shp = load_shape(EXAMPLES / "triangle.json")
-    r = rank(shp, cm.load(small_cat), load_lattice("fine"), top=12, tie_break="geometry")
-    pls = place_top(shp, r, cm.load(small_cat))
-    bad = next(i for i, p in enumerate(pls) if p.inverted) + 1
-    want = next(i for i, p in enumerate(pls) if i + 1 > bad and p.inverted == 0) + 1
+    """(rank of a mesh that is not a good mesh of the shape, rank and id of the next one that
+    is) for the L shape at k = 0..3 under the small catalogue and the CLI's default ranking."""
+    shp = load_shape(EXAMPLES / "lshape.json")
+    lat = load_lattice("fine")
+    r = rank(shp, cm.load(small_cat), lat, top=12, internal=[0, 1, 2, 3], tie_break="geometry")
+    pls = place_top(shp, r, cm.load(small_cat), lattice=lat)
+    ok = [acceptable(p) for p in pls]
+    bad = ok.index(False) + 1
+    assert not pls[bad - 1].valid, "example needs a mesh that is not valid"
+    want = next(i for i in range(bad, len(ok)) if ok[i]) + 1
     return bad, want, r.results[want - 1].mesh_id
 
 
@@ -91,9 +94,10 @@ def test_mesh_writes_vtk_and_pictures_json(cli, small_cat, tmp_path):
 @pytest.mark.parametrize("suffix", [".msh", ".obj", ".json", ".vtu"])
 def test_mesh_formats_read_back(cli, small_cat, tmp_path, suffix):
     out = tmp_path / f"m{suffix}"
-    code, stdout, err = cli("mesh", EXAMPLES / "lshape.json", "--catalogue", small_cat, "--out", out, "--json")
+    code, stdout, err = cli("mesh", EXAMPLES / "lshape.json", "--catalogue", small_cat, "--require-valid", "--out", out, "--json")
     assert code == 0, err
     d = json.loads(stdout)
+    assert d["valid"] and d["missed_corners"] == [] and abs(d["area_ratio"] - 1) <= 1e-9
     if suffix == ".json":
         pts, quads, sj = read_json_mesh(out)
     else:
@@ -121,23 +125,24 @@ def test_mesh_text_output_and_picture_only(cli, small_cat, tmp_path):
 def test_mesh_folded_exit_3_still_writes_and_names_next_valid(cli, small_cat, tmp_path, folded):
     bad, want, want_id = folded
     out = tmp_path / "f.json"
-    code, stdout, err = cli("mesh", EXAMPLES / "triangle.json", "--catalogue", small_cat, "--rank", bad, "--out", out)
+    code, stdout, err = cli("mesh", EXAMPLES / "lshape.json", "--catalogue", small_cat, "--internal", "0..3", "--rank", bad, "--out", out)
     assert code == EXIT_INVERTED
-    assert "FOLDED" in stdout and "inverted" in stdout
+    assert "MISSED CORNERS" in stdout or "FOLDED" in stdout
     assert f"#{want} {want_id}" in stdout
     assert out.exists() and read_json_mesh(out)[1].shape[0] > 0
 
-    code, stdout, err = cli("mesh", EXAMPLES / "triangle.json", "--catalogue", small_cat, "--rank", bad, "--json")
+    code, stdout, err = cli("mesh", EXAMPLES / "lshape.json", "--catalogue", small_cat, "--internal", "0..3", "--rank", bad, "--json")
     assert code == EXIT_INVERTED
     d = json.loads(stdout)
-    assert d["inverted"] > 0 and not d["valid"] and d["rank"] == bad
+    assert (d["inverted"] > 0 or d["missed_corners"]) and not d["valid"] and not d["good"] and d["rank"] == bad
+    assert len(d["missed_corners"]) == d["corners"] - d["corners_kept"]
     assert d["next_valid"]["rank"] == want and d["next_valid"]["mesh_id"] == want_id
-    assert "FOLDED" in err
+    assert "MISSED CORNERS" in err or "FOLDED" in err
 
 
 def test_mesh_require_valid_walks_down(cli, small_cat, tmp_path, folded):
     bad, want, want_id = folded
-    code, stdout, err = cli("mesh", EXAMPLES / "triangle.json", "--catalogue", small_cat, "--rank", bad, "--require-valid", "--json")
+    code, stdout, err = cli("mesh", EXAMPLES / "lshape.json", "--catalogue", small_cat, "--internal", "0..3", "--rank", bad, "--require-valid", "--json")
     assert code == 0, err
     d = json.loads(stdout)
     assert d["rank"] == want and d["requested_rank"] == bad and d["mesh_id"] == want_id and d["inverted"] == 0
@@ -193,8 +198,8 @@ def test_score_tie_break_id_keeps_utilities(cli, small_cat):
 def test_real_process_exit_3(small_cat, tmp_path, folded):
     bad, want, _ = folded
     out = tmp_path / "p.vtk"
-    r = subprocess.run([sys.executable, "-m", "jaxmatch.cli", "mesh", str(EXAMPLES / "triangle.json"), "--catalogue", str(small_cat),
-                        "--rank", str(bad), "--out", str(out)], capture_output=True, text=True, cwd=ROOT, timeout=300)
+    r = subprocess.run([sys.executable, "-m", "jaxmatch.cli", "mesh", str(EXAMPLES / "lshape.json"), "--catalogue", str(small_cat),
+                        "--internal", "0..3", "--rank", str(bad), "--out", str(out)], capture_output=True, text=True, cwd=ROOT, timeout=300)
     assert r.returncode == EXIT_INVERTED, r.stderr
-    assert "FOLDED" in r.stdout and out.exists()
+    assert ("MISSED CORNERS" in r.stdout or "FOLDED" in r.stdout) and out.exists()
     assert meshio.read(out).cells_dict["quad"].shape[1] == 4

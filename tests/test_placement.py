@@ -8,13 +8,17 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import shapely
 
 from jaxmatch.catalogue import store as cm
 from jaxmatch.placement.embed import inverted_mask, quality, quad_areas
 from jaxmatch.errors import InputError
 from jaxmatch.scoring.lattice import load_lattice
 from jaxmatch.api import rank
+from jaxmatch.catalogue.mesh import from_quads
+from jaxmatch.placement.embed import place
 from jaxmatch.placement.choose import (
+    acceptable,
     check_outputs,
     choose_mesh,
     draw_placements,
@@ -107,11 +111,22 @@ def test_spread_alignment_single_vertex_unchanged():
 def test_place_match_user_coordinates_and_same_utility(ranked, cat, lat):
     shp, r, _ = ranked["lshape"]
     ann = r.annotation
+    corner_xy = shp.user_points[shp.corners]
     for m in r.results[:3]:
-        pl = place_match(shp, ann, cat, m)
+        pl = place_match(shp, ann, cat, m, lattice=lat)
         loop = pl.mesh.boundary
-        # boundary vertices exactly on annotated points, in user coordinates
-        assert np.allclose(pl.xy[loop], shp.to_user(ann.positions[pl.alignment]), atol=1e-12)
+        bxy = pl.xy[loop]
+        on_corner = ann.codes[pl.alignment] != 0
+        # vertices on corners sit exactly on them, in user coordinates
+        assert np.array_equal(bxy[on_corner], shp.to_user(ann.positions[pl.alignment[on_corner]]))
+        # every boundary vertex lies on the outline (distance computed with shapely)
+        ring = shapely.LinearRing(shp.user_points)
+        assert max(ring.distance(shapely.Point(p)) for p in bxy) <= 1e-9
+        # missed corners: exactly the corners that are not a mesh vertex
+        kept = [c for c in corner_xy if np.min(np.linalg.norm(pl.xy - c, axis=1)) <= 1e-9]
+        assert len(kept) == pl.kept_corners and pl.corners == len(corner_xy)
+        for c in pl.missed_corners:
+            assert np.min(np.linalg.norm(pl.xy - c, axis=1)) > 1e-6
         lo, hi = shp.user_points.min(axis=0), shp.user_points.max(axis=0)
         assert np.all(pl.xy >= lo - 1e-9) and np.all(pl.xy <= hi + 1e-9)
         # quality is that of the user coordinates
@@ -119,9 +134,40 @@ def test_place_match_user_coordinates_and_same_utility(ranked, cat, lat):
         assert np.array_equal(sj, pl.scaled_jacobian)
         assert pl.inverted == int(inverted_mask(pl.xy, pl.mesh.quads).sum())
         assert pl.mesh_area == pytest.approx(float(quad_areas(pl.xy, pl.mesh.quads).sum()))
-        # the re-spread alignment keeps the ranked utility
+        # the orientation and alignment used have the ranked utility
         vals = cat.bucket(m.boundary_length).valences[list(cat.bucket(m.boundary_length).ids).index(m.mesh_id)]
-        assert utility_of(ann.codes, vals, lat.table(), m.rotation, m.reflected, pl.alignment) == m.utility
+        assert utility_of(ann.codes, vals, lat.table(), pl.rotation, pl.reflected, pl.alignment) == m.utility
+
+
+def test_vertices_between_kept_corners_are_evenly_spaced(ranked, cat, lat):
+    """Between two consecutive kept corners, the boundary vertices split the outline into equal
+    arc lengths (measured along the shape's polygon, independently of the placement code)."""
+    for shp, r, _ in ranked.values():
+        ann = r.annotation
+        ring = shapely.LinearRing(np.vstack([shp.user_points, shp.user_points[:1]]))
+        for m in r.results[:4]:
+            pl = place_match(shp, ann, cat, m, lattice=lat)
+            if pl.slid:
+                continue
+            s = np.array([ring.project(shapely.Point(p)) for p in pl.xy[pl.mesh.boundary]])
+            corner = ann.codes[pl.alignment] != 0
+            J = np.flatnonzero(corner)
+            per = ring.length
+            for q, ja in enumerate(J):
+                jb = J[(q + 1) % len(J)]
+                run = [(ja + i) % len(s) for i in range((jb - ja) % len(s) + 1)] if len(J) > 1 else []
+                if len(run) < 3:
+                    continue
+                gaps = np.diff(np.unwrap(s[run], period=per))
+                np.testing.assert_allclose(gaps, gaps[0], rtol=1e-9, atol=1e-9)
+
+
+def test_spread_false_keeps_the_match_and_annotated_points(ranked, cat):
+    shp, r, _ = ranked["triangle"]
+    m = r.results[0]
+    raw = place_match(shp, r.annotation, cat, m, spread=False)
+    assert np.array_equal(raw.alignment, m.alignment) and raw.rotation == m.rotation and raw.reflected == m.reflected
+    assert np.array_equal(raw.xy[raw.mesh.boundary], shp.to_user(r.annotation.positions[m.alignment]))
 
 
 def test_place_match_follows_translation_and_scaling(ranked, cat):
@@ -141,16 +187,6 @@ def test_place_match_uses_cache(ranked, cat):
     a = place_match(shp, r.annotation, cat, r.results[0], placements=cache)
     assert cache == {r.results[0].mesh_id: a}
     assert place_match(shp, r.annotation, cat, r.results[0], placements=cache) is a
-
-
-def test_spread_never_worse_than_given_alignment_on_examples(ranked, cat):
-    for shp, r, _ in ranked.values():
-        for m in r.results[:3]:
-            spread = place_match(shp, r.annotation, cat, m)
-            raw = place_match(shp, r.annotation, cat, m, spread=False)
-            assert np.array_equal(raw.alignment, m.alignment)
-            assert gap_cost(r.annotation.t, r.annotation.perimeter, spread.alignment) <= gap_cost(
-                r.annotation.t, r.annotation.perimeter, m.alignment) + 1e-12
 
 
 # ---------------------------------------------------------------------------------------------
@@ -244,25 +280,49 @@ def test_first_valid_skips_folded(ranked, cat):
 
 
 def test_choose_mesh_reports_and_requires_valid(cat, lat):
-    shp = load_shape(EXAMPLES / "triangle.json")
-    ranking = rank(shp, cat, lat, top=12, tie_break="geometry")
-    pls = place_top(shp, ranking, cat)
-    bad = next(i for i, p in enumerate(pls) if p.inverted) + 1  # 1-based rank of a folded mesh
-    want = next(i for i, p in enumerate(pls) if i + 1 > bad and p.inverted == 0) + 1
+    shp = load_shape(EXAMPLES / "lshape.json")
+    ks = [0, 1, 2, 3]
+    ranking = rank(shp, cat, lat, top=12, internal=ks, tie_break="geometry")
+    pls = place_top(shp, ranking, cat, lattice=lat)
+    ok = [acceptable(p) for p in pls]
+    assert not all(ok) and any(ok), "example needs both kinds"
+    bad = ok.index(False) + 1  # 1-based rank of a mesh that is not acceptable
+    want = next(i for i in range(bad, len(ok)) if ok[i]) + 1
 
-    c = choose_mesh(shp, cat, lat, rank=bad)
-    assert not c.valid and c.rank == bad and c.match.mesh_id == ranking.results[bad - 1].mesh_id
+    c = choose_mesh(shp, cat, lat, rank=bad, internal=ks)
+    assert not c.good and c.rank == bad and c.match.mesh_id == ranking.results[bad - 1].mesh_id and c.size is None
     assert c.alternative is not None and c.alternative[0] == want
-    assert c.alternative[1].mesh_id == ranking.results[want - 1].mesh_id and c.alternative[2].inverted == 0
+    assert c.alternative[1].mesh_id == ranking.results[want - 1].mesh_id and acceptable(c.alternative[2])
 
-    v = choose_mesh(shp, cat, lat, rank=bad, require_valid=True)
-    assert v.valid and v.rank == want and v.requested_rank == bad and v.alternative is None
-
-    top = choose_mesh(shp, cat, lat)
-    assert top.rank == 1 and top.valid and top.searched == 0
+    v = choose_mesh(shp, cat, lat, rank=bad, internal=ks, require_valid=True)
+    assert v.good and v.valid and v.rank == want and v.requested_rank == bad and v.alternative is None
 
     with pytest.raises(InputError, match="only 1 meshes"):
         choose_mesh(shp, cat, lat, rank=2, internal=[0])  # k = 0: the single quad
+
+
+@pytest.mark.parametrize("floor", [0.0, 0.5, 0.9])
+def test_require_valid_honours_the_quality_floor(cat, lat, floor):
+    shp = load_shape(EXAMPLES / "triangle.json")
+    c = choose_mesh(shp, cat, lat, internal=[2, 3], require_valid=True, min_quality=floor)
+    if c.good:
+        assert c.placement.min_scaled_jacobian >= floor and c.placement.valid
+    else:  # nothing in the walk passes: the requested mesh is kept and no alternative named
+        assert c.rank == c.requested_rank and c.alternative is None
+
+
+@pytest.mark.parametrize(
+    "xy, good",
+    [
+        ([[0, 0], [1, 0], [1, 1], [0, 1]], True),
+        ([[0, 0], [12.9, 0], [12.9, 1], [0, 1]], False),  # edge ratio 12.9, scaled Jacobian 1
+        ([[0, 0], [1, 0], [1, 0.005], [0.99, 1]], False),  # min scaled Jacobian about 0.005
+    ],
+)
+def test_acceptable_needs_edge_ratio_and_scaled_jacobian(xy, good):
+    mesh = from_quads([[0, 1, 2, 3]])
+    pl = place(np.array(xy, float), np.arange(4.0), np.arange(4), mesh, positions=np.array(xy, float), smooth_iters=0)
+    assert pl.valid and acceptable(pl) is good
 
 
 # ---------------------------------------------------------------------------------------------
