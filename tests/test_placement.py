@@ -2,13 +2,17 @@
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
+import json
 from itertools import islice
 from pathlib import Path
 
 import numpy as np
 import pytest
 import shapely
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from jaxmatch.catalogue import store as cm
 from jaxmatch.placement.embed import inverted_mask, quality, quad_areas
@@ -18,9 +22,16 @@ from jaxmatch.api import rank
 from jaxmatch.catalogue.mesh import from_quads
 from jaxmatch.placement.embed import place
 from jaxmatch.placement.choose import (
+    AREA_BAND,
+    GAP_UNIT,
+    SIZE_RULES,
     acceptable,
     check_outputs,
     choose_mesh,
+    choose_size,
+    orientation_utilities,
+    size_key,
+    spread_optimal_alignment,
     draw_placements,
     first_valid,
     gap_cost,
@@ -31,6 +42,7 @@ from jaxmatch.placement.choose import (
     spread_alignment,
 )
 from jaxmatch.scoring.exact import utility_of
+from jaxmatch.scoring.reference import dp_reference as reference_dp
 from jaxmatch.shape import annotate, load_shape, make_shape
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
@@ -301,10 +313,10 @@ def test_choose_mesh_reports_and_requires_valid(cat, lat):
         choose_mesh(shp, cat, lat, rank=2, internal=[0])  # k = 0: the single quad
 
 
-@pytest.mark.parametrize("floor", [0.0, 0.5, 0.9])
+@pytest.mark.parametrize("floor", [0.0, 0.8])
 def test_require_valid_honours_the_quality_floor(cat, lat, floor):
     shp = load_shape(EXAMPLES / "triangle.json")
-    c = choose_mesh(shp, cat, lat, internal=[2, 3], require_valid=True, min_quality=floor)
+    c = choose_mesh(shp, cat, lat, internal=[2, 3], require_valid=True, min_quality=floor, walk=8)
     if c.good:
         assert c.placement.min_scaled_jacobian >= floor and c.placement.valid
     else:  # nothing in the walk passes: the requested mesh is kept and no alternative named
@@ -343,3 +355,171 @@ def test_draw_placements_png(tmp_path, ranked, cat):
     path = draw_placements(tmp_path / "p.png", shp, r.annotation, [("a", pls[0]), ("b", pls[1])], title="two")
     assert path.read_bytes().startswith(PNG_MAGIC)
     assert [p.name for p in tmp_path.iterdir()] == ["p.png"]
+
+
+# ---------------------------------------------------------------------------------------------
+# orientations and alignments with skip weights (against brute force)
+
+
+def brute_alignments(codes, seq, table, skip):
+    """Every alignment of the oriented sequence ``seq`` with its utility (pairing weights plus
+    the skip weight of every unmatched point), by enumeration."""
+    tab = np.asarray(table, float).reshape(3, 4, 4, 4)
+    n, m = len(seq), len(codes)
+    tr = [(seq[(j + 1) % n], seq[j], seq[(j - 1) % n]) for j in range(n)]
+    out = []
+    for comb in itertools.combinations(range(m), n):
+        u = sum(tab[codes[i], a - 2, b - 2, c - 2] for i, (a, b, c) in zip(comb, tr))
+        u += sum(skip[codes[i]] for i in range(m) if i not in comb)
+        out.append((u, comb))
+    return out
+
+
+def random_case(rng, m_max=9, n_max=5):
+    m = int(rng.integers(4, m_max + 1))
+    n = int(rng.integers(2, min(m, n_max) + 1))
+    codes = rng.choice(3, m, p=[0.6, 0.25, 0.15])
+    vals = rng.integers(2, 6, n)
+    table = rng.integers(-3, 6, (3, 64)).astype(float)
+    table[rng.random((3, 64)) < 0.15] = -np.inf
+    skip = np.array([rng.choice([0.0, -1.0, 1.0]), rng.choice([0.0, -2.0, -np.inf]), rng.choice([0.0, -3.0, -np.inf])])
+    t = np.sort(rng.uniform(0, 10, m))
+    t -= t[0]
+    return codes, vals, table, skip, t, float(t[-1] + rng.uniform(0.1, 3))
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_orientation_utilities_match_brute_force(seed):
+    rng = np.random.default_rng(seed)
+    for _ in range(15):
+        codes, vals, table, skip, _, _ = random_case(rng)
+        got = orientation_utilities(codes, vals, (table, skip))
+        n = len(vals)
+        for o in range(2 * n):
+            s = vals[::-1] if o >= n else vals
+            seq = np.roll(s, -(o % n))
+            want = max(u for u, _ in brute_alignments(codes, seq, table, skip))
+            assert got[o] == want
+
+
+def test_orientation_utilities_without_skip_weights_are_the_exact_scorer(cat, lat):
+    shp = load_shape(EXAMPLES / "lshape.json")
+    ann = annotate(shp, 20)
+    b = cat.bucket(10)
+    for vals in b.valences[:20]:
+        got = orientation_utilities(ann.codes, vals, lat)
+        assert got.max() == reference_dp(ann.codes, vals, lat.table())
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_spread_optimal_alignment_is_the_most_even_best_alignment(seed):
+    rng = np.random.default_rng(100 + seed)
+    for _ in range(15):
+        codes, vals, table, skip, t, per = random_case(rng)
+        best, al, g = spread_optimal_alignment(t, per, codes, vals, (table, skip))
+        alls = brute_alignments(codes, vals, table, skip)
+        top = max(u for u, _ in alls)
+        assert best == top
+        if not np.isfinite(top):
+            assert al is None
+            continue
+        unit = GAP_UNIT * per * per
+        cost = lambda comb: sum(round(gg * gg / unit) for gg in np.diff(np.r_[t[list(comb)], t[comb[0]] + per]))  # noqa: E731
+        assert g == min(cost(c) for u, c in alls if u == top)
+        assert g == cost(al) and dict(alls)[top] is not None
+        assert any(u == top and tuple(al) == c for u, c in alls)
+
+
+# ---------------------------------------------------------------------------------------------
+# the placed mesh is a mesh of the shape, and does not depend on how the loop is written
+
+POLYGONS = {name: json.loads((EXAMPLES / f"{name}.json").read_text()) for name in ("lshape", "triangle", "tshape", "square")}
+
+
+def relisted(name, start, reverse):
+    d = POLYGONS[name]
+    b = np.array(d["boundary"], float)
+    P = len(b)
+    idx = np.roll(np.arange(P), -start)
+    if reverse:
+        idx = idx[::-1]
+    inv = np.empty(P, int)
+    inv[idx] = np.arange(P)
+    corners = None if d.get("corners") is None else [int(inv[c]) for c in d["corners"]]
+    return make_shape(b[idx], corners)
+
+
+def sorted_xy(xy):
+    xy = np.round(np.asarray(xy), 6) + 0.0
+    return xy[np.lexsort((xy[:, 1], xy[:, 0]))]
+
+
+@settings(max_examples=12, deadline=None)
+@given(name=st.sampled_from(sorted(POLYGONS)), k=st.sampled_from([1, 2, 3]), start=st.integers(0, 40),
+       reverse=st.booleans())
+def test_placed_mesh_does_not_depend_on_how_the_loop_is_listed(cat, lat, name, k, start, reverse):
+    base = choose_mesh(relisted(name, 0, False), cat, lat, internal=[k])
+    other = choose_mesh(relisted(name, start % len(POLYGONS[name]["boundary"]), reverse), cat, lat, internal=[k])
+    assert other.match.mesh_id == base.match.mesh_id
+    assert other.match.utility == base.match.utility
+    np.testing.assert_allclose(sorted_xy(other.placement.xy), sorted_xy(base.placement.xy), atol=2e-6)
+    assert other.placement.min_scaled_jacobian == pytest.approx(base.placement.min_scaled_jacobian, abs=1e-6)
+
+
+@pytest.mark.parametrize("name", sorted(POLYGONS))
+def test_valid_placements_cover_the_polygon_exactly(cat, lat, name):
+    """A placement that keeps every corner and does not fold covers the polygon: quad areas sum
+    to the polygon's area (shapely) within 1e-9, and the union of the quads is the polygon."""
+    shp = load_shape(EXAMPLES / f"{name}.json")
+    r = rank(shp, cat, lat, internal=[1, 2, 3], top=6)
+    poly = shapely.Polygon(shp.user_points)
+    seen = 0
+    for m in r.results:
+        pl = place_match(shp, r.annotation, cat, m, lattice=lat)
+        if not pl.valid:
+            assert pl.missed_corners.shape[0] or pl.inverted
+            continue
+        seen += 1
+        assert float(quad_areas(pl.xy, pl.mesh.quads).sum()) / poly.area == pytest.approx(1.0, abs=1e-9)
+        union = shapely.union_all([shapely.Polygon(pl.xy[q]) for q in pl.mesh.quads])
+        assert union.symmetric_difference(poly).area <= 1e-9 * poly.area
+    assert seen, "no valid placement among the top 6"
+
+
+# ---------------------------------------------------------------------------------------------
+# size choice
+
+
+def test_choose_size_orders_by_the_rules_and_names_the_deciding_one(cat, lat):
+    shp = load_shape(EXAMPLES / "lshape.json")
+    sc = choose_size(shp, cat, lat)
+    keys = [size_key(pl, k) for k, _, pl in sc.candidates]
+    assert keys == sorted(keys) and sc.k == sc.candidates[0][0]
+    assert sorted(k for k, _, _ in sc.candidates) == [0, 1, 2, 3][: len(sc.candidates)] or len(sc.candidates) >= 2
+    first_diff = next(i for i in range(len(keys[0])) if keys[0][i] != keys[1][i])
+    assert sc.rule == SIZE_RULES[first_diff]
+    assert sc.rule in sc.describe() and f"k={sc.k}" in sc.describe()
+    c = choose_mesh(shp, cat, lat)
+    assert c.size is not None and c.match.internal_vertices == sc.k
+
+
+def test_size_key_prefers_kept_corners_then_no_folds_then_quality():
+    mesh = from_quads([[0, 1, 2, 3]])
+    sq = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], float)
+    good = place(sq, np.arange(4.0), np.arange(4), mesh, positions=sq, smooth_iters=0)
+    thin = place(sq * [12.9, 1], np.arange(4.0), np.arange(4), mesh, positions=sq * [12.9, 1], smooth_iters=0)
+    missed = dataclasses.replace(good, missed_corners=np.zeros((1, 2)), corners=5)
+    assert size_key(good, 0) < size_key(thin, 0)  # quality floor: edge ratio 12.9
+    assert size_key(thin, 3) < size_key(missed, 0)  # a missed corner loses to anything that keeps them
+    assert size_key(good, 0) < size_key(good, 1)  # then fewer internal vertices
+
+
+def test_circle_size_choice_fits_the_area(cat, lat):
+    """On a curved outline a single quad is a poor fit (area ratio 0.64); the area rule must
+    choose a size whose chords cut off less."""
+    shp = load_shape(EXAMPLES / "circle.json")
+    sc = choose_size(shp, cat, lat)
+    ratios = {k: pl.area_ratio for k, _, pl in sc.candidates}
+    chosen = sc.candidates[0][2]
+    assert abs(1 - chosen.area_ratio) <= min(abs(1 - r) for r in ratios.values()) + AREA_BAND
+    assert chosen.area_ratio > ratios[0]

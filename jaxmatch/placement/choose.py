@@ -202,13 +202,17 @@ def orientation_utilities(codes, vals, lattice) -> np.ndarray:
     return D[:, n]
 
 
+MAX_TIED_ALIGNMENTS = 64
+"""At most this many equally good alignments of one orientation are listed
+(:func:`spread_optimal_alignment` with ``all_ties``)."""
+
 GAP_UNIT = 1e-12
 """Squared arc-length gaps are compared in integer multiples of ``GAP_UNIT * perimeter**2``,
 so that equal spacings compare equal whatever the round-off of where the loop starts."""
 
 
 def spread_optimal_alignment(t: np.ndarray, perimeter: float, codes: np.ndarray, seq: np.ndarray,
-                             lattice) -> tuple[float, np.ndarray | None, int]:
+                             lattice, *, all_ties: bool = False) -> tuple[float, np.ndarray | None, int]:
     """The alignment of the oriented sequence ``seq`` with the highest utility, and among those
     the most evenly spread one.
 
@@ -217,7 +221,11 @@ def spread_optimal_alignment(t: np.ndarray, perimeter: float, codes: np.ndarray,
     (cyclically all of them). Spread: sum of squared cyclic arc-length gaps between consecutive
     vertices (in units of :data:`GAP_UNIT` ``* perimeter**2``, rounded). Exact lexicographic
     dynamic programme over (first point, vertex, point); only first points that start an
-    optimal alignment are tried. Returns ``(utility, alignment (n,) int64 or None, gap cost)``.
+    optimal alignment are tried. Returns ``(utility, alignment (n,) int64 or None, gap cost)``;
+    with ``all_ties`` a list in place of the one alignment: every alignment with the best
+    utility and the smallest gap cost (at most :data:`MAX_TIED_ALIGNMENTS`), since which of
+    several equally good ones a single answer picks depends on where the loop is labelled to
+    start.
     """
     tt = np.asarray(t, dtype=np.float64).ravel()
     c = np.asarray(codes, dtype=np.int64).ravel()
@@ -225,7 +233,7 @@ def spread_optimal_alignment(t: np.ndarray, perimeter: float, codes: np.ndarray,
     table, skip = lattice_weights(lattice)
     n, m = sq.shape[0], c.shape[0]
     if n == 0 or n > m:
-        return -math.inf, None, 0
+        return -math.inf, ([] if all_ties else None), 0
     E = _pair_weights(c, sq, table)  # (n, m)
     sk = skip[c]
     fin = np.isfinite(sk)
@@ -246,7 +254,7 @@ def spread_optimal_alignment(t: np.ndarray, perimeter: float, codes: np.ndarray,
     total = prefix + B
     best = float(np.max(total))
     if not np.isfinite(best):
-        return best, None, 0
+        return best, ([] if all_ties else None), 0
     starts = np.flatnonzero(total == best)
     unit = GAP_UNIT * perimeter * perimeter
     gq = np.round((tt[None, :] - tt[:, None]) ** 2 / unit)  # [i', i]
@@ -255,6 +263,7 @@ def spread_optimal_alignment(t: np.ndarray, perimeter: float, codes: np.ndarray,
     U[np.arange(S), starts] = prefix[starts] + E[0, starts]
     G = np.zeros((S, m))
     back = np.zeros((n, S, m), np.int64)
+    ties = [None] * n
     for j in range(1, n):
         tot = U[:, None, :] + between.T[None, :, :] + E[j][None, :, None]  # (S, i, i')
         bu = tot.max(axis=2)
@@ -263,16 +272,33 @@ def spread_optimal_alignment(t: np.ndarray, perimeter: float, codes: np.ndarray,
         U = bu
         G = np.take_along_axis(tg, arg[..., None], axis=2)[..., 0]
         back[j] = arg
+        if all_ties:
+            ties[j] = (tg == G[..., None]) & np.isfinite(tg)
     U = U + suffix[None, :]
     G = G + np.round((perimeter - tt[None, :] + tt[starts][:, None]) ** 2 / unit)
     G = np.where(U == best, G, np.inf)
-    flat = int(np.argmin(G))
-    s_, i = divmod(flat, m)
-    out = np.empty(n, np.int64)
-    for j in range(n - 1, -1, -1):
-        out[j] = i
-        i = int(back[j, s_, i])
-    return best, out, int(G.flat[flat])
+    g_min = float(G.min())
+    if not all_ties:
+        s_, i = divmod(int(np.argmin(G)), m)
+        out = np.empty(n, np.int64)
+        for j in range(n - 1, -1, -1):
+            out[j] = i
+            i = int(back[j, s_, i])
+        return best, out, int(g_min)
+    outs: list[np.ndarray] = []
+
+    def walk(s_, j, i, tail):
+        if len(outs) >= MAX_TIED_ALIGNMENTS:
+            return
+        if j == 0:
+            outs.append(np.array([i, *tail], np.int64))
+            return
+        for ip in np.flatnonzero(ties[j][s_, i]):
+            walk(s_, j - 1, int(ip), [i, *tail])
+
+    for s_, i in zip(*np.nonzero(G == g_min)):
+        walk(int(s_), n - 1, int(i), [])
+    return best, outs, int(g_min)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -400,8 +426,9 @@ def placement_key(pl: Placement) -> tuple:
 
 def match_candidates(annotation: Annotation, vals: np.ndarray, lattice, utility: float | None = None) -> list[tuple[int, bool, np.ndarray]]:
     """Every orientation of a mesh with the best utility, each with its most evenly spread
-    best alignment (:func:`spread_optimal_alignment`), keeping those of the smallest gap cost:
-    ``[(rotation, reflected, alignment (n,) int64)]``, at most :data:`MAX_CANDIDATES`.
+    best alignments (:func:`spread_optimal_alignment`, one per first point), keeping those of
+    the smallest gap cost:
+    ``[(rotation, reflected, alignment (n,) int64)]``.
 
     Which orientation the scorer reports among equal utilities depends on where the shape's
     loop starts; this set does not (up to the loop's relabelling)."""
@@ -415,13 +442,12 @@ def match_candidates(annotation: Annotation, vals: np.ndarray, lattice, utility:
     for o in np.flatnonzero(ut == best):
         rot, refl = int(o % n), bool(o >= n)
         seq = np.roll(v[::-1] if refl else v, -rot)
-        u, al, g = spread_optimal_alignment(annotation.t, annotation.perimeter, annotation.codes, seq, lattice)
-        if al is not None:
-            cands.append((g, rot, refl, al))
+        u, als, g = spread_optimal_alignment(annotation.t, annotation.perimeter, annotation.codes, seq, lattice, all_ties=True)
+        cands.extend((g, rot, refl, al) for al in als)
     if not cands:
         return []
     g0 = min(c[0] for c in cands)
-    return [(rot, refl, al) for g, rot, refl, al in cands if g == g0][:MAX_CANDIDATES]
+    return [(rot, refl, al) for g, rot, refl, al in cands if g == g0]
 
 
 def place_match(shape: Shape, annotation: Annotation, catalogue: Catalogue, match: Match, *, lattice=None,
@@ -467,13 +493,14 @@ def place_match(shape: Shape, annotation: Annotation, catalogue: Catalogue, matc
         if not cands:
             cands = [(match.rotation, match.reflected,
                       spread_alignment(annotation.t, annotation.perimeter, annotation.codes, given))]
-        best = None
-        seen = set()
+        # one candidate per distinct boundary (orientations that differ by a symmetry of the mesh
+        # give the same placement), in a geometric order, at most MAX_CANDIDATES
+        unique = {}
         for rot, refl, al in cands:
-            sig = _boundary_signature(shape, annotation, mesh, rot, refl, al)
-            if sig in seen:  # the same boundary positions up to a symmetry of the mesh: same placement
-                continue
-            seen.add(sig)
+            unique.setdefault(_boundary_signature(shape, annotation, mesh, rot, refl, al), (rot, refl, al))
+        best = None
+        for sig in sorted(unique)[:MAX_CANDIDATES]:
+            rot, refl, al = unique[sig]
             for pl in _place_candidate(shape, annotation, mesh, rot, refl, al, smooth_iters):
                 key = placement_key(pl)
                 if best is None or key < best[0]:
