@@ -25,6 +25,8 @@ the "before" column is produced::
     PYTHONPATH=/work/main .venv/bin/python scripts/placement_table.py --out before.json
     .venv/bin/python scripts/placement_table.py --out after.json
     .venv/bin/python scripts/placement_table.py --compare before.json after.json   # markdown table
+
+``--lattice NAME`` (before ``--out``) scores with another lattice (default: ``fine``).
 """
 
 from __future__ import annotations
@@ -87,7 +89,7 @@ def corner_feasible(shape, catalogue, lattice, k: int, m: int) -> bool:
     return best >= shape.n_corners
 
 
-def run(out: Path, names: list[str] | None) -> list[dict]:
+def run(out: Path, names: list[str] | None, lattice: str = "fine") -> list[dict]:
     from jaxmatch.catalogue.store import default_catalogue
     from jaxmatch.placement.choose import choose_mesh
     from jaxmatch.scoring.lattice import load_lattice
@@ -95,7 +97,7 @@ def run(out: Path, names: list[str] | None) -> list[dict]:
     from jaxmatch.shape import default_points, load_shape
 
     cat = default_catalogue()
-    lat = load_lattice("fine")
+    lat = load_lattice(lattice)
     rows = []
     for path in SHAPES:
         rel = str(path.relative_to(ROOT))
@@ -152,10 +154,14 @@ def main(argv: list[str]) -> None:
     if argv[:1] == ["--compare"] and len(argv) == 3:
         compare(Path(argv[1]), Path(argv[2]))
         return
+    lattice = "fine"
+    if argv[:1] == ["--lattice"] and len(argv) >= 2:
+        lattice, argv = argv[1], argv[2:]
     if len(argv) >= 2 and argv[0] == "--out":
-        run(Path(argv[1]), argv[2:] or None)
+        run(Path(argv[1]), argv[2:] or None, lattice)
         return
-    print("usage: placement_table.py --out rows.json [SHAPE ...] | --compare before.json after.json", file=sys.stderr)
+    print("usage: placement_table.py [--lattice NAME] --out rows.json [SHAPE ...] | --compare before.json after.json",
+          file=sys.stderr)
     sys.exit(2)
 
 
