@@ -138,6 +138,11 @@ def score(
         table.add_row(str(i), r.mesh_id, str(r.internal_vertices), str(r.boundary_length), f"{r.utility:g}",
                       str(r.rotation), "yes" if r.reflected else "no")
     out.print(table)
+    if ks is None and not per_size:
+        out.print("all sizes compete here by raw utility, which grows with the mesh (more matched points); "
+                  "'jaxmatch mesh' without --internal chooses the size by the fit of each size's best mesh "
+                  "(corners kept, folds, quality, area, then fewer quads); --per-size compares sizes",
+                  markup=False, highlight=False)
     for w in written:
         out.print(f"wrote {w}", markup=False, highlight=False)
 

@@ -157,6 +157,8 @@ def test_mesh_require_valid_walks_down(cli, small_cat, tmp_path, folded):
         ["--out", "{d}/m.vtk", "--svg", "{d}/m.png"],
         ["--out", "{d}/m.vtk", "--tie-break", "size"],
         ["--out", "{d}/m.vtk", "--rank", "999"],
+        ["--out", "{d}/m.vtk", "--min-quality", "1.5"],
+        ["--out", "{d}/m.vtk", "--max-edge-ratio", "0.5"],
     ],
 )
 def test_mesh_bad_options_exit_2_one_line_nothing_written(cli, small_cat, tmp_path, extra):
@@ -203,3 +205,20 @@ def test_real_process_exit_3(small_cat, tmp_path, folded):
     assert r.returncode == EXIT_INVERTED, r.stderr
     assert ("MISSED CORNERS" in r.stdout or "FOLDED" in r.stdout) and out.exists()
     assert meshio.read(out).cells_dict["quad"].shape[1] == 4
+
+
+def test_mesh_chooses_the_size_and_says_which_rule_decided(cli, small_cat):
+    code, stdout, err = cli("mesh", EXAMPLES / "square.json", "--catalogue", small_cat, "--json")
+    assert code == 0, err
+    d = json.loads(stdout)
+    sc = d["size_choice"]
+    assert sc["rule"] in sc["rules"] and sc["k"] == d["internal_vertices"] == sc["candidates"][0]["k"]
+    assert sorted(c["k"] for c in sc["candidates"]) == [0, 1, 2, 3]
+    assert f"size k={sc['k']} chosen by rule '{sc['rule']}'" in err
+    assert d["corners_kept"] == d["corners"] == 4 and d["missed_corners"] == [] and d["max_edge_ratio"] >= 1
+    code, stdout, err = cli("mesh", EXAMPLES / "square.json", "--catalogue", small_cat, "--internal", "2", "--json")
+    assert code == 0, err
+    d = json.loads(stdout)
+    assert d["size_choice"] is None and d["internal_vertices"] == 2
+    code, stdout, err = cli("mesh", EXAMPLES / "square.json", "--catalogue", small_cat)
+    assert code == 0 and "chosen by rule" in stdout and "corners kept: 4 of 4" in stdout and "max edge ratio" in stdout
