@@ -161,8 +161,11 @@ def test_vertices_between_kept_corners_are_evenly_spaced(ranked, cat, lat):
             pl = place_match(shp, ann, cat, m, lattice=lat)
             if pl.slid:
                 continue
-            s = np.array([ring.project(shapely.Point(p)) for p in pl.xy[pl.mesh.boundary]])
-            corner = ann.codes[pl.alignment] != 0
+            bxy = pl.xy[pl.mesh.boundary]
+            s = np.array([ring.project(shapely.Point(p)) for p in bxy])
+            corner_xy = shp.user_points[shp.corners]
+            corner = np.linalg.norm(bxy[:, None, :] - corner_xy[None, :, :], axis=-1).min(axis=1) <= 1e-9
+            assert corner.sum() == pl.kept_corners
             J = np.flatnonzero(corner)
             per = ring.length
             for q, ja in enumerate(J):
@@ -523,3 +526,33 @@ def test_circle_size_choice_fits_the_area(cat, lat):
     chosen = sc.candidates[0][2]
     assert abs(1 - chosen.area_ratio) <= min(abs(1 - r) for r in ratios.values()) + AREA_BAND
     assert chosen.area_ratio > ratios[0]
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_snap_picks_the_nearest_increasing_assignment(seed):
+    from jaxmatch.placement.choose import _snap
+
+    rng = np.random.default_rng(seed)
+    for _ in range(60):
+        r = int(rng.integers(1, 7))
+        p = int(rng.integers(1, r + 1))
+        even, tc = np.sort(rng.uniform(0, 1, r)), np.sort(rng.uniform(0, 1, p))
+        got = _snap(even, tc)
+        best = min(sum((even[list(c)] - tc) ** 2) for c in itertools.combinations(range(r), p))
+        assert np.all(np.diff(got) > 0) and sum((even[got] - tc) ** 2) == pytest.approx(best, abs=1e-12)
+
+
+def test_spare_vertices_take_the_corners_an_alignment_skipped(cat, lat):
+    """The L shape at k = 2: the scorer's best alignment skips a corner (free skipping in the
+    fine lattice), but the run around it has vertices to spare, so the placed mesh keeps it."""
+    from jaxmatch.placement.choose import corner_boundary
+
+    shp = load_shape(EXAMPLES / "lshape.json")
+    r = rank(shp, cat, lat, internal=[2], top=1)
+    m = r.results[0]
+    ann = r.annotation
+    assert np.sum(ann.codes[m.alignment] != 0) < shp.n_corners, "example needs a skipped corner"
+    assert corner_boundary(shp, ann, m.alignment, snap=False).missed.shape[0] > 0
+    assert corner_boundary(shp, ann, m.alignment).missed.shape[0] == 0
+    pl = place_match(shp, ann, cat, m, lattice=lat)
+    assert pl.kept_corners == shp.n_corners and pl.missed_corners.shape == (0, 2)

@@ -326,28 +326,35 @@ class Boundary(NamedTuple):
     missed: np.ndarray
 
 
-def corner_boundary(shape: Shape, annotation: Annotation, alignment: np.ndarray) -> Boundary:
+def corner_boundary(shape: Shape, annotation: Annotation, alignment: np.ndarray, *, snap: bool = True) -> Boundary:
     """Boundary vertices of an alignment: vertices on corners stay there, the vertices between
     two consecutive kept corners are spread evenly by arc length along the outline between
     them (which straight point of the annotation each took does not change its utility). With
     no corner kept, the vertices are spread evenly around the whole loop, at the phase that
-    best fits the aligned points (least squares)."""
+    best fits the aligned points (least squares).
+
+    snap: a corner the alignment skipped, between two kept corners whose run has vertices to
+    spare, takes one of them (the assignment of run vertices to skipped corners, in order, that
+    is nearest to the even spacing: :func:`_snap`), and the rest are spread evenly between the
+    corners; so the mesh keeps that corner too. Its vertex then stands on a corner although its
+    alignment took a straight point (``Placement.alignment`` still says so).
+    """
     al = np.asarray(alignment, dtype=np.int64).ravel()
     n = al.shape[0]
     codes = np.asarray(annotation.codes)
     per = float(annotation.perimeter)
     tt = np.asarray(annotation.t, dtype=np.float64)
     pts = shape.points
-    on_corner = codes[al] != S_CODE
-    J = np.flatnonzero(on_corner)
+    J = np.flatnonzero(codes[al] != S_CODE)
     u = tt[al].astype(np.float64).copy()
-    groups = []
+    pin = {int(j): int(al[j]) for j in J}  # vertex -> corner point it stands on
     if J.size == 0:
         step = per / n
         phase = float(np.mean(tt[al] - step * np.arange(n)))
         u = phase + step * np.arange(n)
-    else:
-        cum = cumulative_length(pts)
+    elif snap:
+        corner_pts = np.flatnonzero(codes != S_CODE)
+        taken = set(pin.values())
         for q, ja in enumerate(J):
             jb = J[(q + 1) % J.size]
             r = (jb - ja - 1) % n if J.size > 1 else n - 1
@@ -355,13 +362,58 @@ def corner_boundary(shape: Shape, annotation: Annotation, alignment: np.ndarray)
             tb = tt[al[jb]] if J.size > 1 else ta + per
             if tb <= ta:
                 tb += per
+            skipped = [(c, tt[c] + (per if tt[c] <= ta else 0.0)) for c in corner_pts if c not in taken]
+            skipped = sorted((tc, c) for c, tc in skipped if ta < tc < tb)
+            if 0 < len(skipped) <= r:
+                even = ta + (tb - ta) * (np.arange(1, r + 1) / (r + 1))
+                for qi, (tc, c) in zip(_snap(even, np.array([tc for tc, _ in skipped])), skipped):
+                    pin[int((ja + 1 + qi) % n)] = int(c)
+    groups = []
+    if pin:
+        P = np.array(sorted(pin))
+        cum = cumulative_length(pts)
+        for q, ja in enumerate(P):
+            jb = P[(q + 1) % P.size]
+            r = (jb - ja - 1) % n if P.size > 1 else n - 1
+            ta = tt[pin[ja]]
+            tb = tt[pin[jb]] if P.size > 1 else ta + per
+            if tb <= ta:
+                tb += per
+            u[ja] = ta
             js = (ja + 1 + np.arange(r)) % n
             u[js] = ta + (tb - ta) * (np.arange(1, r + 1) / (r + 1))
-            if r and J.size > 1 and _straight(pts, cum, ta, tb):
+            if r and P.size > 1 and _straight(pts, cum, ta, tb):
                 groups.append((int(ja), int(jb), js.astype(np.int64)))
     xy = shape_point_at(pts, u)
-    xy[J] = annotation.positions[al[J]]  # corners exactly
+    for j, c in pin.items():
+        xy[j] = annotation.positions[c]  # corners exactly
     return Boundary(u, xy, tuple(groups), missed_corners(annotation, xy))
+
+
+def _snap(even: np.ndarray, tc: np.ndarray) -> list[int]:
+    """Increasing indices ``q_1 < ... < q_p`` into ``even (r,)`` minimising
+    ``sum_k (even[q_k] - tc[k])**2`` for increasing ``tc (p,)``, ``p <= r`` (a small DP; ties
+    keep the smaller index)."""
+    r, p = even.shape[0], tc.shape[0]
+    cost = (even[None, :] - tc[:, None]) ** 2  # (p, r)
+    D = cost[0].copy()
+    back = np.zeros((p, r), np.int64)
+    for k in range(1, p):
+        new = np.full(r, np.inf)
+        run, at = np.inf, 0
+        for q in range(r):  # run = min over q' < q of D[q'], at its first argmin
+            if run < np.inf:
+                new[q] = run + cost[k, q]
+                back[k, q] = at
+            if D[q] < run:
+                run, at = D[q], q
+        D = new
+    q = int(np.argmin(D))
+    out = [q]
+    for k in range(p - 1, 0, -1):
+        q = int(back[k, q])
+        out.append(q)
+    return out[::-1]
 
 
 def missed_corners(annotation: Annotation, bxy: np.ndarray, tol: float = 1e-9) -> np.ndarray:
