@@ -120,7 +120,7 @@ def score(
     written = []
     if png is not None or svg is not None:
         placed = place_top(shp, ranking, cat, lattice=lat)
-        items = [(panel_title(i, r), pl) for i, (r, pl) in enumerate(zip(ranking.results, placed), 1)]
+        items = [(panel_title(i, r, pl), pl) for i, (r, pl) in enumerate(zip(ranking.results, placed), 1)]
         head = f"{shape.name}: {'best per size' if per_size else f'top {len(items)}'}"
         written = [str(draw_placements(p, shp, ranking.annotation, items, title=head)) for p in (png, svg) if p is not None]
     if as_json:
@@ -236,7 +236,7 @@ def mesh(
         written["out"] = str(write_mesh(out_path, pl))
     for key, path in (("png", png), ("svg", svg)):
         if path is not None:
-            written[key] = str(draw_placements(path, shp, ann, [(panel_title(choice.rank, m), pl)], title=shape.name))
+            written[key] = str(draw_placements(path, shp, ann, [(panel_title(choice.rank, m, pl), pl)], title=shape.name))
     floor = f"min scaled Jacobian >= {min_quality:g}, max edge ratio <= {max_edge_ratio:g}"
     notes = []
     if choice.size is not None:

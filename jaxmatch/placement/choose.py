@@ -1,18 +1,21 @@
 """Placing ranked meshes in the user's shape: the glue between ranking and geometry.
 
 :func:`rank <jaxmatch.scoring.rank.rank>` works on the combinatorics only; this module puts a
-ranked mesh into the shape (:func:`jaxmatch.placement.embed.place` on the unit-box shape, then mapped to
-the user's coordinates), re-orders tied utilities by the quality of the embedding
-(:func:`rerank_ties`), walks down a ranking for the first mesh that embeds without folds
-(:func:`first_valid`), and draws placed meshes (:func:`draw_placements`).
+ranked mesh into the shape (:func:`place_match`: corners kept, vertices spread evenly between
+them, every equally good orientation and alignment tried so that the result does not depend on
+how the loop is listed; :func:`jaxmatch.placement.embed.place` on the unit-box shape, then mapped
+to the user's coordinates), re-orders tied utilities by the quality of the embedding
+(:func:`rerank_ties`), walks down a ranking for the first good mesh of the shape
+(:func:`first_valid`, :func:`acceptable`), chooses the mesh size by fit (:func:`choose_size`,
+:data:`SIZE_RULES`), and draws placed meshes (:func:`draw_placements`).
 
 :func:`choose_mesh` is what ``jaxmatch mesh`` does; :func:`place_top` is what
 ``jaxmatch score --png`` does.
 
 All placements returned here are in the user's coordinates (the shape file's unit of length).
 Placements are deterministic (numpy only), so a ``placements`` cache (``mesh_id -> Placement``,
-valid for one shape, annotation and catalogue) can be passed around to avoid placing a mesh
-twice.
+valid for one shape, annotation, catalogue and lattice) can be passed around to avoid placing a
+mesh twice.
 """
 
 from __future__ import annotations
@@ -971,8 +974,12 @@ def draw_placements(path: str | os.PathLike, shape: Shape, annotation: Annotatio
     return draw_many(panels, path, ncols=ncols, title=title)
 
 
-def panel_title(rank: int, match: Match) -> str:
+def panel_title(rank: int, match: Match, placement: Placement | None = None) -> str:
     """``"#1 k5-b2b65fa5f3 (utility 24)"``: short title line for a picture panel."""
     short = match.mesh_id if len(match.mesh_id) <= 14 else match.mesh_id[:14]
     refl = ", reflected" if match.reflected else ""
+    if placement is not None:
+        refl = ", reflected" if placement.reflected else ""
+        corners = f", corners {placement.kept_corners}/{placement.corners}" if placement.corners else ""
+        return f"#{rank} {short} (utility {match.utility:g}, rot {placement.rotation}{refl}{corners})"
     return f"#{rank} {short} (utility {match.utility:g}, rot {match.rotation}{refl})"
