@@ -19,10 +19,12 @@ the catalogue with a table that counts matched corners (1 per corner pairing the
 the number of corners.
 
 The script only uses ``choose_mesh``, ``load_lattice``, ``default_catalogue``, ``load_shape`` and
-``score_bucket``, so it runs on older trees too (``PYTHONPATH=/path/to/other/tree``), which is how
-the "before" column is produced::
+``score_bucket``, so it runs on older trees too, which is how the "before" column is produced: run
+it with the other tree's ``jaxmatch`` imported (its own environment, with shapely; or this one with
+``sys.path`` starting at the other tree and the editable-install finder of this tree removed from
+``sys.meta_path``)::
 
-    PYTHONPATH=/work/main .venv/bin/python scripts/placement_table.py --out before.json
+    /path/to/main/.venv/bin/python scripts/placement_table.py --out before.json
     .venv/bin/python scripts/placement_table.py --out after.json
     .venv/bin/python scripts/placement_table.py --compare before.json after.json   # markdown table
 
@@ -142,7 +144,8 @@ def compare(before: Path, after: Path) -> None:
         ra, rb = a.get(key), b.get(key)
         left = fmt(ra) if ra and ra.get("feasible") else "| – | – | – | – | – | – |"
         right = fmt(rb) if rb and rb.get("feasible") else "| – | – | – | – | – | – |"
-        print(f"| {Path(key[0]).stem} | {key[1]} {left[1:]}{right[1:]}")
+        name = key[0].removeprefix("examples/").removesuffix(".json")
+        print(f"| {name} | {key[1]} |{left[1:]}{right[1:]}")
     for name, d in (("before", a), ("after", b)):
         rows = [d[k] for k in keys if k in d and d[k].get("feasible")]
         print(f"\n{name}: {sum(r['pass'] for r in rows)} of {len(rows)} pass; corners all kept in "
