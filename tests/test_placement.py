@@ -157,7 +157,7 @@ def test_vertices_between_kept_corners_are_evenly_spaced(ranked, cat, lat):
     for shp, r, _ in ranked.values():
         ann = r.annotation
         ring = shapely.LinearRing(np.vstack([shp.user_points, shp.user_points[:1]]))
-        for m in r.results[:4]:
+        for m in r.results[:2]:
             pl = place_match(shp, ann, cat, m, lattice=lat)
             if pl.slid:
                 continue
@@ -294,6 +294,7 @@ def test_first_valid_skips_folded(ranked, cat):
     assert first_valid(shp, ann, cat, folded + good, limit=len(folded), placements=cache) is None
 
 
+@pytest.mark.slow
 def test_choose_mesh_reports_and_requires_valid(cat, lat):
     shp = load_shape(EXAMPLES / "lshape.json")
     ks = [0, 1, 2, 3]
@@ -457,7 +458,7 @@ def sorted_xy(xy):
     return xy[np.lexsort((xy[:, 1], xy[:, 0]))]
 
 
-@settings(max_examples=12, deadline=None)
+@settings(max_examples=10, deadline=None)
 @given(name=st.sampled_from(sorted(POLYGONS)), k=st.sampled_from([1, 2, 3]), start=st.integers(0, 40),
        reverse=st.booleans())
 def test_placed_mesh_does_not_depend_on_how_the_loop_is_listed(cat, lat, name, k, start, reverse):
