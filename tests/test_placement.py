@@ -438,10 +438,11 @@ def test_spread_optimal_alignment_is_the_most_even_best_alignment(seed):
 # the placed mesh is a mesh of the shape, and does not depend on how the loop is written
 
 POLYGONS = {name: json.loads((EXAMPLES / f"{name}.json").read_text()) for name in ("lshape", "triangle", "tshape", "square")}
+LOOPS = {**POLYGONS, **{name: json.loads((EXAMPLES / f"{name}.json").read_text()) for name in ("circle", "curved")}}
 
 
 def relisted(name, start, reverse):
-    d = POLYGONS[name]
+    d = LOOPS[name]
     b = np.array(d["boundary"], float)
     P = len(b)
     idx = np.roll(np.arange(P), -start)
@@ -459,11 +460,13 @@ def sorted_xy(xy):
 
 
 @settings(max_examples=10, deadline=None)
-@given(name=st.sampled_from(sorted(POLYGONS)), k=st.sampled_from([1, 2, 3]), start=st.integers(0, 40),
+@given(name=st.sampled_from(sorted(LOOPS)), k=st.sampled_from([1, 2, 3]), start=st.integers(0, 200),
        reverse=st.booleans())
 def test_placed_mesh_does_not_depend_on_how_the_loop_is_listed(cat, lat, name, k, start, reverse):
+    """Polygons and curved outlines (a circle has no corner at all), listed from any point in
+    either direction: same mesh, same utility, same vertex positions up to relabelling."""
     base = choose_mesh(relisted(name, 0, False), cat, lat, internal=[k])
-    other = choose_mesh(relisted(name, start % len(POLYGONS[name]["boundary"]), reverse), cat, lat, internal=[k])
+    other = choose_mesh(relisted(name, start % len(LOOPS[name]["boundary"]), reverse), cat, lat, internal=[k])
     assert other.match.mesh_id == base.match.mesh_id
     assert other.match.utility == base.match.utility
     np.testing.assert_allclose(sorted_xy(other.placement.xy), sorted_xy(base.placement.xy), atol=2e-6)
