@@ -37,17 +37,20 @@ def small_cat(tmp_path_factory):
     return p
 
 
+U_SHAPE = EXAMPLES / "labels" / "shapes" / "ushape.json"
+Z_SHAPE = EXAMPLES / "labels" / "shapes" / "zshape.json"
+
+
 @pytest.fixture(scope="session")
 def folded(small_cat):
-    """(rank of a mesh that is not a good mesh of the shape, rank and id of the next one that
-    is) for the L shape at k = 0..3 under the small catalogue and the CLI's default ranking."""
-    shp = load_shape(EXAMPLES / "lshape.json")
+    """(rank of a mesh that is not a good mesh of the U shape at k = 1..3, rank and id of the
+    next one that is) under the small catalogue and the CLI's default ranking."""
+    shp = load_shape(U_SHAPE)
     lat = load_lattice("fine")
-    r = rank(shp, cm.load(small_cat), lat, top=12, internal=[0, 1, 2, 3], tie_break="geometry")
+    r = rank(shp, cm.load(small_cat), lat, top=12, internal=[1, 2, 3], tie_break="geometry")
     pls = place_top(shp, r, cm.load(small_cat), lattice=lat)
     ok = [acceptable(p) for p in pls]
     bad = ok.index(False) + 1
-    assert not pls[bad - 1].valid, "example needs a mesh that is not valid"
     want = next(i for i in range(bad, len(ok)) if ok[i]) + 1
     return bad, want, r.results[want - 1].mesh_id
 
@@ -122,30 +125,38 @@ def test_mesh_text_output_and_picture_only(cli, small_cat, tmp_path):
     assert [p.name for p in tmp_path.iterdir() if p.is_file()] == ["only.png"]
 
 
-def test_mesh_folded_exit_3_still_writes_and_names_next_valid(cli, small_cat, tmp_path, folded):
+def test_mesh_not_good_names_the_next_good_one(cli, small_cat, tmp_path, folded):
     bad, want, want_id = folded
-    out = tmp_path / "f.json"
-    code, stdout, err = cli("mesh", EXAMPLES / "lshape.json", "--catalogue", small_cat, "--internal", "0..3", "--rank", bad, "--out", out)
-    assert code == EXIT_INVERTED
-    assert "MISSED CORNERS" in stdout or "FOLDED" in stdout
-    assert f"#{want} {want_id}" in stdout
-    assert out.exists() and read_json_mesh(out)[1].shape[0] > 0
-
-    code, stdout, err = cli("mesh", EXAMPLES / "lshape.json", "--catalogue", small_cat, "--internal", "0..3", "--rank", bad, "--json")
-    assert code == EXIT_INVERTED
+    code, stdout, err = cli("mesh", U_SHAPE, "--catalogue", small_cat, "--internal", "1..3", "--rank", bad, "--json")
     d = json.loads(stdout)
-    assert (d["inverted"] > 0 or d["missed_corners"]) and not d["valid"] and not d["good"] and d["rank"] == bad
-    assert len(d["missed_corners"]) == d["corners"] - d["corners_kept"]
+    assert not d["good"] and d["rank"] == bad
+    assert code == (0 if d["valid"] else EXIT_INVERTED)
     assert d["next_valid"]["rank"] == want and d["next_valid"]["mesh_id"] == want_id
-    assert "MISSED CORNERS" in err or "FOLDED" in err
+    assert f"#{want} {want_id}" in err
 
 
 def test_mesh_require_valid_walks_down(cli, small_cat, tmp_path, folded):
     bad, want, want_id = folded
-    code, stdout, err = cli("mesh", EXAMPLES / "lshape.json", "--catalogue", small_cat, "--internal", "0..3", "--rank", bad, "--require-valid", "--json")
+    code, stdout, err = cli("mesh", U_SHAPE, "--catalogue", small_cat, "--internal", "1..3", "--rank", bad, "--require-valid", "--json")
     assert code == 0, err
     d = json.loads(stdout)
     assert d["rank"] == want and d["requested_rank"] == bad and d["mesh_id"] == want_id and d["inverted"] == 0
+    assert d["good"] and d["valid"] and d["min_scaled_jacobian"] >= d["min_quality"]
+
+
+def test_mesh_folded_exit_3_still_writes(cli, small_cat, tmp_path):
+    """The Z shape with one internal vertex: none of its 3 meshes embeds without a fold or a
+    degenerate quad."""
+    out = tmp_path / "f.json"
+    code, stdout, err = cli("mesh", Z_SHAPE, "--catalogue", small_cat, "--internal", "1", "--out", out)
+    assert code == EXIT_INVERTED
+    assert "FOLDED" in stdout or "MISSED CORNERS" in stdout
+    assert "no mesh ranked #1..#3" in stdout and out.exists() and read_json_mesh(out)[1].shape[0] > 0
+    code, stdout, err = cli("mesh", Z_SHAPE, "--catalogue", small_cat, "--internal", "1", "--json")
+    assert code == EXIT_INVERTED
+    d = json.loads(stdout)
+    assert (d["inverted"] > 0 or d["missed_corners"]) and not d["valid"] and not d["good"] and d["next_valid"] is None
+    assert len(d["missed_corners"]) == d["corners"] - d["corners_kept"]
 
 
 @pytest.mark.parametrize(
@@ -197,11 +208,10 @@ def test_score_tie_break_id_keeps_utilities(cli, small_cat):
     assert [r["utility"] for r in runs["id"]] == [r["utility"] for r in runs["geometry"]]
 
 
-def test_real_process_exit_3(small_cat, tmp_path, folded):
-    bad, want, _ = folded
+def test_real_process_exit_3(small_cat, tmp_path):
     out = tmp_path / "p.vtk"
-    r = subprocess.run([sys.executable, "-m", "jaxmatch.cli", "mesh", str(EXAMPLES / "lshape.json"), "--catalogue", str(small_cat),
-                        "--internal", "0..3", "--rank", str(bad), "--out", str(out)], capture_output=True, text=True, cwd=ROOT, timeout=300)
+    r = subprocess.run([sys.executable, "-m", "jaxmatch.cli", "mesh", str(Z_SHAPE), "--catalogue", str(small_cat),
+                        "--internal", "1", "--out", str(out)], capture_output=True, text=True, cwd=ROOT, timeout=300)
     assert r.returncode == EXIT_INVERTED, r.stderr
     assert ("MISSED CORNERS" in r.stdout or "FOLDED" in r.stdout) and out.exists()
     assert meshio.read(out).cells_dict["quad"].shape[1] == 4

@@ -41,7 +41,7 @@ from jaxmatch.placement.choose import (
     rerank_ties,
     spread_alignment,
 )
-from jaxmatch.scoring.exact import utility_of
+from jaxmatch.scoring.exact import score_bucket, utility_of
 from jaxmatch.scoring.reference import dp_reference as reference_dp
 from jaxmatch.shape import annotate, load_shape, make_shape
 
@@ -148,7 +148,7 @@ def test_place_match_user_coordinates_and_same_utility(ranked, cat, lat):
         assert pl.mesh_area == pytest.approx(float(quad_areas(pl.xy, pl.mesh.quads).sum()))
         # the orientation and alignment used have the ranked utility
         vals = cat.bucket(m.boundary_length).valences[list(cat.bucket(m.boundary_length).ids).index(m.mesh_id)]
-        assert utility_of(ann.codes, vals, lat.table(), pl.rotation, pl.reflected, pl.alignment) == m.utility
+        assert utility_of(ann.codes, vals, lat, pl.rotation, pl.reflected, pl.alignment) == m.utility  # skip weights included
 
 
 def test_vertices_between_kept_corners_are_evenly_spaced(ranked, cat, lat):
@@ -280,24 +280,25 @@ def test_per_size_with_geometry(cat, lat):
 # walking for a valid mesh
 
 
-def test_first_valid_skips_folded(ranked, cat):
-    shp, r_id, _ = ranked["triangle"]
+def test_first_valid_skips_folded(ranked, cat, lat):
+    shp = ranked["triangle"][0]
+    r_id = rank(shp, cat, lat, top=16)  # deep enough to hold folded meshes too (the top 8 of fine all embed)
     ann = r_id.annotation
     cache = {}
     pls = [place_match(shp, ann, cat, m, placements=cache) for m in r_id.results]
-    assert any(p.inverted for p in pls) and any(p.inverted == 0 for p in pls), "example needs both kinds"
-    folded = [m for m, p in zip(r_id.results, pls) if p.inverted]
-    good = [m for m, p in zip(r_id.results, pls) if p.inverted == 0]
+    assert any(not p.valid for p in pls) and any(p.valid for p in pls), "example needs both kinds"
+    folded = [m for m, p in zip(r_id.results, pls) if not p.valid]
+    good = [m for m, p in zip(r_id.results, pls) if p.valid]
     i, m, pl = first_valid(shp, ann, cat, folded + good, placements=cache)
-    assert i == len(folded) and m is good[0] and pl.inverted == 0
+    assert i == len(folded) and m is good[0] and pl.valid
     assert first_valid(shp, ann, cat, folded, placements=cache) is None
     assert first_valid(shp, ann, cat, folded + good, limit=len(folded), placements=cache) is None
 
 
 @pytest.mark.slow
 def test_choose_mesh_reports_and_requires_valid(cat, lat):
-    shp = load_shape(EXAMPLES / "lshape.json")
-    ks = [0, 1, 2, 3]
+    shp = load_shape(EXAMPLES / "labels" / "shapes" / "ushape.json")
+    ks = [1, 2, 3]
     ranking = rank(shp, cat, lat, top=12, internal=ks, tie_break="geometry")
     pls = place_top(shp, ranking, cat, lattice=lat)
     ok = [acceptable(p) for p in pls]
@@ -406,13 +407,17 @@ def test_orientation_utilities_match_brute_force(seed):
             assert got[o] == want
 
 
-def test_orientation_utilities_without_skip_weights_are_the_exact_scorer(cat, lat):
+def test_orientation_utilities_are_the_exact_scorers(cat, lat):
+    """Best orientation = the exact scorer's utility (with the lattice's skip weights), and with
+    skip weights 0 = the paper's DP (plain-Python reference)."""
     shp = load_shape(EXAMPLES / "lshape.json")
     ann = annotate(shp, 20)
     b = cat.bucket(10)
-    for vals in b.valences[:20]:
-        got = orientation_utilities(ann.codes, vals, lat)
-        assert got.max() == reference_dp(ann.codes, vals, lat.table())
+    res = score_bucket(ann.codes, b.valences[:20], lat)
+    free = dataclasses.replace(lat, skip=(0, 0, 0))
+    for i, vals in enumerate(b.valences[:20]):
+        assert orientation_utilities(ann.codes, vals, lat).max() == res.utility[i]
+        assert orientation_utilities(ann.codes, vals, free).max() == reference_dp(ann.codes, vals, lat.table())
 
 
 @pytest.mark.parametrize("seed", range(4))
@@ -546,17 +551,22 @@ def test_snap_picks_the_nearest_increasing_assignment(seed):
         assert np.all(np.diff(got) > 0) and sum((even[got] - tc) ** 2) == pytest.approx(best, abs=1e-12)
 
 
-def test_spare_vertices_take_the_corners_an_alignment_skipped(cat, lat):
-    """The L shape at k = 2: the scorer's best alignment skips a corner (free skipping in the
-    fine lattice), but the run around it has vertices to spare, so the placed mesh keeps it."""
+def test_spare_vertices_take_the_corners_an_alignment_skipped():
+    """An alignment of the L shape that skips the concave corner, with vertices on straight
+    points around it: unsnapped, the corner is missed; snapped, one of those vertices stands
+    exactly on it and the others are spread evenly between the corners."""
     from jaxmatch.placement.choose import corner_boundary
 
     shp = load_shape(EXAMPLES / "lshape.json")
-    r = rank(shp, cat, lat, internal=[2], top=1)
-    m = r.results[0]
-    ann = r.annotation
-    assert np.sum(ann.codes[m.alignment] != 0) < shp.n_corners, "example needs a skipped corner"
-    assert corner_boundary(shp, ann, m.alignment, snap=False).missed.shape[0] > 0
-    assert corner_boundary(shp, ann, m.alignment).missed.shape[0] == 0
-    pl = place_match(shp, ann, cat, m, lattice=lat)
-    assert pl.kept_corners == shp.n_corners and pl.missed_corners.shape == (0, 2)
+    ann = annotate(shp, 40)
+    corners = np.flatnonzero(ann.codes != 0)
+    v = int(np.flatnonzero(ann.codes == 2)[0])
+    al = np.sort(np.r_[corners[corners != v], v - 1, v + 1])  # evenly: at 1/3 and 2/3 of the run, off the corner
+    assert corner_boundary(shp, ann, al, snap=False).missed.shape[0] == 1
+    b = corner_boundary(shp, ann, al)
+    assert b.missed.shape[0] == 0
+    hit = np.flatnonzero((b.xy == ann.positions[v]).all(axis=1))
+    assert hit.size == 1
+    j = int(hit[0])
+    left, right = b.u[j] - b.u[j - 1], b.u[j + 1] - b.u[j]
+    assert left > 0 and right > 0
