@@ -146,17 +146,21 @@ def rank(shape: Shape, catalogue: str | os.PathLike | Catalogue | None = None, l
         raise ValueError(f"tie_break must be one of {TIE_BREAKS}, got {tie_break!r}")
     cat = load_catalogue(catalogue)
     ks = check_sizes(cat, internal)
-    tb = geometry_tie_breaker(cat) if tie_break == "geometry" else "id"
-    return _rank(shape, cat, _lattice(lattice), internal=ks, top=top, points=points, per_size=per_size, tie_break=tb,
+    lat = _lattice(lattice)
+    tb = geometry_tie_breaker(cat, lat) if tie_break == "geometry" else "id"
+    return _rank(shape, cat, lat, internal=ks, top=top, points=points, per_size=per_size, tie_break=tb,
                  prune=prune, devices=devices, progress=progress, tie_cap=tie_cap)
 
 
 def place(shape: Shape, ranking: Ranking, which: int | Match = 1,
-          catalogue: str | os.PathLike | Catalogue | None = None) -> Placement:
+          catalogue: str | os.PathLike | Catalogue | None = None,
+          lattice: str | os.PathLike | Lattice = DEFAULT_LATTICE) -> Placement:
     """Place a ranked mesh in ``shape`` (user coordinates).
 
     which: the rank (1-based, within ``ranking.results``) or a :class:`Match` of ``ranking``.
-    catalogue: the one ``ranking`` was computed with (default: the shipped one).
+    catalogue, lattice: the ones ``ranking`` was computed with (default: the shipped catalogue
+    and lattice); the lattice lets placement try every orientation of equal utility, so the
+    result does not depend on how the shape's loop is written.
     Returns a :class:`~jaxmatch.placement.embed.Placement`: ``xy (V, 2)`` vertex positions,
     ``mesh.quads (F, 4)``, ``scaled_jacobian (F,)``, ``min_scaled_jacobian``, ``inverted``
     (count of inverted quads), ``area_ratio``, ...; write it with :func:`write_mesh`.
@@ -169,7 +173,8 @@ def place(shape: Shape, ranking: Ranking, which: int | Match = 1,
             raise InputError(f"rank {r} is not in the ranking (it holds {len(ranking.results)} results; raise top)")
         match = ranking.results[r - 1]
     cache = ranking.placements if ranking.placements is not None else None
-    return place_match(shape, ranking.annotation, load_catalogue(catalogue), match, placements=cache)
+    return place_match(shape, ranking.annotation, load_catalogue(catalogue), match, placements=cache,
+                       lattice=_lattice(lattice))
 
 
 def choose_mesh(shape: Shape, catalogue: str | os.PathLike | Catalogue | None = None,

@@ -234,8 +234,8 @@ def score(
                        progress=lambda d, t: prog.update(task, completed=d, total=t))
     written = []
     if png is not None or svg is not None:
-        placed = place_top(shp, ranking, cat)
-        items = [(panel_title(i, r), pl) for i, (r, pl) in enumerate(zip(ranking.results, placed), 1)]
+        placed = place_top(shp, ranking, cat, lattice=lat)
+        items = [(panel_title(i, r, pl), pl) for i, (r, pl) in enumerate(zip(ranking.results, placed), 1)]
         head = f"{shape.name}: {'best per size' if per_size else f'top {len(items)}'}"
         written = [str(draw_placements(p, shp, ranking.annotation, items, title=head)) for p in (png, svg) if p is not None]
     if as_json:
@@ -253,6 +253,11 @@ def score(
         table.add_row(str(i), r.mesh_id, str(r.internal_vertices), str(r.boundary_length), f"{r.utility:g}",
                       str(r.rotation), "yes" if r.reflected else "no")
     out.print(table)
+    if ks is None and not per_size:
+        out.print("all sizes compete here by raw utility, which grows with the mesh (more matched points); "
+                  "'jaxmatch mesh' without --internal chooses the size by the fit of each size's best mesh "
+                  "(corners kept, folds, quality, area, then fewer quads); --per-size compares sizes",
+                  markup=False, highlight=False)
     for w in written:
         out.print(f"wrote {w}", markup=False, highlight=False)
 
@@ -326,15 +331,18 @@ def score_many(
 def mesh(
     shape: Path = typer.Argument(..., metavar="SHAPE", help=SHAPE_HELP),
     catalogue: Optional[Path] = typer.Option(None, help="Catalogue file (default: the shipped k=0..5 catalogue)."),
-    internal: Optional[str] = typer.Option(None, help="Mesh size: K or K1..K2 internal vertices (default: all sizes compete)."),
+    internal: Optional[str] = typer.Option(None, help="Mesh size: K or K1..K2 internal vertices (default: the size is chosen by "
+                                           "the fit of the best mesh of each size; the rule that decided is printed)."),
     lattice: str = typer.Option(DEFAULT_LATTICE, help="Lattice: fine, coarse, or a TOML path."),
     points: Optional[int] = typer.Option(None, min=1, help="Number m of annotated shape points (default: 2 x longest boundary)."),
-    rank_: int = typer.Option(1, "--rank", min=1, help="Place the R-th ranked mesh."),
+    rank_: int = typer.Option(1, "--rank", min=1, help="Place the R-th ranked mesh (of the chosen size, without --internal)."),
     out_path: Optional[Path] = typer.Option(None, "--out", help="Mesh file: .vtk .vtu .obj .msh or .json (written atomically)."),
     png: Optional[Path] = typer.Option(None, "--png", help="Picture of the placed mesh in the shape (.png)."),
     svg: Optional[Path] = typer.Option(None, "--svg", help="Picture of the placed mesh in the shape (.svg)."),
     require_valid: bool = typer.Option(False, "--require-valid", help="Walk down the ranking (up to 50 meshes) and place the first "
-                                       "mesh that embeds with zero inverted quads."),
+                                       "mesh that keeps every corner, has no inverted quad and passes --min-quality and --max-edge-ratio."),
+    min_quality: float = typer.Option(0.2, "--min-quality", help="Quality floor: smallest acceptable min scaled Jacobian."),
+    max_edge_ratio: float = typer.Option(8.0, "--max-edge-ratio", help="Quality floor: largest acceptable longest/shortest edge of a quad."),
     tie_break: str = typer.Option(DEFAULT_TIE_BREAK, "--tie-break", help=TIE_BREAK_HELP),
     corner_angle: float = typer.Option(DEFAULT_CORNER_ANGLE, help="Corner threshold (degrees from straight) when the shape lists no corners."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object."),
@@ -347,13 +355,18 @@ def mesh(
     """Rank like 'score', place the R-th mesh in SHAPE and write it (and/or a picture).
 
     With --sides or --size the chosen template is refined to the requested size instead.
-    Exit status 3 when the placed mesh has inverted quads (the files are written anyway).
+    Exit status 3 when the placed mesh is not a mesh of the shape (a corner without a mesh
+    vertex, or inverted quads); the files are written anyway.
     """
     from jaxmatch.io.meshfile import write_mesh
-    from jaxmatch.placement.choose import DEFAULT_WALK, check_outputs, choose_mesh, draw_placements, panel_title
+    from jaxmatch.placement.choose import DEFAULT_WALK, check_outputs, choose_mesh, draw_placements, fit_json, panel_title
 
     check_outputs(out_path, png, svg)
     tb = _tie_break(tie_break)
+    if not -1.0 <= min_quality <= 1.0:
+        raise InputError(f"must lie in [-1, 1] (a scaled Jacobian), got {min_quality:g}", "--min-quality")
+    if not max_edge_ratio >= 1.0:
+        raise InputError(f"must be at least 1, got {max_edge_ratio:g}", "--max-edge-ratio")
     if sides is not None or size is not None:
         _mesh_refined(shape, sides, size, catalogue=catalogue, internal=internal, lattice=lattice, rank_=rank_,
                       out_path=out_path, png=png, svg=svg, corner_angle=corner_angle, as_json=as_json)
@@ -363,42 +376,54 @@ def mesh(
     with _progress() as prog:
         task = prog.add_task("scoring meshes", total=None)
         choice = choose_mesh(shp, cat, lat, rank=rank_, internal=ks, points=points, tie_break=tb,
-                             require_valid=require_valid, walk=DEFAULT_WALK,
-                             progress=lambda d, t: prog.update(task, completed=d, total=t))
+                             require_valid=require_valid, walk=DEFAULT_WALK, min_quality=min_quality,
+                             max_edge_ratio=max_edge_ratio, progress=lambda d, t: prog.update(task, completed=d, total=t))
     m, pl, ann = choice.match, choice.placement, choice.ranking.annotation
     written = {}
     if out_path is not None:
         written["out"] = str(write_mesh(out_path, pl))
     for key, path in (("png", png), ("svg", svg)):
         if path is not None:
-            written[key] = str(draw_placements(path, shp, ann, [(panel_title(choice.rank, m), pl)], title=shape.name))
+            written[key] = str(draw_placements(path, shp, ann, [(panel_title(choice.rank, m, pl), pl)], title=shape.name))
+    floor = f"min scaled Jacobian >= {min_quality:g}, max edge ratio <= {max_edge_ratio:g}"
     notes = []
+    if choice.size is not None:
+        notes.append(choice.size.describe())
     if choice.rank != choice.requested_rank:
-        notes.append(f"mesh #{choice.requested_rank} folds; placed #{choice.rank} {m.mesh_id}, the first mesh of the ranking "
-                     "that embeds without inverted quads")
-    if not choice.valid:
+        notes.append(f"mesh #{choice.requested_rank} is not a good mesh of the shape; placed #{choice.rank} {m.mesh_id}, the first "
+                     f"mesh of the ranking that keeps every corner, has no inverted quad and {floor}")
+    if pl.missed_corners.shape[0]:
+        where = ", ".join(f"({x:.6g}, {y:.6g})" for x, y in pl.missed_corners)
+        notes.append(f"MISSED CORNERS: {pl.missed_corners.shape[0]} of {pl.corners} corners of the shape get no vertex of mesh "
+                     f"#{choice.rank} {m.mesh_id}: {where} (the mesh cuts across them)")
+    if pl.inverted:
         notes.append(f"FOLDED: {pl.inverted} of {pl.mesh.n_quads} quads of mesh #{choice.rank} {m.mesh_id} are inverted "
-                     "(a corner of zero or negative area: the placed mesh folds over itself or is degenerate); "
-                     "files were written anyway")
+                     "(a corner of zero or negative area: the placed mesh folds over itself or is degenerate)")
+    if choice.valid and not choice.good:
+        notes.append(f"LOW QUALITY: mesh #{choice.rank} {m.mesh_id} has min scaled Jacobian {pl.min_scaled_jacobian:.3f} and max "
+                     f"edge ratio {pl.max_edge_ratio:.2f}; the floor is {floor}")
+    if not choice.valid:
+        notes.append("files were written anyway")
+    if not choice.good:
         if choice.alternative is not None:
             ar, am, apl = choice.alternative
-            notes.append(f"next-ranked mesh that embeds without folds: #{ar} {am.mesh_id} (utility {am.utility:g}, "
-                         f"min scaled Jacobian {apl.min_scaled_jacobian:.3f}); use --rank {ar} or --require-valid")
+            notes.append(f"next-ranked mesh that keeps every corner, has no inverted quad and {floor}: #{ar} {am.mesh_id} "
+                         f"(utility {am.utility:g}, min scaled Jacobian {apl.min_scaled_jacobian:.3f}); use --rank {ar} or --require-valid")
         else:
             last = choice.requested_rank + choice.searched
             more = "" if choice.searched >= DEFAULT_WALK - 1 else " (no further meshes match)"
-            notes.append(f"no mesh ranked #{choice.requested_rank}..#{last} embeds without folds{more}")
+            notes.append(f"no mesh ranked #{choice.requested_rank}..#{last} keeps every corner, has no inverted quad and {floor}{more}")
     if as_json:
         alt = choice.alternative
         print(json.dumps({
             "shape": str(shape), "sequence": ann.symbols, "lattice": lat.name, "tie_break": tb,
             "rank": choice.rank, "requested_rank": choice.requested_rank, "mesh_id": m.mesh_id,
             "internal_vertices": int(m.internal_vertices), "boundary_length": int(m.boundary_length),
-            "utility": float(m.utility), "rotation": int(m.rotation), "reflected": bool(m.reflected),
-            "quads": int(pl.mesh.n_quads), "min_scaled_jacobian": pl.min_scaled_jacobian,
-            "mean_scaled_jacobian": pl.mean_scaled_jacobian, "inverted": int(pl.inverted),
-            "irregular": int(len(pl.irregular)), "area_ratio": pl.area_ratio, "valid": choice.valid,
+            "utility": float(m.utility), "rotation": int(pl.rotation), "reflected": bool(pl.reflected),
+            **fit_json(pl), "irregular": int(len(pl.irregular)), "good": choice.good,
+            "min_quality": min_quality, "max_edge_ratio_allowed": max_edge_ratio,
             "alignment": [int(i) for i in pl.alignment],
+            "size_choice": None if choice.size is None else choice.size.as_json(),
             "out": written.get("out"), "png": written.get("png"), "svg": written.get("svg"),
             "next_valid": None if alt is None else {"rank": alt[0], "mesh_id": alt[1].mesh_id, "utility": float(alt[1].utility),
                                                     "min_scaled_jacobian": alt[2].min_scaled_jacobian},
@@ -410,10 +435,11 @@ def mesh(
         out.print(f"lattice {lat.name}; scored {choice.ranking.scored} meshes, {choice.ranking.unmatchable} unmatchable; "
                   f"ties broken by {tb}", highlight=False)
         out.print(f"mesh #{choice.rank} {m.mesh_id}: {m.internal_vertices} internal, {m.boundary_length} boundary vertices, "
-                  f"{pl.mesh.n_quads} quads, {len(pl.irregular)} irregular internal; utility {m.utility:g}, rotation {m.rotation}, "
-                  f"{'reflected' if m.reflected else 'not reflected'}", markup=False, highlight=False)
-        out.print(f"scaled Jacobian: min {pl.min_scaled_jacobian:.3f}, mean {pl.mean_scaled_jacobian:.3f}; "
-                  f"inverted quads: {pl.inverted}; mesh area / shape area {pl.area_ratio:.3f}", markup=False, highlight=False)
+                  f"{pl.mesh.n_quads} quads, {len(pl.irregular)} irregular internal; utility {m.utility:g}, rotation {pl.rotation}, "
+                  f"{'reflected' if pl.reflected else 'not reflected'}", markup=False, highlight=False)
+        out.print(f"corners kept: {pl.kept_corners} of {pl.corners}; scaled Jacobian: min {pl.min_scaled_jacobian:.3f}, "
+                  f"mean {pl.mean_scaled_jacobian:.3f}; max edge ratio {pl.max_edge_ratio:.2f}; inverted quads: {pl.inverted}; "
+                  f"mesh area / shape area {pl.area_ratio:.6f}", markup=False, highlight=False)
         for note in notes:  # warnings (FOLDED, next valid mesh) go to stderr, as in --json mode
             err.print(note, markup=False, highlight=False)
         for path in written.values():

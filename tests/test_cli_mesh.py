@@ -22,7 +22,7 @@ from jaxmatch.errors import EXIT_BAD_INPUT, EXIT_INVERTED
 from jaxmatch.scoring.lattice import load_lattice
 from jaxmatch.io.meshfile import read_json_mesh
 from jaxmatch.api import rank
-from jaxmatch.placement.choose import place_top
+from jaxmatch.placement.choose import acceptable, place_top
 from jaxmatch.shape import load_shape
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -37,15 +37,21 @@ def small_cat(tmp_path_factory):
     return p
 
 
+U_SHAPE = EXAMPLES / "labels" / "shapes" / "ushape.json"
+Z_SHAPE = EXAMPLES / "labels" / "shapes" / "zshape.json"
+
+
 @pytest.fixture(scope="session")
 def folded(small_cat):
-    """(rank of a folded mesh, rank of the next mesh that embeds without folds) for the
-    triangle under the small catalogue and the CLI's default ranking."""
-    shp = load_shape(EXAMPLES / "triangle.json")
-    r = rank(shp, cm.load(small_cat), load_lattice("fine"), top=12, tie_break="geometry")
-    pls = place_top(shp, r, cm.load(small_cat))
-    bad = next(i for i, p in enumerate(pls) if p.inverted) + 1
-    want = next(i for i, p in enumerate(pls) if i + 1 > bad and p.inverted == 0) + 1
+    """(rank of a mesh that is not a good mesh of the U shape at k = 1..3, rank and id of the
+    next one that is) under the small catalogue and the CLI's default ranking."""
+    shp = load_shape(U_SHAPE)
+    lat = load_lattice("fine")
+    r = rank(shp, cm.load(small_cat), lat, top=12, internal=[1, 2, 3], tie_break="geometry")
+    pls = place_top(shp, r, cm.load(small_cat), lattice=lat)
+    ok = [acceptable(p) for p in pls]
+    bad = ok.index(False) + 1
+    want = next(i for i in range(bad, len(ok)) if ok[i]) + 1
     return bad, want, r.results[want - 1].mesh_id
 
 
@@ -91,9 +97,10 @@ def test_mesh_writes_vtk_and_pictures_json(cli, small_cat, tmp_path):
 @pytest.mark.parametrize("suffix", [".msh", ".obj", ".json", ".vtu"])
 def test_mesh_formats_read_back(cli, small_cat, tmp_path, suffix):
     out = tmp_path / f"m{suffix}"
-    code, stdout, err = cli("mesh", EXAMPLES / "lshape.json", "--catalogue", small_cat, "--out", out, "--json")
+    code, stdout, err = cli("mesh", EXAMPLES / "lshape.json", "--catalogue", small_cat, "--require-valid", "--out", out, "--json")
     assert code == 0, err
     d = json.loads(stdout)
+    assert d["valid"] and d["missed_corners"] == [] and abs(d["area_ratio"] - 1) <= 1e-9
     if suffix == ".json":
         pts, quads, sj = read_json_mesh(out)
     else:
@@ -118,29 +125,38 @@ def test_mesh_text_output_and_picture_only(cli, small_cat, tmp_path):
     assert [p.name for p in tmp_path.iterdir() if p.is_file()] == ["only.png"]
 
 
-def test_mesh_folded_exit_3_still_writes_and_names_next_valid(cli, small_cat, tmp_path, folded):
+def test_mesh_not_good_names_the_next_good_one(cli, small_cat, tmp_path, folded):
     bad, want, want_id = folded
-    out = tmp_path / "f.json"
-    code, stdout, err = cli("mesh", EXAMPLES / "triangle.json", "--catalogue", small_cat, "--rank", bad, "--out", out)
-    assert code == EXIT_INVERTED
-    assert "inverted" in stdout and "FOLDED" not in stdout  # the warning and the advice go to stderr
-    assert "FOLDED" in err and f"#{want} {want_id}" in err
-    assert out.exists() and read_json_mesh(out)[1].shape[0] > 0
-
-    code, stdout, err = cli("mesh", EXAMPLES / "triangle.json", "--catalogue", small_cat, "--rank", bad, "--json")
-    assert code == EXIT_INVERTED
+    code, stdout, err = cli("mesh", U_SHAPE, "--catalogue", small_cat, "--internal", "1..3", "--rank", bad, "--json")
     d = json.loads(stdout)
-    assert d["inverted"] > 0 and not d["valid"] and d["rank"] == bad
+    assert not d["good"] and d["rank"] == bad
+    assert code == (0 if d["valid"] else EXIT_INVERTED)
     assert d["next_valid"]["rank"] == want and d["next_valid"]["mesh_id"] == want_id
-    assert "FOLDED" in err
+    assert f"#{want} {want_id}" in err
 
 
 def test_mesh_require_valid_walks_down(cli, small_cat, tmp_path, folded):
     bad, want, want_id = folded
-    code, stdout, err = cli("mesh", EXAMPLES / "triangle.json", "--catalogue", small_cat, "--rank", bad, "--require-valid", "--json")
+    code, stdout, err = cli("mesh", U_SHAPE, "--catalogue", small_cat, "--internal", "1..3", "--rank", bad, "--require-valid", "--json")
     assert code == 0, err
     d = json.loads(stdout)
     assert d["rank"] == want and d["requested_rank"] == bad and d["mesh_id"] == want_id and d["inverted"] == 0
+    assert d["good"] and d["valid"] and d["min_scaled_jacobian"] >= d["min_quality"]
+
+
+def test_mesh_folded_exit_3_still_writes(cli, small_cat, tmp_path):
+    """The Z shape with one internal vertex: none of its 3 meshes embeds without a fold or a
+    degenerate quad."""
+    out = tmp_path / "f.json"
+    code, stdout, err = cli("mesh", Z_SHAPE, "--catalogue", small_cat, "--internal", "1", "--out", out)
+    assert code == EXIT_INVERTED
+    assert "FOLDED" in err or "MISSED CORNERS" in err  # warnings and advice go to stderr
+    assert "no mesh ranked #1..#3" in err and out.exists() and read_json_mesh(out)[1].shape[0] > 0
+    code, stdout, err = cli("mesh", Z_SHAPE, "--catalogue", small_cat, "--internal", "1", "--json")
+    assert code == EXIT_INVERTED
+    d = json.loads(stdout)
+    assert (d["inverted"] > 0 or d["missed_corners"]) and not d["valid"] and not d["good"] and d["next_valid"] is None
+    assert len(d["missed_corners"]) == d["corners"] - d["corners_kept"]
 
 
 @pytest.mark.parametrize(
@@ -152,6 +168,8 @@ def test_mesh_require_valid_walks_down(cli, small_cat, tmp_path, folded):
         ["--out", "{d}/m.vtk", "--svg", "{d}/m.png"],
         ["--out", "{d}/m.vtk", "--tie-break", "size"],
         ["--out", "{d}/m.vtk", "--rank", "999"],
+        ["--out", "{d}/m.vtk", "--min-quality", "1.5"],
+        ["--out", "{d}/m.vtk", "--max-edge-ratio", "0.5"],
     ],
 )
 def test_mesh_bad_options_exit_2_one_line_nothing_written(cli, small_cat, tmp_path, extra):
@@ -190,11 +208,28 @@ def test_score_tie_break_id_keeps_utilities(cli, small_cat):
     assert [r["utility"] for r in runs["id"]] == [r["utility"] for r in runs["geometry"]]
 
 
-def test_real_process_exit_3(small_cat, tmp_path, folded):
-    bad, want, _ = folded
+def test_real_process_exit_3(small_cat, tmp_path):
     out = tmp_path / "p.vtk"
-    r = subprocess.run([sys.executable, "-m", "jaxmatch.cli", "mesh", str(EXAMPLES / "triangle.json"), "--catalogue", str(small_cat),
-                        "--rank", str(bad), "--out", str(out)], capture_output=True, text=True, cwd=ROOT, timeout=300)
+    r = subprocess.run([sys.executable, "-m", "jaxmatch.cli", "mesh", str(Z_SHAPE), "--catalogue", str(small_cat),
+                        "--internal", "1", "--out", str(out)], capture_output=True, text=True, cwd=ROOT, timeout=300)
     assert r.returncode == EXIT_INVERTED, r.stderr
-    assert "FOLDED" in r.stderr and "FOLDED" not in r.stdout and out.exists()
+    assert ("MISSED CORNERS" in r.stderr or "FOLDED" in r.stderr) and out.exists()  # warnings go to stderr
+    assert "FOLDED" not in r.stdout and "MISSED CORNERS" not in r.stdout
     assert meshio.read(out).cells_dict["quad"].shape[1] == 4
+
+
+def test_mesh_chooses_the_size_and_says_which_rule_decided(cli, small_cat):
+    code, stdout, err = cli("mesh", EXAMPLES / "square.json", "--catalogue", small_cat, "--json")
+    assert code == 0, err
+    d = json.loads(stdout)
+    sc = d["size_choice"]
+    assert sc["rule"] in sc["rules"] and sc["k"] == d["internal_vertices"] == sc["candidates"][0]["k"]
+    assert sorted(c["k"] for c in sc["candidates"]) == [0, 1, 2, 3]
+    assert f"size k={sc['k']} chosen by rule '{sc['rule']}'" in err
+    assert d["corners_kept"] == d["corners"] == 4 and d["missed_corners"] == [] and d["max_edge_ratio"] >= 1
+    code, stdout, err = cli("mesh", EXAMPLES / "square.json", "--catalogue", small_cat, "--internal", "2", "--json")
+    assert code == 0, err
+    d = json.loads(stdout)
+    assert d["size_choice"] is None and d["internal_vertices"] == 2
+    code, stdout, err = cli("mesh", EXAMPLES / "square.json", "--catalogue", small_cat)
+    assert code == 0 and "chosen by rule" in stdout and "corners kept: 4 of 4" in stdout and "max edge ratio" in stdout

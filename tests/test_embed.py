@@ -14,6 +14,7 @@ from jaxmatch.placement.embed import (
     Placement,
     arc_lengths,
     boundary_paths,
+    edge_ratios,
     inverted_mask,
     oriented_boundary,
     place,
@@ -555,3 +556,58 @@ def test_bad_alignment_raises(al, msg):
     pts, t, _, mesh, rot, refl = case_quad()
     with pytest.raises(ValueError, match=msg):
         place(pts, t, np.array(al), mesh, rot, refl)
+
+
+# ---------------------------------------------------------------------------------------------
+# sliding boundary vertices and edge ratios
+
+
+def test_slide_gradient_matches_finite_differences():
+    """The chain rule through the softmax gap parametrisation (embed._Params.pull) against
+    central differences of the energy."""
+    from jaxmatch.placement.embed import Slide, _Params, _objective
+
+    mesh, lattice = grid(3, 2)
+    xy = lattice + np.random.default_rng(3).normal(0, 0.05, lattice.shape)
+    b = mesh.boundary
+    bottom = [v for v in b if lattice[v, 1] == 0 and 0 < lattice[v, 0] < 3]
+    bottom = sorted(bottom, key=lambda v: lattice[v, 0])
+    xy[bottom] = lattice[bottom]
+    slides = (Slide(np.array([0.0, 0.0]), np.array([3.0, 0.0]), np.array(bottom)),)
+    free = np.setdiff1d(np.arange(mesh.n_vertices), b)
+    params = _Params(xy, free, slides)
+    x = params.start(xy) + np.random.default_rng(4).normal(0, 0.1, params.start(xy).shape)
+    f, g = _objective(x, params, mesh.quads, 1e-3, 2.0)
+    h = 1e-6
+    num = np.array([(_objective(x + h * e, params, mesh.quads, 1e-3, 2.0)[0] - _objective(x - h * e, params, mesh.quads, 1e-3, 2.0)[0]) / (2 * h)
+                    for e in np.eye(x.size)])
+    np.testing.assert_allclose(g, num, rtol=1e-4, atol=1e-7)
+
+
+def test_sliding_vertices_stay_on_their_side_in_order_and_keep_the_area():
+    """A 3x1 strip of quads in a 3x1 rectangle with the two middle bottom vertices crowded
+    to one end: sliding spreads them back, they stay on the bottom side in order, and the
+    covered area stays the rectangle's."""
+    mesh, lattice = grid(3, 1)
+    loop = mesh.boundary
+    pts = lattice[loop]
+    bxy = pts.copy()
+    j1, j2 = [int(np.flatnonzero((pts == p).all(axis=1))[0]) for p in ([1.0, 0.0], [2.0, 0.0])]
+    ja, jb = [int(np.flatnonzero((pts == p).all(axis=1))[0]) for p in ([0.0, 0.0], [3.0, 0.0])]
+    bxy[j1], bxy[j2] = [2.6, 0.0], [2.8, 0.0]
+    t = arc_lengths(pts)[:-1]
+    al = np.arange(len(loop))
+    fixed = place(pts, t, al, mesh, boundary_xy=bxy)
+    slid = place(pts, t, al, mesh, boundary_xy=bxy, slide_groups=((ja, jb, [j1, j2]),))
+    assert slid.slid and not fixed.slid
+    assert slid.min_scaled_jacobian > fixed.min_scaled_jacobian + 0.1
+    y = slid.xy[loop[[j1, j2]]]
+    assert np.all(y[:, 1] == 0.0) and 0 < y[0, 0] < y[1, 0] < 3
+    assert slid.mesh_area == pytest.approx(3.0, abs=1e-12) and slid.inverted == 0
+
+
+@pytest.mark.parametrize("w, ratio", [(1.0, 1.0), (12.9, 12.9), (0.25, 4.0)])
+def test_edge_ratios_of_rectangles(w, ratio):
+    xy = np.array([[0, 0], [w, 0], [w, 1], [0, 1]], float)
+    np.testing.assert_allclose(edge_ratios(xy, np.array([[0, 1, 2, 3]])), [ratio])
+    assert edge_ratios(np.array([[0, 0], [1, 0], [1, 0], [0, 1]], float), np.array([[0, 1, 2, 3]]))[0] == np.inf

@@ -2,21 +2,36 @@
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
+import json
 from itertools import islice
 from pathlib import Path
 
 import numpy as np
 import pytest
+import shapely
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from jaxmatch.catalogue import store as cm
 from jaxmatch.placement.embed import inverted_mask, quality, quad_areas
 from jaxmatch.errors import InputError
 from jaxmatch.scoring.lattice import load_lattice
 from jaxmatch.api import rank
+from jaxmatch.catalogue.mesh import from_quads
+from jaxmatch.placement.embed import place
 from jaxmatch.placement.choose import (
+    AREA_BAND,
+    GAP_UNIT,
+    SIZE_RULES,
+    acceptable,
     check_outputs,
     choose_mesh,
+    choose_size,
+    orientation_utilities,
+    size_key,
+    spread_optimal_alignment,
     draw_placements,
     first_valid,
     gap_cost,
@@ -26,7 +41,8 @@ from jaxmatch.placement.choose import (
     rerank_ties,
     spread_alignment,
 )
-from jaxmatch.scoring.exact import utility_of
+from jaxmatch.scoring.exact import score_bucket, utility_of
+from jaxmatch.scoring.reference import dp_reference as reference_dp
 from jaxmatch.shape import annotate, load_shape, make_shape
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
@@ -107,11 +123,22 @@ def test_spread_alignment_single_vertex_unchanged():
 def test_place_match_user_coordinates_and_same_utility(ranked, cat, lat):
     shp, r, _ = ranked["lshape"]
     ann = r.annotation
+    corner_xy = shp.user_points[shp.corners]
     for m in r.results[:3]:
-        pl = place_match(shp, ann, cat, m)
+        pl = place_match(shp, ann, cat, m, lattice=lat)
         loop = pl.mesh.boundary
-        # boundary vertices exactly on annotated points, in user coordinates
-        assert np.allclose(pl.xy[loop], shp.to_user(ann.positions[pl.alignment]), atol=1e-12)
+        bxy = pl.xy[loop]
+        on_corner = ann.codes[pl.alignment] != 0
+        # vertices on corners sit exactly on them, in user coordinates
+        assert np.array_equal(bxy[on_corner], shp.to_user(ann.positions[pl.alignment[on_corner]]))
+        # every boundary vertex lies on the outline (distance computed with shapely)
+        ring = shapely.LinearRing(shp.user_points)
+        assert max(ring.distance(shapely.Point(p)) for p in bxy) <= 1e-9
+        # missed corners: exactly the corners that are not a mesh vertex
+        kept = [c for c in corner_xy if np.min(np.linalg.norm(pl.xy - c, axis=1)) <= 1e-9]
+        assert len(kept) == pl.kept_corners and pl.corners == len(corner_xy)
+        for c in pl.missed_corners:
+            assert np.min(np.linalg.norm(pl.xy - c, axis=1)) > 1e-6
         lo, hi = shp.user_points.min(axis=0), shp.user_points.max(axis=0)
         assert np.all(pl.xy >= lo - 1e-9) and np.all(pl.xy <= hi + 1e-9)
         # quality is that of the user coordinates
@@ -119,9 +146,43 @@ def test_place_match_user_coordinates_and_same_utility(ranked, cat, lat):
         assert np.array_equal(sj, pl.scaled_jacobian)
         assert pl.inverted == int(inverted_mask(pl.xy, pl.mesh.quads).sum())
         assert pl.mesh_area == pytest.approx(float(quad_areas(pl.xy, pl.mesh.quads).sum()))
-        # the re-spread alignment keeps the ranked utility
+        # the orientation and alignment used have the ranked utility
         vals = cat.bucket(m.boundary_length).valences[list(cat.bucket(m.boundary_length).ids).index(m.mesh_id)]
-        assert utility_of(ann.codes, vals, lat, m.rotation, m.reflected, pl.alignment) == m.utility  # skip weights included
+        assert utility_of(ann.codes, vals, lat, pl.rotation, pl.reflected, pl.alignment) == m.utility  # skip weights included
+
+
+def test_vertices_between_kept_corners_are_evenly_spaced(ranked, cat, lat):
+    """Between two consecutive kept corners, the boundary vertices split the outline into equal
+    arc lengths (measured along the shape's polygon, independently of the placement code)."""
+    for shp, r, _ in ranked.values():
+        ann = r.annotation
+        ring = shapely.LinearRing(np.vstack([shp.user_points, shp.user_points[:1]]))
+        for m in r.results[:2]:
+            pl = place_match(shp, ann, cat, m, lattice=lat)
+            if pl.slid:
+                continue
+            bxy = pl.xy[pl.mesh.boundary]
+            s = np.array([ring.project(shapely.Point(p)) for p in bxy])
+            corner_xy = shp.user_points[shp.corners]
+            corner = np.linalg.norm(bxy[:, None, :] - corner_xy[None, :, :], axis=-1).min(axis=1) <= 1e-9
+            assert corner.sum() == pl.kept_corners
+            J = np.flatnonzero(corner)
+            per = ring.length
+            for q, ja in enumerate(J):
+                jb = J[(q + 1) % len(J)]
+                run = [(ja + i) % len(s) for i in range((jb - ja) % len(s) + 1)] if len(J) > 1 else []
+                if len(run) < 3:
+                    continue
+                gaps = np.diff(np.unwrap(s[run], period=per))
+                np.testing.assert_allclose(gaps, gaps[0], rtol=1e-9, atol=1e-9)
+
+
+def test_spread_false_keeps_the_match_and_annotated_points(ranked, cat):
+    shp, r, _ = ranked["triangle"]
+    m = r.results[0]
+    raw = place_match(shp, r.annotation, cat, m, spread=False)
+    assert np.array_equal(raw.alignment, m.alignment) and raw.rotation == m.rotation and raw.reflected == m.reflected
+    assert np.array_equal(raw.xy[raw.mesh.boundary], shp.to_user(r.annotation.positions[m.alignment]))
 
 
 def test_place_match_follows_translation_and_scaling(ranked, cat):
@@ -141,16 +202,6 @@ def test_place_match_uses_cache(ranked, cat):
     a = place_match(shp, r.annotation, cat, r.results[0], placements=cache)
     assert cache == {r.results[0].mesh_id: a}
     assert place_match(shp, r.annotation, cat, r.results[0], placements=cache) is a
-
-
-def test_spread_never_worse_than_given_alignment_on_examples(ranked, cat):
-    for shp, r, _ in ranked.values():
-        for m in r.results[:3]:
-            spread = place_match(shp, r.annotation, cat, m)
-            raw = place_match(shp, r.annotation, cat, m, spread=False)
-            assert np.array_equal(raw.alignment, m.alignment)
-            assert gap_cost(r.annotation.t, r.annotation.perimeter, spread.alignment) <= gap_cost(
-                r.annotation.t, r.annotation.perimeter, m.alignment) + 1e-12
 
 
 # ---------------------------------------------------------------------------------------------
@@ -238,35 +289,60 @@ def test_first_valid_skips_folded(ranked, cat, lat):
     ann = r_id.annotation
     cache = {}
     pls = [place_match(shp, ann, cat, m, placements=cache) for m in r_id.results]
-    assert any(p.inverted for p in pls) and any(p.inverted == 0 for p in pls), "example needs both kinds"
-    folded = [m for m, p in zip(r_id.results, pls) if p.inverted]
-    good = [m for m, p in zip(r_id.results, pls) if p.inverted == 0]
+    assert any(not p.valid for p in pls) and any(p.valid for p in pls), "example needs both kinds"
+    folded = [m for m, p in zip(r_id.results, pls) if not p.valid]
+    good = [m for m, p in zip(r_id.results, pls) if p.valid]
     i, m, pl = first_valid(shp, ann, cat, folded + good, placements=cache)
-    assert i == len(folded) and m is good[0] and pl.inverted == 0
+    assert i == len(folded) and m is good[0] and pl.valid
     assert first_valid(shp, ann, cat, folded, placements=cache) is None
     assert first_valid(shp, ann, cat, folded + good, limit=len(folded), placements=cache) is None
 
 
+@pytest.mark.slow
 def test_choose_mesh_reports_and_requires_valid(cat, lat):
-    shp = load_shape(EXAMPLES / "triangle.json")
-    ranking = rank(shp, cat, lat, top=12, tie_break="geometry")
-    pls = place_top(shp, ranking, cat)
-    bad = next(i for i, p in enumerate(pls) if p.inverted) + 1  # 1-based rank of a folded mesh
-    want = next(i for i, p in enumerate(pls) if i + 1 > bad and p.inverted == 0) + 1
+    shp = load_shape(EXAMPLES / "labels" / "shapes" / "ushape.json")
+    ks = [1, 2, 3]
+    ranking = rank(shp, cat, lat, top=12, internal=ks, tie_break="geometry")
+    pls = place_top(shp, ranking, cat, lattice=lat)
+    ok = [acceptable(p) for p in pls]
+    assert not all(ok) and any(ok), "example needs both kinds"
+    bad = ok.index(False) + 1  # 1-based rank of a mesh that is not acceptable
+    want = next(i for i in range(bad, len(ok)) if ok[i]) + 1
 
-    c = choose_mesh(shp, cat, lat, rank=bad)
-    assert not c.valid and c.rank == bad and c.match.mesh_id == ranking.results[bad - 1].mesh_id
+    c = choose_mesh(shp, cat, lat, rank=bad, internal=ks)
+    assert not c.good and c.rank == bad and c.match.mesh_id == ranking.results[bad - 1].mesh_id and c.size is None
     assert c.alternative is not None and c.alternative[0] == want
-    assert c.alternative[1].mesh_id == ranking.results[want - 1].mesh_id and c.alternative[2].inverted == 0
+    assert c.alternative[1].mesh_id == ranking.results[want - 1].mesh_id and acceptable(c.alternative[2])
 
-    v = choose_mesh(shp, cat, lat, rank=bad, require_valid=True)
-    assert v.valid and v.rank == want and v.requested_rank == bad and v.alternative is None
-
-    top = choose_mesh(shp, cat, lat)
-    assert top.rank == 1 and top.valid and top.searched == 0
+    v = choose_mesh(shp, cat, lat, rank=bad, internal=ks, require_valid=True)
+    assert v.good and v.valid and v.rank == want and v.requested_rank == bad and v.alternative is None
 
     with pytest.raises(InputError, match="only 1 meshes"):
         choose_mesh(shp, cat, lat, rank=2, internal=[0])  # k = 0: the single quad
+
+
+@pytest.mark.parametrize("floor", [0.0, 0.8])
+def test_require_valid_honours_the_quality_floor(cat, lat, floor):
+    shp = load_shape(EXAMPLES / "triangle.json")
+    c = choose_mesh(shp, cat, lat, internal=[2, 3], require_valid=True, min_quality=floor, walk=8)
+    if c.good:
+        assert c.placement.min_scaled_jacobian >= floor and c.placement.valid
+    else:  # nothing in the walk passes: the requested mesh is kept and no alternative named
+        assert c.rank == c.requested_rank and c.alternative is None
+
+
+@pytest.mark.parametrize(
+    "xy, good",
+    [
+        ([[0, 0], [1, 0], [1, 1], [0, 1]], True),
+        ([[0, 0], [12.9, 0], [12.9, 1], [0, 1]], False),  # edge ratio 12.9, scaled Jacobian 1
+        ([[0, 0], [1, 0], [1, 0.005], [0.99, 1]], False),  # min scaled Jacobian about 0.005
+    ],
+)
+def test_acceptable_needs_edge_ratio_and_scaled_jacobian(xy, good):
+    mesh = from_quads([[0, 1, 2, 3]])
+    pl = place(np.array(xy, float), np.arange(4.0), np.arange(4), mesh, positions=np.array(xy, float), smooth_iters=0)
+    assert pl.valid and acceptable(pl) is good
 
 
 # ---------------------------------------------------------------------------------------------
@@ -287,3 +363,213 @@ def test_draw_placements_png(tmp_path, ranked, cat):
     path = draw_placements(tmp_path / "p.png", shp, r.annotation, [("a", pls[0]), ("b", pls[1])], title="two")
     assert path.read_bytes().startswith(PNG_MAGIC)
     assert [p.name for p in tmp_path.iterdir()] == ["p.png"]
+
+
+# ---------------------------------------------------------------------------------------------
+# orientations and alignments with skip weights (against brute force)
+
+
+def brute_alignments(codes, seq, table, skip):
+    """Every alignment of the oriented sequence ``seq`` with its utility (pairing weights plus
+    the skip weight of every unmatched point), by enumeration."""
+    tab = np.asarray(table, float).reshape(3, 4, 4, 4)
+    n, m = len(seq), len(codes)
+    tr = [(seq[(j + 1) % n], seq[j], seq[(j - 1) % n]) for j in range(n)]
+    out = []
+    for comb in itertools.combinations(range(m), n):
+        u = sum(tab[codes[i], a - 2, b - 2, c - 2] for i, (a, b, c) in zip(comb, tr))
+        u += sum(skip[codes[i]] for i in range(m) if i not in comb)
+        out.append((u, comb))
+    return out
+
+
+def random_case(rng, m_max=9, n_max=5):
+    m = int(rng.integers(4, m_max + 1))
+    n = int(rng.integers(2, min(m, n_max) + 1))
+    codes = rng.choice(3, m, p=[0.6, 0.25, 0.15])
+    vals = rng.integers(2, 6, n)
+    table = rng.integers(-3, 6, (3, 64)).astype(float)
+    table[rng.random((3, 64)) < 0.15] = -np.inf
+    skip = np.array([rng.choice([0.0, -1.0, 1.0]), rng.choice([0.0, -2.0, -np.inf]), rng.choice([0.0, -3.0, -np.inf])])
+    t = np.sort(rng.uniform(0, 10, m))
+    t -= t[0]
+    return codes, vals, table, skip, t, float(t[-1] + rng.uniform(0.1, 3))
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_orientation_utilities_match_brute_force(seed):
+    rng = np.random.default_rng(seed)
+    for _ in range(15):
+        codes, vals, table, skip, _, _ = random_case(rng)
+        got = orientation_utilities(codes, vals, (table, skip))
+        n = len(vals)
+        for o in range(2 * n):
+            s = vals[::-1] if o >= n else vals
+            seq = np.roll(s, -(o % n))
+            want = max(u for u, _ in brute_alignments(codes, seq, table, skip))
+            assert got[o] == want
+
+
+def test_orientation_utilities_are_the_exact_scorers(cat, lat):
+    """Best orientation = the exact scorer's utility (with the lattice's skip weights), and with
+    skip weights 0 = the paper's DP (plain-Python reference)."""
+    shp = load_shape(EXAMPLES / "lshape.json")
+    ann = annotate(shp, 20)
+    b = cat.bucket(10)
+    res = score_bucket(ann.codes, b.valences[:20], lat)
+    free = dataclasses.replace(lat, skip=(0, 0, 0))
+    for i, vals in enumerate(b.valences[:20]):
+        assert orientation_utilities(ann.codes, vals, lat).max() == res.utility[i]
+        assert orientation_utilities(ann.codes, vals, free).max() == reference_dp(ann.codes, vals, lat.table())
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_spread_optimal_alignment_is_the_most_even_best_alignment(seed):
+    rng = np.random.default_rng(100 + seed)
+    for _ in range(15):
+        codes, vals, table, skip, t, per = random_case(rng)
+        best, al, g = spread_optimal_alignment(t, per, codes, vals, (table, skip))
+        alls = brute_alignments(codes, vals, table, skip)
+        top = max(u for u, _ in alls)
+        assert best == top
+        if not np.isfinite(top):
+            assert al is None
+            continue
+        unit = GAP_UNIT * per * per
+        cost = lambda comb: sum(round(gg * gg / unit) for gg in np.diff(np.r_[t[list(comb)], t[comb[0]] + per]))  # noqa: E731
+        assert g == min(cost(c) for u, c in alls if u == top)
+        assert g == cost(al) and dict(alls)[top] is not None
+        assert any(u == top and tuple(al) == c for u, c in alls)
+
+
+# ---------------------------------------------------------------------------------------------
+# the placed mesh is a mesh of the shape, and does not depend on how the loop is written
+
+POLYGONS = {name: json.loads((EXAMPLES / f"{name}.json").read_text()) for name in ("lshape", "triangle", "tshape", "square")}
+LOOPS = {**POLYGONS, **{name: json.loads((EXAMPLES / f"{name}.json").read_text()) for name in ("circle", "curved")}}
+
+
+def relisted(name, start, reverse):
+    d = LOOPS[name]
+    b = np.array(d["boundary"], float)
+    P = len(b)
+    idx = np.roll(np.arange(P), -start)
+    if reverse:
+        idx = idx[::-1]
+    inv = np.empty(P, int)
+    inv[idx] = np.arange(P)
+    corners = None if d.get("corners") is None else [int(inv[c]) for c in d["corners"]]
+    return make_shape(b[idx], corners)
+
+
+def sorted_xy(xy):
+    xy = np.round(np.asarray(xy), 6) + 0.0
+    return xy[np.lexsort((xy[:, 1], xy[:, 0]))]
+
+
+@settings(max_examples=10, deadline=None)
+@given(name=st.sampled_from(sorted(LOOPS)), k=st.sampled_from([1, 2, 3]), start=st.integers(0, 200),
+       reverse=st.booleans())
+def test_placed_mesh_does_not_depend_on_how_the_loop_is_listed(cat, lat, name, k, start, reverse):
+    """Polygons and curved outlines (a circle has no corner at all), listed from any point in
+    either direction: same mesh, same utility, same vertex positions up to relabelling."""
+    base = choose_mesh(relisted(name, 0, False), cat, lat, internal=[k])
+    other = choose_mesh(relisted(name, start % len(LOOPS[name]["boundary"]), reverse), cat, lat, internal=[k])
+    assert other.match.mesh_id == base.match.mesh_id
+    assert other.match.utility == base.match.utility
+    np.testing.assert_allclose(sorted_xy(other.placement.xy), sorted_xy(base.placement.xy), atol=2e-6)
+    assert other.placement.min_scaled_jacobian == pytest.approx(base.placement.min_scaled_jacobian, abs=1e-6)
+
+
+@pytest.mark.parametrize("name", sorted(POLYGONS))
+def test_valid_placements_cover_the_polygon_exactly(cat, lat, name):
+    """A placement that keeps every corner and does not fold covers the polygon: quad areas sum
+    to the polygon's area (shapely) within 1e-9, and the union of the quads is the polygon."""
+    shp = load_shape(EXAMPLES / f"{name}.json")
+    r = rank(shp, cat, lat, internal=[1, 2, 3], top=6)
+    poly = shapely.Polygon(shp.user_points)
+    seen = 0
+    for m in r.results:
+        pl = place_match(shp, r.annotation, cat, m, lattice=lat)
+        if not pl.valid:
+            assert pl.missed_corners.shape[0] or pl.inverted
+            continue
+        seen += 1
+        assert float(quad_areas(pl.xy, pl.mesh.quads).sum()) / poly.area == pytest.approx(1.0, abs=1e-9)
+        union = shapely.union_all([shapely.Polygon(pl.xy[q]) for q in pl.mesh.quads])
+        assert union.symmetric_difference(poly).area <= 1e-9 * poly.area
+    assert seen, "no valid placement among the top 6"
+
+
+# ---------------------------------------------------------------------------------------------
+# size choice
+
+
+def test_choose_size_orders_by_the_rules_and_names_the_deciding_one(cat, lat):
+    shp = load_shape(EXAMPLES / "lshape.json")
+    sc = choose_size(shp, cat, lat)
+    keys = [size_key(pl, k) for k, _, pl in sc.candidates]
+    assert keys == sorted(keys) and sc.k == sc.candidates[0][0]
+    assert sorted(k for k, _, _ in sc.candidates) == [0, 1, 2, 3][: len(sc.candidates)] or len(sc.candidates) >= 2
+    first_diff = next(i for i in range(len(keys[0])) if keys[0][i] != keys[1][i])
+    assert sc.rule == SIZE_RULES[first_diff]
+    assert sc.rule in sc.describe() and f"k={sc.k}" in sc.describe()
+    c = choose_mesh(shp, cat, lat)
+    assert c.size is not None and c.match.internal_vertices == sc.k
+
+
+def test_size_key_prefers_kept_corners_then_no_folds_then_quality():
+    mesh = from_quads([[0, 1, 2, 3]])
+    sq = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], float)
+    good = place(sq, np.arange(4.0), np.arange(4), mesh, positions=sq, smooth_iters=0)
+    thin = place(sq * [12.9, 1], np.arange(4.0), np.arange(4), mesh, positions=sq * [12.9, 1], smooth_iters=0)
+    missed = dataclasses.replace(good, missed_corners=np.zeros((1, 2)), corners=5)
+    assert size_key(good, 0) < size_key(thin, 0)  # quality floor: edge ratio 12.9
+    assert size_key(thin, 3) < size_key(missed, 0)  # a missed corner loses to anything that keeps them
+    assert size_key(good, 0) < size_key(good, 1)  # then fewer internal vertices
+
+
+def test_circle_size_choice_fits_the_area(cat, lat):
+    """On a curved outline a single quad is a poor fit (area ratio 0.64); the area rule must
+    choose a size whose chords cut off less."""
+    shp = load_shape(EXAMPLES / "circle.json")
+    sc = choose_size(shp, cat, lat)
+    ratios = {k: pl.area_ratio for k, _, pl in sc.candidates}
+    chosen = sc.candidates[0][2]
+    assert abs(1 - chosen.area_ratio) <= min(abs(1 - r) for r in ratios.values()) + AREA_BAND
+    assert chosen.area_ratio > ratios[0]
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_snap_picks_the_nearest_increasing_assignment(seed):
+    from jaxmatch.placement.choose import _snap
+
+    rng = np.random.default_rng(seed)
+    for _ in range(60):
+        r = int(rng.integers(1, 7))
+        p = int(rng.integers(1, r + 1))
+        even, tc = np.sort(rng.uniform(0, 1, r)), np.sort(rng.uniform(0, 1, p))
+        got = _snap(even, tc)
+        best = min(sum((even[list(c)] - tc) ** 2) for c in itertools.combinations(range(r), p))
+        assert np.all(np.diff(got) > 0) and sum((even[got] - tc) ** 2) == pytest.approx(best, abs=1e-12)
+
+
+def test_spare_vertices_take_the_corners_an_alignment_skipped():
+    """An alignment of the L shape that skips the concave corner, with vertices on straight
+    points around it: unsnapped, the corner is missed; snapped, one of those vertices stands
+    exactly on it and the others are spread evenly between the corners."""
+    from jaxmatch.placement.choose import corner_boundary
+
+    shp = load_shape(EXAMPLES / "lshape.json")
+    ann = annotate(shp, 40)
+    corners = np.flatnonzero(ann.codes != 0)
+    v = int(np.flatnonzero(ann.codes == 2)[0])
+    al = np.sort(np.r_[corners[corners != v], v - 1, v + 1])  # evenly: at 1/3 and 2/3 of the run, off the corner
+    assert corner_boundary(shp, ann, al, snap=False).missed.shape[0] == 1
+    b = corner_boundary(shp, ann, al)
+    assert b.missed.shape[0] == 0
+    hit = np.flatnonzero((b.xy == ann.positions[v]).all(axis=1))
+    assert hit.size == 1
+    j = int(hit[0])
+    left, right = b.u[j] - b.u[j - 1], b.u[j + 1] - b.u[j]
+    assert left > 0 and right > 0

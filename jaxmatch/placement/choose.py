@@ -1,18 +1,21 @@
 """Placing ranked meshes in the user's shape: the glue between ranking and geometry.
 
 :func:`rank <jaxmatch.scoring.rank.rank>` works on the combinatorics only; this module puts a
-ranked mesh into the shape (:func:`jaxmatch.placement.embed.place` on the unit-box shape, then mapped to
-the user's coordinates), re-orders tied utilities by the quality of the embedding
-(:func:`rerank_ties`), walks down a ranking for the first mesh that embeds without folds
-(:func:`first_valid`), and draws placed meshes (:func:`draw_placements`).
+ranked mesh into the shape (:func:`place_match`: corners kept, vertices spread evenly between
+them, every equally good orientation and alignment tried so that the result does not depend on
+how the loop is listed; :func:`jaxmatch.placement.embed.place` on the unit-box shape, then mapped
+to the user's coordinates), re-orders tied utilities by the quality of the embedding
+(:func:`rerank_ties`), walks down a ranking for the first good mesh of the shape
+(:func:`first_valid`, :func:`acceptable`), chooses the mesh size by fit (:func:`choose_size`,
+:data:`SIZE_RULES`), and draws placed meshes (:func:`draw_placements`).
 
 :func:`choose_mesh` is what ``jaxmatch mesh`` does; :func:`place_top` is what
 ``jaxmatch score --png`` does.
 
 All placements returned here are in the user's coordinates (the shape file's unit of length).
 Placements are deterministic (numpy only), so a ``placements`` cache (``mesh_id -> Placement``,
-valid for one shape, annotation and catalogue) can be passed around to avoid placing a mesh
-twice.
+valid for one shape, annotation, catalogue and lattice) can be passed around to avoid placing a
+mesh twice.
 """
 
 from __future__ import annotations
@@ -23,12 +26,17 @@ import os
 from dataclasses import dataclass
 from itertools import groupby, islice
 from pathlib import Path
-from typing import TYPE_CHECKING, Callable, Iterable, Sequence
+from typing import TYPE_CHECKING, Callable, Iterable, NamedTuple, Sequence
 
 import numpy as np
 
 from jaxmatch.errors import InputError
-from jaxmatch.placement.embed import Placement, inverted_mask, place, quality
+from jaxmatch.catalogue.mesh import boundary_valences, valences
+from jaxmatch.placement.embed import Placement, edge_ratios, inverted_mask, oriented_boundary, place, quality
+from jaxmatch.placement.embed import boundary_paths as embed_boundary_paths
+from jaxmatch.shape import S as S_CODE
+from jaxmatch.shape import cumulative_length
+from jaxmatch.shape import point_at as shape_point_at
 from jaxmatch.scoring.rank import TIE_CAP, Match, Ranking, TieBreaker
 from jaxmatch.scoring.rank import rank as rank_meshes
 
@@ -39,10 +47,23 @@ if TYPE_CHECKING:  # pragma: no cover
 
 __all__ = [
     "DEFAULT_WALK",
+    "MAX_EDGE_RATIO",
+    "MIN_QUALITY",
     "MeshChoice",
+    "SIZE_RULES",
+    "SizeChoice",
     "TIE_CAP",
+    "acceptable",
     "check_outputs",
     "choose_mesh",
+    "choose_size",
+    "corner_boundary",
+    "fit_json",
+    "match_candidates",
+    "orientation_utilities",
+    "placement_key",
+    "size_key",
+    "spread_optimal_alignment",
     "draw_placements",
     "first_valid",
     "geometry_key",
@@ -133,45 +154,457 @@ def gap_cost(t: np.ndarray, perimeter: float, alignment: np.ndarray) -> float:
 
 
 # ---------------------------------------------------------------------------------------------
+# the lattice as the placement sees it
+
+
+def lattice_weights(lattice) -> tuple[np.ndarray, np.ndarray]:
+    """``(table (3, 64) float64, skip (3,) float64)`` of a lattice: the pairing weights
+    ``[code, 16 (u-2) + 4 (v-2) + (w-2)]`` and the weight of skipping a point of each code
+    (``-inf``: forbidden; zeros for a lattice without skip weights, the paper's free skipping).
+    ``lattice``: a :class:`~jaxmatch.scoring.lattice.Lattice`, or a ``(table, skip)`` pair."""
+    if isinstance(lattice, tuple):
+        table, skip = lattice
+    else:
+        table = lattice.table()
+        skip = getattr(lattice, "skip", None)
+        if callable(skip):
+            skip = skip()
+    tab = np.asarray(table, dtype=np.float64).reshape(3, 64)
+    sk = np.zeros(3) if skip is None else np.asarray(skip, dtype=np.float64).reshape(3)
+    return tab, sk
+
+
+def _pair_weights(codes: np.ndarray, seq: np.ndarray, table: np.ndarray) -> np.ndarray:
+    """``(..., n, m)``: weight of oriented vertex ``j`` (valences ``seq (..., n)``) on point ``i``."""
+    t = np.stack([np.roll(seq, -1, axis=-1), seq, np.roll(seq, 1, axis=-1)], axis=-1) - 2
+    flat = t[..., 0] * 16 + t[..., 1] * 4 + t[..., 2]  # (..., n)
+    return table[codes[None, :], flat[..., None]]
+
+
+def orientation_utilities(codes, vals, lattice) -> np.ndarray:
+    """Utility of every orientation of one mesh, ``(2n,) float64`` (``-inf``: none).
+
+    codes: (m,) point codes; vals: (n,) ccw boundary valences; orientation ``o < n`` is
+    rotation ``o``, ``o >= n`` rotation ``o - n`` reflected (as in :mod:`jaxmatch.scoring.exact`).
+    Plain numpy, the recurrence ``D[i][j] = max(D[i-1][j] + skip[code[i-1]], D[i-1][j-1] +
+    W[i-1, j-1])`` for all orientations at once (one mesh: microseconds)."""
+    c = np.asarray(codes, dtype=np.int64).ravel()
+    v = np.asarray(vals, dtype=np.int64).ravel()
+    table, skip = lattice_weights(lattice)
+    n, m = v.shape[0], c.shape[0]
+    rot = (np.arange(n)[:, None] + np.arange(n)[None, :]) % n
+    seqs = np.concatenate([v[rot], v[::-1][rot]])  # (2n, n)
+    W = _pair_weights(c, seqs, table)  # (2n, n, m)
+    D = np.full((2 * n, n + 1), -np.inf)
+    D[:, 0] = 0.0
+    for i in range(m):
+        sk = skip[c[i]]
+        take = D[:, :-1] + W[:, :, i]
+        D = D + sk
+        D[:, 1:] = np.maximum(D[:, 1:], take)
+    return D[:, n]
+
+
+MAX_TIED_ALIGNMENTS = 64
+"""At most this many equally good alignments of one orientation are listed
+(:func:`spread_optimal_alignment` with ``all_ties``)."""
+
+GAP_UNIT = 1e-12
+"""Squared arc-length gaps are compared in integer multiples of ``GAP_UNIT * perimeter**2``,
+so that equal spacings compare equal whatever the round-off of where the loop starts."""
+
+
+def spread_optimal_alignment(t: np.ndarray, perimeter: float, codes: np.ndarray, seq: np.ndarray,
+                             lattice, *, all_ties: bool = False) -> tuple[float, np.ndarray | None, int]:
+    """The alignment of the oriented sequence ``seq`` with the highest utility, and among those
+    the most evenly spread one.
+
+    t: (m,) arc-length parameters in ``[0, perimeter)``, increasing; codes: (m,); seq: (n,)
+    valences in matched order. Utility: pairing weights plus skip weights of unmatched points
+    (cyclically all of them). Spread: sum of squared cyclic arc-length gaps between consecutive
+    vertices (in units of :data:`GAP_UNIT` ``* perimeter**2``, rounded). Exact lexicographic
+    dynamic programme over (first point, vertex, point); only first points that start an
+    optimal alignment are tried. Returns ``(utility, alignment (n,) int64 or None, gap cost)``;
+    with ``all_ties`` a list in place of the one alignment: every alignment with the best
+    utility and the smallest gap cost (at most :data:`MAX_TIED_ALIGNMENTS`), since which of
+    several equally good ones a single answer picks depends on where the loop is labelled to
+    start.
+    """
+    tt = np.asarray(t, dtype=np.float64).ravel()
+    c = np.asarray(codes, dtype=np.int64).ravel()
+    sq = np.asarray(seq, dtype=np.int64).ravel()
+    table, skip = lattice_weights(lattice)
+    n, m = sq.shape[0], c.shape[0]
+    if n == 0 or n > m:
+        return -math.inf, ([] if all_ties else None), 0
+    E = _pair_weights(c, sq, table)  # (n, m)
+    sk = skip[c]
+    fin = np.isfinite(sk)
+    P = np.concatenate([[0.0], np.cumsum(np.where(fin, sk, 0.0))])  # finite skip sums
+    Fb = np.concatenate([[0], np.cumsum(~fin)])  # forbidden-skip counts
+
+    def skipped(a, b):  # skip weight of points a..b-1 (arrays broadcast)
+        return np.where(Fb[b] - Fb[a] > 0, -np.inf, P[b] - P[a])
+
+    idx = np.arange(m)
+    between = np.where(idx[:, None] < idx[None, :], skipped(np.minimum(idx[:, None] + 1, m), np.maximum(idx[None, :], idx[:, None] + 1)), -np.inf)  # [i', i]
+    prefix = skipped(np.zeros(m, np.int64), idx)  # points before i
+    suffix = skipped(np.minimum(idx + 1, m), np.full(m, m))  # points after i
+    # backward best utilities: B[j][i] with vertex j on point i, vertices j.. and the suffix
+    B = E[n - 1] + suffix
+    for j in range(n - 2, -1, -1):
+        B = E[j] + np.max(between + B[None, :], axis=1)
+    total = prefix + B
+    best = float(np.max(total))
+    if not np.isfinite(best):
+        return best, ([] if all_ties else None), 0
+    starts = np.flatnonzero(total == best)
+    unit = GAP_UNIT * perimeter * perimeter
+    gq = np.round((tt[None, :] - tt[:, None]) ** 2 / unit)  # [i', i]
+    S = starts.size
+    U = np.full((S, m), -np.inf)
+    U[np.arange(S), starts] = prefix[starts] + E[0, starts]
+    G = np.zeros((S, m))
+    back = np.zeros((n, S, m), np.int64)
+    ties = [None] * n
+    for j in range(1, n):
+        tot = U[:, None, :] + between.T[None, :, :] + E[j][None, :, None]  # (S, i, i')
+        bu = tot.max(axis=2)
+        tg = np.where(tot == bu[..., None], G[:, None, :] + gq.T[None, :, :], np.inf)
+        arg = np.argmin(tg, axis=2)
+        U = bu
+        G = np.take_along_axis(tg, arg[..., None], axis=2)[..., 0]
+        back[j] = arg
+        if all_ties:
+            ties[j] = (tg == G[..., None]) & np.isfinite(tg)
+    U = U + suffix[None, :]
+    G = G + np.round((perimeter - tt[None, :] + tt[starts][:, None]) ** 2 / unit)
+    G = np.where(U == best, G, np.inf)
+    g_min = float(G.min())
+    if not all_ties:
+        s_, i = divmod(int(np.argmin(G)), m)
+        out = np.empty(n, np.int64)
+        for j in range(n - 1, -1, -1):
+            out[j] = i
+            i = int(back[j, s_, i])
+        return best, out, int(g_min)
+    outs: list[np.ndarray] = []
+
+    def walk(s_, j, i, tail):
+        if len(outs) >= MAX_TIED_ALIGNMENTS:
+            return
+        if j == 0:
+            outs.append(np.array([i, *tail], np.int64))
+            return
+        for ip in np.flatnonzero(ties[j][s_, i]):
+            walk(s_, j - 1, int(ip), [i, *tail])
+
+    for s_, i in zip(*np.nonzero(G == g_min)):
+        walk(int(s_), n - 1, int(i), [])
+    return best, outs, int(g_min)
+
+
+# ---------------------------------------------------------------------------------------------
+# boundary positions
+
+
+STRAIGHT_TOL = 1e-9
+"""A piece of outline is straight when every polyline point lies within this distance (unit
+box) of the chord between its ends."""
+
+
+class Boundary(NamedTuple):
+    """Where the boundary vertices of a match go (unit-box coordinates of the shape).
+
+    u: ``(n,) float64`` arc-length parameters along ``shape.points`` (from ``points[0]``; may
+    exceed the perimeter by less than one lap); xy: ``(n, 2)`` positions (corners exactly the
+    shape's polyline vertices); slide_groups: ``(ja, jb, js)`` runs of vertices between two kept
+    corners on one straight side (see :func:`jaxmatch.placement.embed.place`); missed:
+    ``(c', 2)`` corners of the shape that no vertex takes.
+    """
+
+    u: np.ndarray
+    xy: np.ndarray
+    slide_groups: tuple
+    missed: np.ndarray
+
+
+def corner_boundary(shape: Shape, annotation: Annotation, alignment: np.ndarray, *, snap: bool = True) -> Boundary:
+    """Boundary vertices of an alignment: vertices on corners stay there, the vertices between
+    two consecutive kept corners are spread evenly by arc length along the outline between
+    them (which straight point of the annotation each took does not change its utility). With
+    no corner kept, the vertices are spread evenly around the whole loop, at the phase that
+    best fits the aligned points (least squares).
+
+    snap: a corner the alignment skipped, between two kept corners whose run has vertices to
+    spare, takes one of them (the assignment of run vertices to skipped corners, in order, that
+    is nearest to the even spacing: :func:`_snap`), and the rest are spread evenly between the
+    corners; so the mesh keeps that corner too. Its vertex then stands on a corner although its
+    alignment took a straight point (``Placement.alignment`` still says so).
+    """
+    al = np.asarray(alignment, dtype=np.int64).ravel()
+    n = al.shape[0]
+    codes = np.asarray(annotation.codes)
+    per = float(annotation.perimeter)
+    tt = np.asarray(annotation.t, dtype=np.float64)
+    pts = shape.points
+    J = np.flatnonzero(codes[al] != S_CODE)
+    u = tt[al].astype(np.float64).copy()
+    pin = {int(j): int(al[j]) for j in J}  # vertex -> corner point it stands on
+    if J.size == 0:
+        step = per / n
+        phase = float(np.mean(tt[al] - step * np.arange(n)))
+        u = phase + step * np.arange(n)
+    elif snap:
+        corner_pts = np.flatnonzero(codes != S_CODE)
+        taken = set(pin.values())
+        for q, ja in enumerate(J):
+            jb = J[(q + 1) % J.size]
+            r = (jb - ja - 1) % n if J.size > 1 else n - 1
+            ta = tt[al[ja]]
+            tb = tt[al[jb]] if J.size > 1 else ta + per
+            if tb <= ta:
+                tb += per
+            skipped = [(c, tt[c] + (per if tt[c] <= ta else 0.0)) for c in corner_pts if c not in taken]
+            skipped = sorted((tc, c) for c, tc in skipped if ta < tc < tb)
+            if 0 < len(skipped) <= r:
+                even = ta + (tb - ta) * (np.arange(1, r + 1) / (r + 1))
+                for qi, (tc, c) in zip(_snap(even, np.array([tc for tc, _ in skipped])), skipped):
+                    pin[int((ja + 1 + qi) % n)] = int(c)
+    groups = []
+    if pin:
+        P = np.array(sorted(pin))
+        cum = cumulative_length(pts)
+        for q, ja in enumerate(P):
+            jb = P[(q + 1) % P.size]
+            r = (jb - ja - 1) % n if P.size > 1 else n - 1
+            ta = tt[pin[ja]]
+            tb = tt[pin[jb]] if P.size > 1 else ta + per
+            if tb <= ta:
+                tb += per
+            u[ja] = ta
+            js = (ja + 1 + np.arange(r)) % n
+            u[js] = ta + (tb - ta) * (np.arange(1, r + 1) / (r + 1))
+            if r and P.size > 1 and _straight(pts, cum, ta, tb):
+                groups.append((int(ja), int(jb), js.astype(np.int64)))
+    xy = shape_point_at(pts, u)
+    for j, c in pin.items():
+        xy[j] = annotation.positions[c]  # corners exactly
+    return Boundary(u, xy, tuple(groups), missed_corners(annotation, xy))
+
+
+def _snap(even: np.ndarray, tc: np.ndarray) -> list[int]:
+    """Increasing indices ``q_1 < ... < q_p`` into ``even (r,)`` minimising
+    ``sum_k (even[q_k] - tc[k])**2`` for increasing ``tc (p,)``, ``p <= r`` (a small DP; ties
+    keep the smaller index)."""
+    r, p = even.shape[0], tc.shape[0]
+    cost = (even[None, :] - tc[:, None]) ** 2  # (p, r)
+    D = cost[0].copy()
+    back = np.zeros((p, r), np.int64)
+    for k in range(1, p):
+        new = np.full(r, np.inf)
+        run, at = np.inf, 0
+        for q in range(r):  # run = min over q' < q of D[q'], at its first argmin
+            if run < np.inf:
+                new[q] = run + cost[k, q]
+                back[k, q] = at
+            if D[q] < run:
+                run, at = D[q], q
+        D = new
+    q = int(np.argmin(D))
+    out = [q]
+    for k in range(p - 1, 0, -1):
+        q = int(back[k, q])
+        out.append(q)
+    return out[::-1]
+
+
+def missed_corners(annotation: Annotation, bxy: np.ndarray, tol: float = 1e-9) -> np.ndarray:
+    """``(c', 2)``: the annotation's corners (unit box) farther than ``tol`` from every boundary
+    vertex ``bxy (n, 2)``. A vertex spread onto a corner keeps it even if its alignment skipped
+    that corner's point (the outline is covered exactly all the same)."""
+    corner = np.asarray(annotation.positions)[np.asarray(annotation.codes) != S_CODE]
+    if corner.shape[0] == 0:
+        return np.zeros((0, 2))
+    d = np.linalg.norm(corner[:, None, :] - np.asarray(bxy)[None, :, :], axis=-1).min(axis=1)
+    return corner[d > tol].reshape(-1, 2)
+
+
+def _straight(points: np.ndarray, cum: np.ndarray, t0: float, t1: float) -> bool:
+    """The outline between parameters ``t0 < t1`` is one straight segment."""
+    per = cum[-1]
+    c2 = np.concatenate([cum[:-1], cum[:-1] + per, cum[:-1] + 2 * per])
+    p2 = np.concatenate([points, points, points])
+    tol = 1e-12 * per
+    inner = p2[(c2 > t0 + tol) & (c2 < t1 - tol)]
+    if inner.shape[0] == 0:
+        return True
+    a, b = shape_point_at(points, np.array([t0, t1]))
+    d = b - a
+    ln = float(np.hypot(*d))
+    if ln == 0:
+        return False
+    dist = np.abs((inner[:, 0] - a[0]) * d[1] - (inner[:, 1] - a[1]) * d[0]) / ln
+    along = (inner - a) @ d / (ln * ln)
+    return bool(np.all(dist <= STRAIGHT_TOL) and np.all((along > 0) & (along < 1)))
+
+
+# ---------------------------------------------------------------------------------------------
 # placing one match
 
+MAX_CANDIDATES = 8
+"""At most this many equally good orientations/alignments of one mesh are placed to choose
+among them (:func:`place_match`)."""
 
-def place_match(shape: Shape, annotation: Annotation, catalogue: Catalogue, match: Match, *,
+SLIDE_BELOW = 0.5
+"""A placement whose min scaled Jacobian is below this (or that folds) is tried again with the
+vertices of straight sides free to slide along them (:func:`place_match`)."""
+
+COORD_DIGITS = 6
+"""Unit-box coordinates are compared rounded to this many decimals in the last tie-break."""
+
+
+def placement_key(pl: Placement) -> tuple:
+    """Order among placements of one mesh (best first): fewer missed corners, fewer inverted
+    quads, higher min scaled Jacobian (:data:`SJ_DIGITS` decimals), lower max edge ratio
+    (4 decimals), higher mean scaled Jacobian, then the sorted rounded vertex coordinates
+    (a geometric, labelling-independent last resort: equal keys mean equal vertex positions)."""
+    sj = pl.min_scaled_jacobian
+    sj = -math.inf if math.isnan(sj) else round(sj, SJ_DIGITS)
+    er = pl.max_edge_ratio
+    er = math.inf if math.isnan(er) else round(er, 4)
+    coords = np.round(pl.xy, COORD_DIGITS) + 0.0  # -0.0 -> 0.0
+    order = np.lexsort((coords[:, 1], coords[:, 0]))
+    return (pl.missed_corners.shape[0], pl.inverted, -sj, er, -round(pl.mean_scaled_jacobian, SJ_DIGITS),
+            tuple(coords[order].ravel().tolist()))
+
+
+def match_candidates(annotation: Annotation, vals: np.ndarray, lattice, utility: float | None = None) -> list[tuple[int, bool, np.ndarray]]:
+    """Every orientation of a mesh with the best utility, each with its most evenly spread
+    best alignments (:func:`spread_optimal_alignment`, one per first point), keeping those of
+    the smallest gap cost:
+    ``[(rotation, reflected, alignment (n,) int64)]``.
+
+    Which orientation the scorer reports among equal utilities depends on where the shape's
+    loop starts; this set does not (up to the loop's relabelling)."""
+    v = np.asarray(vals, dtype=np.int64).ravel()
+    n = v.shape[0]
+    ut = orientation_utilities(annotation.codes, v, lattice)
+    best = float(np.max(ut)) if ut.size else -math.inf
+    if utility is not None and np.isfinite(best) and abs(best - float(utility)) > 1e-6 * max(1.0, abs(best)):
+        raise ValueError(f"mesh utility {utility} differs from its best orientation's {best}: wrong lattice?")
+    cands = []
+    for o in np.flatnonzero(ut == best):
+        rot, refl = int(o % n), bool(o >= n)
+        seq = np.roll(v[::-1] if refl else v, -rot)
+        u, als, g = spread_optimal_alignment(annotation.t, annotation.perimeter, annotation.codes, seq, lattice, all_ties=True)
+        cands.extend((g, rot, refl, al) for al in als)
+    if not cands:
+        return []
+    g0 = min(c[0] for c in cands)
+    return [(rot, refl, al) for g, rot, refl, al in cands if g == g0]
+
+
+def place_match(shape: Shape, annotation: Annotation, catalogue: Catalogue, match: Match, *, lattice=None,
                 smooth_iters: int = 200, spread: bool = True, placements: dict | None = None) -> Placement:
     """Place the ranked ``match`` in ``shape``; the result is in the user's coordinates.
 
     annotation: the annotation the match was computed for (``ranking.annotation``).
-    The mesh (``catalogue.mesh(match.mesh_id)``) is oriented by the match's rotation and
-    reflection; its boundary vertices sit exactly on annotated points: those of
-    ``match.alignment`` re-spread evenly along the outline at the same utility
-    (:func:`spread_alignment`; ``spread=False``: ``match.alignment`` as it is; should the
-    spread one fold, ``match.alignment`` is placed too and the one with fewer inverted quads,
-    then higher min scaled Jacobian, is kept). The interior is embedded and smoothed
-    (:func:`jaxmatch.placement.embed.place`). ``Placement.alignment`` holds the
-    alignment used. Quality (scaled Jacobian, angles, inverted count) is recomputed on the user
+
+    With ``lattice`` (the one the ranking used): every orientation of the mesh with the match's
+    utility is a candidate, each with its most evenly spread best alignment; those of the
+    smallest spread cost are placed (:func:`match_candidates`) and the best placement by
+    :func:`placement_key` is kept. So the same shape listed clockwise, counter-clockwise or
+    from another point gives the same vertex positions. Without ``lattice``: the match's own
+    orientation, its alignment re-spread at the same point codes (:func:`spread_alignment`).
+
+    Boundary: vertices on corners sit exactly on them; the others are spread evenly by arc
+    length between the kept corners around them (:func:`corner_boundary`). A placement that
+    folds or has min scaled Jacobian below :data:`SLIDE_BELOW` is tried again with the vertices
+    of straight sides sliding along them, and the better one kept (:func:`placement_key`).
+    ``spread=False``: the match's orientation and alignment, vertices exactly on their
+    annotated points (no spreading, no sliding).
+
+    ``Placement.alignment``, ``rotation``, ``reflected`` hold the orientation and alignment
+    used; ``missed_corners`` the corners no vertex takes. Quality is recomputed on the user
     coordinates, so it agrees with what is drawn and written. ``placements``: optional cache
-    keyed by mesh id (read and filled; only for one shape, annotation, catalogue and
+    keyed by mesh id (read and filled; only for one shape, annotation, catalogue, lattice and
     ``spread``/``smooth_iters`` setting).
     """
     if placements is not None and match.mesh_id in placements:
         return placements[match.mesh_id]
     mesh = catalogue.mesh(match.mesh_id)
     given = np.asarray(match.alignment, dtype=np.int64)
-    al = spread_alignment(annotation.t, annotation.perimeter, annotation.codes, given) if spread else given
-
-    def put(alignment):
-        return place(shape.points, annotation.t, alignment, mesh, match.rotation, match.reflected,
-                     positions=annotation.positions, smooth_iters=smooth_iters)
-
-    pl = put(al)
-    if pl.inverted and not np.array_equal(al, given):  # rare: then keep the better of the two
-        other = put(given)
-        if (other.inverted, -other.min_scaled_jacobian) < (pl.inverted, -pl.min_scaled_jacobian):
-            pl = other
-    user = to_user_placement(shape, pl)
+    if not spread:
+        pl = place(shape.points, annotation.t, given, mesh, match.rotation, match.reflected,
+                   positions=annotation.positions, smooth_iters=smooth_iters)
+        miss = missed_corners(annotation, annotation.positions[given])
+        user = to_user_placement(shape, dataclasses.replace(pl, missed_corners=miss, corners=shape.n_corners))
+    else:
+        if lattice is not None:
+            cands = match_candidates(annotation, boundary_valences(mesh), lattice, match.utility)
+        else:
+            cands = []
+        if not cands:
+            cands = [(match.rotation, match.reflected,
+                      spread_alignment(annotation.t, annotation.perimeter, annotation.codes, given))]
+        # one candidate per distinct boundary (orientations that differ by a symmetry of the mesh
+        # give the same placement), in a geometric order, at most MAX_CANDIDATES
+        unique = {}
+        for rot, refl, al in cands:
+            unique.setdefault(_boundary_signature(shape, annotation, mesh, rot, refl, al), (rot, refl, al))
+        best = None
+        for sig in sorted(unique)[:MAX_CANDIDATES]:
+            rot, refl, al = unique[sig]
+            for pl in _place_candidate(shape, annotation, mesh, rot, refl, al, smooth_iters):
+                key = placement_key(pl)
+                if best is None or key < best[0]:
+                    best = (key, pl)
+        user = to_user_placement(shape, best[1])
     if placements is not None:
         placements[match.mesh_id] = user
     return user
+
+
+def _boundary_signature(shape, annotation, mesh, rot, refl, al) -> tuple:
+    """Sorted (rounded position, valence) of the boundary vertices of a candidate: equal for
+    two orientations that differ by a symmetry of the mesh."""
+    b = corner_boundary(shape, annotation, al)
+    _, loop = oriented_boundary(mesh, rot, refl)
+    val = valences(mesh.quads, mesh.n_vertices)[loop]
+    xy = np.round(b.xy, COORD_DIGITS) + 0.0
+    return tuple(sorted(zip(xy[:, 0].tolist(), xy[:, 1].tolist(), val.tolist())))
+
+
+def _place_candidate(shape, annotation, mesh, rot, refl, al, smooth_iters):
+    """Placements (unit box) of one orientation and alignment: evenly spread, and, when that
+    folds or is poor, with sliding straight-side vertices too."""
+    b = corner_boundary(shape, annotation, al)
+
+    def put(groups):
+        pl = place(shape.points, annotation.t, al, mesh, rot, refl, boundary_xy=b.xy, slide_groups=groups,
+                   smooth_iters=smooth_iters)
+        paths = boundary_paths_between(shape.points, b.u, pl.xy[pl.mesh.boundary])
+        return dataclasses.replace(pl, boundary_paths=paths, missed_corners=b.missed, corners=shape.n_corners)
+
+    pl = put(())
+    yield pl
+    if b.slide_groups and smooth_iters > 0 and (pl.inverted or pl.min_scaled_jacobian < SLIDE_BELOW):
+        yield put(b.slide_groups)
+
+
+def boundary_paths_between(points: np.ndarray, u: np.ndarray, bxy: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The outline between consecutive boundary vertices (parameters ``u``), with the ends
+    replaced by the vertices' exact positions ``bxy (n, 2)``."""
+    paths = embed_boundary_paths(points, np.mod(u, cumulative_length(points)[-1]))
+    out = []
+    n = len(paths)
+    for j, p in enumerate(paths):
+        p = p.copy()
+        p[0] = bxy[j]
+        p[-1] = bxy[(j + 1) % n]
+        out.append(p)
+    return tuple(out)
 
 
 def to_user_placement(shape: Shape, pl: Placement) -> Placement:
@@ -183,6 +616,8 @@ def to_user_placement(shape: Shape, pl: Placement) -> Placement:
     return dataclasses.replace(
         pl,
         xy=xy,
+        edge_ratio=edge_ratios(xy, quads),
+        missed_corners=shape.to_user(pl.missed_corners).reshape(-1, 2),
         scaled_jacobian=sj,
         min_angle=amin,
         max_angle=amax,
@@ -198,26 +633,25 @@ def to_user_placement(shape: Shape, pl: Placement) -> Placement:
 
 
 def geometry_key(placement: Placement, mesh_id: str) -> tuple:
-    """Sort key among equal utilities: higher min scaled Jacobian (rounded to
-    :data:`SJ_DIGITS` decimals; NaN counts as worst), then fewer irregular internal vertices,
-    then the mesh id. A placement with inverted quads always sorts after one without (this
-    only matters when both round to a min scaled Jacobian of 0: a degenerate, 180-degree
-    corner whose sign is round-off)."""
+    """Sort key among equal utilities: fewer missed corners, then no inverted quads before
+    some, then higher min scaled Jacobian (rounded to :data:`SJ_DIGITS` decimals; NaN counts as
+    worst), then fewer irregular internal vertices, then the mesh id."""
     sj = placement.min_scaled_jacobian
     sj = -math.inf if math.isnan(sj) else round(sj, SJ_DIGITS)
-    return (placement.inverted > 0, -sj, int(len(placement.irregular)), mesh_id)
+    return (placement.missed_corners.shape[0], placement.inverted > 0, -sj, int(len(placement.irregular)), mesh_id)
 
 
 def rerank_ties(shape: Shape, annotation: Annotation, catalogue: Catalogue, matches: Sequence[Match], *,
-                cap: int = TIE_CAP, placements: dict | None = None, smooth_iters: int = 200) -> list[Match]:
+                cap: int = TIE_CAP, placements: dict | None = None, smooth_iters: int = 200, lattice=None) -> list[Match]:
     """Re-order meshes of equal utility by the quality of their embedding.
 
     matches: ranked best first (utilities non-increasing). Within each run of equal utility
-    with more than one member, members are placed (:func:`place_match`) and ordered by
-    :func:`geometry_key` (no inverted quads first, then higher min scaled Jacobian, then
-    fewer irregular internal vertices, then id). At most ``cap`` meshes are placed in all, in the given order; tied meshes beyond
-    the cap follow the placed ones of their run, in the given order. Utilities never change
-    order. ``placements``: cache (mesh id -> placement), read and filled. Returns a new list.
+    with more than one member, members are placed (:func:`place_match`, with ``lattice``) and
+    ordered by :func:`geometry_key` (fewer missed corners, no inverted quads first, then higher
+    min scaled Jacobian, then fewer irregular internal vertices, then id). At most ``cap``
+    meshes are placed in all, in the given order; tied meshes beyond the cap follow the placed
+    ones of their run, in the given order. Utilities never change order. ``placements``:
+    cache (mesh id -> placement), read and filled. Returns a new list.
     """
     budget = max(int(cap), 0)
     cache = {} if placements is None else placements
@@ -229,21 +663,41 @@ def rerank_ties(shape: Shape, annotation: Annotation, catalogue: Catalogue, matc
             continue
         head, tail = grp[:budget], grp[budget:]
         budget -= len(head)
-        keyed = [(geometry_key(place_match(shape, annotation, catalogue, m, smooth_iters=smooth_iters, placements=cache), m.mesh_id), i)
+        keyed = [(geometry_key(place_match(shape, annotation, catalogue, m, lattice=lattice, smooth_iters=smooth_iters,
+                                           placements=cache), m.mesh_id), i)
                  for i, m in enumerate(head)]
         out.extend(head[i] for _, i in sorted(keyed))
         out.extend(tail)
     return out
 
 
-def geometry_tie_breaker(catalogue: Catalogue, *, smooth_iters: int = 200) -> TieBreaker:
+def geometry_tie_breaker(catalogue: Catalogue, lattice=None, *, smooth_iters: int = 200) -> TieBreaker:
     """The ``tie_break`` of :func:`jaxmatch.scoring.rank.rank` that orders equal utilities by
-    :func:`rerank_ties` (placed quality) for meshes of ``catalogue``."""
+    :func:`rerank_ties` (placed quality) for meshes of ``catalogue``; pass the ranking's
+    ``lattice`` so that placements do not depend on how the shape's loop is listed."""
 
     def reorder(shape: Shape, annotation: Annotation, matches: Sequence[Match], cap: int, placements: dict) -> list[Match]:
-        return rerank_ties(shape, annotation, catalogue, matches, cap=cap, placements=placements, smooth_iters=smooth_iters)
+        return rerank_ties(shape, annotation, catalogue, matches, cap=cap, placements=placements,
+                           smooth_iters=smooth_iters, lattice=lattice)
 
     return reorder
+
+
+# ---------------------------------------------------------------------------------------------
+# what counts as a good placement
+
+MIN_QUALITY = 0.2
+"""Default floor on the min scaled Jacobian for a placement to count as good (``--min-quality``)."""
+
+MAX_EDGE_RATIO = 8.0
+"""Default ceiling on the longest/shortest edge ratio of any quad for a placement to count as
+good: a min scaled Jacobian near 1 does not catch a long thin quad (a 1 x 13 rectangle)."""
+
+
+def acceptable(pl: Placement, min_quality: float = MIN_QUALITY, max_edge_ratio: float = MAX_EDGE_RATIO) -> bool:
+    """``pl`` is a mesh of the shape (every corner kept, no inverted quad, :attr:`Placement.valid`)
+    with min scaled Jacobian ``>= min_quality`` and max edge ratio ``<= max_edge_ratio``."""
+    return bool(pl.valid and pl.min_scaled_jacobian >= min_quality and pl.max_edge_ratio <= max_edge_ratio)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -251,19 +705,136 @@ def geometry_tie_breaker(catalogue: Catalogue, *, smooth_iters: int = 200) -> Ti
 
 
 def first_valid(shape: Shape, annotation: Annotation, catalogue: Catalogue, matches: Iterable[Match], *,
-                limit: int = DEFAULT_WALK, placements: dict | None = None,
-                smooth_iters: int = 200) -> tuple[int, Match, Placement] | None:
-    """The first of (at most ``limit`` of) ``matches`` whose placement has no inverted quad.
+                limit: int = DEFAULT_WALK, placements: dict | None = None, smooth_iters: int = 200, lattice=None,
+                min_quality: float = -1.0, max_edge_ratio: float = math.inf) -> tuple[int, Match, Placement] | None:
+    """The first of (at most ``limit`` of) ``matches`` whose placement is :func:`acceptable`
+    (by default: valid, i.e. every corner kept and no inverted quad; pass ``min_quality`` /
+    ``max_edge_ratio`` for a quality floor).
 
     matches: candidates in ranking order (any iterable; consumed lazily). Returns
     ``(index into matches, match, placement)`` or None when none of the first ``limit``
-    embeds without folds. ``placements``: cache, read and filled.
+    is. ``placements``: cache, read and filled.
     """
     for i, m in enumerate(islice(matches, max(int(limit), 0))):
-        pl = place_match(shape, annotation, catalogue, m, smooth_iters=smooth_iters, placements=placements)
-        if pl.inverted == 0:
+        pl = place_match(shape, annotation, catalogue, m, lattice=lattice, smooth_iters=smooth_iters, placements=placements)
+        if acceptable(pl, min_quality, max_edge_ratio):
             return i, m, pl
     return None
+
+
+# ---------------------------------------------------------------------------------------------
+# choosing the size
+
+SJ_BAND = 0.1
+"""Min scaled Jacobians are compared in bands of this width when choosing a size, so that a
+marginally better worst quad does not outweigh a much smaller mesh."""
+
+AREA_BAND = 0.05
+"""Mesh/shape area ratios are compared by ``|1 - ratio|`` in bands of this width when choosing a
+size (polygons: exactly 1 once every corner is kept; curved outlines: the chords cut off area,
+less with more boundary vertices)."""
+
+SIZE_RULES = ("corners kept", "no inverted quads", "quality floor", "area fit band", "min scaled Jacobian band",
+              "fewer quads", "fewer internal vertices")
+"""The rules of :func:`choose_size`, in order."""
+
+
+def size_key(pl: Placement, k: int, min_quality: float = MIN_QUALITY, max_edge_ratio: float = MAX_EDGE_RATIO) -> tuple:
+    """One entry per rule of :data:`SIZE_RULES` (smaller is better): missed corners, inverted
+    quads, 0 if the quality floor holds (min SJ and edge ratio) else 1, the area band
+    (``floor(|1 - area ratio| / AREA_BAND)``), minus the min scaled Jacobian's band
+    (``floor(min SJ / SJ_BAND)``), number of quads, internal vertices."""
+    sj = pl.min_scaled_jacobian
+    band = -math.inf if math.isnan(sj) else math.floor(round(sj, SJ_DIGITS) / SJ_BAND + 1e-9)
+    ar = pl.area_ratio
+    area = math.inf if math.isnan(ar) else math.floor(round(abs(1.0 - ar), 9) / AREA_BAND)
+    ok = pl.min_scaled_jacobian >= min_quality and pl.max_edge_ratio <= max_edge_ratio
+    return (pl.missed_corners.shape[0], pl.inverted, 0 if ok else 1, area, -band, pl.mesh.n_quads, int(k))
+
+
+@dataclass(frozen=True, eq=False)
+class SizeChoice:
+    """Result of :func:`choose_size`.
+
+    k: the chosen number of internal vertices; candidates: ``(k, match, placement)`` of the
+    best mesh of every size, best first by :func:`size_key`; rule: the entry of
+    :data:`SIZE_RULES` that separated the chosen size from the runner-up (``"only size"``
+    when there was one candidate); points: the number of annotated points used.
+    """
+
+    k: int
+    candidates: tuple
+    rule: str
+    points: int
+
+    def describe(self) -> str:
+        """One line: the chosen size, the rule that decided, and the runner-up."""
+        k, m, pl = self.candidates[0]
+        head = f"size k={k} chosen by rule '{self.rule}'"
+        if len(self.candidates) < 2:
+            return head
+        k2, m2, pl2 = self.candidates[1]
+        return (f"{head} ({SIZE_RULES_TEXT}); runner-up k={k2}: {_fit_text(pl2)}; chosen: {_fit_text(pl)}")
+
+    def as_json(self) -> dict:
+        return {"k": int(self.k), "rule": self.rule, "rules": list(SIZE_RULES),
+                "candidates": [{"k": int(k), "mesh_id": m.mesh_id, "utility": float(m.utility), **fit_json(pl)}
+                               for k, m, pl in self.candidates]}
+
+
+SIZE_RULES_TEXT = "rules in order: " + ", ".join(SIZE_RULES)
+
+
+def _fit_text(pl: Placement) -> str:
+    return (f"{pl.kept_corners}/{pl.corners} corners, {pl.inverted} inverted, min SJ {pl.min_scaled_jacobian:.3f}, "
+            f"max edge ratio {pl.max_edge_ratio:.2f}, {pl.mesh.n_quads} quads")
+
+
+def fit_json(pl: Placement) -> dict:
+    """The fit measures of a placement as JSON fields (user coordinates)."""
+    return {
+        "corners": int(pl.corners), "corners_kept": pl.kept_corners,
+        "missed_corners": [[float(x), float(y)] for x, y in pl.missed_corners],
+        "inverted": int(pl.inverted), "min_scaled_jacobian": pl.min_scaled_jacobian,
+        "mean_scaled_jacobian": pl.mean_scaled_jacobian, "max_edge_ratio": pl.max_edge_ratio,
+        "area_ratio": pl.area_ratio, "quads": int(pl.mesh.n_quads), "valid": pl.valid,
+    }
+
+
+def choose_size(shape: Shape, catalogue: Catalogue, lattice: Lattice, *, points: int | None = None,
+                tie_break="geometry", tie_cap: int = TIE_CAP, min_quality: float = MIN_QUALITY,
+                max_edge_ratio: float = MAX_EDGE_RATIO, progress: Callable[[int, int], None] | None = None) -> SizeChoice:
+    """Choose the number of internal vertices by the fit of the best mesh of each size.
+
+    Raw utilities grow with the mesh (more matched points), so they cannot compare sizes. The
+    best mesh of every size k (rank 1 of ``rank(per_size=True)``) is placed and the sizes are
+    ordered by :func:`size_key`, i.e. by the rules of :data:`SIZE_RULES` in turn: every corner
+    kept; no inverted quad; the quality floor (min scaled Jacobian ``>= min_quality`` and max
+    edge ratio ``<= max_edge_ratio``); mesh area closer to the shape's (bands of
+    :data:`AREA_BAND` of ``|1 - area ratio|``: matters for curved outlines); the higher band of
+    min scaled Jacobian (bands of :data:`SJ_BAND`); fewer quads; fewer internal vertices. ``SizeChoice.rule`` names the rule
+    that decided. The annotation has the same number of points for every size (the default
+    for the longest boundary), as in a ranking of all sizes.
+    """
+    tb = geometry_tie_breaker(catalogue, lattice) if tie_break == "geometry" else tie_break
+    ranking = rank_meshes(shape, catalogue, lattice, internal=None, top=1, points=points, per_size=True,
+                          tie_break=tb, tie_cap=tie_cap, progress=progress)
+    cache = ranking.placements if ranking.placements is not None else {}
+    cands = []
+    for m in ranking.results:
+        pl = place_match(shape, ranking.annotation, catalogue, m, lattice=lattice, placements=cache)
+        cands.append((size_key(pl, m.internal_vertices, min_quality, max_edge_ratio), m.internal_vertices, m, pl))
+    cands.sort(key=lambda c: c[0])
+    if len(cands) < 2:
+        rule = "only size"
+    else:
+        a, b = cands[0][0], cands[1][0]
+        rule = next(SIZE_RULES[i] for i in range(len(a)) if a[i] != b[i])
+    return SizeChoice(cands[0][1], tuple((k, m, pl) for _, k, m, pl in cands), rule, len(ranking.annotation.codes))
+
+
+# ---------------------------------------------------------------------------------------------
+# choosing a mesh
 
 
 @dataclass(frozen=True, eq=False)
@@ -273,10 +844,12 @@ class MeshChoice:
     ranking: the ranking used (its ``results`` hold the first ``requested_rank`` matches);
     rank / match / placement: the mesh placed (1-based rank; placement in user coordinates);
     requested_rank: the ``--rank`` asked for (``rank`` differs only with ``require_valid``);
-    alternative: when ``placement`` has inverted quads, the next-ranked mesh that embeds
-    without folds as ``(rank, match, placement)``, or None when none of the next ``walk``
-    does (also None when ``placement`` is valid); searched: how many ranked meshes after
-    the requested one were placed looking for a valid one (0 when none was needed).
+    alternative: when ``placement`` is not :func:`acceptable`, the next-ranked mesh that is, as
+    ``(rank, match, placement)``, or None when none of the next ``walk`` is (also None when
+    ``placement`` is acceptable); searched: how many ranked meshes after the requested one were
+    placed looking for an acceptable one (0 when none was needed); size: the
+    :class:`SizeChoice` when the size was chosen (no ``internal`` given), else None;
+    min_quality / max_edge_ratio: the quality floor used.
     """
 
     ranking: Ranking
@@ -286,31 +859,53 @@ class MeshChoice:
     requested_rank: int
     alternative: tuple[int, Match, Placement] | None = None
     searched: int = 0
+    size: SizeChoice | None = None
+    min_quality: float = MIN_QUALITY
+    max_edge_ratio: float = MAX_EDGE_RATIO
 
     @property
     def valid(self) -> bool:
-        return self.placement.inverted == 0
+        """The placed mesh is a mesh of the shape (corners kept, no inverted quad)."""
+        return self.placement.valid
+
+    @property
+    def good(self) -> bool:
+        """Valid and above the quality floor (:func:`acceptable`)."""
+        return acceptable(self.placement, self.min_quality, self.max_edge_ratio)
 
 
 def choose_mesh(shape: Shape, catalogue: Catalogue, lattice: Lattice, *, rank: int = 1,
                 internal: list[int] | None = None, points: int | None = None, tie_break: str = "geometry",
                 tie_cap: int = TIE_CAP, require_valid: bool = False, walk: int = DEFAULT_WALK,
+                min_quality: float = MIN_QUALITY, max_edge_ratio: float = MAX_EDGE_RATIO,
                 progress: Callable[[int, int], None] | None = None) -> MeshChoice:
     """Rank the catalogue for ``shape``, take the ``rank``-th mesh (1-based) and place it.
 
-    When that mesh folds (inverted quads): with ``require_valid`` the ranking is walked down
-    (at most ``walk`` meshes from ``rank`` on, in ranking order) and the first mesh that embeds
-    with zero inverted quads is placed instead (if there is none, the ``rank``-th is kept and
-    ``alternative`` is None); otherwise the ``rank``-th is kept and the next ``walk`` meshes
-    are searched for ``alternative``. Raises :class:`InputError` when fewer than ``rank``
-    meshes match, :class:`UnmatchableError` when none does.
+    Size: with ``internal`` the meshes of those sizes compete by utility; without it the size is
+    chosen first by the fit of the best mesh of each size (:func:`choose_size`), and the ranking
+    is that size's (so ``rank`` counts within it).
+
+    When the mesh is not :func:`acceptable` (a corner missed, an inverted quad, min scaled
+    Jacobian below ``min_quality`` or an edge ratio above ``max_edge_ratio``): with
+    ``require_valid`` the ranking is walked down (at most ``walk`` meshes from ``rank`` on, in
+    ranking order) and the first acceptable mesh is placed instead (if there is none, the
+    ``rank``-th is kept and ``alternative`` is None); otherwise the ``rank``-th is kept and the
+    next ``walk`` meshes are searched for ``alternative``. Raises :class:`InputError` when fewer
+    than ``rank`` meshes match, :class:`UnmatchableError` when none does.
     """
     r = int(rank)
     if r < 1:
         raise InputError(f"rank must be at least 1, got {r}", "--rank")
+    size = None
+    m_points = points
+    if internal is None:
+        size = choose_size(shape, catalogue, lattice, points=points, tie_break=tie_break, tie_cap=tie_cap,
+                           min_quality=min_quality, max_edge_ratio=max_edge_ratio, progress=progress)
+        internal = [size.k]
+        m_points = size.points  # keep the annotation the sizes were compared on
     # top=0: score only; count the matchable meshes before aligning (or placing) any of them
-    tb = geometry_tie_breaker(catalogue) if tie_break == "geometry" else tie_break
-    ranking = rank_meshes(shape, catalogue, lattice, internal=internal, top=0, points=points,
+    tb = geometry_tie_breaker(catalogue, lattice) if tie_break == "geometry" else tie_break
+    ranking = rank_meshes(shape, catalogue, lattice, internal=internal, top=0, points=m_points,
                           tie_break=tb, tie_cap=tie_cap, progress=progress)
     count = ranking.scored - ranking.unmatchable
     if count < r:
@@ -319,24 +914,28 @@ def choose_mesh(shape: Shape, catalogue: Catalogue, lattice: Lattice, *, rank: i
     cache = ranking.placements if ranking.placements is not None else {}
     ann = ranking.annotation
     match = ranking.results[r - 1]
-    pl = place_match(shape, ann, catalogue, match, placements=cache)
-    if pl.inverted == 0:
-        return MeshChoice(ranking, r, match, pl, r)
+    pl = place_match(shape, ann, catalogue, match, lattice=lattice, placements=cache)
+    common = dict(size=size, min_quality=min_quality, max_edge_ratio=max_edge_ratio)
+    if acceptable(pl, min_quality, max_edge_ratio):
+        return MeshChoice(ranking, r, match, pl, r, **common)
     following = ranking.following if ranking.following is not None else iter(())
     tried: list[Match] = []
     candidates = (tried.append(m) or m for m in following)
-    found = first_valid(shape, ann, catalogue, candidates, limit=max(int(walk) - 1, 0), placements=cache)
+    found = first_valid(shape, ann, catalogue, candidates, limit=max(int(walk) - 1, 0), placements=cache, lattice=lattice,
+                        min_quality=min_quality, max_edge_ratio=max_edge_ratio)
     alt = None if found is None else (r + 1 + found[0], found[1], found[2])
     if require_valid and alt is not None:
-        return MeshChoice(ranking, alt[0], alt[1], alt[2], r, None, len(tried))
-    return MeshChoice(ranking, r, match, pl, r, alt, len(tried))
+        return MeshChoice(ranking, alt[0], alt[1], alt[2], r, None, len(tried), **common)
+    return MeshChoice(ranking, r, match, pl, r, alt, len(tried), **common)
 
 
-def place_top(shape: Shape, ranking: Ranking, catalogue: Catalogue, *, placements: dict | None = None) -> list[Placement]:
+def place_top(shape: Shape, ranking: Ranking, catalogue: Catalogue, *, placements: dict | None = None,
+              lattice=None) -> list[Placement]:
     """Placements (user coordinates) of every match in ``ranking.results``, in order; reuses
-    ``ranking.placements`` (meshes already placed for tie-breaking)."""
+    ``ranking.placements`` (meshes already placed for tie-breaking; pass the ranking's
+    ``lattice``, as for the tie-break)."""
     cache = placements if placements is not None else (ranking.placements if ranking.placements is not None else {})
-    return [place_match(shape, ranking.annotation, catalogue, m, placements=cache) for m in ranking.results]
+    return [place_match(shape, ranking.annotation, catalogue, m, lattice=lattice, placements=cache) for m in ranking.results]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -375,8 +974,13 @@ def draw_placements(path: str | os.PathLike, shape: Shape, annotation: Annotatio
     return draw_many(panels, path, ncols=ncols, title=title)
 
 
-def panel_title(rank: int, match: Match) -> str:
-    """``"#1 k5-b2b65fa5f3b0 (utility 24, rot 0)"``: title line for a picture panel (the full
-    mesh id, so that it can be copied into ``catalogue export --id``)."""
-    refl = ", reflected" if match.reflected else ""
-    return f"#{rank} {match.mesh_id} (utility {match.utility:g}, rot {match.rotation}{refl})"
+def panel_title(rank: int, match: Match, placement: Placement | None = None) -> str:
+    """``"#1 k5-b2b65fa5f3b0 (utility 24, rot 0, corners 4/4)"``: title line for a picture panel
+    (the full mesh id, so that it can be copied into ``catalogue export --id``; with
+    ``placement``, the orientation placed and the corners kept)."""
+    if placement is None:
+        refl = ", reflected" if match.reflected else ""
+        return f"#{rank} {match.mesh_id} (utility {match.utility:g}, rot {match.rotation}{refl})"
+    refl = ", reflected" if placement.reflected else ""
+    corners = f", corners {placement.kept_corners}/{placement.corners}" if placement.corners else ""
+    return f"#{rank} {match.mesh_id} (utility {match.utility:g}, rot {placement.rotation}{refl}{corners})"

@@ -44,6 +44,7 @@ boundary vertices are copied from the input exactly.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 import scipy.sparse
@@ -54,8 +55,10 @@ from jaxmatch.geometry import cumulative_length, point_at, signed_area, sub_poly
 
 __all__ = [
     "Placement",
+    "Slide",
     "arc_lengths",
     "boundary_paths",
+    "edge_ratios",
     "inverted_mask",
     "oriented_boundary",
     "place",
@@ -90,6 +93,15 @@ class Placement:
     region_area: area enclosed by the input ``points`` (units of length squared).
     mesh_area: signed area covered by the quads (sum of the quads' shoelace areas; equals the
         area of the polygon of boundary vertices when nothing is folded).
+    edge_ratio: ``(F,) float64`` per quad, longest over shortest edge (>= 1; inf for a
+        zero-length edge), see :func:`edge_ratios`.
+    rotation, reflected: the orientation of the match that was placed (see
+        :func:`oriented_boundary`).
+    missed_corners: ``(c, 2) float64`` corners of the shape that are not a mesh vertex (same
+        coordinates as ``xy``); empty when every corner is kept (set by
+        :func:`jaxmatch.placement.choose.place_match`; :func:`place` knows no corners).
+    corners: number of corners of the shape (0 for :func:`place` called directly).
+    slid: whether boundary vertices on straight sides were allowed to slide (see :func:`place`).
     """
 
     mesh: QuadMesh
@@ -103,6 +115,27 @@ class Placement:
     boundary_paths: tuple = ()
     region_area: float = float("nan")
     mesh_area: float = float("nan")
+    edge_ratio: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    rotation: int = 0
+    reflected: bool = False
+    missed_corners: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    corners: int = 0
+    slid: bool = False
+
+    @property
+    def max_edge_ratio(self) -> float:
+        """Largest longest/shortest edge ratio over the quads (nan for no quads)."""
+        return float(self.edge_ratio.max()) if self.edge_ratio.size else float("nan")
+
+    @property
+    def kept_corners(self) -> int:
+        """Number of the shape's corners that are mesh vertices."""
+        return int(self.corners - self.missed_corners.shape[0])
+
+    @property
+    def valid(self) -> bool:
+        """A mesh *of the shape*: every corner is a mesh vertex and no quad is inverted."""
+        return self.inverted == 0 and self.missed_corners.shape[0] == 0
 
     @property
     def min_scaled_jacobian(self) -> float:
@@ -238,6 +271,20 @@ def inverted_mask(xy: np.ndarray, quads: np.ndarray) -> np.ndarray:
     return (_corners(xy, q)[2] <= 0).any(axis=1)
 
 
+def edge_ratios(xy: np.ndarray, quads: np.ndarray) -> np.ndarray:
+    """``(F,) float64``: longest over shortest of each quad's four edges (1 for a square or
+    rhombus; ``inf`` when an edge has zero length). Scale-free; a min scaled Jacobian near 1
+    says nothing about it (a 1 x 13 rectangle has scaled Jacobian 1 and edge ratio 13)."""
+    q = np.asarray(quads)
+    if q.size == 0:
+        return np.zeros(0)
+    p = np.asarray(xy, dtype=np.float64)[q]
+    ln = np.linalg.norm(np.roll(p, -1, axis=1) - p, axis=-1)
+    lo, hi = ln.min(axis=1), ln.max(axis=1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(lo > 0, hi / np.where(lo > 0, lo, 1.0), np.inf)
+
+
 # ---------------------------------------------------------------------------------------------
 # interior: Tutte embedding
 
@@ -272,14 +319,13 @@ def tutte(quads: np.ndarray, n_vertices: int, boundary: np.ndarray, boundary_xy:
 # untangling and smoothing
 
 
-def _objective(x_free, xy, free, quads, delta, power):
+def _energy(pos, quads, delta, power):
     """Power mean of the regularised corner condition numbers, ``(mean kappa**power)**(1/power)``,
-    and its gradient w.r.t. the free vertices (flattened). Same minimisers as the sum of
-    ``kappa**power``, but computed without overflow."""
-    pos = xy.copy()
-    pos[free] = x_free.reshape(-1, 2)
+    and its gradient w.r.t. every position ``(V, 2)``. Same minimisers as the sum of
+    ``kappa**power``, but computed without overflow. ``(inf, zeros)`` where not finite."""
     e1, e2, a = _corners(pos, quads)
     d2 = 4.0 * delta * delta
+    zero = np.zeros_like(pos)
     with np.errstate(all="ignore"):
         r = np.sqrt(a * a + d2)
         h = np.where(a >= 0, 0.5 * (a + r), d2 / (2.0 * (r - a)))  # stable for a << 0
@@ -287,7 +333,7 @@ def _objective(x_free, xy, free, quads, delta, power):
         k = N / (2.0 * h)
         kmax = float(k.max())
         if not np.isfinite(kmax) or kmax <= 0:
-            return np.inf, np.zeros_like(x_free)
+            return np.inf, zero
         C = k.size
         f = kmax * float(np.mean((k / kmax) ** power)) ** (1.0 / power)
         dk = (k / f) ** (power - 1) / C  # d f / d kappa_c
@@ -299,10 +345,80 @@ def _objective(x_free, xy, free, quads, delta, power):
     flat = quads.ravel()
     gx = np.bincount(flat, weights=G[..., 0].ravel(), minlength=pos.shape[0])
     gy = np.bincount(flat, weights=G[..., 1].ravel(), minlength=pos.shape[0])
-    grad = np.stack([gx, gy], axis=-1)[free].ravel()
+    grad = np.stack([gx, gy], axis=-1)
     if not (np.isfinite(f) and np.all(np.isfinite(grad))):
-        return np.inf, np.zeros_like(x_free)
+        return np.inf, zero
     return f, grad
+
+
+class Slide(NamedTuple):
+    """Boundary vertices that may slide along one straight side.
+
+    a, b: ``(2,)`` the side's fixed ends (normally two kept corners); vertices: ``(r,) int``
+    the vertex ids strictly between them, in order from ``a`` to ``b``. Their positions are
+    ``a + u_k (b - a)`` with ``0 < u_1 < ... < u_r < 1`` parametrised by the softmax of
+    ``r + 1`` gap logits (``u_k`` = sum of the first ``k`` gaps), so they stay on the side,
+    in order, whatever the optimiser does; all logits 0 is the even spacing.
+    """
+
+    a: np.ndarray
+    b: np.ndarray
+    vertices: np.ndarray
+
+
+class _Params:
+    """Flat optimisation vector <-> positions: free vertices' ``(x, y)``, then the gap logits
+    of each :class:`Slide`."""
+
+    def __init__(self, xy, free, slides):
+        self.base = np.asarray(xy, dtype=np.float64)
+        self.free = free
+        self.slides = [Slide(np.asarray(s.a, float), np.asarray(s.b, float), np.asarray(s.vertices, np.int64)) for s in slides]
+        self.nf = 2 * free.size
+
+    def start(self, xy) -> np.ndarray:
+        z = [np.asarray(xy, float)[self.free].ravel()]
+        for s in self.slides:
+            d = s.b - s.a
+            u = np.concatenate([[0.0], (np.asarray(xy, float)[s.vertices] - s.a) @ d / float(d @ d), [1.0]])
+            gaps = np.maximum(np.diff(u), 1e-12)
+            z.append(np.log(gaps / gaps.sum()))
+        return np.concatenate(z)
+
+    def _split(self, x):
+        off = self.nf
+        for s in self.slides:
+            r = s.vertices.size
+            z = x[off:off + r + 1]
+            off += r + 1
+            w = np.exp(z - z.max())
+            sm = w / w.sum()
+            yield s, sm, np.cumsum(sm)[:r]
+
+    def positions(self, x) -> np.ndarray:
+        pos = self.base.copy()
+        pos[self.free] = x[: self.nf].reshape(-1, 2)
+        for s, _, u in self._split(x):
+            pos[s.vertices] = s.a + u[:, None] * (s.b - s.a)
+        return pos
+
+    def pull(self, x, gpos) -> np.ndarray:
+        """Gradient w.r.t. ``x`` from the gradient w.r.t. positions ``(V, 2)``."""
+        out = [gpos[self.free].ravel()]
+        for s, sm, u in self._split(x):
+            g = gpos[s.vertices] @ (s.b - s.a)  # d f / d u_k, (r,)
+            g = np.concatenate([g, [0.0]])  # u_{r+1} = 1 is not a vertex
+            tail = np.cumsum(g[::-1])[::-1]  # sum_{k >= i} g_k
+            out.append(sm * (tail - float(g[:-1] @ u)))
+        return np.concatenate(out)
+
+
+def _objective(x, params, quads, delta, power):
+    pos = params.positions(x)
+    f, g = _energy(pos, quads, delta, power)
+    if not np.isfinite(f):
+        return np.inf, np.zeros_like(x)
+    return f, params.pull(x, g)
 
 
 def _lbfgs(fg, x0: np.ndarray, maxiter: int, mem: int = 8, ftol: float = 1e-11, gtol: float = 1e-10) -> np.ndarray:
@@ -365,12 +481,10 @@ def _lbfgs(fg, x0: np.ndarray, maxiter: int, mem: int = 8, ftol: float = 1e-11, 
     return x
 
 
-def _minimise(xy, free, quads, delta, power, maxiter):
-    """L-BFGS on the free vertices; returns new (V, 2) positions."""
-    out = xy.copy()
-    x = _lbfgs(lambda z: _objective(z, xy, free, quads, delta, power), xy[free].ravel(), maxiter)
-    out[free] = x.reshape(-1, 2)
-    return out
+def _minimise(xy, params, quads, delta, power, maxiter):
+    """L-BFGS on the free vertices (and sliding boundary vertices); returns new (V, 2) positions."""
+    x = _lbfgs(lambda z: _objective(z, params, quads, delta, power), params.start(xy), maxiter)
+    return params.positions(x)
 
 
 SMOOTH_POWERS = (2.0, 4.0, 8.0, 16.0)
@@ -386,11 +500,14 @@ def smooth(
     iters: int = 200,
     powers: tuple[float, ...] = SMOOTH_POWERS,
     untangle_rounds: int = 12,
+    slides: tuple[Slide, ...] = (),
 ) -> np.ndarray:
     """Untangle (if needed) and smooth, moving all vertices not in ``fixed``.
 
     xy: (V, 2) start positions (ideally normalised: O(1) size); quads: (F, 4) ccw;
     fixed: vertex ids that stay put. ``iters``: L-BFGS iterations per round (0: return ``xy``).
+    slides: boundary vertices (listed in ``fixed``) that may nevertheless move along a straight
+    side (:class:`Slide`); they stay on it, in order, so the region covered is unchanged.
 
     Untangling: rounds of the regularised objective (power 1) with ``delta`` from the worst
     corner area (Escobar et al.'s rule ``delta^2 = eps (eps - min_area)``) until every corner
@@ -404,8 +521,10 @@ def smooth(
     xy = np.asarray(xy, dtype=np.float64)
     V = xy.shape[0]
     free = np.setdiff1d(np.arange(V), np.asarray(fixed))
-    if free.size == 0 or iters <= 0 or q.size == 0:
+    slides = tuple(s for s in slides if len(s.vertices))
+    if (free.size == 0 and not slides) or iters <= 0 or q.size == 0:
         return xy.copy()
+    params = _Params(xy, free, slides)
     F = q.shape[0]
     area = float(np.abs(quad_areas(xy, q)).sum()) or 1.0
     eps = 1e-2 * area / F  # corner area under which a corner counts as nearly folded
@@ -417,11 +536,11 @@ def smooth(
         if s_min >= eps:
             break
         delta = np.sqrt(eps * (eps - s_min))
-        cur = _minimise(cur, free, q, delta, 1.0, iters)
+        cur = _minimise(cur, params, q, delta, 1.0, iters)
         best, best_key = _pick(best, best_key, cur, q)
     cur = best
     for p in powers:
-        cur = _minimise(cur, free, q, floor, float(p), iters)
+        cur = _minimise(cur, params, q, floor, float(p), iters)
         best, best_key = _pick(best, best_key, cur, q)
     return best
 
@@ -468,6 +587,8 @@ def place(
     reflected: bool = False,
     *,
     positions: np.ndarray | None = None,
+    boundary_xy: np.ndarray | None = None,
+    slide_groups: tuple = (),
     smooth_iters: int = 200,
 ) -> Placement:
     """Place ``mesh`` in the shape ``points`` following a match.
@@ -477,6 +598,12 @@ def place(
     matched order (see :func:`oriented_boundary`); rotation/reflected: the match's orientation.
     positions: optional (m, 2) annotated points; when given, boundary vertices are put exactly
     there (otherwise at ``point_at(points, t)``, which returns polyline vertices exactly).
+    boundary_xy: optional (n, 2) boundary vertex positions in matched order, used instead of
+    the annotated points (``alignment`` is then only recorded; boundary paths run between these
+    positions' arc-length parameters ``t[alignment]``, so give positions on the outline).
+    slide_groups: ``(ja, jb, js)`` triples of matched-order boundary indices: the vertices
+    ``js`` (in order) lie on the straight segment from boundary vertex ``ja`` to ``jb`` and may
+    slide along it during untangling and smoothing (:class:`Slide`); ``ja``/``jb`` stay put.
     smooth_iters: L-BFGS iterations per untangling/smoothing round (0: plain Tutte).
     """
     pts = np.asarray(points, dtype=np.float64)
@@ -484,7 +611,11 @@ def place(
     al = np.asarray(alignment, dtype=np.int64).ravel()
     om, loop = oriented_boundary(mesh, rotation, reflected)
     _check_alignment(al, tt.shape[0], loop.shape[0])
-    if positions is None:
+    if boundary_xy is not None:
+        bxy = np.asarray(boundary_xy, dtype=np.float64).reshape(-1, 2).copy()
+        if bxy.shape[0] != loop.shape[0]:
+            raise ValueError(f"boundary_xy has {bxy.shape[0]} rows, mesh boundary has {loop.shape[0]}")
+    elif positions is None:
         bxy = point_at(pts, tt[al])
     else:
         bxy = np.asarray(positions, dtype=np.float64).reshape(-1, 2)[al]
@@ -495,9 +626,15 @@ def place(
     offset = bxy.mean(axis=0)
     scale = float(np.sqrt(np.mean(np.sum((bxy - offset) ** 2, axis=1)))) or 1.0
     nb = (bxy - offset) / scale
+    groups = [(int(ja), int(jb), np.asarray(js, np.int64)) for ja, jb, js in slide_groups if len(js)]
+    slides = tuple(Slide(nb[ja], nb[jb], loop[js]) for ja, jb, js in groups)
     x0 = tutte(quads, V, loop, nb)
-    xn = smooth(x0, quads, loop, iters=smooth_iters)
+    xn = smooth(x0, quads, loop, iters=smooth_iters, slides=slides)
     xy = to_user(xn, scale, offset)
+    for ja, jb, js in groups:  # slid vertices: exactly on the user's segment
+        d = nb[jb] - nb[ja]
+        u = (xn[loop[js]] - nb[ja]) @ d / float(d @ d)
+        bxy[js] = bxy[ja] + u[:, None] * (bxy[jb] - bxy[ja])
     xy[loop] = bxy  # exact boundary positions (no round-off from normalisation)
 
     sj, amin, amax = quality(xy, quads)
@@ -505,6 +642,10 @@ def place(
     internal = np.ones(V, bool)
     internal[loop] = False
     irregular = np.flatnonzero(internal & (val != 4))
+    if boundary_xy is not None or positions is not None:
+        paths = _paths_exact(pts, tt[al], bxy)
+    else:
+        paths = boundary_paths(pts, tt[al])
     return Placement(
         mesh=om,
         xy=xy,
@@ -514,9 +655,13 @@ def place(
         inverted=int(inverted_mask(xy, quads).sum()),
         irregular=irregular,
         alignment=al,
-        boundary_paths=boundary_paths(pts, tt[al]) if positions is None else _paths_exact(pts, tt[al], bxy),
+        boundary_paths=paths,
         region_area=polygon_area(pts),
         mesh_area=float(quad_areas(xy, quads).sum()),
+        edge_ratio=edge_ratios(xy, quads),
+        rotation=int(rotation),
+        reflected=bool(reflected),
+        slid=bool(groups),
     )
 
 
