@@ -1,0 +1,84 @@
+"""Compiled CPU backend for the exact host: the max-plus DP as a numba kernel.
+
+:class:`NumbaBackend` implements the backend seam of :func:`jaxmatch.scoring.exact.exact_values`
+(``mesh_lanes`` and ``run(problem, vals)``): it receives the padded problem (shifted-frame
+weights ``tab (4, 64)``, ``gate (4,)``, codes ``(S, m_pad)`` with their true lengths) and
+returns the raw ``E[m][n]`` of every orientation, the same numbers' classification as
+:func:`jaxmatch.scoring.exact.final_blocks` (valid values bit for bit; invalid ones, at or below
+``kind.neg / 2``, may differ in their exact sentinel value, which the host maps to ``-inf``).
+
+Kernel (:func:`_dp_kernel`), per chunk of :data:`LANES` meshes of one boundary length and one
+shape, chunks spread over all cores with ``numba.prange``:
+
+* lanes = meshes, innermost and contiguous, in the DP number type (int16 for the shipped
+  lattices: 32 lanes per AVX-512 op); per-vertex weights ``(2, 4, n, lanes)`` of the sequence
+  and of its mirror are built once per chunk, and orientation ``r`` reads row ``(r + j) % n``
+  of them (no per-orientation weight copies);
+* per orientation the DP row ``d (n + 1, lanes)`` stays in L1;
+* banded: after input point ``i`` only rows ``max(1, n - m + i + 1) .. min(n, i + 1)`` are
+  updated (row ``j > i`` is unreachable, and a row below ``n - (m - i)`` cannot reach ``D[m][n]``);
+  for ``m = 2n`` that is ``(n + 1) / (2n)`` of the cells, about half;
+* padded input points (code 3) are not visited at all (``problem.lengths``).
+
+Measurements and the alternatives tried: ``docs/perf.md``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["LANES", "NumbaBackend", "numba_values"]
+
+LANES = 128
+"""Meshes per chunk (vector lanes of one DP row; measured 64 / 128 / 256 / 512: docs/perf.md)."""
+
+def _kernel():
+    """The compiled int16 kernel (:mod:`jaxmatch.scoring._numba_dp`, imported on first use)."""
+    from jaxmatch.scoring._numba_dp import dp_kernel_i16
+
+    return dp_kernel_i16
+
+
+def numba_values(codes, lengths, vals, tab, gate, strict: bool = False, lanes: int = LANES) -> np.ndarray:
+    """Raw shifted-frame ``E[m][n]`` of every orientation: ``(S, N, 2n)`` in ``tab.dtype``.
+
+    codes: ``(S, m_pad) int32`` (3 = padding, never visited); lengths: ``(S,)`` true lengths;
+    vals: ``(N, n)`` valences 2..5; tab: ``(4, 64)`` and gate: ``(4,)`` in the DP number type
+    (:func:`jaxmatch.scoring.exact.dp_table`, :func:`~jaxmatch.scoring.exact.dp_gate`); strict: some
+    type must be matched. Values at or below ``tab[3, 0] / 2`` mean no finite alignment.
+    """
+    tab = np.ascontiguousarray(tab)
+    if tab.dtype != np.int16:
+        raise ValueError(f"the numba kernel is int16 only, got {tab.dtype}")
+    v = np.ascontiguousarray(vals, dtype=np.int32)
+    big_n, n = v.shape
+    c = np.ascontiguousarray(codes, dtype=np.int32).reshape(-1, np.shape(codes)[-1])
+    lens = np.minimum(np.asarray(lengths, np.int64).reshape(-1), c.shape[1])
+    out = np.empty((c.shape[0], big_n, 2 * n), tab.dtype)
+    if big_n == 0 or c.shape[0] == 0:
+        return out
+    _kernel()(c, lens, v, tab, np.ascontiguousarray(gate, dtype=tab.dtype), bool(strict), int(lanes), out)
+    return out
+
+
+class NumbaBackend:
+    """Backend of :func:`jaxmatch.scoring.exact.exact_values` running :func:`numba_values` on all
+    cores of this process (``numba.set_num_threads``: ``threads``, default all)."""
+
+    mesh_lanes = 1
+
+    def __init__(self, threads: int | None = None, lanes: int = LANES):
+        self.threads = threads
+        self.lanes = int(lanes)
+
+    def run(self, problem, vals: np.ndarray) -> np.ndarray:
+        if np.dtype(problem.kind.dtype) != np.int16:  # int32 / float32 models: the XLA kernel
+            from jaxmatch.scoring.exact import CPUBackend
+
+            return CPUBackend(self.threads).run(problem, vals)
+        flat = np.asarray(vals).reshape(-1, problem.n)
+        if self.threads is not None:
+            import numba
+
+            numba.set_num_threads(max(1, min(int(self.threads), numba.config.NUMBA_NUM_THREADS)))
+        return numba_values(problem.codes, problem.lengths, flat, problem.tab, problem.gate, problem.strict, self.lanes)
