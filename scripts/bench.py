@@ -18,7 +18,12 @@ Printed, from one run:
   ``jaxmatch.scoring.reference.dp_reference``, written for this benchmark), checked to give identical
   utilities for every mesh and shape; its throughput, and the ratio jaxmatch / reference
   (``ratio`` in the JSON). Also a second, SIMD-friendly numba reference (all 2n orientations in
-  the innermost loop, which LLVM vectorises): ``ratio_vectorised``;
+  the innermost loop, which LLVM vectorises): ``ratio_vectorised``; and the strongest one
+  (:func:`make_strongest`: int16, meshes as vector lanes, ``prange`` over chunks on all cores):
+  ``ratio_strongest``. ``--refs`` picks which run. For each, the fraction of the machine's peak
+  (:func:`machine_peak`: int16 lanes x cores x clock) it reaches, and the ratio of process CPU
+  time (all threads; less sensitive to other users of the machine than wall time,
+  ``ratio_*_cpu``);
 * the same workload through ``jaxmatch.scoring.bulk``: each distinct boundary sequence once (sharing
   per k), and pruned exact top-5 against exhaustive top-5 (speed-up, sequences scored);
 * peak RSS: of this process, and of a scorer-only subprocess for catalogue parts k <= 4 and
@@ -68,6 +73,8 @@ def parse_args(argv=None):
     ap.add_argument("--block-cells", type=int, default=None, help="DP cells per block step (default score.BLOCK_CELLS)")
     ap.add_argument("--dtype", choices=["auto", "int32", "float32"], default="auto", help="force the DP number type")
     ap.add_argument("--skip-reference", action="store_true", help="jaxmatch only (no ratio)")
+    ap.add_argument("--refs", default="plain,vectorised,strongest",
+                    help="references to run, comma-separated (default plain,vectorised,strongest; plain takes ~18 s a repetition)")
     ap.add_argument("--skip-bulk", action="store_true", help="skip the distinct-sequence and pruning measurements")
     ap.add_argument("--skip-rss", action="store_true", help="skip the per-catalogue-size RSS subprocesses")
     ap.add_argument("--cli", action="store_true", help="also time cold and warm 'jaxmatch score examples/lshape.json'")
@@ -219,6 +226,137 @@ def make_reference():
         return [[fn(np.asarray(c, np.int64), v, tf) for v in vals] for c in shapes]
 
     return {"plain": run, "vectorised": lambda b, t, s: run(b, t, s, fn=score_vec)}
+
+
+# --------------------------------------------------------------------------- the strongest reference
+
+STRONG_LANES = 128
+"""Meshes per chunk of the strongest reference (lanes of one DP row; 64 / 128 / 256 measured)."""
+
+
+def make_strongest():
+    """The strongest reference a reader would write today: numba, int16, vectorised across the
+    lanes of a chunk of same-length meshes (lanes innermost and contiguous, ``np.int16`` casts so
+    LLVM keeps 16-bit lanes: 32 per AVX-512 op), chunks spread over all cores with ``prange``.
+    Every cell of every orientation is computed (no band); skip weights are added directly
+    (``D[i][j] = max(D[i-1][j] + skip[c], D[i-1][j-1] + W)``, clamped at the sentinel), not
+    through jaxmatch's shifted frame. Written for the benchmark only."""
+    import numba
+    import numpy as np
+    from numba import prange
+
+    neg16 = np.int16(-16384)
+
+    @numba.njit(parallel=True, nogil=True, cache=False, boundscheck=False)
+    def strong(codes, vals, tab, skip, has_skip, lanes_per_chunk):  # pragma: no cover - compiled
+        big_n, n = vals.shape
+        m = codes.shape[0]
+        n_chunks = (big_n + lanes_per_chunk - 1) // lanes_per_chunk
+        out = np.empty((big_n, 2 * n), np.int16)
+        for ch in prange(n_chunks):
+            b0 = ch * lanes_per_chunk
+            lanes = min(lanes_per_chunk, big_n - b0)
+            pv = np.empty((2, 3, n, lanes), np.int16)  # per-vertex weights of vals and of vals[::-1]
+            d = np.empty((n + 1, lanes), np.int16)
+            for bl in range(lanes):
+                b = b0 + bl
+                for k in range(n):
+                    t = (vals[b, (k + 1) % n] - 2) * 16 + (vals[b, k] - 2) * 4 + (vals[b, (k - 1 + n) % n] - 2)
+                    tr = (vals[b, (k - 1 + n) % n] - 2) * 16 + (vals[b, k] - 2) * 4 + (vals[b, (k + 1) % n] - 2)
+                    for c in range(3):
+                        pv[0, c, k, bl] = tab[c, t]
+                        pv[1, c, n - 1 - k, bl] = tab[c, tr]
+            for o in range(2 * n):
+                h = 0 if o < n else 1
+                r = o % n
+                d[0, :] = 0
+                d[1:, :] = neg16
+                for i in range(m):
+                    c = codes[i]
+                    if has_skip:
+                        sk = skip[c]
+                        for j in range(n, 0, -1):
+                            dj = d[j]
+                            dm = d[j - 1]
+                            w = pv[h, c, (r + j - 1) % n]
+                            for l in range(lanes):
+                                x = np.int16(dm[l] + w[l])
+                                y = np.int16(dj[l] + sk)
+                                y = y if y > neg16 else neg16
+                                dj[l] = x if x > y else y
+                        d0 = d[0]
+                        for l in range(lanes):
+                            y = np.int16(d0[l] + sk)
+                            d0[l] = y if y > neg16 else neg16
+                    else:
+                        for j in range(n, 0, -1):
+                            dj = d[j]
+                            dm = d[j - 1]
+                            w = pv[h, c, (r + j - 1) % n]
+                            for l in range(lanes):
+                                x = np.int16(dm[l] + w[l])
+                                dj[l] = x if x > dj[l] else dj[l]
+                for bl in range(lanes):
+                    out[b0 + bl, o] = d[n, bl]
+        return out
+
+    def run(buckets, table, shapes, skip=None):
+        t = np.asarray(table, np.float64).reshape(3, 64)
+        sk = np.zeros(3) if skip is None else np.asarray(skip, np.float64).reshape(3)
+        ok_t, ok_s = np.isfinite(t) & (t > -1e8), np.isfinite(sk) & (sk > -1e8)
+        if not (np.all(t[ok_t] == np.round(t[ok_t])) and np.all(sk[ok_s] == np.round(sk[ok_s]))):
+            raise ValueError("the int16 reference needs integer weights")
+        tab = np.where(ok_t, t, neg16).astype(np.int16)
+        skip16 = np.where(ok_s, sk, neg16).astype(np.int16)
+        has_skip = bool(np.any(skip16 != 0))
+        vals = [np.ascontiguousarray(b.valences, dtype=np.int32) for b in buckets]
+        res = []
+        for c in shapes:
+            cc = np.asarray(c, np.int64)
+            row = []
+            for v in vals:
+                raw = strong(cc, v, tab, skip16, has_skip, STRONG_LANES).max(axis=1)
+                u = raw.astype(np.float32)
+                u[raw <= neg16 // 2] = -np.inf
+                if v.shape[1] > len(cc):
+                    u[:] = -np.inf
+                row.append(u)
+            res.append(row)
+        return res
+
+    return run
+
+
+def machine_peak() -> dict:
+    """``lanes x cores x clock``: int16 lanes per vector op from the CPU flags (AVX-512 BW: 32,
+    AVX2: 16, else SSE2: 8), the cores this process may use, the clock from /proc/cpuinfo
+    (the largest ``cpu MHz``; ``lscpu``'s max MHz if it is larger)."""
+    flags, mhz = set(), 0.0
+    try:
+        with open("/proc/cpuinfo") as fh:
+            for line in fh:
+                key, _, val = line.partition(":")
+                if key.strip() == "flags":
+                    flags |= set(val.split())
+                elif key.strip() == "cpu MHz":
+                    mhz = max(mhz, float(val))
+    except OSError:
+        pass
+    try:
+        out = subprocess.run(["lscpu"], capture_output=True, text=True, timeout=10).stdout
+        for line in out.splitlines():
+            if line.startswith("CPU max MHz:"):
+                mhz = max(mhz, float(line.split(":")[1]))
+    except (OSError, ValueError, subprocess.SubprocessError):
+        pass
+    lanes = 32 if "avx512bw" in flags else 16 if "avx2" in flags else 8
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - not Linux
+        cores = os.cpu_count() or 1
+    return {"int16_lanes": lanes, "isa": "avx512bw" if lanes == 32 else "avx2" if lanes == 16 else "sse2",
+            "cores": cores, "clock_mhz": mhz, "peak_cells_per_s": lanes * cores * mhz * 1e6,
+            "definition": "one DP cell per int16 lane per core per clock cycle"}
 
 
 # --------------------------------------------------------------------------- bulk measurements
@@ -390,8 +528,16 @@ def main(argv=None) -> int:
     warm = time.perf_counter() - t
     compile_s = first - warm
 
-    refs = {} if args.skip_reference else make_reference()
+    refs = {} if args.skip_reference else {**make_reference(), "strongest": make_strongest()}
+    wanted = [r.strip() for r in args.refs.split(",") if r.strip()]
+    unknown = sorted(set(wanted) - {"plain", "vectorised", "strongest"})
+    if unknown:
+        raise SystemExit(f"bench.py: --refs: unknown reference(s) {', '.join(unknown)}")
+    refs = {k: v for k, v in refs.items() if k in wanted}
+    peak = machine_peak()
     ref_times: dict = {name: [] for name in refs}
+    ref_cpu: dict = {name: [] for name in refs}
+    jax_cpu: list[float] = []
     ref_compile: dict = {}
     for name, fn in refs.items():
         t = time.perf_counter()
@@ -401,15 +547,17 @@ def main(argv=None) -> int:
     identical: dict = {}
     for rep in range(max(args.reps, args.ref_reps if refs else 0)):  # interleaved, so load hits all alike
         if rep < args.reps:
-            t = time.perf_counter()
+            t, tc = time.perf_counter(), time.process_time()
             ours = jax_pass(buckets, table, shapes, args)
             jax_times.append(time.perf_counter() - t)
+            jax_cpu.append(time.process_time() - tc)
             say(f"  jaxmatch rep {rep + 1}: {jax_times[-1]:.3f} s")
         for name, fn in refs.items():
             if rep < args.ref_reps:
-                t = time.perf_counter()
+                t, tc = time.perf_counter(), time.process_time()
                 theirs = fn(buckets, table, shapes)
                 ref_times[name].append(time.perf_counter() - t)
+                ref_cpu[name].append(time.process_time() - tc)
                 say(f"  reference ({name}) rep {rep + 1}: {ref_times[name][-1]:.3f} s")
                 if name not in identical:
                     identical[name] = all(np.array_equal(a, b) for xs, ys in zip(ours, theirs) for a, b in zip(xs, ys))
@@ -423,23 +571,36 @@ def main(argv=None) -> int:
                      "dtype": np.dtype(score.dp_kind(table, max(b.n for b in buckets)).dtype).name,
                      "block_cells": score.BLOCK_CELLS, "batch": args.batch or score.DEFAULT_BATCH},
     }
+    result["machine_peak"] = peak
+    result["jaxmatch"]["peak_fraction"] = cells / jb / peak["peak_cells_per_s"]
+    result["jaxmatch"]["cpu_s"] = summary(jax_cpu)
+    result["jaxmatch"]["cells_per_cpu_s"] = cells / min(jax_cpu)
+    say(f"peak      : {peak['int16_lanes']} int16 lanes ({peak['isa']}) x {peak['cores']} cores x {peak['clock_mhz']:.0f} MHz "
+        f"= {peak['peak_cells_per_s']:.3g} cells/s; jaxmatch reaches {result['jaxmatch']['peak_fraction']:.1%}")
     say(f"jaxmatch  : compile {compile_s:.2f} s (first pass of one shape {first:.2f} s, warm {warm:.2f} s); "
         f"run min {jb:.3f} s, median {statistics.median(jax_times):.3f} s over {len(jax_times)}; "
         f"{pairs / jb:,.0f} meshes/s, {cells / jb:.3g} cells/s")
     impl = {"plain": "numba njit, nopython, 1 thread, float32: per orientation a 1-D row, j inner (dp_reference)",
             "vectorised": "numba njit, nopython, 1 thread, float32: rows over all 2n orientations, orientation "
-                          "innermost (LLVM SIMD)"}
+                          "innermost (LLVM SIMD)",
+            "strongest": f"numba njit, parallel (prange over chunks of {STRONG_LANES} same-length meshes, all cores), "
+                         "int16, meshes as lanes innermost (LLVM AVX-512/AVX2), every cell"}
     for name, ts in ref_times.items():
         rb = min(ts)
         key = "reference" if name == "plain" else f"reference_{name}"
         result[key] = {"impl": impl[name], "compile_s": ref_compile[name], "run_s": summary(ts),
-                       "cells_per_s": cells / rb, "meshes_per_s": pairs / rb, "identical_utilities": identical[name]}
+                       "cells_per_s": cells / rb, "meshes_per_s": pairs / rb, "identical_utilities": identical[name],
+                       "peak_fraction": cells / rb / peak["peak_cells_per_s"],
+                       "cpu_s": summary(ref_cpu[name]), "cells_per_cpu_s": cells / min(ref_cpu[name])}
+        result[f"ratio_{name}_cpu" if name != "plain" else "ratio_cpu"] = min(ref_cpu[name]) / min(jax_cpu)
         ratio, ratio_median = rb / jb, statistics.median(ts) / statistics.median(jax_times)
         result["ratio" if name == "plain" else f"ratio_{name}"] = ratio
         result["ratio_median" if name == "plain" else f"ratio_{name}_median"] = ratio_median
         say(f"reference ({name}): compile {ref_compile[name]:.2f} s; run min {rb:.3f} s, median {statistics.median(ts):.3f} s; "
-            f"{pairs / rb:,.0f} meshes/s, {cells / rb:.3g} cells/s; utilities identical: {identical[name]}")
-        say(f"ratio jaxmatch / reference ({name}): {ratio:.2f}x (min vs min), {ratio_median:.2f}x (median vs median)")
+            f"{pairs / rb:,.0f} meshes/s, {cells / rb:.3g} cells/s ({cells / rb / peak['peak_cells_per_s']:.1%} of peak); "
+            f"utilities identical: {identical[name]}")
+        say(f"ratio jaxmatch / reference ({name}): {ratio:.2f}x (min vs min), {ratio_median:.2f}x (median vs median); "
+            f"CPU time (all threads): {min(ref_cpu[name]) / min(jax_cpu):.2f}x")
 
     if not args.skip_bulk:
         result["sharing"] = sharing(buckets)
