@@ -155,8 +155,13 @@ def score_many(
     corner_angle: float = typer.Option(30.0, help="Corner threshold in degrees."),
     tie_break: str = typer.Option("id", "--tie-break", help=TIE_BREAK_HELP),
     devices: Optional[int] = typer.Option(None, min=1, help="Shard the scoring over N JAX devices."),
+    coordinator: Optional[str] = typer.Option(None, help="HOST:PORT of process 0: share the shapes among --num-processes "
+                                              "processes (jax.distributed; start the same command once per process)."),
+    num_processes: int = typer.Option(1, min=1, help="Processes sharing the run (with --coordinator)."),
+    process_id: int = typer.Option(0, min=0, help="This process's id, 0..N-1 (with --coordinator); process 0 writes --out."),
 ) -> None:
     """Score many shapes in one run (bulk mode); every shape is read and checked before scoring."""
+    cluster = _cluster(coordinator, num_processes, process_id, devices)
     if devices is not None:
         from jaxmatch.scoring.bulk import configure_host_devices
 
@@ -172,16 +177,40 @@ def score_many(
     enable_compile_cache()
     loaded = [(p, load_shape(p, corner_angle=corner_angle)) for p in shapes]  # bad input fails before any work
     _, lat, cat, ks = _inputs(None, corner_angle, lattice, catalogue, internal)
+    from jaxmatch.scoring import distributed
+
+    distributed.initialize(cluster)
+    mine = distributed.share(len(loaded), cluster)
     records = []
     with _progress() as prog:
-        task = prog.add_task("shapes", total=len(loaded))
-        for p, shp in loaded:
+        task = prog.add_task("shapes", total=len(mine))
+        for i in mine:
+            p, shp = loaded[i]
             ranking = rank(shp, cat, lat, internal=ks, top=top, points=points, per_size=per_size, tie_break=tb,
                            prune=True, devices=devices)
             records.append(ranking_json(str(p), ranking, lat.name, tb))
             prog.advance(task)
-    write_jsonl(out_path, records)
-    err.print(f"wrote {out_path}: {len(records)} shapes", markup=False, highlight=False)
+    records = distributed.gather_records(records, mine, len(loaded), cluster)
+    if cluster.process_id == 0:
+        write_jsonl(out_path, records)
+        err.print(f"wrote {out_path}: {len(records)} shapes", markup=False, highlight=False)
+    distributed.shutdown(cluster)
+
+
+def _cluster(coordinator: Optional[str], num_processes: int, process_id: int, devices: Optional[int]):
+    """The :class:`jaxmatch.scoring.distributed.Cluster` of score-many's options (one process without --coordinator)."""
+    from jaxmatch.scoring.distributed import Cluster, make_cluster
+
+    if coordinator is None:
+        if num_processes != 1 or process_id != 0:
+            raise InputError("needs --coordinator HOST:PORT", "--num-processes/--process-id")
+        return Cluster("", 1, 0)
+    if devices is not None:
+        raise InputError("use either --devices or --coordinator, not both", "--devices")
+    try:
+        return make_cluster(coordinator, num_processes, process_id)
+    except InputError as e:
+        raise InputError(e.problem, "--coordinator/--num-processes/--process-id") from None
 
 
 @app.command()

@@ -47,6 +47,7 @@ __all__ = [
     "fan_out",
     "upper_bounds",
     "prepare",
+    "prepared",
     "score_distinct",
     "top_k",
     "top_k_many",
@@ -294,6 +295,20 @@ def prepare(buckets: Iterable) -> list[Part]:
         hist = triple_histograms(g.seqs).astype(np.uint8)  # counts <= n <= 255
         parts.append(Part(int(b.n), np.asarray(b.ids), np.asarray(b.k).astype(np.int64), vals, g,
                           hist if int(b.n) < 256 else None))
+    return parts
+
+
+def prepared(catalogue, internal=None) -> list[Part]:
+    """:func:`prepare` of ``catalogue.buckets(internal)``, computed once per catalogue object and
+    k selection and kept on the catalogue (its ``_cache``), so ranking many shapes against one
+    catalogue (``score-many``, the Python API) pays for the grouping only once."""
+    key = ("bulk.prepared", None if internal is None else tuple(sorted({int(k) for k in internal})))
+    cache = getattr(catalogue, "_cache", None)
+    if isinstance(cache, dict) and key in cache:
+        return cache[key]
+    parts = prepare(catalogue.buckets(internal))
+    if isinstance(cache, dict):
+        cache[key] = parts
     return parts
 
 

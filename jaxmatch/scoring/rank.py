@@ -140,9 +140,9 @@ def rank(
     rows = []  # (utility, k, n, id, rotation, reflected, vals)
     done = unmatchable = pruned = 0
     if prune or (devices is not None and devices > 1):
-        from jaxmatch.scoring.bulk import top_k
+        from jaxmatch.scoring.bulk import prepared, top_k
 
-        tk = top_k(ann.codes, buckets, table, top=top, per_size=per_size, prune=prune,
+        tk = top_k(ann.codes, prepared(catalogue, internal), table, top=top, per_size=per_size, prune=prune,
                    devices=devices if devices is not None and devices > 1 else None, progress=progress)
         rows, unmatchable, pruned = list(tk.rows), tk.unmatchable, tk.pruned
         buckets = []
