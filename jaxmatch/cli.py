@@ -417,6 +417,18 @@ def main() -> None:
     run_typer(app)
 
 
+def _unmatchable_hint(err: Exception) -> str:
+    """The options that change what an :class:`UnmatchableError` names (core messages name concepts)."""
+    cause = getattr(err, "cause", None)
+    if cause == "points":
+        return f" (raise --points to at least {err.points})" if getattr(err, "points", None) else " (--points)"
+    if cause == "internal":
+        return " (--internal)"
+    if cause == "forbidden":
+        return " (--points, --internal, --lattice)"
+    return ""
+
+
 def run_typer(typer_app: typer.Typer) -> None:
     """Run a typer app (``jaxmatch`` or a script) with jaxmatch's exit conventions.
 
@@ -429,7 +441,7 @@ def run_typer(typer_app: typer.Typer) -> None:
     except InputError as e:
         _fail(f"error: {e}", EXIT_BAD_INPUT)
     except UnmatchableError as e:
-        _fail(f"no match: {e}", EXIT_UNMATCHABLE)
+        _fail(f"no match: {e}{_unmatchable_hint(e)}", EXIT_UNMATCHABLE)
     except (typer.Abort, KeyboardInterrupt):
         _fail("aborted", 130)
     except ClickException as e:  # usage errors: unknown option, bad value, missing argument

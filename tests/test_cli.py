@@ -60,7 +60,7 @@ def test_annotate_json():
 def test_lattice_show_json():
     r = run("lattice", "show", "fine", "--json")
     d = json.loads(r.stdout)
-    assert set(d) == {"s", "x", "v"} and all(len(v) == 64 for v in d.values())
+    assert set(d) == {"s", "x", "v", "skip"} and all(len(d[k]) == 64 for k in "sxv") and set(d["skip"]) == {"s", "x", "v"}
     assert d["x"]["3-4-3"] is None  # convex corner on valence 4: -inf
 
 

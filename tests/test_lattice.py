@@ -4,6 +4,8 @@ import itertools
 import re
 from pathlib import Path
 
+import math
+
 import numpy as np
 import pytest
 import tomli_w
@@ -216,10 +218,12 @@ def test_with_level_weights_clips(lat):
 
 def test_lattice_json(lat):
     doc = lattice_json(lat)
-    assert list(doc) == ["s", "x", "v"]
+    assert list(doc) == ["s", "x", "v", "skip"]
     for kind in TYPES:
         assert list(doc[kind]) == list(ALL_TRIPLES)
         assert all(v is None or isinstance(v, int) for v in doc[kind].values())
+    assert list(doc["skip"]) == list(TYPES)
+    assert [None if v is None else float(v) for v in doc["skip"].values()] == [None if math.isinf(w) else w for w in lat.skip]
 
 
 def test_lattice_text_lists_every_level(lat):

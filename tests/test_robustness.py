@@ -301,7 +301,8 @@ def test_unmatchable_too_few_points(small):
     with pytest.raises(UnmatchableError) as exc:
         rank(shape, cat, lat, internal=[3], points=5, tie_break="id")
     msg = str(exc.value)
-    assert "more boundary vertices (6+)" in msg and "(5)" in msg and "raise --points to at least 22" in msg and "\n" not in msg
+    assert "more boundary vertices (6+)" in msg and "(5)" in msg and "at least 22 points" in msg and "\n" not in msg
+    assert "--" not in msg and exc.value.cause == "points" and exc.value.points == 22  # the CLI adds the option
 
 
 def test_unmatchable_all_corners_forbidden(small, tmp_path):
@@ -312,7 +313,8 @@ def test_unmatchable_all_corners_forbidden(small, tmp_path):
         rank(shape, cat, lat, internal=[0], points=4, tie_break="id")
     msg = str(exc.value)
     assert "forbidden" in msg and "4 convex" in msg and "'no-x'" in msg
-    assert "--points" in msg and "--internal" in msg and "lattice" in msg and "\n" not in msg
+    assert "points" in msg and "mesh sizes" in msg and "lattice" in msg and "\n" not in msg
+    assert "--" not in msg and exc.value.cause == "forbidden"  # the CLI adds the options
     # with enough straight points the corners can be skipped: it matches
     assert rank(shape, cat, lat, internal=[0], tie_break="id").results
 

@@ -13,10 +13,26 @@ from jaxmatch.scoring import reference
 from jaxmatch.scoring import exact as score
 from jaxmatch.scoring import soft
 from jaxmatch.scoring.exact import NEG, score_bucket
+from jaxmatch.scoring.model import make_weights
 from jaxmatch.scoring.soft import pad_shapes, soft_utility, soft_utility_batch, table_parts
 
 S, X, V = 0, 1, 2
 N_MESHES = 3  # fixed batch: one compilation per (n, padded m)
+
+
+
+def _model(free, mask):
+    """The Weights whose free values are ``free`` and forbidden entries ``mask``."""
+    return make_weights(np.where(np.asarray(mask), -np.inf, np.asarray(free, np.float32)))
+
+
+def su(codes, vals, free, mask, gamma, **kw):
+    """soft_utility with the match table ``free`` (traced or not), skip weights 0."""
+    return soft_utility(codes, vals, _model(np.zeros((3, 4, 4, 4)), mask), gamma, table=free, **kw)
+
+
+def sub(codes, valid, vals, free, mask, gamma, **kw):
+    return soft_utility_batch(codes, valid, vals, _model(np.zeros((3, 4, 4, 4)), mask), gamma, table=free, **kw)
 
 
 def random_table(seed: int, forbidden: float) -> np.ndarray:
@@ -55,7 +71,7 @@ def test_soft_is_the_log_partition_function(shape_meshes, seed, forbidden, gamma
     codes, vals = shape_meshes
     table = random_table(seed, forbidden)
     free, mask = table_parts(table)
-    got = np.asarray(soft_utility(codes, np.array(vals), free, mask, gamma))
+    got = np.asarray(su(codes, np.array(vals), free, mask, gamma))
     for k, v in enumerate(vals):
         expect = reference.brute_force_soft(codes, v, table, gamma)
         if expect == -math.inf:
@@ -70,7 +86,7 @@ def test_converges_to_exact_within_log_paths_bound(gamma):
     codes, vals, table = random_case(0, m, n, forbidden=0.3, n_meshes=8)
     exact = score_bucket(codes, vals, table)
     free, mask = table_parts(table)
-    got = np.asarray(soft_utility(codes, vals, free, mask, gamma))
+    got = np.asarray(su(codes, vals, free, mask, gamma))
     ok = ~exact.unmatchable
     assert ok.sum() >= 4
     tol = 1e-5 * np.abs(exact.utility[ok]) + 1e-5
@@ -83,14 +99,14 @@ def test_soft_approaches_exact_monotonically():
     codes, vals, table = random_case(1, 10, 5, forbidden=0.0)
     free, mask = table_parts(table)
     exact = score_bucket(codes, vals, table).utility
-    gaps = [np.asarray(soft_utility(codes, vals, free, mask, g)) - exact for g in (1.0, 0.3, 0.1, 0.03)]
+    gaps = [np.asarray(su(codes, vals, free, mask, g)) - exact for g in (1.0, 0.3, 0.1, 0.03)]
     for a, b in zip(gaps, gaps[1:]):
         assert np.all(b <= a + 1e-5)
     assert np.all(gaps[-1] >= -1e-5)
 
 
 def _grad(codes, vals, free, mask, gamma):
-    return jax.grad(lambda t: soft_utility(codes, vals, t, mask, gamma).sum())(jnp.asarray(free))
+    return jax.grad(lambda t: su(codes, vals, t, mask, gamma).sum())(jnp.asarray(free))
 
 
 @pytest.mark.parametrize("gamma", [1.0, 1e-2, 1e-3])
@@ -101,7 +117,7 @@ def test_gradients_finite_with_forbidden_rows_and_unmatchable_meshes(gamma):
     codes = [S, X, V, S, S, X, V, S, X, S]
     vals = np.array([[3, 3, 2, 4, 2], [5, 5, 5, 5, 5], [2, 3, 4, 5, 3]])
     free, mask = table_parts(table)
-    value = np.asarray(soft_utility(codes, vals, free, mask, gamma))
+    value = np.asarray(su(codes, vals, free, mask, gamma))
     assert np.isfinite(value).all()
     g = np.asarray(_grad(codes, vals, free, mask, gamma))
     assert np.isfinite(g).all()
@@ -111,7 +127,7 @@ def test_gradients_finite_with_forbidden_rows_and_unmatchable_meshes(gamma):
     none_free = np.ones((3, 4, 4, 4), bool)
     g0 = np.asarray(_grad(codes, vals, free, none_free, gamma))
     assert np.isfinite(g0).all() and np.all(g0 == 0.0)
-    assert np.all(np.asarray(soft_utility(codes, vals, free, none_free, gamma)) <= NEG / 2)
+    assert np.all(np.asarray(su(codes, vals, free, none_free, gamma)) <= NEG / 2)
 
 
 def test_forbidden_entries_are_fixed():
@@ -119,7 +135,7 @@ def test_forbidden_entries_are_fixed():
     free, mask = table_parts(table)
     other = np.where(mask, 1e6, free).astype(np.float32)  # values under the mask are ignored
     np.testing.assert_array_equal(
-        np.asarray(soft_utility(codes, vals, free, mask, 0.5)), np.asarray(soft_utility(codes, vals, other, mask, 0.5))
+        np.asarray(su(codes, vals, free, mask, 0.5)), np.asarray(su(codes, vals, other, mask, 0.5))
     )
 
 
@@ -174,7 +190,7 @@ def test_gradient_matches_finite_differences_float64():
         t0 = jnp.asarray(free, jnp.float64)
 
         def f(t):
-            return soft_utility(codes, vals, t, mask, gamma).sum()
+            return su(codes, vals, t, mask, gamma).sum()
 
         assert f(t0).dtype == jnp.float64
         g = np.asarray(jax.grad(f)(t0))
@@ -189,7 +205,7 @@ def test_gradient_matches_finite_differences_float64():
             fd = (float(f(t0 + e)) - float(f(t0 - e))) / (2 * eps)
             assert g[p] == pytest.approx(fd, rel=1e-6, abs=1e-8)
         # and w.r.t. gamma (entropy terms of the smoothed maxima)
-        h = lambda gm: soft_utility(codes, vals, t0, mask, gm).sum()  # noqa: E731
+        h = lambda gm: su(codes, vals, t0, mask, gm).sum()  # noqa: E731
         dg = float(jax.grad(h)(jnp.float64(gamma)))
         fd = (float(h(gamma + eps)) - float(h(gamma - eps))) / (2 * eps)
         assert dg == pytest.approx(fd, rel=1e-6)
@@ -198,8 +214,8 @@ def test_gradient_matches_finite_differences_float64():
 def test_padding_does_not_change_soft_values():
     codes, vals, table = random_case(6, 11, 5)
     free, mask = table_parts(table)
-    a = np.asarray(soft_utility(codes, vals, free, mask, 0.3))
-    b = np.asarray(soft_utility(codes, vals, free, mask, 0.3, m_pad=32))
+    a = np.asarray(su(codes, vals, free, mask, 0.3))
+    b = np.asarray(su(codes, vals, free, mask, 0.3, m_pad=32))
     np.testing.assert_array_equal(a, b)
 
 
@@ -210,22 +226,22 @@ def test_batch_over_shapes_matches_single_shapes():
     free, mask = table_parts(random_table(8, 0.2))
     codes, valid = pad_shapes(shapes)
     assert codes.shape == (3, 32) and valid.sum(axis=1).tolist() == [5, 9, 20]
-    got = np.asarray(soft_utility_batch(codes, valid, vals, free, mask, 0.2))
+    got = np.asarray(sub(codes, valid, vals, free, mask, 0.2))
     assert got.shape == (3, N_MESHES)
     assert np.all(got[0] <= NEG / 2)  # n = 6 > m = 5
     for s, shape in enumerate(shapes[1:], start=1):
-        np.testing.assert_allclose(got[s], np.asarray(soft_utility(shape, vals, free, mask, 0.2, m_pad=32)), rtol=1e-6)
-    g = jax.grad(lambda t: soft_utility_batch(codes, valid, vals, t, mask, 1e-3).sum())(jnp.asarray(free))
+        np.testing.assert_allclose(got[s], np.asarray(su(shape, vals, free, mask, 0.2, m_pad=32)), rtol=1e-6)
+    g = jax.grad(lambda t: sub(codes, valid, vals, t, mask, 1e-3).sum())(jnp.asarray(free))
     assert np.isfinite(np.asarray(g)).all()
 
 
 def test_soft_utility_is_jittable_with_traced_inputs():
     codes, vals, table = random_case(9, 7, 4)
     free, mask = table_parts(table)
-    f = jax.jit(lambda c, v, t: soft_utility(c, v, t, mask, 0.1))
+    f = jax.jit(lambda c, v, t: su(c, v, t, mask, 0.1))
     np.testing.assert_allclose(
         np.asarray(f(jnp.asarray(codes), jnp.asarray(vals), jnp.asarray(free))),
-        np.asarray(soft_utility(codes, vals, free, mask, 0.1)),
+        np.asarray(su(codes, vals, free, mask, 0.1)),
         rtol=1e-6,
     )
 

@@ -16,9 +16,11 @@ on every mesh) gives; the tests compare them (``tests/test_bulk.py``).
 * **Streaming** (:func:`prepare`): the catalogue is read one bucket (boundary length) at a time
   and only the grouped sequences, ids and k are kept; device memory per call depends on the
   batch size, never on the catalogue size.
-* **Devices** (:func:`score_sharded`, :func:`score_many`): the same blocks of
-  :func:`jaxmatch.scoring.exact.final_blocks`, sharded over a 1-D ``jax.sharding.Mesh`` with
-  ``shard_map``: meshes over devices (one shape), or shapes over devices (many shapes). Inputs
+* **Devices** (:class:`ShardedBackend`, :func:`score_sharded`, :func:`score_many`): a backend of
+  the exact host (:func:`jaxmatch.scoring.exact.exact_values`, which does all the padding and
+  chunking) running the same blocks of :func:`jaxmatch.scoring.exact.final_blocks`, sharded
+  over a 1-D ``jax.sharding.Mesh`` with ``shard_map``: meshes over devices (one shape), or
+  shapes over devices (many shapes). Inputs
   are built with ``jax.make_array_from_callback`` and outputs gathered with
   ``multihost_utils.process_allgather``, so the same code runs on several hosts after
   ``jax.distributed.initialize()`` (docs/perf.md). On CPU, :func:`configure_host_devices` splits
@@ -40,6 +42,7 @@ import numpy as np
 
 __all__ = [
     "SequenceGroups",
+    "ShardedBackend",
     "Part",
     "TopK",
     "configure_host_devices",
@@ -58,7 +61,7 @@ __all__ = [
     "write_jsonl",
 ]
 
-_NEG = -1e9  # jaxmatch.scoring.exact.NEG, without importing JAX here
+from jaxmatch.scoring.model import NEG, skip_frame, skip_offset, weights_of  # numpy only: no JAX import here
 
 
 # --------------------------------------------------------------------------- devices
@@ -184,23 +187,18 @@ def fan_out(rep_values: np.ndarray, groups: SequenceGroups, rows=None) -> np.nda
     return np.asarray(rep_values)[idx[:, None], orient]
 
 
-def score_distinct(codes, vals, table, **kw):
+def score_distinct(codes, vals, weights, **kw):
     """:func:`jaxmatch.scoring.exact.score_bucket`, scoring each distinct sequence once (same result).
     Keyword arguments go to :func:`jaxmatch.scoring.exact.final_values` (or, with ``devices``, to
     :func:`sharded_values`)."""
     from jaxmatch.scoring.exact import reduce_orientations
 
     g = group_sequences(np.asarray(vals).reshape(-1, np.shape(vals)[-1]))
-    rep = _values(codes, g.seqs, table, **kw)
+    rep = _values(codes, g.seqs, weights, **kw)
     return reduce_orientations(fan_out(rep, g))
 
 
 # --------------------------------------------------------------------------- bounds
-
-
-def _finite_np(table) -> np.ndarray:
-    t = np.asarray(table, np.float64).reshape(3, 64)
-    return np.where(t > _NEG, t, _NEG)
 
 
 _MIRROR = np.array([(w * 16 + v * 4 + u) for u in range(4) for v in range(4) for w in range(4)])
@@ -216,11 +214,16 @@ def triple_histograms(seqs) -> np.ndarray:
     return np.bincount((f + 64 * np.arange(u)[:, None]).reshape(-1), minlength=64 * u).reshape(u, 64).astype(np.int32)
 
 
-def upper_bounds(seqs, codes, table, *, hist: np.ndarray | None = None) -> np.ndarray:
+def upper_bounds(seqs, codes, weights, *, hist: np.ndarray | None = None) -> np.ndarray:
     """``(U,) float64`` upper bound of the best utility of each sequence ``seqs (U, n)`` against
-    ``codes (m,)`` (the utility with forbidden weights as ``NEG``, so a bound ``<= NEG / 2``
-    means unmatchable; ``-inf`` when ``n > m``). ``hist``: :func:`triple_histograms` of ``seqs``
-    if already known.
+    ``codes (m,)`` under the model ``weights`` (the utility with forbidden weights as ``NEG``,
+    so a bound ``<= NEG / 2`` means unmatchable; ``-inf`` when ``n > m``). ``hist``:
+    :func:`triple_histograms` of ``seqs`` if already known.
+
+    Skip weights: in the shifted frame (:func:`jaxmatch.scoring.exact.skip_frame`) the utility
+    is ``sum of the matched points' W' + sum_i shift[codes[i]]``, the second term the same for
+    every alignment; the bound below is computed on ``W'`` and the offset added. Must-match
+    types only remove alignments, so the bound stays an upper bound.
 
     Per orientation family (``vals`` and ``vals[::-1]``; rotations keep the multiset of triples)
     each vertex ``j`` has weights ``w_c(j)`` for the types ``c`` the shape has. The bound is the
@@ -239,7 +242,7 @@ def upper_bounds(seqs, codes, table, *, hist: np.ndarray | None = None) -> np.nd
         return out
     count = np.bincount(c, minlength=3)[:3]
     present = np.flatnonzero(count > 0)
-    w = _finite_np(table)  # (3, 64)
+    w = skip_frame(weights).table  # (3, 64) W', NEG where forbidden
     h0 = np.ascontiguousarray((triple_histograms(s) if hist is None else np.asarray(hist, np.int32)).T)  # (64, U)
     # numpy only, no BLAS (einsum's own loops; a row-by-row running sum): BLAS threads fight
     # with XLA's under load, and np.cumsum along axis 0 is ~15x slower than the loop below
@@ -263,7 +266,7 @@ def upper_bounds(seqs, codes, table, *, hist: np.ndarray | None = None) -> np.nd
                 total = total + np.einsum("ku,k->u", run, gain[pos])
             bound = np.minimum(bound, total)
         out = np.maximum(out, bound)
-    return out
+    return out + skip_offset(c, weights)
 
 
 # --------------------------------------------------------------------------- parts (streamed)
@@ -312,14 +315,14 @@ def prepared(catalogue, internal=None) -> list[Part]:
     return parts
 
 
-def _values(codes, seqs, table, *, devices=None, plan=None, **kw) -> np.ndarray:
+def _values(codes, seqs, weights, *, devices=None, plan=None, **kw) -> np.ndarray:
     """Per-orientation values of ``seqs`` on one device (threads) or sharded over ``devices``."""
     if devices is not None and not (isinstance(devices, (int, np.integer)) and int(devices) == 1):
         kw.pop("threads", None)
-        return sharded_values(codes, seqs, table, devices=devices, plan=plan, **kw)
+        return sharded_values(codes, seqs, weights, devices=devices, plan=plan, **kw)
     from jaxmatch.scoring.exact import final_values
 
-    return final_values(codes, seqs, table, plan=plan, **kw)
+    return final_values(codes, seqs, weights, plan=plan, **kw)
 
 
 # --------------------------------------------------------------------------- top K
@@ -365,7 +368,7 @@ def _select(rows: list, top: int, per_size: bool) -> list:
 def top_k(
     codes,
     parts,
-    table,
+    weights,
     *,
     top: int = 5,
     per_size: bool = False,
@@ -387,8 +390,9 @@ def top_k(
     threads; an int or a device list = :func:`sharded_values` over those devices.
     progress(done, total): meshes settled (scored, pruned or unmatchable) so far.
     """
-    from jaxmatch.scoring.exact import DEFAULT_BATCH, NEG, block_size
+    from jaxmatch.scoring.exact import DEFAULT_BATCH, block_size
 
+    weights = weights_of(weights)  # compiled once for all calls
     top = max(int(top), 1)
     batch = DEFAULT_BATCH if batch is None else int(batch)
     parts = _as_parts(parts)
@@ -418,7 +422,7 @@ def top_k(
         from jaxmatch.scoring.exact import reduce_orientations
 
         rep = np.full((p.groups.seqs.shape[0], 2 * p.n), -np.inf, np.float32)
-        rep[sel] = _values(codes, p.groups.seqs[sel], table, plan=plan, batch=batch, threads=threads, devices=devices)
+        rep[sel] = _values(codes, p.groups.seqs[sel], weights, plan=plan, batch=batch, threads=threads, devices=devices)
         mesh_rows = np.flatnonzero(np.isin(p.groups.index, sel))
         res = reduce_orientations(fan_out(rep, p.groups, mesh_rows))
         ok = np.isfinite(res.utility)
@@ -433,7 +437,7 @@ def top_k(
         if progress is not None:
             progress(st["done"], total)
 
-    bounds = [upper_bounds(p.groups.seqs, codes, table, hist=p.hist) for p in parts]
+    bounds = [upper_bounds(p.groups.seqs, codes, weights, hist=p.hist) for p in parts]
     hopeless = [b <= NEG / 2 for b in bounds]  # n > m, or a vertex with no allowed point type
     for p, h in zip(parts, hopeless):
         dead = int(h[p.groups.index].sum())
@@ -486,7 +490,7 @@ def _as_parts(parts) -> list:
     return prepare(parts)
 
 
-def top_k_many(codes_list: Sequence, parts, table, *, devices=None, **kw) -> list[TopK]:
+def top_k_many(codes_list: Sequence, parts, weights, *, devices=None, **kw) -> list[TopK]:
     """:func:`top_k` for several shapes (``codes_list``), sharing one :func:`prepare`.
 
     devices None or 1: each shape is a (pruned, unless ``prune=False``) :func:`top_k` on this
@@ -494,8 +498,9 @@ def top_k_many(codes_list: Sequence, parts, table, *, devices=None, **kw) -> lis
     every distinct sequence is scored, no pruning). ``kw``: ``top``, ``per_size``, ``batch``
     (and for one device also ``prune``, ``threads``, ``round_size``). Same rows either way."""
     parts = _as_parts(parts)
+    weights = weights_of(weights)
     if _mesh_size(devices) <= 1:
-        return [top_k(c, parts, table, devices=None, **kw) for c in codes_list]
+        return [top_k(c, parts, weights, devices=None, **kw) for c in codes_list]
     from jaxmatch.scoring.exact import reduce_orientations
 
     top, per_size = max(int(kw.get("top", 5)), 1), bool(kw.get("per_size", False))
@@ -503,7 +508,7 @@ def top_k_many(codes_list: Sequence, parts, table, *, devices=None, **kw) -> lis
     rows: list[list] = [[] for _ in codes_list]
     unmatchable = [0] * len(codes_list)
     for p in parts:
-        values = score_many(codes_list, p.groups.seqs, table, devices=devices, values=True, batch=kw.get("batch"))
+        values = score_many(codes_list, p.groups.seqs, weights, devices=devices, values=True, batch=kw.get("batch"))
         for s, v in enumerate(values):
             res = reduce_orientations(fan_out(v, p.groups))
             ok = np.flatnonzero(np.isfinite(res.utility))
@@ -523,41 +528,75 @@ def _mesh_size(devices) -> int:
     return len(list(devices))
 
 
-# --------------------------------------------------------------------------- sharded kernels
+# --------------------------------------------------------------------------- sharded backend
 
 _FNS: dict = {}
 
 
-def _sharded_fn(mesh, unroll: int, over: str):
+def _sharded_fn(mesh, unroll: int, over: str, strict: bool):
     """jit(shard_map(...)) of the block kernel: ``over="meshes"`` shards the blocks axis,
     ``over="shapes"`` the shapes axis."""
-    key = (mesh, unroll, over)
+    key = (mesh, unroll, over, strict)
     if key in _FNS:
         return _FNS[key]
     import jax
     from jax.sharding import PartitionSpec as P
 
-    from jaxmatch.scoring.exact import _final_block
+    from jaxmatch.scoring.exact import _blocks
 
-    def blocks(codes, vals, tab):
-        return jax.lax.map(lambda v: _final_block(codes, v, tab, unroll), vals)
+    def body(codes, vals, tab, gate):
+        return _blocks(codes, vals, tab, gate, strict, unroll)
 
-    if over == "meshes":
-        body, specs = blocks, (P(), P("d"), P())
-    else:
-        def body(codes_many, vals, tab):
-            return jax.lax.map(lambda c: blocks(c, vals, tab), codes_many)
-
-        specs = (P("d"), P(), P())
-    fn = jax.jit(jax.shard_map(body, mesh=mesh, in_specs=specs, out_specs=P("d"), check_vma=False))
+    specs = (P(), P("d"), P(), P()) if over == "meshes" else (P("d"), P(), P(), P())
+    out_spec = P(None, "d") if over == "meshes" else P("d")
+    fn = jax.jit(jax.shard_map(body, mesh=mesh, in_specs=specs, out_specs=out_spec, check_vma=False))
     _FNS[key] = fn
     return fn
+
+
+class ShardedBackend:
+    """A backend of the exact host (:class:`jaxmatch.scoring.exact.Backend`): the blocks of
+    :func:`jaxmatch.scoring.exact.final_blocks` sharded over ``devices`` (:func:`device_mesh`).
+
+    over="meshes": each call's blocks are split over the devices (one or a few shapes);
+    over="shapes": the shapes are split over the devices, every device scores all meshes of the
+    call (many shapes). Inputs are global arrays (:func:`_global`), outputs gathered on every
+    host (:func:`_to_host`), so it runs unchanged on several hosts.
+    """
+
+    def __init__(self, devices=None, over: str = "meshes", unroll: int | None = None):
+        if over not in ("meshes", "shapes"):
+            raise ValueError(f"over must be 'meshes' or 'shapes', got {over!r}")
+        from jaxmatch.scoring.exact import UNROLL
+
+        self.mesh = device_mesh(devices)
+        self.over = over
+        self.unroll = UNROLL if unroll is None else int(unroll)
+        self.mesh_lanes = self.mesh.size if over == "meshes" else 1
+
+    def run(self, problem, vals: np.ndarray) -> np.ndarray:
+        from jax.sharding import PartitionSpec as P
+
+        d, s, n = self.mesh.size, problem.codes.shape[0], problem.n
+        codes = problem.codes
+        if self.over == "shapes":  # whole shapes per device: pad with all-padding shapes
+            s_pad = -(-s // d) * d
+            codes = np.concatenate([codes, np.full((s_pad - s, codes.shape[1]), 3, np.int32)])
+        fn = _sharded_fn(self.mesh, self.unroll, self.over, problem.strict)
+        cj = _global(codes, self.mesh, P() if self.over == "meshes" else P("d"))
+        tab = _global(problem.tab, self.mesh, P())
+        gate = _global(problem.gate, self.mesh, P())
+        vspec = P("d") if self.over == "meshes" else P()
+        outs = [fn(cj, _global(vals[k], self.mesh, vspec), tab, gate) for k in range(vals.shape[0])]  # asynchronous
+        if not outs:
+            return np.empty((s, 0, 2 * n), problem.kind.dtype)
+        return np.concatenate([_to_host(o).reshape(codes.shape[0], -1, 2 * n)[:s] for o in outs], axis=1)
 
 
 def sharded_values(
     codes,
     vals,
-    table,
+    weights,
     *,
     devices=None,
     batch: int | None = None,
@@ -566,47 +605,26 @@ def sharded_values(
     plan: tuple[int, int] | None = None,
 ) -> np.ndarray:
     """:func:`jaxmatch.scoring.exact.final_values` with the meshes sharded over ``devices``
-    (:func:`device_mesh`): ``(N, 2n) float32``, ``-inf`` for orientations without a finite
+    (:class:`ShardedBackend`): ``(N, 2n) float32``, ``-inf`` for orientations without a finite
     alignment. Each call holds ``devices x blocks per call x block`` meshes."""
-    from jax.sharding import PartitionSpec as P
+    from jaxmatch.scoring.exact import DEFAULT_BATCH, exact_values
 
-    from jaxmatch.scoring.exact import DEFAULT_BATCH, UNROLL, _check_vals, dp_codes, dp_kind, dp_table, plan_chunks
-
-    v = _check_vals(vals)
-    big_n, n = v.shape
-    c = np.asarray(codes, np.int32).reshape(-1)
-    mesh = device_mesh(devices)
-    d = mesh.size
-    kind = dp_kind(table, n)
-    block, per_call = plan if plan is not None else plan_chunks(-(-big_n // d), n, DEFAULT_BATCH if batch is None else batch)
-    chunk = d * per_call * block
-    n_calls = max(-(-big_n // chunk), 1)
-    vp = np.full((n_calls * chunk, n), 2, np.int32)
-    vp[:big_n] = v
-    vp = vp.reshape(n_calls, d * per_call, block, n)
-    fn = _sharded_fn(mesh, UNROLL if unroll is None else int(unroll), "meshes")
-    cj = _global(dp_codes(c, m_pad), mesh, P())
-    tab = _global(dp_table(table, kind), mesh, P())
-    outs = [fn(cj, _global(vp[k], mesh, P("d")), tab) for k in range(n_calls)]  # dispatched asynchronously
-    raw = np.concatenate([_to_host(o).reshape(-1, 2 * n) for o in outs])[:big_n]
-    out = raw.astype(np.float32)
-    out[raw <= kind.neg / 2] = -np.inf
-    if n > c.shape[0]:
-        out[:] = -np.inf
-    return out
+    be = ShardedBackend(devices, "meshes", unroll)
+    return exact_values([codes], vals, weights, backend=be, batch=DEFAULT_BATCH if batch is None else batch,
+                        m_pad=m_pad, plan=plan)[0]
 
 
-def score_sharded(codes, vals, table, *, devices=None, **kw):
+def score_sharded(codes, vals, weights, *, devices=None, **kw):
     """:func:`jaxmatch.scoring.exact.score_bucket` with the meshes sharded over ``devices`` (same result)."""
     from jaxmatch.scoring.exact import reduce_orientations
 
-    return reduce_orientations(sharded_values(codes, vals, table, devices=devices, **kw))
+    return reduce_orientations(sharded_values(codes, vals, weights, devices=devices, **kw))
 
 
 def score_many(
     codes_list: Sequence,
     vals,
-    table,
+    weights,
     *,
     devices=None,
     batch: int | None = None,
@@ -620,43 +638,13 @@ def score_many(
     the longest one's :func:`jaxmatch.scoring.exact.bucket_length` (padding points are skipped) and to a
     multiple of the device count; meshes go in chunks of ``batch``.
     """
-    from jax.sharding import PartitionSpec as P
+    from jaxmatch.scoring.exact import DEFAULT_BATCH, exact_values, reduce_orientations
 
-    from jaxmatch.scoring.exact import (DEFAULT_BATCH, UNROLL, _check_vals, bucket_length, dp_codes, dp_kind, dp_table,
-                        plan_chunks, reduce_orientations)
-
-    v = _check_vals(vals)
-    big_n, n = v.shape
-    shapes = [np.asarray(c, np.int32).reshape(-1) for c in codes_list]
-    if not shapes:
+    if not len(codes_list):
         return []
-    mesh = device_mesh(devices)
-    d = mesh.size
-    m_pad = bucket_length(max(len(c) for c in shapes))
-    s_pad = -(-len(shapes) // d) * d
-    codes = np.full((s_pad, m_pad), 3, np.int32)
-    for i, c in enumerate(shapes):
-        codes[i] = dp_codes(c, m_pad)
-    kind = dp_kind(table, n)
-    block, per_call = plan_chunks(big_n, n, DEFAULT_BATCH if batch is None else batch)
-    chunk = per_call * block
-    n_calls = max(-(-big_n // chunk), 1)
-    vp = np.full((n_calls * chunk, n), 2, np.int32)
-    vp[:big_n] = v
-    vp = vp.reshape(n_calls, per_call, block, n)
-    fn = _sharded_fn(mesh, UNROLL if unroll is None else int(unroll), "shapes")
-    cj = _global(codes, mesh, P("d"))
-    tab = _global(dp_table(table, kind), mesh, P())
-    outs = [fn(cj, _global(vp[k], mesh, P()), tab) for k in range(n_calls)]
-    raw = np.concatenate([_to_host(o).reshape(s_pad, -1, 2 * n) for o in outs], axis=1)[: len(shapes), :big_n]
-    res = []
-    for i, c in enumerate(shapes):
-        out = raw[i].astype(np.float32)
-        out[raw[i] <= kind.neg / 2] = -np.inf
-        if n > c.shape[0]:
-            out[:] = -np.inf
-        res.append(out if values else reduce_orientations(out))
-    return res
+    be = ShardedBackend(devices, "shapes", unroll)
+    out = exact_values(list(codes_list), vals, weights, backend=be, batch=DEFAULT_BATCH if batch is None else batch)
+    return [v if values else reduce_orientations(v) for v in out]
 
 
 # --------------------------------------------------------------------------- output

@@ -4,14 +4,17 @@ Problem
 -------
 ``codes: (m,) int`` is the shape's annotation, 0 = ``s`` straight, 1 = ``x`` convex,
 2 = ``v`` concave; its start is fixed. A mesh boundary is a ccw valence sequence
-``vals: (n,)`` with valences in {2, 3, 4, 5}. ``table: (3, 4, 4, 4)`` holds the lattice
-weights, indexed ``table[code, u - 2, v - 2, w - 2]`` (integers or ``-inf`` = forbidden).
+``vals: (n,)`` with valences in {2, 3, 4, 5}. The scoring model is a
+:class:`jaxmatch.scoring.model.Weights` (a lattice compiles to one; a bare ``(3, 4, 4, 4)``
+table means skip weights 0): match weights ``table[code, u - 2, v - 2, w - 2]`` (integers or
+``-inf`` = forbidden) and skip weights ``skip[code]`` (integers or ``-inf`` = the point must
+get a mesh vertex).
 
 Every mesh boundary vertex ``j`` (of an *oriented* sequence, see below) is matched to its own
 input point ``i_j`` with ``i_0 < i_1 < ... < i_{n-1}`` (input points may be skipped, mesh
-vertices may not). The utility is ``sum_j table[codes[i_j], t_j]`` where ``t_j`` is the
-boundary triple of oriented vertex ``j``. A mesh's score is the best utility over all
-alignments and all ``2n`` orientations.
+vertices may not). The utility is ``sum_j table[codes[i_j], t_j] + sum over skipped points i of
+skip[codes[i]]`` where ``t_j`` is the boundary triple of oriented vertex ``j``. A mesh's score
+is the best utility over all alignments and all ``2n`` orientations.
 
 Orientation convention (exact; :func:`oriented_sequence`)
 ---------------------------------------------------------
@@ -30,27 +33,39 @@ Dynamic programme
 ``D[i][j]`` = best utility matching the first ``j`` oriented vertices into the first ``i``
 input points::
 
-    D[0][0] = 0,  D[0][j > 0] = NEG,  D[i][0] = 0
-    D[i][j] = reduce(D[i-1][j], D[i-1][j-1] + W[i-1, j-1])
+    D[0][0] = 0,  D[0][j > 0] = -inf,  D[i][0] = D[i-1][0] + skip[codes[i-1]]
+    D[i][j] = reduce(D[i-1][j] + skip[codes[i-1]], D[i-1][j-1] + W[i-1, j-1])
 
 answer ``D[m][n]``. ``reduce`` is ``max`` here; :mod:`jaxmatch.scoring.soft` passes the smoothed
-maximum ``gamma * logaddexp(a / gamma, b / gamma)`` to the very same core (:func:`dp_scan`).
+maximum to the very same core (:func:`dp_scan`).
+
+*Shifted frame.* For a type with a finite skip weight, subtracting ``skip[c]`` from every match
+weight of ``c`` and adding ``sum_i skip[codes[i]]`` (the same for every alignment: every point is
+either matched or skipped) gives the same utility. So all scorers run the recurrence on
+``E = D - S_i`` (``S_i`` the skip weights of the first ``i`` points of finite-skip types):
+``E[i][j] = reduce(E[i-1][j] + gate[c], E[i-1][j-1] + W'[i-1, j-1])`` with ``W' = W - skip[c]``,
+``gate[c] = 0`` (or ``-inf`` for a must-match type, which also turns ``E[i][0]`` into ``-inf``),
+and add the offset ``S_m`` at the end (:func:`skip_frame`). With all skip weights 0 this is
+the paper's recurrence unchanged, bit for bit.
+
 Forbidden weights are replaced by the finite ``NEG`` (never ``-inf`` inside the DP); a mesh
 whose best value is ``<= NEG / 2``, or with ``n > m``, is *unmatchable*: utility ``-inf``,
-``unmatchable`` true, rotation ``-1``. This assumes ``|weights| * m << |NEG| / 2``
-(the lattice weights are small integers).
+``unmatchable`` true, rotation ``-1``.
 
-Implementation: one ``jax.lax.scan`` over input points (carry: one ``(n, ...)`` array, the
-DP rows ``j = 1..n`` for every orientation of every mesh of a block; row 0 is the constant 0).
-:func:`dp_scan` is the generic form (any reduction; used by :mod:`jaxmatch.scoring.soft` and
-:func:`align`). Exact scoring (:func:`score_bucket`, :func:`final_values`) runs the same
-max-plus recurrence in its fastest form: the narrowest exact number type (:func:`dp_kind`:
-int16 for the shipped lattices), a flat ``(n, 2n * block)`` layout with cache-sized blocks
-(:func:`block_size`) mapped one after another inside a call, padded input points as a code
-whose weights are all the sentinel, and calls dispatched on several host threads. Input
-lengths are padded to a few bucket sizes (:func:`bucket_length`); mesh batches are padded to a
-fixed chunk size, so XLA compiles once per (bucket length, n, block, chunk). Weights are
-integers, so all number types give identical utilities. Measurements: ``docs/perf.md``.
+Implementation
+--------------
+:func:`dp_scan` is the generic form (one ``jax.lax.scan`` over input points, any reduction;
+used by :mod:`jaxmatch.scoring.soft` and :func:`align`). Exact scoring goes through one host,
+:func:`exact_values`: it compiles the model for a DP number type (:func:`dp_problem`: the
+narrowest exact one, :func:`dp_kind`: int16 for the shipped lattices), pads input lengths to
+a few bucket sizes (:func:`bucket_length`) and mesh batches to a fixed chunk size
+(:func:`plan_chunks`), hands the padded chunks to a *backend* and turns the raw values back
+into utilities. Backends (:class:`Backend`): :class:`CPUBackend` (this module: the max-plus
+recurrence in a flat ``(n, 2n * block)`` layout with cache-sized blocks, :func:`final_blocks`,
+calls dispatched on several host threads) and :class:`jaxmatch.scoring.bulk.ShardedBackend`
+(the same blocks over several devices). A new backend (e.g. a GPU kernel) implements
+``mesh_lanes`` and ``run``; it never sees the padding or the chunking. Weights are integers,
+so all number types give identical utilities. Measurements: ``docs/perf.md``.
 """
 
 from __future__ import annotations
@@ -58,20 +73,14 @@ from __future__ import annotations
 import os
 from concurrent.futures import ThreadPoolExecutor
 from functools import partial
-from typing import Callable, NamedTuple
+from typing import Callable, NamedTuple, Protocol, Sequence
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from jaxmatch.errors import UnmatchableError
-
-try:  # the lattice loader owns NEG once it exists
-    from jaxmatch.scoring.lattice import NEG  # type: ignore[attr-defined]
-except ImportError:  # pragma: no cover - depends on the tree state
-    NEG = -1e9
-NEG = float(NEG)
-"""Finite stand-in for ``-inf`` inside the DP."""
+from jaxmatch.scoring.model import NEG, SkipFrame, Weights, skip_frame, skip_offset, weights_of  # noqa: F401 (re-exported)
 
 UNROLL = 1
 """``lax.scan`` unroll factor (1, 2, 4, 8 measured on XLA:CPU: 1 is fastest, and compiles fastest)."""
@@ -104,14 +113,6 @@ def finite_table(table) -> jnp.ndarray:
     if t.shape != (3, 4, 4, 4):
         raise ValueError(f"table must have shape (3, 4, 4, 4), got {t.shape}")
     return jnp.where(t > NEG, t, jnp.float32(NEG))
-
-
-def _finite_np(table) -> np.ndarray:
-    """:func:`finite_table` in numpy (no device work: called once per scoring call)."""
-    t = np.asarray(table, dtype=np.float32)
-    if t.shape != (3, 4, 4, 4):
-        raise ValueError(f"table must have shape (3, 4, 4, 4), got {t.shape}")
-    return np.where(t > NEG, t, np.float32(NEG))
 
 
 def bucket_length(m: int) -> int:
@@ -182,46 +183,59 @@ def dp_scan(
     valid: jnp.ndarray,
     reduce: Callable[[jnp.ndarray, jnp.ndarray], jnp.ndarray],
     *,
+    gate=None,
     keep_rows: bool = False,
     unroll: int = UNROLL,
 ):
-    """The modified-LCS recurrence, once, for any reduction.
+    """The modified-LCS recurrence in the shifted frame (module docstring), once, for any reduction.
 
-    wc: ``(3, n, *batch)`` finite weights per input code (``W[i, j] = wc[codes[i], j]``);
+    wc: ``(3, n, *batch)`` finite shifted weights per input code (``W'[i, j] = wc[codes[i], j]``);
     codes: ``(m,)`` int; valid: ``(m,)`` bool, invalid (padding) input points are skipped
     (the row is carried unchanged); reduce: elementwise ``(skip, match) -> value``
-    (``jnp.maximum`` exact, a smoothed maximum soft).
+    (``jnp.maximum`` exact, a smoothed maximum soft); gate: ``(3,)`` added to the skip branch
+    per code (0, or NEG for a point that must be matched; None: zeros). ``D[i][0]`` starts at 0
+    and takes the gate too.
 
-    One ``lax.scan`` over input points; the carry is the single row array ``(n + 1, *batch)``
-    (the weights are gathered inside the step, so no ``(m, n, *batch)`` array is built).
-    Returns the last row ``D[m]``, and with ``keep_rows`` also all rows ``(m + 1, n + 1, *batch)``.
+    One ``lax.scan`` over input points; the carry is the row array ``(n, *batch)`` (rows
+    ``j = 1..n``) and ``D[i][0]`` (the weights are gathered inside the step, so no
+    ``(m, n, *batch)`` array is built). Returns the last row ``D[m]`` ``(n + 1, *batch)``, and
+    with ``keep_rows`` also all rows ``(m + 1, n + 1, *batch)``.
     """
     n = wc.shape[1]
     batch = wc.shape[2:]
-    # the carry holds rows j = 1..n only (D[i][0] = 0 is constant): the shifted row is a
-    # zero-padded slice, which XLA:CPU fuses into one vectorised loop (a concatenate in the
-    # step fusion was ~5x slower, docs/perf.md)
+    # the carry holds rows j = 1..n only: the shifted row is a padded slice, which XLA:CPU
+    # fuses into one vectorised loop (a concatenate in the step fusion was ~5x slower, docs/perf.md)
     d0 = jnp.full((n, *batch), NEG, wc.dtype)
+    z0 = jnp.zeros((), wc.dtype)
     pad = [(1, 0)] + [(0, 0)] * len(batch)
+    g = None if gate is None else jnp.asarray(gate, wc.dtype)
 
-    def step(d, x):
+    def step(carry, x):
+        d, z = carry
         c, ok = x
         wi = jax.lax.dynamic_index_in_dim(wc, c, axis=0, keepdims=False)
-        new = reduce(d, jnp.pad(d[:-1], pad) + wi)
+        shifted = jnp.pad(d[:-1], pad, constant_values=z) + wi
+        if g is None:
+            new, z_new = reduce(d, shifted), z
+        else:
+            gi = g[c]
+            new, z_new = reduce(d + gi, shifted), z + gi
         new = jnp.where(ok, new, d)
-        return new, (new if keep_rows else None)
+        z_new = jnp.where(ok, z_new, z)
+        return (new, z_new), ((new, z_new) if keep_rows else None)
 
-    last, rows = jax.lax.scan(step, d0, (codes, valid), unroll=unroll)
-    zero = jnp.zeros((1, *batch), wc.dtype)
-    last = jnp.concatenate([zero, last], axis=0)
+    (last, z_last), rows = jax.lax.scan(step, (d0, z0), (codes, valid), unroll=unroll)
+    last = jnp.concatenate([jnp.broadcast_to(z_last, (1, *batch)), last], axis=0)
     if keep_rows:
-        m = rows.shape[0]
-        rows = jnp.concatenate([jnp.zeros((m, 1, *batch), wc.dtype), rows], axis=1)
-        return last, jnp.concatenate([jnp.concatenate([zero, d0], axis=0)[None], rows], axis=0)
+        r, zs = rows
+        m = r.shape[0]
+        r = jnp.concatenate([jnp.broadcast_to(zs.reshape((m, 1) + (1,) * len(batch)), (m, 1, *batch)), r], axis=1)
+        first = jnp.concatenate([jnp.zeros((1, *batch), wc.dtype), d0], axis=0)
+        return last, jnp.concatenate([first[None], r], axis=0)
     return last
 
 
-# --------------------------------------------------------------------------- exact scoring
+# --------------------------------------------------------------------------- the CPU kernel
 
 BLOCK_CELLS = 16384
 """Target DP cells per scan step of one block (``block * 2n * n``): the carry, the four weight
@@ -238,22 +252,23 @@ _INVALID = 3
 
 
 class DPKind(NamedTuple):
-    """The exact DP's number type for a table and boundary length (:func:`dp_kind`)."""
+    """The exact DP's number type for a model and boundary length (:func:`dp_kind`)."""
 
     dtype: type
     neg: float
 
 
-def dp_kind(table, n: int) -> DPKind:
-    """Narrowest exact number type for the DP of ``table`` with boundary length ``n``.
+def dp_kind(weights, n: int) -> DPKind:
+    """Narrowest exact number type for the DP of a model (or table) with boundary length ``n``.
 
-    Integer weights with ``n * max|w| < 2**13`` use int16 (16 SIMD lanes on AVX2; values stay in
-    ``[2 * NEG16, n * max|w|]``, valid ones above ``NEG16 / 2``, invalid ones at or below it),
-    integer weights with ``n * max|w| < 2**29`` int32, anything else float32 with :data:`NEG`
-    (bit for bit the recurrence of :func:`dp_scan`). All three give identical utilities.
+    On the shifted weights ``W'`` (:func:`skip_frame`): integers with ``n * max|W'| < 2**13``
+    use int16 (16 SIMD lanes on AVX2; values stay in ``[2 * NEG16, n * max|W'|]``, valid ones
+    above ``NEG16 / 2``, invalid ones at or below it), integers with ``n * max|W'| < 2**29``
+    int32, anything else float32 with :data:`NEG` (bit for bit the recurrence of
+    :func:`dp_scan`). All three give identical utilities.
     """
-    t = _finite_np(table)
-    w = t[t > NEG]
+    t = skip_frame(weights).table
+    w = t[t > NEG / 2]
     big = float(np.abs(w).max()) if w.size else 0.0
     if w.size == 0 or np.all(w == np.round(w)):
         if n * big < 2**13:
@@ -263,13 +278,22 @@ def dp_kind(table, n: int) -> DPKind:
     return DPKind(np.float32, NEG)
 
 
-def dp_table(table, kind: DPKind) -> np.ndarray:
-    """``(4, 64)`` weights in ``kind.dtype``: rows = codes s, x, v and the padding code 3;
-    forbidden entries and the whole padding row are ``kind.neg``."""
-    t = _finite_np(table).reshape(3, 64)
+def dp_table(weights, kind: DPKind) -> np.ndarray:
+    """``(4, 64)`` shifted weights ``W'`` in ``kind.dtype``: rows = codes s, x, v and the padding
+    code 3; forbidden entries and the whole padding row are ``kind.neg``."""
+    t = skip_frame(weights).table
     out = np.full((4, 64), kind.neg, np.float64)
-    out[:3] = np.where(t > NEG, t, kind.neg)
+    out[:3] = np.where(t > NEG / 2, t, kind.neg)
     return out.astype(kind.dtype)
+
+
+def dp_gate(weights, kind: DPKind) -> np.ndarray:
+    """``(4,)`` in ``kind.dtype``: the cap on the skip branch per code (``kind.neg`` for a
+    must-match type, the largest value of the type otherwise and for padding)."""
+    top = np.inf if np.dtype(kind.dtype).kind == "f" else np.iinfo(kind.dtype).max
+    g = np.full(4, top, np.float64)
+    g[:3][skip_frame(weights).gate] = kind.neg
+    return g.astype(kind.dtype)
 
 
 def block_size(n: int, cells: int = BLOCK_CELLS) -> int:
@@ -299,29 +323,56 @@ def orientation_slabs(vals, tab) -> jnp.ndarray:
     return jnp.concatenate(halves, 2).reshape(4, n, 2 * n * b)
 
 
-def _final_block(codes, vals, tab, unroll):
-    """``D[m][n]`` of every orientation: ``(B, n)`` -> ``(B, 2n)`` in ``tab.dtype``.
+def _final_block(codes, vals, tab, gate, strict: bool, unroll: int):
+    """``E[m][n]`` of every orientation: ``(B, n)`` -> ``(B, 2n)`` in ``tab.dtype``.
 
-    The max-plus recurrence of :func:`dp_scan` on the flat layout ``(n, 2n * B)``; padded input
-    points carry code 3 (all weights the sentinel), which never changes a valid value.
+    The max-plus recurrence of :func:`dp_scan` (shifted frame) on the flat layout
+    ``(n, 2n * B)``; padded input points carry code 3 (all weights the sentinel), which never
+    changes a valid value. ``strict`` (some type must be matched): the skip branch is capped at
+    ``gate[c]`` (the sentinel for a must-match code, a no-op otherwise) and ``E[i][0]`` is carried
+    (0 until the first must-match point, then the sentinel); without it the step is the plain
+    ``max(d, shift(d) + w)``. Values never leave ``[2 * sentinel, n * max|W'|]``.
     """
     b, n = vals.shape
     wc = orientation_slabs(vals, tab)
-    d0 = jnp.full(wc.shape[1:], tab[_INVALID, 0], tab.dtype)
+    neg = tab[_INVALID, 0]
+    d0 = jnp.full(wc.shape[1:], neg, tab.dtype)
+    pad = ((1, 0), (0, 0))
 
-    def step(d, c):
-        wi = jax.lax.dynamic_index_in_dim(wc, c, axis=0, keepdims=False)
-        return jnp.maximum(d, jnp.pad(d[:-1], ((1, 0), (0, 0))) + wi), None
+    if not strict:
+        def step(d, c):
+            wi = jax.lax.dynamic_index_in_dim(wc, c, axis=0, keepdims=False)
+            return jnp.maximum(d, jnp.pad(d[:-1], pad) + wi), None
 
-    last = jax.lax.scan(step, d0, codes, unroll=unroll)[0]
+        last = jax.lax.scan(step, d0, codes, unroll=unroll)[0]
+    else:
+        def step(carry, c):
+            d, z = carry
+            wi = jax.lax.dynamic_index_in_dim(wc, c, axis=0, keepdims=False)
+            g = gate[c]
+            new = jnp.maximum(jnp.minimum(d, g), jnp.pad(d[:-1], pad, constant_values=z) + wi)
+            return (new, jnp.minimum(z, g)), None
+
+        last = jax.lax.scan(step, (d0, jnp.zeros((), tab.dtype)), codes, unroll=unroll)[0][0]
     return last[-1].reshape(2 * n, b).T
 
 
-@partial(jax.jit, static_argnames=("unroll",))
-def final_blocks(codes, vals, tab, unroll=UNROLL):
-    """``codes (m_pad,)`` (3 = padding), ``vals (C, B, n)``, ``tab (4, 64)`` -> ``(C, B, 2n)``:
-    blocks one after another (``lax.map``), so each block's working set stays in cache."""
-    return jax.lax.map(lambda v: _final_block(codes, v, tab, unroll), vals)
+def _blocks(codes, vals, tab, gate, strict: bool, unroll: int):
+    """``codes (S, m_pad)``, ``vals (C, B, n)`` -> ``(S, C, B, 2n)``: shapes and blocks one after
+    another (``lax.map``), so each block's working set stays in cache."""
+    def one(c):
+        return jax.lax.map(lambda v: _final_block(c, v, tab, gate, strict, unroll), vals)
+
+    if codes.shape[0] == 1:
+        return one(codes[0])[None]
+    return jax.lax.map(one, codes)
+
+
+@partial(jax.jit, static_argnames=("strict", "unroll"))
+def final_blocks(codes, vals, tab, gate, strict: bool = False, unroll: int = UNROLL):
+    """``codes (S, m_pad)`` (3 = padding), ``vals (C, B, n)``, ``tab (4, 64)``, ``gate (4,)`` ->
+    ``(S, C, B, 2n)`` raw shifted-frame values (:func:`_final_block`)."""
+    return _blocks(codes, vals, tab, gate, strict, unroll)
 
 
 def _check_vals(vals) -> np.ndarray:
@@ -377,43 +428,134 @@ def plan_chunks(big_n: int, n: int, batch: int = DEFAULT_BATCH) -> tuple[int, in
     return block, -(-chunk // block)
 
 
+# --------------------------------------------------------------------------- the exact host
+
+
+class DPProblem(NamedTuple):
+    """What a backend computes: the shapes and the compiled model in the DP number type.
+
+    codes: ``(S, m_pad) int32`` (3 = padding); lengths: ``(S,)`` true ``m`` of each shape;
+    offset: ``(S,) float64`` the skip weights added back (:func:`skip_frame`); tab: ``(4, 64)``
+    and gate: ``(4,)`` in ``kind.dtype`` (:func:`dp_table`, :func:`dp_gate`); strict: some type
+    must be matched (selects the kernel variant); kind: the number type; n: boundary length.
+    """
+
+    codes: np.ndarray
+    lengths: np.ndarray
+    offset: np.ndarray
+    tab: np.ndarray
+    gate: np.ndarray
+    strict: bool
+    kind: DPKind
+    n: int
+
+
+def dp_problem(codes_list: Sequence, weights, n: int, m_pad: int | None = None, kind: DPKind | None = None) -> DPProblem:
+    """:class:`DPProblem` for shapes ``codes_list`` (each ``(m_s,)`` ints 0/1/2), padded to
+    ``m_pad`` (default :func:`bucket_length` of the longest), and boundary length ``n``."""
+    w = weights_of(weights)
+    shapes = [np.asarray(c, np.int32).reshape(-1) for c in codes_list]
+    mp = bucket_length(max((len(c) for c in shapes), default=1)) if m_pad is None else int(m_pad)
+    codes = np.full((len(shapes), mp), _INVALID, np.int32)
+    for i, c in enumerate(shapes):
+        codes[i] = dp_codes(c, mp)
+    kind = dp_kind(w, n) if kind is None else kind
+    return DPProblem(codes, np.asarray([len(c) for c in shapes], np.int64),
+                     np.asarray([skip_offset(c, w) for c in shapes], np.float64),
+                     dp_table(w, kind), dp_gate(w, kind), bool(w.must.any()), kind, int(n))
+
+
+class Backend(Protocol):
+    """Runs the exact DP on padded chunks (the seam between :func:`exact_values` and a kernel).
+
+    mesh_lanes: how many devices the meshes of one call are split over (the host makes each
+    call hold ``mesh_lanes * blocks per call`` blocks). run(problem, vals): ``vals (calls,
+    mesh_lanes * per_call, block, n) int32`` (padding meshes are all-2 sequences) ->
+    ``(S, calls * mesh_lanes * per_call * block, 2n)`` raw values in ``problem.kind.dtype``
+    (the shifted-frame ``E[m][n]`` of :func:`final_blocks`, mesh-major).
+    """
+
+    mesh_lanes: int
+
+    def run(self, problem: DPProblem, vals: np.ndarray) -> np.ndarray: ...
+
+
+class CPUBackend:
+    """:func:`final_blocks` on this process's default device, calls dispatched on ``threads``
+    host threads (default :func:`default_threads`)."""
+
+    mesh_lanes = 1
+
+    def __init__(self, threads: int | None = None, unroll: int = UNROLL):
+        self.threads = threads
+        self.unroll = int(unroll)
+
+    def run(self, problem: DPProblem, vals: np.ndarray) -> np.ndarray:
+        s, n = problem.codes.shape[0], problem.n
+
+        def call(k):
+            return np.asarray(final_blocks(problem.codes, vals[k], problem.tab, problem.gate,
+                                           strict=problem.strict, unroll=self.unroll)).reshape(s, -1, 2 * n)
+
+        outs = run_calls(call, range(vals.shape[0]), self.threads)
+        if not outs:
+            return np.empty((s, 0, 2 * n), problem.kind.dtype)
+        return np.concatenate(outs, axis=1)
+
+
+def exact_values(
+    codes_list: Sequence,
+    vals,
+    weights,
+    *,
+    backend: Backend | None = None,
+    batch: int = DEFAULT_BATCH,
+    m_pad: int | None = None,
+    plan: tuple[int, int] | None = None,
+) -> np.ndarray:
+    """The exact host: best utility of every orientation of every mesh against every shape,
+    ``(S, N, 2n) float32``, ``-inf`` where an orientation has no finite alignment (or ``n > m``).
+
+    codes_list: ``S`` shapes ``(m_s,)``; vals: ``(N, n)`` boundary valences; weights: the model
+    (:func:`jaxmatch.scoring.model.weights_of`). Meshes are padded to whole calls of
+    ``mesh_lanes x blocks per call x block`` (:func:`plan_chunks` of ``batch``, or ``plan``);
+    ``backend`` (default :class:`CPUBackend`) computes the raw values.
+    """
+    backend = CPUBackend() if backend is None else backend
+    v = _check_vals(vals)
+    big_n, n = v.shape
+    prob = dp_problem(codes_list, weights, n, m_pad)
+    lanes = max(int(backend.mesh_lanes), 1)
+    block, per_call = plan if plan is not None else plan_chunks(-(-big_n // lanes), n, batch)
+    chunk = lanes * per_call * block
+    n_calls = -(-big_n // chunk)
+    vp = np.full((n_calls * chunk, n), 2, np.int32)
+    vp[:big_n] = v
+    raw = backend.run(prob, vp.reshape(n_calls, lanes * per_call, block, n))[:, :big_n]
+    out = raw.astype(np.float64) + prob.offset[:, None, None]
+    out[raw <= prob.kind.neg / 2] = -np.inf
+    out[prob.lengths < n] = -np.inf
+    return out.astype(np.float32)
+
+
 def final_values(
     codes,
     vals,
-    table,
+    weights,
     *,
     batch: int = DEFAULT_BATCH,
     m_pad: int | None = None,
     unroll: int = UNROLL,
     threads: int | None = None,
     plan: tuple[int, int] | None = None,
+    backend: Backend | None = None,
 ) -> np.ndarray:
-    """Best utility of every orientation: ``(N, 2n) float32``, ``-inf`` where the orientation has
-    no finite alignment (or ``n > m``). Column ``o`` is orientation ``o`` of the module docstring.
-
-    Same arguments as :func:`score_bucket`; ``threads`` host threads dispatch the calls
-    (default :func:`default_threads`); ``plan`` overrides :func:`plan_chunks`.
-    """
-    v = _check_vals(vals)
-    big_n, n = v.shape
-    c = np.asarray(codes, dtype=np.int32).reshape(-1)
-    m = c.shape[0]
-    cj = dp_codes(c, m_pad)
-    kind = dp_kind(table, n)
-    tab = dp_table(table, kind)
-    block, per_call = plan if plan is not None else plan_chunks(big_n, n, batch)
-    chunk = block * per_call
-    n_calls = -(-big_n // chunk)
-    vp = np.full((n_calls * chunk, n), 2, np.int32)
-    vp[:big_n] = v
-    vp = vp.reshape(n_calls, per_call, block, n)
-    outs = run_calls(lambda k: np.asarray(final_blocks(cj, vp[k], tab, unroll=unroll)), range(n_calls), threads)
-    raw = np.concatenate([o.reshape(-1, 2 * n) for o in outs] or [np.empty((0, 2 * n), kind.dtype)])[:big_n]
-    out = raw.astype(np.float32)
-    out[raw <= kind.neg / 2] = -np.inf
-    if n > m:
-        out[:] = -np.inf
-    return out
+    """Best utility of every orientation for one shape: ``(N, 2n) float32``, ``-inf`` where the
+    orientation has no finite alignment (or ``n > m``). Column ``o`` is orientation ``o`` of the
+    module docstring. :func:`exact_values` for one shape (``threads``, ``unroll``: of the
+    default :class:`CPUBackend`)."""
+    be = CPUBackend(threads, unroll) if backend is None else backend
+    return exact_values([codes], vals, weights, backend=be, batch=batch, m_pad=m_pad, plan=plan)[0]
 
 
 def reduce_orientations(values: np.ndarray) -> ScoreResult:
@@ -434,47 +576,50 @@ def reduce_orientations(values: np.ndarray) -> ScoreResult:
 def score_bucket(
     codes,
     vals,
-    table,
+    weights,
     *,
     batch: int = DEFAULT_BATCH,
     m_pad: int | None = None,
     unroll: int = UNROLL,
     threads: int | None = None,
+    backend: Backend | None = None,
 ) -> ScoreResult:
     """Score every mesh of one bucket (all of boundary length ``n``) against ``codes``.
 
-    codes: ``(m,)`` ints 0/1/2; vals: ``(N, n)`` ccw boundary valences; table:
-    ``(3, 4, 4, 4)`` weights with ``-inf`` for forbidden. ``m`` is padded to
-    :func:`bucket_length` (or ``m_pad``), the meshes to a multiple of the chunk size
-    ``min(batch, next power of two >= N)`` (at least 8), cut into cache-sized blocks
-    (:func:`block_size`); one compilation per (padded m, n, block, chunk). The DP runs in the
-    narrowest exact number type (:func:`dp_kind`); chunks are dispatched on ``threads`` host
-    threads (default: every CPU this process may use).
+    codes: ``(m,)`` ints 0/1/2; vals: ``(N, n)`` ccw boundary valences; weights: the model (a
+    :class:`jaxmatch.scoring.model.Weights`, a lattice, or a ``(3, 4, 4, 4)`` table with ``-inf``
+    for forbidden and skip weights 0). ``m`` is padded to :func:`bucket_length` (or ``m_pad``),
+    the meshes to a multiple of the chunk size ``min(batch, next power of two >= N)`` (at least
+    8), cut into cache-sized blocks (:func:`block_size`); one compilation per (padded m, n,
+    block, chunk). The DP runs in the narrowest exact number type (:func:`dp_kind`); chunks are
+    dispatched on ``threads`` host threads (default: every CPU this process may use).
     """
-    return reduce_orientations(final_values(codes, vals, table, batch=batch, m_pad=m_pad, unroll=unroll, threads=threads))
+    return reduce_orientations(final_values(codes, vals, weights, batch=batch, m_pad=m_pad, unroll=unroll,
+                                            threads=threads, backend=backend))
 
 
 # --------------------------------------------------------------------------- one mesh
 
 
 @jax.jit
-def _rows_one(codes, valid, seq, table_finite):
-    """All DP rows ``(m + 1, n + 1)`` for one oriented sequence ``seq: (n,)``."""
+def _rows_one(codes, valid, seq, table_shifted, gate):
+    """All DP rows ``(m + 1, n + 1)`` (shifted frame) for one oriented sequence ``seq: (n,)``."""
     t = jnp.stack([jnp.roll(seq, -1), seq, jnp.roll(seq, 1)], axis=-1) - 2
     flat = t[:, 0] * 16 + t[:, 1] * 4 + t[:, 2]
-    wc = table_finite.reshape(3, 64)[:, flat]  # (3, n)
-    _, rows = dp_scan(wc, codes, valid, jnp.maximum, keep_rows=True)
+    wc = table_shifted.reshape(3, 64)[:, flat]  # (3, n)
+    _, rows = dp_scan(wc, codes, valid, jnp.maximum, gate=gate, keep_rows=True)
     return rows
 
 
-def align(codes, vals_one, table, rotation: int, reflected: bool, *, m_pad: int | None = None) -> np.ndarray:
+def align(codes, vals_one, weights, rotation: int, reflected: bool, *, m_pad: int | None = None) -> np.ndarray:
     """Best alignment for one orientation: ``(n,) int32`` strictly increasing input indices.
 
     ``alignment[j]`` is the input point taken by ``oriented_sequence(vals_one, rotation,
     reflected)[j]``. Backtracks the DP rows of :func:`dp_scan` (recomputed for this one
-    orientation) from ``D[m][n]``; at a tie between skipping input point ``i - 1`` and
-    matching it, skipping wins (so each vertex takes the earliest best point counted from
-    the end). Raises :class:`UnmatchableError` when this orientation has no finite alignment.
+    orientation, shifted frame) from ``D[m][n]``; at a tie between skipping input point
+    ``i - 1`` (allowed unless its type must be matched) and matching it, skipping wins (so each
+    vertex takes the earliest best point counted from the end). Raises
+    :class:`UnmatchableError` when this orientation has no finite alignment.
     """
     seq = oriented_sequence(vals_one, rotation, reflected)
     n = seq.shape[0]
@@ -483,15 +628,18 @@ def align(codes, vals_one, table, rotation: int, reflected: bool, *, m_pad: int 
     if n > m:
         raise UnmatchableError(f"mesh has {n} boundary vertices but the shape only {m} points")
     _check_vals(seq)
+    fr = skip_frame(weights)
     codes_pad, valid = pad_codes(c, m_pad)
-    rows = np.asarray(_rows_one(jnp.asarray(codes_pad), jnp.asarray(valid), jnp.asarray(seq), finite_table(table)))
+    gate = np.where(fr.gate, NEG, 0.0).astype(np.float32)
+    rows = np.asarray(_rows_one(jnp.asarray(codes_pad), jnp.asarray(valid), jnp.asarray(seq),
+                                jnp.asarray(fr.table.astype(np.float32)), jnp.asarray(gate)))
     rows = rows[: m + 1]  # padded rows only repeat D[m]
     if rows[m, n] <= NEG / 2:
-        raise UnmatchableError("every alignment of this orientation uses a forbidden weight")
+        raise UnmatchableError("every alignment of this orientation uses a forbidden weight or skips a point that must be matched")
     out = np.empty(n, np.int32)
     i, j = m, n
     while j > 0:
-        if i > j and rows[i, j] == rows[i - 1, j]:
+        if i > j and not fr.gate[c[i - 1]] and rows[i, j] == rows[i - 1, j]:
             i -= 1  # skip input point i-1
         else:
             out[j - 1] = i - 1
@@ -499,10 +647,22 @@ def align(codes, vals_one, table, rotation: int, reflected: bool, *, m_pad: int 
     return out
 
 
-def utility_of(codes, vals_one, table, rotation: int, reflected: bool, alignment) -> float:
-    """Utility of one explicit alignment (numpy, original table: ``-inf`` if it uses a forbidden weight)."""
-    from jaxmatch.catalogue.mesh import triples
+class UtilityParts(NamedTuple):
+    """An alignment's utility split: ``match`` (sum of the matched pairs' weights) + ``skip``
+    (sum of the skipped points' skip weights) = ``total``; ``-inf`` parts when forbidden."""
 
+    total: float
+    match: float
+    skip: float
+
+
+def utility_parts(codes, vals_one, weights, rotation: int, reflected: bool, alignment) -> UtilityParts:
+    """:class:`UtilityParts` of one explicit alignment (numpy, the model's ``-inf`` entries as
+    ``-inf``). ValueError when the alignment is not strictly increasing in range."""
+    from jaxmatch.catalogue.mesh import triples
+    from jaxmatch.scoring.model import skipped_weight
+
+    w = weights_of(weights)
     seq = oriented_sequence(vals_one, rotation, reflected)
     n = seq.shape[0]
     c = np.asarray(codes, dtype=np.int64).reshape(-1)
@@ -512,5 +672,13 @@ def utility_of(codes, vals_one, table, rotation: int, reflected: bool, alignment
     if n and (a[0] < 0 or a[-1] >= c.shape[0] or np.any(np.diff(a) <= 0)):
         raise ValueError("alignment must be strictly increasing input indices in range")
     t = triples(seq) - 2
-    tab = np.asarray(table, dtype=np.float64)
-    return float(np.sum(tab[c[a], t[:, 0], t[:, 1], t[:, 2]]))
+    tab = w.table_inf().astype(np.float64)
+    match = float(np.sum(tab[c[a], t[:, 0], t[:, 1], t[:, 2]]))
+    skip = skipped_weight(c, a, w)
+    return UtilityParts(match + skip, match, skip)
+
+
+def utility_of(codes, vals_one, weights, rotation: int, reflected: bool, alignment) -> float:
+    """Utility of one explicit alignment, skip weights included (:func:`utility_parts`;
+    ``-inf`` if it uses a forbidden weight or skips a point that must be matched)."""
+    return utility_parts(codes, vals_one, weights, rotation, reflected, alignment).total

@@ -19,24 +19,34 @@ File format (TOML; ``lattices/fine.toml`` and ``lattices/coarse.toml`` are the b
     [[x.levels]]                       # levels, best first; at least one
     weight = 8                         # integer, |weight| <= MAX_WEIGHT
     triples = ["3-2-3"]                # non-empty list of "u-v-w", u, v, w in 2..5
+    [skip]                             # optional: skip weight per point type (default 0)
+    s = 0                              # integer, |weight| <= MAX_WEIGHT, or -inf
+    x = -20                            # (-inf: every point of this type must get a mesh vertex)
+    v = -inf
 
 Rules: every one of the 64 triples is placed exactly once per type (in a level, ``weeded`` or
 ``forbidden``); a level must not weigh more than a level listed before it; no other keys.
 Violations raise :class:`InputError` with ``where="path:LINE"`` (the offending line, found by
 searching the file text; TOML syntax errors keep tomllib's line).
 
+The skip weights enter the recurrence ``D[i][j] = max(D[i-1][j] + skip[code[i-1]],
+D[i-1][j-1] + W[i-1, j-1])`` (:mod:`jaxmatch.scoring.exact`); a file without ``[skip]`` scores
+as before (skipping is free, as in the paper).
+
 Arrays: ``table()`` is ``(3, 4, 4, 4) float32`` indexed ``[type, u-2, v-2, w-2]`` with type
 ``0 = s, 1 = x, 2 = v`` (:data:`jaxmatch.shape.SYMBOLS`), ``-inf`` where weeded/forbidden;
-:func:`finite_table` replaces ``-inf`` by :data:`NEG` for the scorer.
+:func:`finite_table` replaces ``-inf`` by :data:`NEG` for the scorer; ``weights()`` compiles the
+lattice (table and skip weights) into the :class:`jaxmatch.scoring.model.Weights` every scorer takes.
 """
 
 from __future__ import annotations
 
 import importlib.resources
 import itertools
+import math
 import re
 import tomllib
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import NamedTuple
 
@@ -44,6 +54,7 @@ import numpy as np
 
 from jaxmatch.errors import InputError
 from jaxmatch.files import read_limited, write_text_atomic
+from jaxmatch.scoring.model import NEG, Weights, make_weights
 from jaxmatch.shape import SYMBOLS
 
 __all__ = [
@@ -71,9 +82,6 @@ __all__ = [
     "with_level_weights",
 ]
 
-NEG = -1e9
-"""Large finite negative used by the scorer instead of ``-inf``."""
-
 MAX_BYTES = 2**20
 """Largest accepted lattice file (bytes); the built-ins are about 10 kB."""
 
@@ -93,7 +101,7 @@ BUILTIN_DIR = Path(__file__).resolve().parents[2] / "lattices"
 
 _TRIPLE_RE = re.compile(r"^[2-5]-[2-5]-[2-5]$")
 _NAME_RE = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.-]*$")
-_TOP_KEYS = ("name", "description", *TYPES)
+_TOP_KEYS = ("name", "description", *TYPES, "skip")
 _TYPE_KEYS = ("levels", "weeded", "forbidden")
 _LEVEL_KEYS = ("weight", "triples")
 
@@ -112,6 +120,7 @@ class Lattice:
     levels: per type, a tuple of :class:`Level`, best first (non-increasing weights).
     weeded: per type, triples that cannot occur in the catalogue class (weight ``-inf``).
     forbidden: per type, triples never matched to that point type (weight ``-inf``).
+    skip: per type, the skip weight (an integer, or ``-inf``: the point must get a mesh vertex).
     """
 
     name: str
@@ -119,6 +128,11 @@ class Lattice:
     weeded: tuple[tuple[str, ...], tuple[str, ...], tuple[str, ...]]
     forbidden: tuple[tuple[str, ...], tuple[str, ...], tuple[str, ...]]
     description: str = ""
+    skip: tuple[float, float, float] = (0, 0, 0)
+
+    def weights(self) -> Weights:
+        """The compiled scoring model (match table and skip weights) every scorer takes."""
+        return make_weights(self.table(), np.asarray(self.skip, np.float64), self.name)
 
     def table(self) -> np.ndarray:
         """``(3, 4, 4, 4) float32`` weights ``[type, u-2, v-2, w-2]``; ``-inf`` when excluded."""
@@ -204,8 +218,10 @@ def table_from_levels(structure: LevelStructure, weights):
     return (weights @ m + base).reshape(3, 4, 4, 4)
 
 
-def with_level_weights(lat: Lattice, weights) -> Lattice:
-    """A copy of ``lat`` with new level weights ``(L,)`` in :func:`level_structure` order.
+def with_level_weights(lat: Lattice, weights, skip=None) -> Lattice:
+    """A copy of ``lat`` with new level weights ``(L,)`` in :func:`level_structure` order (and,
+    when given, new skip weights ``(3,)``: finite ones rounded and clipped like the levels,
+    ``-inf`` ones of ``lat`` stay ``-inf``).
 
     Weights are rounded to integers and clipped to ``[-MAX_WEIGHT, MAX_WEIGHT]`` (the file
     format is integer-only, as in the paper). Levels are then stably re-sorted best first
@@ -224,7 +240,19 @@ def with_level_weights(lat: Lattice, weights) -> Lattice:
         new = [Level(int(w[i + j]), lev.triples) for j, lev in enumerate(levels)]
         i += len(levels)
         out.append(tuple(sorted(new, key=lambda lev: -lev.weight)))  # stable
-    return Lattice(name=lat.name, levels=tuple(out), weeded=lat.weeded, forbidden=lat.forbidden, description=lat.description)
+    new_skip = lat.skip
+    if skip is not None:
+        sk = np.asarray(skip, dtype=np.float64).reshape(-1)
+        if sk.shape != (3,):
+            raise ValueError(f"expected 3 skip weights, got {sk.shape[0]}")
+        new_skip = tuple(
+            old if math.isinf(old) else int(np.clip(np.rint(x), -MAX_WEIGHT, MAX_WEIGHT)) if np.isfinite(x) else _bad_skip()
+            for old, x in zip(lat.skip, sk))
+    return replace(lat, levels=tuple(out), skip=new_skip)
+
+
+def _bad_skip():
+    raise ValueError("finite skip weights must stay finite")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -481,7 +509,35 @@ def _validate(doc: dict, loc: _Locator, source: str) -> Lattice:
         levels_all.append(tuple(parsed))
         weeded_all.append(weeded)
         forbidden_all.append(forbidden)
-    return Lattice(name=name, levels=tuple(levels_all), weeded=tuple(weeded_all), forbidden=tuple(forbidden_all), description=description)
+    skip = _validate_skip(doc.get("skip", {}), loc)
+    return Lattice(name=name, levels=tuple(levels_all), weeded=tuple(weeded_all), forbidden=tuple(forbidden_all),
+                   description=description, skip=skip)
+
+
+def _validate_skip(table, loc: _Locator) -> tuple:
+    """The ``[skip]`` table: keys s, x, v (missing = 0), integers within MAX_WEIGHT or -inf."""
+    if not isinstance(table, dict):
+        raise InputError("skip must be a table [skip] with keys s, x, v", where=loc.at(loc.key(None, "skip")))
+    out = []
+    for key in table:
+        if key not in TYPES:
+            raise InputError(f"[skip]: unknown key {_short(key)} (allowed: s, x, v)", where=loc.at(loc.key("skip", key) or loc.header("skip")))
+    for kind in TYPES:
+        w = table.get(kind, 0)
+        where = loc.at(loc.key("skip", kind) or loc.header("skip"))
+        if isinstance(w, float) and math.isinf(w) and w < 0:
+            out.append(-math.inf)
+            continue
+        if isinstance(w, bool) or not isinstance(w, int):
+            raise InputError(f"[skip] {kind}: skip weight must be an integer or -inf, got {_short(w)}", where=where)
+        if abs(w) > MAX_WEIGHT:
+            raise InputError(f"[skip] {kind}: skip weight {w} is outside [-{MAX_WEIGHT}, {MAX_WEIGHT}]", where=where)
+        out.append(int(w))
+    return tuple(out)
+
+
+def _skip_value(w) -> str:
+    return "-inf" if math.isinf(w) else str(int(w))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -532,6 +588,9 @@ def lattice_toml(lat: Lattice) -> str:
         lines.append(f"forbidden = {_triple_array(lat.forbidden[k])}")
         for lev in lat.levels[k]:
             lines += ["", f"[[{kind}.levels]]", f"weight = {int(lev.weight)}", f"triples = {_triple_array(lev.triples)}"]
+    if any(w != 0 for w in lat.skip):
+        lines += ["", "# skip weights: the cost of leaving a shape point of that type without a mesh vertex", "[skip]"]
+        lines += [f"{kind} = {_skip_value(w)}" for kind, w in zip(TYPES, lat.skip)]
     return "\n".join(lines) + "\n"
 
 
@@ -561,6 +620,23 @@ def _patched(lat: Lattice, template: str) -> str | None:
             if count != 1:
                 return None
             lines[n - 1] = new
+    if tuple(old.skip) != tuple(lat.skip):
+        for kind, w_old, w_new in zip(TYPES, old.skip, lat.skip):
+            if w_old == w_new:
+                continue
+            n = loc.key("skip", kind)
+            if n is None:
+                if loc.header("skip") is not None:
+                    return None
+                continue  # no [skip] table: appended below
+            new, count = re.subn(r"^(\s*%s\s*=\s*)(-inf|[+-]?\d+)" % kind, rf"\g<1>{_skip_value(w_new)}", lines[n - 1], count=1)
+            if count != 1:
+                return None
+            lines[n - 1] = new
+        if loc.header("skip") is None:
+            tail = "" if not lines or lines[-1].endswith("\n") else "\n"
+            lines.append(tail + "\n# skip weights: the cost of leaving a shape point of that type without a mesh vertex\n[skip]\n"
+                         + "".join(f"{kind} = {_skip_value(w)}\n" for kind, w in zip(TYPES, lat.skip)))
     text = "".join(lines)
     n = loc.key("", "name")
     if old.name != lat.name:
@@ -594,13 +670,16 @@ def save_lattice(lat: Lattice, path, template=None) -> None:
 
 
 def lattice_json(lat: Lattice) -> dict:
-    """``{"s": {"2-2-2": w or None, ...}, "x": {...}, "v": {...}}``: all 64 triples per type
-    in :data:`ALL_TRIPLES` order, integer weights, ``None`` for ``-inf``."""
+    """``{"s": {"2-2-2": w or None, ...}, "x": {...}, "v": {...}, "skip": {"s": w, "x": w, "v": w
+    or None}}``: all 64 triples per type in :data:`ALL_TRIPLES` order, integer weights, ``None``
+    for ``-inf``; the skip weights likewise."""
     t = lat.table().reshape(3, 64)
-    return {
+    out = {
         kind: {tr: (int(t[k, i]) if np.isfinite(t[k, i]) else None) for i, tr in enumerate(ALL_TRIPLES)}
         for k, kind in enumerate(TYPES)
     }
+    out["skip"] = {kind: (None if math.isinf(w) else int(w)) for kind, w in zip(TYPES, lat.skip)}
+    return out
 
 
 def lattice_text(lat: Lattice) -> str:
@@ -616,4 +695,6 @@ def lattice_text(lat: Lattice) -> str:
             out.append(f"  {'-inf':>5}  forbidden: {' '.join(lat.forbidden[k])}")
         if lat.weeded[k]:
             out.append(f"  {'-inf':>5}  weeded:    {' '.join(lat.weeded[k])}")
+    out.append("skip  (weight of leaving a point without a mesh vertex; -inf: must get one)")
+    out.append("  " + "  ".join(f"{kind} {_skip_value(w):>5}" for kind, w in zip(TYPES, lat.skip)))
     return "\n".join(out) + "\n"

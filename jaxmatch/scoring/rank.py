@@ -14,7 +14,8 @@ from jaxmatch.catalogue.store import Catalogue
 from jaxmatch.errors import UnmatchableError
 from jaxmatch.scoring.lattice import Lattice
 from jaxmatch.catalogue.mesh import triples
-from jaxmatch.scoring.exact import align, oriented_sequence, score_bucket
+from jaxmatch.scoring.exact import align, oriented_sequence, score_bucket, utility_parts
+from jaxmatch.scoring.model import Weights, weights_of
 from jaxmatch.shape import Annotation, Shape, annotate, default_points
 
 
@@ -23,6 +24,8 @@ class Match(NamedTuple):
 
     alignment: (n,) int32 input index per mesh boundary vertex, in matched order
     (after rotation and reflection; strictly increasing). triples: (n, 3) in that order.
+    match_utility / skip_utility: the utility split into the matched pairs' weights and the
+    skipped points' skip weights (``utility = match_utility + skip_utility``).
     """
 
     mesh_id: str
@@ -33,6 +36,8 @@ class Match(NamedTuple):
     reflected: bool
     alignment: np.ndarray
     triples: np.ndarray
+    match_utility: float = float("nan")
+    skip_utility: float = 0.0
 
     def as_json(self) -> dict:
         return {
@@ -40,6 +45,8 @@ class Match(NamedTuple):
             "internal_vertices": int(self.internal_vertices),
             "boundary_length": int(self.boundary_length),
             "utility": float(self.utility),
+            "match_utility": float(self.match_utility),
+            "skip_utility": float(self.skip_utility),
             "rotation": int(self.rotation),
             "reflected": bool(self.reflected),
             "alignment": [int(i) for i in self.alignment],
@@ -84,7 +91,7 @@ def selected_lengths(catalogue: Catalogue, internal: list[int] | None) -> list[i
 def rank(
     shape: Shape,
     catalogue: Catalogue,
-    lattice: Lattice,
+    lattice: Lattice | Weights,
     *,
     internal: list[int] | None = None,
     top: int = 5,
@@ -98,6 +105,8 @@ def rank(
 ) -> Ranking:
     """Score every selected catalogue mesh against ``shape`` and return the best ``top``.
 
+    lattice: the scoring model (a :class:`Lattice` or its compiled
+    :class:`jaxmatch.scoring.model.Weights`), compiled once for the whole ranking.
     internal: k values to consider (None: all sizes compete; raw utilities then favour larger
     meshes, which match more points). per_size: return the best ``top`` of *each* k.
     points: number m of annotated shape points (default :func:`default_points` for the
@@ -131,10 +140,10 @@ def rank(
         raise ValueError(f"tie_break must be 'id' or a tie breaker function, got {tie_break!r}")
     lengths = selected_lengths(catalogue, internal)
     if not lengths:
-        raise UnmatchableError(f"the catalogue has no mesh with {internal_text(internal)}")
+        raise _unmatchable(f"the catalogue has no mesh with {internal_text(internal)}", "internal")
     m = points if points is not None else default_points(shape, max(lengths))
     ann = annotate(shape, m)
-    table = lattice.table()
+    weights = weights_of(lattice)
     buckets = list(catalogue.buckets(internal))
     total = sum(len(b.ids) for b in buckets)
     rows = []  # (utility, k, n, id, rotation, reflected, vals)
@@ -142,12 +151,12 @@ def rank(
     if prune or (devices is not None and devices > 1):
         from jaxmatch.scoring.bulk import prepared, top_k
 
-        tk = top_k(ann.codes, prepared(catalogue, internal), table, top=top, per_size=per_size, prune=prune,
+        tk = top_k(ann.codes, prepared(catalogue, internal), weights, top=top, per_size=per_size, prune=prune,
                    devices=devices if devices is not None and devices > 1 else None, progress=progress)
         rows, unmatchable, pruned = list(tk.rows), tk.unmatchable, tk.pruned
         buckets = []
     for b in buckets:
-        res = score_bucket(ann.codes, b.valences, table)
+        res = score_bucket(ann.codes, b.valences, weights)
         ok = ~res.unmatchable
         unmatchable += int((~ok).sum())
         for i in np.flatnonzero(ok):
@@ -156,13 +165,15 @@ def rank(
         if progress is not None:
             progress(done, total)
     if not rows:
-        raise UnmatchableError(unmatchable_reason(ann, lengths, lattice))
+        raise unmatchable_error(ann, lengths, weights)
     rows.sort(key=lambda r: (-r[0], r[1], r[2], r[3]))
 
     def to_match(r) -> Match:
         util, k, n, mid, rot, refl, vals = r
-        alignment = align(ann.codes, vals, table, rot, refl)
-        return Match(mid, k, n, util, rot, refl, alignment, triples(oriented_sequence(vals, rot, refl)))
+        alignment = align(ann.codes, vals, weights, rot, refl)
+        parts = utility_parts(ann.codes, vals, weights, rot, refl, alignment)
+        return Match(mid, k, n, util, rot, refl, alignment, triples(oriented_sequence(vals, rot, refl)),
+                     parts.match, parts.skip)
 
     placements = {} if callable(tie_break) else None
     budget = [TIE_CAP if tie_cap is None else max(int(tie_cap), 0)]
@@ -207,12 +218,36 @@ def internal_text(internal: list[int] | None) -> str:
     return f"{internal[0]}..{internal[-1]} internal vertices"
 
 
-def unmatchable_reason(ann: Annotation, lengths: list[int], lattice: Lattice) -> str:
-    """One sentence: why no mesh matched, and which option to change."""
+UNMATCHABLE_CAUSES = ("internal", "points", "forbidden")
+"""Values of ``UnmatchableError.cause``: which input would have to change (the CLI names the
+option for each; core messages name only the concept)."""
+
+
+def _unmatchable(message: str, cause: str, points: int | None = None) -> UnmatchableError:
+    err = UnmatchableError(message)
+    err.cause = cause  # type: ignore[attr-defined]
+    err.points = points  # type: ignore[attr-defined]  # the number of points needed, for "points"
+    return err
+
+
+def unmatchable_reason(ann: Annotation, lengths: list[int], lattice) -> str:
+    """One sentence: why no mesh matched, and what to change (concepts, no option names)."""
+    return str(unmatchable_error(ann, lengths, lattice))
+
+
+def unmatchable_error(ann: Annotation, lengths: list[int], lattice) -> UnmatchableError:
+    """:class:`UnmatchableError` saying why no mesh matched, with ``cause`` (one of
+    :data:`UNMATCHABLE_CAUSES`) and ``points`` (the number of points needed, or None) for the
+    caller's hint."""
+    w = weights_of(lattice)
     m = len(ann.codes)
     if min(lengths) > m:
-        return (f"every selected mesh has more boundary vertices ({min(lengths)}+) than the shape has points ({m}); "
-                f"raise --points to at least {max(lengths)}")
-    return (f"every selected mesh needs a forbidden (-inf) pairing with the shape's {ann.symbols.count('x')} convex and "
-            f"{ann.symbols.count('v')} concave corners under lattice '{lattice.name}' (m={m}); "
-            "try more --points, other --internal sizes, or a lattice with fewer forbidden triples")
+        return _unmatchable(f"every selected mesh has more boundary vertices ({min(lengths)}+) than the shape has points ({m}); "
+                            f"annotate the shape with at least {max(lengths)} points", "points", max(lengths))
+    must = [f"{ann.symbols.count(k)} {name}" for k, name in zip("sxv", ("straight points", "convex corners", "concave corners"))
+            if w.must["sxv".index(k)]]
+    need = f"; the lattice requires a mesh vertex at each of its {' and '.join(must)}" if must else ""
+    name = f" '{w.name}'" if w.name else ""
+    return _unmatchable(f"every selected mesh needs a forbidden (-inf) pairing with the shape's {ann.symbols.count('x')} convex and "
+                        f"{ann.symbols.count('v')} concave corners under lattice{name} (m={m}){need}; "
+                        "try more annotated points, other mesh sizes, or a lattice with fewer forbidden entries", "forbidden")

@@ -13,8 +13,15 @@ is used under the Gibbs distribution ``exp(U / gamma)`` (each matchable mesh's g
 to ``n``; for any mesh it is nonnegative with sum at most ``n``: the smoothed maxima use
 normalised weights in their derivatives, see :func:`smax2`).
 
-Forbidden entries (``forbidden_mask``) are fixed at the finite ``NEG`` (never ``-inf``) and
-get exactly zero gradient. Values ``<= NEG / 2`` mean *unmatchable* (no finite alignment or
+The model is a :class:`jaxmatch.scoring.model.Weights` (match table, forbidden mask, skip
+weights, must-match mask); the free values (``table``, ``skip``) may be given separately as JAX
+arrays to differentiate in them. Skip weights enter as in the exact scorer (the shifted frame
+of :mod:`jaxmatch.scoring.exact`: ``W' = W - skip[c]`` in the DP, ``sum_i skip[codes[i]]``
+added at the end, which is exact for a log-sum-exp over alignments too); the gradient w.r.t.
+``skip[c]`` is the expected number of skipped points of type ``c``.
+
+Forbidden entries and ``-inf`` skip weights are fixed at the finite ``NEG`` (never ``-inf``)
+and get exactly zero gradient. Values ``<= NEG / 2`` mean *unmatchable* (no finite alignment or
 ``n > m``); they stay finite so gradients stay finite (at any ``gamma > 0``, 1e-3 included).
 
 The computation dtype follows ``table_free`` (float32 normally; float64 under
@@ -31,12 +38,15 @@ import jax.numpy as jnp
 import numpy as np
 from jax.custom_derivatives import SymbolicZero
 
-from jaxmatch.scoring.exact import NEG, UNROLL, bucket_length, dp_scan, orientation_weights
+from jaxmatch.scoring.exact import UNROLL, bucket_length, dp_scan, orientation_weights
+from jaxmatch.scoring.model import NEG, weights_of
 
 __all__ = [
     "smax",
     "smax2",
     "smooth_max",
+    "soft_batch",
+    "soft_parts",
     "soft_table",
     "soft_utility",
     "soft_utility_batch",
@@ -137,32 +147,63 @@ def table_parts(table) -> tuple[np.ndarray, np.ndarray]:
     return np.where(forbidden, 0.0, t).astype(np.float32), forbidden
 
 
-def _soft_core(codes, valid, vals, table, gamma, unroll):
+def soft_parts(weights) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``(table_free (3, 4, 4, 4) float32, forbidden (3, 4, 4, 4) bool, skip_free (3,) float32,
+    must (3,) bool)`` of a model (:func:`jaxmatch.scoring.model.weights_of`); forbidden entries
+    of ``table_free`` and must-match entries of ``skip_free`` are 0."""
+    w = weights_of(weights)
+    return (np.where(w.forbidden, 0.0, w.table).astype(np.float32).reshape(3, 4, 4, 4), w.forbidden.reshape(3, 4, 4, 4).copy(),
+            np.where(w.must, 0.0, w.skip).astype(np.float32), w.must.copy())
+
+
+def _shifted(table, forbidden, skip, must):
+    """Shifted-frame weights ``(3, 4, 4, 4)``, skip gate ``(3,)`` and shift ``(3,)`` (exact.py's frame)."""
+    t = jnp.asarray(table)
+    dt = t.dtype if jnp.issubdtype(t.dtype, jnp.floating) else jnp.float32
+    t = t.astype(dt).reshape(3, 64)
+    must = jnp.asarray(must, bool)
+    shift = jnp.where(must, jnp.asarray(0.0, dt), jnp.asarray(skip, dt))
+    tw = jnp.where(jnp.asarray(forbidden, bool).reshape(3, 64), jnp.asarray(NEG, dt), t - shift[:, None])
+    gate = jnp.where(must, jnp.asarray(NEG, dt), jnp.asarray(0.0, dt))
+    return tw.reshape(3, 4, 4, 4), gate, shift
+
+
+def _soft_core(codes, valid, vals, tw, gate, shift, gamma, unroll):
     """``(N,)`` soft utilities of meshes ``vals: (N, n)`` for one padded shape."""
-    wc = orientation_weights(vals, table)  # (3, n, N, 2n)
-    last = dp_scan(wc, codes, valid, smooth_max(gamma), unroll=unroll)
-    return smax(last[-1], gamma, -1)  # over the 2n orientations of each mesh
+    wc = orientation_weights(vals, tw)  # (3, n, N, 2n)
+    last = dp_scan(wc, codes, valid, smooth_max(gamma), gate=gate, unroll=unroll)
+    offset = jnp.sum(jnp.where(valid, shift[codes], 0.0))
+    return smax(last[-1], gamma, -1) + offset  # over the 2n orientations of each mesh
 
 
 @partial(jax.jit, static_argnames=("unroll",))
-def _soft_one(codes, valid, vals, table_free, forbidden_mask, gamma, unroll=UNROLL):
-    table = soft_table(table_free, forbidden_mask)
-    return _soft_core(codes, valid, vals, table, jnp.asarray(gamma, table.dtype), unroll)
+def _soft_one(codes, valid, vals, table, forbidden, skip, must, gamma, unroll=UNROLL):
+    tw, gate, shift = _shifted(table, forbidden, skip, must)
+    return _soft_core(codes, valid, vals, tw, gate, shift, jnp.asarray(gamma, tw.dtype), unroll)
 
 
 @partial(jax.jit, static_argnames=("unroll",))
-def _soft_many(codes, valid, vals, table_free, forbidden_mask, gamma, unroll=UNROLL):
-    table = soft_table(table_free, forbidden_mask)
-    g = jnp.asarray(gamma, table.dtype)
-    return jax.vmap(lambda c, v: _soft_core(c, v, vals, table, g, unroll))(codes, valid)
+def soft_batch(codes, valid, vals, table, forbidden, skip, must, gamma, unroll=UNROLL):
+    """Array form of :func:`soft_utility_batch` (for use inside a traced loss): ``table (3, 4, 4,
+    4)``, ``forbidden`` like it, ``skip (3,)``, ``must (3,)`` as in :func:`soft_parts`."""
+    tw, gate, shift = _shifted(table, forbidden, skip, must)
+    g = jnp.asarray(gamma, tw.dtype)
+    return jax.vmap(lambda c, v: _soft_core(c, v, vals, tw, gate, shift, g, unroll))(codes, valid)
 
 
-def soft_utility(codes, vals, table_free, forbidden_mask, gamma, *, m_pad: int | None = None, unroll: int = UNROLL):
+def _model_arrays(weights, table, skip):
+    tf, forbidden, sf, must = soft_parts(weights)
+    return (tf if table is None else table), forbidden, (sf if skip is None else skip), must
+
+
+def soft_utility(codes, vals, weights, gamma, *, table=None, skip=None, m_pad: int | None = None, unroll: int = UNROLL):
     """Soft utilities ``(N,)`` of meshes ``vals: (N, n)`` against one shape ``codes: (m,)``.
 
-    Differentiable in ``table_free`` (and ``gamma``); traceable (``codes``/``vals`` may be
-    traced, their shapes are static). ``m`` is padded to :func:`bucket_length` (or ``m_pad``)
-    with padded points skipped, which does not change the value.
+    weights: the model (:func:`jaxmatch.scoring.model.weights_of`); ``table (3, 4, 4, 4)`` and
+    ``skip (3,)``, when given, replace its free values (forbidden / must-match entries stay
+    fixed at NEG). Differentiable in ``table``, ``skip`` and ``gamma``; traceable
+    (``codes``/``vals`` may be traced, their shapes are static). ``m`` is padded to
+    :func:`bucket_length` (or ``m_pad``) with padded points skipped, which does not change the value.
     """
     c = jnp.asarray(codes, jnp.int32).reshape(-1)
     m = c.shape[0]
@@ -174,7 +215,7 @@ def soft_utility(codes, vals, table_free, forbidden_mask, gamma, *, m_pad: int |
         v = v[None]
     c = jnp.pad(c, (0, mp - m))
     valid = jnp.arange(mp) < m
-    return _soft_one(c, valid, v, table_free, forbidden_mask, gamma, unroll=unroll)
+    return _soft_one(c, valid, v, *_model_arrays(weights, table, skip), gamma, unroll=unroll)
 
 
 def pad_shapes(shapes: Sequence, m_pad: int | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -195,15 +236,16 @@ def pad_shapes(shapes: Sequence, m_pad: int | None = None) -> tuple[np.ndarray, 
     return codes, valid
 
 
-def soft_utility_batch(codes, valid, vals, table_free, forbidden_mask, gamma, *, unroll: int = UNROLL):
+def soft_utility_batch(codes, valid, vals, weights, gamma, *, table=None, skip=None, unroll: int = UNROLL):
     """Soft utilities ``(S, N)`` of meshes ``vals: (N, n)`` against ``S`` padded shapes.
 
-    codes, valid: ``(S, m_pad)`` from :func:`pad_shapes` (invalid points are skipped).
-    ``vmap`` over shapes of the same DP; differentiable in ``table_free``. Entry ``[s, k]``
-    equals ``soft_utility(shape s, vals[k:k+1], ...)``; ``n`` greater than shape ``s``'s
-    length gives a value ``<= NEG / 2``.
+    codes, valid: ``(S, m_pad)`` from :func:`pad_shapes` (invalid points are skipped);
+    weights, table, skip: as in :func:`soft_utility`. ``vmap`` over shapes of the same DP;
+    differentiable in ``table`` and ``skip``. Entry ``[s, k]`` equals ``soft_utility(shape s,
+    vals[k:k+1], ...)``; ``n`` greater than shape ``s``'s length gives a value ``<= NEG / 2``.
     """
     v = jnp.asarray(vals, jnp.int32)
     if v.ndim == 1:
         v = v[None]
-    return _soft_many(jnp.asarray(codes, jnp.int32), jnp.asarray(valid, bool), v, table_free, forbidden_mask, gamma, unroll=unroll)
+    return soft_batch(jnp.asarray(codes, jnp.int32), jnp.asarray(valid, bool), v, *_model_arrays(weights, table, skip), gamma,
+                      unroll=unroll)

@@ -2,10 +2,11 @@
 
 What is tuned
 -------------
-Only the *level weights* of a lattice (:func:`jaxmatch.scoring.lattice.level_structure`), never the
+The *level weights* of a lattice (:func:`jaxmatch.scoring.lattice.level_structure`), never the
 192 table entries one by one: every triple keeps its level, and ``-inf`` entries (weeded and
 forbidden) stay ``-inf`` (they are fixed at ``NEG`` inside the soft scorer and get exactly zero
-gradient). The order of the levels survives by construction: per point type, the parameters
+gradient). And the three *skip weights* (``[skip]``; ``tune_skip=False`` keeps them): finite
+ones are free parameters, ``-inf`` ones stay ``-inf``. The order of the levels survives by construction: per point type, the parameters
 are the best level's weight ``a`` and one number ``d_l`` per lower level, and
 
     w_0 = a,    w_l = w_{l-1} - softplus(d_l)        (l = 1, 2, ...)
@@ -60,11 +61,11 @@ Twins of ``p`` are not competitors. ``top1`` is the fraction of examples that no
 beats, ``top5`` the fraction beaten by at most four. An unmatchable preferred mesh is beaten
 by every competitor.
 
-Not done: a per-type deletion penalty (a cost for skipping a shape point of type s, x or v; 0 in
-the paper) would be three more parameters, but it changes the exact scorer's recurrence (owned by
-:mod:`jaxmatch.scoring.exact`). A uniform penalty would add nothing: a mesh of ``n`` vertices always skips
-``m - n`` points, so it equals adding a constant to every finite weight. A per-type one would make
-skipped corners cost more than skipped straight points.
+Skip weights: only their differences to the match weights of the same type matter for a
+ranking within one size up to a constant per shape (a mesh of ``n`` vertices always skips
+``m - n`` points), so a uniform skip weight changes nothing; per type they make a skipped
+corner cost more than a skipped straight point. The exact evaluation uses the one exact host
+(:func:`jaxmatch.scoring.exact.exact_values`).
 """
 
 from __future__ import annotations
@@ -80,10 +81,13 @@ import optax
 
 from jaxmatch.catalogue.store import Catalogue
 from jaxmatch.tuning.labels import Example, MeshIndex, boundary_key, mesh_index
+from dataclasses import replace
+
+from jaxmatch.scoring.exact import exact_values
 from jaxmatch.scoring.lattice import MAX_WEIGHT, Lattice, LevelStructure, level_structure, table_from_levels, with_level_weights
-from jaxmatch.scoring.exact import NEG, dp_scan, orientation_weights
+from jaxmatch.scoring.model import NEG, make_weights, weights_of
+from jaxmatch.scoring.soft import pad_shapes, soft_batch, soft_parts
 from jaxmatch.shape import annotate, default_points
-from jaxmatch.scoring.soft import pad_shapes, soft_utility_batch, table_parts
 
 __all__ = [
     "Candidates",
@@ -265,42 +269,24 @@ def split_examples(examples: Sequence[Example], fraction: float, seed: int) -> t
 # exact evaluation
 
 
-@jax.jit
-def _exact_many(codes, valid, vals, table_finite):
-    """``(S, N)`` exact best utility of meshes ``vals`` against padded shapes (NEG-ish when
-    unmatchable): the recurrence of :func:`jaxmatch.scoring.exact.score_bucket`, vmapped over shapes."""
-    wc = orientation_weights(vals, table_finite)
-
-    def one(c, v):
-        return jnp.max(dp_scan(wc, c, v, jnp.maximum)[-1], axis=-1)
-
-    return jax.vmap(one)(codes, valid)
-
-
-def _finite(table) -> np.ndarray:
-    t = np.asarray(table, np.float32)
-    return np.where(np.isfinite(t) & (t > NEG), t, np.float32(NEG)).astype(np.float32)
-
-
-def exact_utilities(enc: Encoded, cands: Candidates, table) -> np.ndarray:
-    """``(S, N) float32`` exact utilities (``-inf`` when unmatchable) for a ``(3, 4, 4, 4)``
-    table (``-inf`` or ``<= NEG`` = excluded)."""
-    tf = jnp.asarray(_finite(table))
+def exact_utilities(enc: Encoded, cands: Candidates, weights) -> np.ndarray:
+    """``(S, N) float32`` exact utilities (``-inf`` when unmatchable) under a model (a
+    :class:`Lattice`, :class:`jaxmatch.scoring.model.Weights` or a ``(3, 4, 4, 4)`` table with
+    ``-inf`` = excluded and skip weights 0), by the exact host, in chunks of a fixed number of
+    shapes (one compilation per (m_pad, bucket))."""
+    w = weights_of(weights)
     s_total = enc.codes.shape[0]
+    shapes = [enc.codes[i][enc.valid[i]] for i in range(s_total)]
     out = []
     for start in range(0, s_total, _SHAPE_CHUNK):
-        c = enc.codes[start:start + _SHAPE_CHUNK]
-        v = enc.valid[start:start + _SHAPE_CHUNK]
-        s = c.shape[0]
-        if s < _SHAPE_CHUNK:  # fixed chunk: one compilation per (m_pad, bucket)
-            c = np.concatenate([c, np.zeros((_SHAPE_CHUNK - s, c.shape[1]), c.dtype)])
-            v = np.concatenate([v, np.zeros((_SHAPE_CHUNK - s, v.shape[1]), bool)])
-        cols = [_exact_many(jnp.asarray(c), jnp.asarray(v), jnp.asarray(vals), tf) for _, vals in cands.buckets]
-        out.append(np.concatenate([np.asarray(x) for x in cols], axis=1)[:s])
+        chunk = shapes[start:start + _SHAPE_CHUNK]
+        s = len(chunk)
+        chunk = chunk + [np.zeros(0, np.int32)] * (_SHAPE_CHUNK - s)  # all-padding shapes
+        cols = [exact_values(chunk, vals, w, m_pad=enc.codes.shape[1]).max(axis=2) for _, vals in cands.buckets]
+        out.append(np.concatenate(cols, axis=1)[:s])
     if not out:
         return np.zeros((0, len(cands.ids)), np.float32)
-    u = np.concatenate(out)
-    return np.where(u <= NEG / 2, -np.inf, u).astype(np.float32)
+    return np.concatenate(out).astype(np.float32)
 
 
 def rank_positions(util: np.ndarray, pos: np.ndarray, twin: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -349,12 +335,12 @@ def _groups(examples, index, *, max_candidates=None, seed=0) -> list[_Group]:
     return out
 
 
-def _ranks(groups: list[_Group], n_examples: int, table) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _ranks(groups: list[_Group], n_examples: int, weights) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     pess = np.zeros(n_examples, np.int64)
     by_id = np.zeros(n_examples, np.int64)
     unmatchable = np.zeros(n_examples, bool)
     for g in groups:
-        u = exact_utilities(g.enc, g.cands, table)
+        u = exact_utilities(g.enc, g.cands, weights)
         p, b = rank_positions(u, g.enc.pos, g.enc.twin)
         idx = np.asarray(g.members)
         pess[idx], by_id[idx] = p, b
@@ -363,15 +349,14 @@ def _ranks(groups: list[_Group], n_examples: int, table) -> tuple[np.ndarray, np
 
 
 def evaluate(examples: Sequence[Example], catalogue_or_index, table, *, detail: bool = False) -> dict:
-    """Exact-scorer accuracy of ``table`` (a ``(3, 4, 4, 4)`` array or a :class:`Lattice`) on
+    """Exact-scorer accuracy of a model ``table`` (a :class:`Lattice`, its
+    :class:`jaxmatch.scoring.model.Weights`, or a ``(3, 4, 4, 4)`` array with skip weights 0) on
     ``examples``: ``{"top1", "top5", "top1_by_id", "top5_by_id", "mean_rank", "examples",
     "unmatchable"}`` over *all* catalogue meshes of each example's size (tie rule: module
     docstring); with ``detail`` also ``"ranks"`` (pessimistic rank per example)."""
     index = catalogue_or_index if isinstance(catalogue_or_index, MeshIndex) else mesh_index(catalogue_or_index)
-    if isinstance(table, Lattice):
-        table = table.table()
     groups = _groups(examples, index)
-    pess, by_id, unm = _ranks(groups, len(examples), table)
+    pess, by_id, unm = _ranks(groups, len(examples), weights_of(table))
     out = _metrics(pess, by_id)
     out["unmatchable"] = int(unm.sum())
     if detail:
@@ -385,11 +370,13 @@ def evaluate(examples: Sequence[Example], catalogue_or_index, table, *, detail: 
 
 class TuneResult(NamedTuple):
     """weights: ``(L,) float64`` tuned level weights (unrounded); losses: mean loss per epoch;
-    ignored: indices (into the training examples) whose preferred mesh is unmatchable."""
+    ignored: indices (into the training examples) whose preferred mesh is unmatchable;
+    skip: ``(3,) float64`` tuned skip weights (unrounded; ``-inf`` where the lattice has ``-inf``)."""
 
     weights: np.ndarray
     losses: list
     ignored: list
+    skip: np.ndarray = np.zeros(3)
 
 
 def _weights(params, segments):
@@ -402,21 +389,24 @@ def _weights(params, segments):
 
 
 def _loss(params, fixed, batch, gamma, segments):
-    """Mini-batch loss (module docstring).
+    """Mini-batch loss (module docstring). ``params``: ``(L + 3,)`` level parameters, then the
+    three skip weights.
 
-    fixed: ``(masks (L, 192), base (192,), forbidden (3, 4, 4, 4), buckets (tuple of (N_n, n)),
-    w0 (L,), l2)``; batch: ``(codes, valid, pos, keep (B, N), ex_w (B,))``.
+    fixed: ``(masks (L, 192), base (192,), forbidden (3, 4, 4, 4), must (3,), buckets (tuple of
+    (N_n, n)), w0 (L + 3,), l2)``; batch: ``(codes, valid, pos, keep (B, N), ex_w (B,))``.
     """
-    masks, base, forbidden, buckets, w0, l2 = fixed
+    masks, base, forbidden, must, buckets, w0, l2 = fixed
     codes, valid, pos, keep, ex_w = batch
-    w = _weights(params, segments)
+    n_levels = masks.shape[0]
+    w = _weights(params[:n_levels], segments)
+    skip = params[n_levels:]
     table = (w @ masks + base).reshape(3, 4, 4, 4)  # = table_from_levels(structure, w)
-    u = jnp.concatenate([soft_utility_batch(codes, valid, vals, table, forbidden, gamma) for vals in buckets], axis=1)
+    u = jnp.concatenate([soft_batch(codes, valid, vals, table, forbidden, skip, must, gamma) for vals in buckets], axis=1)
     logits = jnp.where(keep, u / gamma, -jnp.inf)
     lp = jnp.take_along_axis(logits, pos[:, None], axis=1)[:, 0]
     ce = jax.nn.logsumexp(logits, axis=1) - lp
     data = jnp.sum(ce * ex_w) / jnp.maximum(jnp.sum(ex_w), 1.0)
-    return data + l2 * jnp.mean((w - w0) ** 2)
+    return data + l2 * jnp.mean((jnp.concatenate([w, jnp.where(must, 0.0, skip)]) - w0) ** 2)
 
 
 _value_and_grad = jax.jit(jax.value_and_grad(_loss), static_argnames=("segments",))
@@ -442,8 +432,10 @@ def train(
     l2: float = 1e-3,
     max_candidates: int | None = 256,
     progress: Callable[[int, int, float], None] | None = None,
+    tune_skip: bool = True,
 ) -> TuneResult:
-    """Tune the level weights of ``lattice`` on ``examples`` (module docstring).
+    """Tune the level weights (and, with ``tune_skip``, the finite skip weights) of ``lattice``
+    on ``examples`` (module docstring).
 
     progress(step, total_steps, loss): called after every optimiser step.
     Raises FloatingPointError when a loss or gradient is not finite.
@@ -454,15 +446,19 @@ def train(
         raise ValueError("epochs must be >= 0 and batch_size >= 1")
     index = catalogue_or_index if isinstance(catalogue_or_index, MeshIndex) else mesh_index(catalogue_or_index)
     structure = level_structure(lattice)
-    _, forbidden = table_parts(lattice.table())
-    w0 = jnp.asarray(structure.weights, jnp.float32)
-    params = jnp.asarray(init_params(structure))
+    model = weights_of(lattice)
+    _, forbidden, skip0, must = soft_parts(model)
+    n_levels = structure.weights.shape[0]
+    w0 = jnp.asarray(np.concatenate([structure.weights, skip0]), jnp.float32)
+    params = jnp.asarray(np.concatenate([init_params(structure), skip0]).astype(np.float32))
+    # gradient mask: -inf skip weights never move; with tune_skip=False none of them does
+    free = jnp.asarray(np.concatenate([np.ones(n_levels), (~must) & bool(tune_skip)]).astype(np.float32))
     groups = _groups(examples, index, max_candidates=max_candidates, seed=seed)
     # examples whose preferred mesh no weights can match get no weight
     ignored = []
     weight_of = {}
     for g in groups:
-        u = exact_utilities(g.enc, g.cands, lattice.table())
+        u = exact_utilities(g.enc, g.cands, model)
         ok = np.isfinite(u[np.arange(len(g.members)), g.enc.pos])
         ignored += [i for i, good in zip(g.members, ok) if not good]
         weight_of[g.k] = ok.astype(np.float32)
@@ -470,7 +466,8 @@ def train(
     masks = jnp.asarray(structure.masks.reshape(structure.masks.shape[0], -1).astype(np.float32))
     base = jnp.asarray(np.where(structure.masks.any(axis=0), 0.0, NEG).astype(np.float32).reshape(-1))
     fixed = {
-        g.k: (masks, base, jnp.asarray(forbidden), tuple(jnp.asarray(v) for _, v in g.cands.buckets), w0, jnp.float32(l2))
+        g.k: (masks, base, jnp.asarray(forbidden), jnp.asarray(must), tuple(jnp.asarray(v) for _, v in g.cands.buckets), w0,
+              jnp.float32(l2))
         for g in groups
     }
     state = optax.adam(learning_rate).init(params)
@@ -494,6 +491,7 @@ def train(
                 batch = (jnp.asarray(g.enc.codes[pad]), jnp.asarray(g.enc.valid[pad]), jnp.asarray(g.enc.pos[pad]),
                          jnp.asarray(keep), jnp.asarray(ex_w))
                 value, grads = _value_and_grad(params, fixed[g.k], batch, gamma, segments)
+                grads = grads * free
                 value = float(value)
                 gnp = np.asarray(grads)
                 if not math.isfinite(value) or not np.all(np.isfinite(gnp)):
@@ -505,41 +503,48 @@ def train(
                 if progress is not None:
                     progress(step, total, value)
         losses.append(epoch_loss / max(epoch_n, 1))
-    w = np.asarray(params_to_weights(params, structure), np.float64)
-    return TuneResult(w, losses, ignored)
+    w = np.asarray(params_to_weights(params[:n_levels], structure), np.float64)
+    skip = np.where(must, -np.inf, np.asarray(params[n_levels:], np.float64))
+    return TuneResult(w, losses, ignored, skip)
 
 
 # ---------------------------------------------------------------------------------------------
 # rounding and the whole job
 
 
-def choose_scale(lattice: Lattice, weights, examples: Sequence[Example], catalogue_or_index, scales: Sequence[int] = SCALES) -> tuple[Lattice, int, list]:
-    """The rounded lattice ``with_level_weights(lattice, scale * weights)`` whose exact ranking
-    of ``examples`` is best (pessimistic top-1, then top-5, then the smaller scale); returns
-    ``(lattice, scale, [{"scale", "top1", "top5", ...}, ...])``."""
+def choose_scale(lattice: Lattice, weights, examples: Sequence[Example], catalogue_or_index, scales: Sequence[int] = SCALES,
+                 skip=None) -> tuple[Lattice, int, list]:
+    """The rounded lattice ``with_level_weights(lattice, scale * weights, scale * skip)`` whose
+    exact ranking of ``examples`` is best (pessimistic top-1, then top-5, then the smaller
+    scale); returns ``(lattice, scale, [{"scale", "top1", "top5", ...}, ...])``. ``skip``:
+    ``(3,)`` tuned skip weights (None: the lattice's own)."""
     index = catalogue_or_index if isinstance(catalogue_or_index, MeshIndex) else mesh_index(catalogue_or_index)
     w = np.asarray(weights, np.float64)
-    biggest = float(np.max(np.abs(w))) if w.size else 0.0
+    sk = None if skip is None else np.asarray(skip, np.float64)
+    finite_skip = np.zeros(0) if sk is None else sk[np.isfinite(sk)]
+    biggest = float(np.max(np.abs(np.concatenate([w, finite_skip])))) if w.size + finite_skip.size else 0.0
     groups = _groups(examples, index)
     best = None
     rows = []
     for s in scales:
         if s * biggest > MAX_WEIGHT:
             break
-        lat = with_level_weights(lattice, s * w)
-        pess, by_id, _ = _ranks(groups, len(examples), lat.table())
+        lat = with_level_weights(lattice, s * w, None if sk is None else s * sk)
+        pess, by_id, _ = _ranks(groups, len(examples), lat)
         m = _metrics(pess, by_id)
         rows.append({"scale": int(s), **{k: m[k] for k in ("top1", "top5", "top1_by_id", "top5_by_id", "mean_rank")}})
         key = (m["top1"] or 0.0, m["top5"] or 0.0, m["top1_by_id"] or 0.0)
         if best is None or key > best[0]:
             best = (key, s, lat)
     if best is None:  # weights too large for any scale: clip at scale 1
-        return with_level_weights(lattice, w), 1, rows
+        return with_level_weights(lattice, w, sk), 1, rows
     return best[2], int(best[1]), rows
 
 
 def _weights_json(lattice: Lattice) -> dict:
-    return {kind: [int(lev.weight) for lev in levels] for kind, levels in zip("sxv", lattice.levels)}
+    out = {kind: [int(lev.weight) for lev in levels] for kind, levels in zip("sxv", lattice.levels)}
+    out["skip"] = weights_of(lattice).skip_json()
+    return out
 
 
 def run_tuning(
@@ -559,6 +564,7 @@ def run_tuning(
     extra: dict | None = None,
     progress: Callable[[int, int, float], None] | None = None,
     stage: Callable[[str], None] | None = None,
+    tune_skip: bool = True,
 ) -> tuple[Lattice, dict]:
     """Split, evaluate before, train, round, evaluate after. Returns ``(tuned lattice, report)``.
 
@@ -582,21 +588,22 @@ def run_tuning(
     say(f"training on {len(tr)} examples")
     result = train(
         lattice, tr, index, epochs=epochs, temperature=temperature, seed=seed, learning_rate=learning_rate,
-        batch_size=batch_size, l2=l2, max_candidates=max_candidates, progress=progress,
+        batch_size=batch_size, l2=l2, max_candidates=max_candidates, progress=progress, tune_skip=tune_skip,
     )
     say("rounding to integers")
-    tuned, scale, scale_rows = choose_scale(lattice, result.weights, tr, index)
-    tuned = Lattice(name=name or f"{lattice.name}-tuned", levels=tuned.levels, weeded=tuned.weeded, forbidden=tuned.forbidden, description=tuned.description)
+    tuned, scale, scale_rows = choose_scale(lattice, result.weights, tr, index, skip=result.skip if tune_skip else None)
+    tuned = replace(tuned, name=name or f"{lattice.name}-tuned")
     say("evaluating the tuned lattice")
     structure = level_structure(lattice)
-    float_table = np.asarray(table_from_levels(structure, result.weights.astype(np.float32)))
+    float_table = make_weights(np.asarray(table_from_levels(structure, result.weights.astype(np.float32))),
+                               result.skip if tune_skip else weights_of(lattice).skip_inf())
     report = {
         "lattice": {"input": lattice.name, "output": tuned.name},
         "tie_rule": TIE_RULE,
         "settings": {
             "epochs": int(epochs), "temperature": float(temperature), "seed": int(seed),
             "learning_rate": float(learning_rate), "batch_size": int(batch_size), "l2": float(l2),
-            "max_candidates": None if max_candidates is None else int(max_candidates),
+            "max_candidates": None if max_candidates is None else int(max_candidates), "tune_skip": bool(tune_skip),
             "heldout_fraction": float(heldout),
         },
         "split": {
@@ -609,7 +616,8 @@ def run_tuning(
         "scales": scale_rows,
         "loss": [float(x) for x in result.losses],
         "weights": {"before": _weights_json(lattice), "after": _weights_json(tuned),
-                    "after_unrounded": {kind: [float(result.weights[i]) for i in range(a, b)] for kind, (a, b) in zip("sxv", _segments(structure))}},
+                    "after_unrounded": {**{kind: [float(result.weights[i]) for i in range(a, b)] for kind, (a, b) in zip("sxv", _segments(structure))},
+                                        "skip": {kind: (None if not np.isfinite(x) else float(x)) for kind, x in zip("sxv", result.skip)}}},
     }
     for key, ex in sets.items():
         report[key] = {
