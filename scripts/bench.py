@@ -71,6 +71,8 @@ def parse_args(argv=None):
     ap.add_argument("--threads", type=int, default=None, help="jaxmatch host threads (default: all CPUs of this process)")
     ap.add_argument("--batch", type=int, default=None, help="meshes per compiled call (default score.DEFAULT_BATCH)")
     ap.add_argument("--block-cells", type=int, default=None, help="DP cells per block step (default score.BLOCK_CELLS)")
+    ap.add_argument("--backend", choices=["default", "xla", "numba"], default="default",
+                    help="exact host backend measured as 'jaxmatch' (default: the host's default)")
     ap.add_argument("--dtype", choices=["auto", "int32", "float32"], default="auto", help="force the DP number type")
     ap.add_argument("--skip-reference", action="store_true", help="jaxmatch only (no ratio)")
     ap.add_argument("--refs", default="plain,vectorised,strongest",
@@ -133,11 +135,26 @@ def configure(args):
         score.dp_kind = lambda table, n: forced  # noqa: E731 - benchmark-only override
 
 
+def make_backend(args):
+    """The exact host's backend the benchmark measures (``--backend``); None: the host's default."""
+    if args.backend == "xla":
+        from jaxmatch.scoring.exact import CPUBackend
+
+        return CPUBackend(args.threads)
+    if args.backend == "numba":
+        from jaxmatch.scoring.backends import NumbaBackend
+
+        return NumbaBackend(args.threads)
+    return None
+
+
 def jax_pass(buckets, table, shapes, args) -> list:
     from jaxmatch.scoring.exact import DEFAULT_BATCH, score_bucket
 
     batch = args.batch or DEFAULT_BATCH
-    return [[score_bucket(c, b.valences, table, batch=batch, threads=args.threads).utility for b in buckets] for c in shapes]
+    backend = make_backend(args)
+    return [[score_bucket(c, b.valences, table, batch=batch, threads=args.threads, backend=backend).utility
+             for b in buckets] for c in shapes]
 
 
 # --------------------------------------------------------------------------- the reference
@@ -568,7 +585,7 @@ def main(argv=None) -> int:
                      "cell_definition": "2n orientations x n mesh vertices x m shape points per mesh and shape"},
         "jaxmatch": {"threads": threads, "first_pass_s": first, "warm_pass_s": warm, "compile_s": compile_s,
                      "run_s": summary(jax_times), "cells_per_s": cells / jb, "meshes_per_s": pairs / jb,
-                     "dtype": np.dtype(score.dp_kind(table, max(b.n for b in buckets)).dtype).name,
+                     "dtype": np.dtype(score.dp_kind(table, max(b.n for b in buckets)).dtype).name, "backend": args.backend,
                      "block_cells": score.BLOCK_CELLS, "batch": args.batch or score.DEFAULT_BATCH},
     }
     result["machine_peak"] = peak

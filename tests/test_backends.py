@@ -9,7 +9,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from jaxmatch.scoring import reference
-from jaxmatch.scoring.backends import NumbaBackend, numba_values
+from jaxmatch.errors import InputError
+from jaxmatch.scoring.backends import NumbaBackend, default_backend, numba_values
 from jaxmatch.scoring.exact import CPUBackend, dp_problem, exact_values, score_bucket
 from jaxmatch.scoring.model import make_weights
 
@@ -85,3 +86,15 @@ def test_numba_values_rejects_wider_types_and_backend_falls_back():
     vals = np.random.default_rng(0).integers(2, 6, (5, 10))
     np.testing.assert_array_equal(exact_values([np.zeros(12, np.int32)], vals, w, backend=NumbaBackend()),
                                   exact_values([np.zeros(12, np.int32)], vals, w, backend=CPUBackend()))
+
+
+@pytest.mark.parametrize("value, kind", [("numba", NumbaBackend), ("xla", CPUBackend), ("auto", NumbaBackend), ("", NumbaBackend)])
+def test_default_backend_follows_the_environment(monkeypatch, value, kind):
+    monkeypatch.setenv("JAXMATCH_BACKEND", value)
+    assert isinstance(default_backend(), kind)  # tests run JAX on the CPU: auto = numba
+
+
+def test_default_backend_rejects_unknown_names(monkeypatch):
+    monkeypatch.setenv("JAXMATCH_BACKEND", "cuda")
+    with pytest.raises(InputError, match="JAXMATCH_BACKEND: must be one of auto, numba, xla"):
+        default_backend()

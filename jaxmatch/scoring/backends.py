@@ -25,12 +25,20 @@ Measurements and the alternatives tried: ``docs/perf.md``.
 
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 
-__all__ = ["LANES", "NumbaBackend", "numba_values"]
+__all__ = ["BACKENDS", "LANES", "NumbaBackend", "default_backend", "numba_values"]
 
-LANES = 128
-"""Meshes per chunk (vector lanes of one DP row; measured 64 / 128 / 256 / 512: docs/perf.md)."""
+BACKENDS = ("auto", "numba", "xla")
+"""Values of ``JAXMATCH_BACKEND`` (:func:`default_backend`)."""
+
+LANES = 256
+"""Meshes per chunk (vector lanes of one DP row; 64 / 128 / 256 / 512 measured: docs/perf.md)."""
+
+_LOCK = threading.Lock()
+
 
 def _kernel():
     """The compiled int16 kernel (:mod:`jaxmatch.scoring._numba_dp`, imported on first use)."""
@@ -76,9 +84,43 @@ class NumbaBackend:
             from jaxmatch.scoring.exact import CPUBackend
 
             return CPUBackend(self.threads).run(problem, vals)
-        flat = np.asarray(vals).reshape(-1, problem.n)
-        if self.threads is not None:
-            import numba
+        import numba
 
-            numba.set_num_threads(max(1, min(int(self.threads), numba.config.NUMBA_NUM_THREADS)))
-        return numba_values(problem.codes, problem.lengths, flat, problem.tab, problem.gate, problem.strict, self.lanes)
+        flat = np.asarray(vals).reshape(-1, problem.n)
+        top = numba.config.NUMBA_NUM_THREADS
+        with _LOCK:  # one parallel kernel at a time (numba's default threading layer is not re-entrant)
+            numba.set_num_threads(top if self.threads is None else max(1, min(int(self.threads), top)))
+            return numba_values(problem.codes, problem.lengths, flat, problem.tab, problem.gate, problem.strict, self.lanes)
+
+
+def _numba_available() -> bool:
+    try:
+        import numba  # noqa: F401
+    except ImportError:  # pragma: no cover - numba is a dependency
+        return False
+    return True
+
+
+def default_backend(threads: int | None = None, unroll: int | None = None):
+    """The exact host's backend when none is given.
+
+    ``JAXMATCH_BACKEND`` = ``auto`` (default): :class:`NumbaBackend` when JAX computes on the CPU
+    and numba is installed (int16 models; others fall back to the XLA kernel), else the XLA
+    kernel :class:`jaxmatch.scoring.exact.CPUBackend` (GPUs, TPUs); ``numba`` or ``xla`` force one.
+    Both give identical utilities (tests/test_backends.py). InputError for another value.
+    """
+    import os
+
+    from jaxmatch.errors import InputError
+    from jaxmatch.scoring.exact import UNROLL, CPUBackend
+
+    choice = os.environ.get("JAXMATCH_BACKEND", "auto").strip().lower() or "auto"
+    if choice not in BACKENDS:
+        raise InputError(f"must be one of {', '.join(BACKENDS)}, got {choice!r}", "JAXMATCH_BACKEND")
+    if choice == "auto":
+        import jax
+
+        choice = "numba" if jax.default_backend() == "cpu" and _numba_available() else "xla"
+    if choice == "numba":
+        return NumbaBackend(threads)
+    return CPUBackend(threads, UNROLL if unroll is None else int(unroll))
