@@ -98,3 +98,20 @@ def test_default_backend_rejects_unknown_names(monkeypatch):
     monkeypatch.setenv("JAXMATCH_BACKEND", "cuda")
     with pytest.raises(InputError, match="JAXMATCH_BACKEND: must be one of auto, numba, xla"):
         default_backend()
+
+
+@pytest.mark.parametrize("skip", ["zero", "must"])
+def test_parallel_and_serial_kernels_agree(monkeypatch, skip):
+    from jaxmatch.scoring import backends
+
+    rng = np.random.default_rng(11)
+    shapes = [rng.integers(0, 3, 40), rng.integers(0, 3, 17)]
+    vals = rng.integers(2, 6, (700, 9))
+    table, sk = random_model(11, 0.2, skip)
+    w = make_weights(table, sk)
+    monkeypatch.setattr(backends, "PARALLEL_CELLS", 0)
+    par = exact_values(shapes, vals, w, backend=NumbaBackend(lanes=64))
+    monkeypatch.setattr(backends, "PARALLEL_CELLS", 1 << 62)
+    ser = exact_values(shapes, vals, w, backend=NumbaBackend(lanes=64))
+    np.testing.assert_array_equal(par, ser)
+    np.testing.assert_array_equal(par, exact_values(shapes, vals, w, backend=CPUBackend()))

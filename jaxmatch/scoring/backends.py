@@ -29,7 +29,7 @@ import threading
 
 import numpy as np
 
-__all__ = ["BACKENDS", "LANES", "NumbaBackend", "default_backend", "numba_values"]
+__all__ = ["BACKENDS", "LANES", "PARALLEL_CELLS", "NumbaBackend", "default_backend", "numba_values"]
 
 BACKENDS = ("auto", "numba", "xla")
 """Values of ``JAXMATCH_BACKEND`` (:func:`default_backend`)."""
@@ -40,11 +40,16 @@ LANES = 256
 _LOCK = threading.Lock()
 
 
-def _kernel():
-    """The compiled int16 kernel (:mod:`jaxmatch.scoring._numba_dp`, imported on first use)."""
-    from jaxmatch.scoring._numba_dp import dp_kernel_i16
+PARALLEL_CELLS = 1 << 22
+"""Smallest problem (DP cells) run on all cores; smaller ones (e.g. the pruned search's rounds)
+run on the calling thread: waking the thread pool costs milliseconds on a loaded machine."""
 
-    return dp_kernel_i16
+
+def _kernel(parallel: bool):
+    """The compiled int16 kernel (:mod:`jaxmatch.scoring._numba_dp`, imported on first use)."""
+    from jaxmatch.scoring import _numba_dp
+
+    return _numba_dp.dp_kernel_i16 if parallel else _numba_dp.dp_kernel_i16_serial
 
 
 def numba_values(codes, lengths, vals, tab, gate, strict: bool = False, lanes: int = LANES) -> np.ndarray:
@@ -65,7 +70,11 @@ def numba_values(codes, lengths, vals, tab, gate, strict: bool = False, lanes: i
     out = np.empty((c.shape[0], big_n, 2 * n), tab.dtype)
     if big_n == 0 or c.shape[0] == 0:
         return out
-    _kernel()(c, lens, v, tab, np.ascontiguousarray(gate, dtype=tab.dtype), bool(strict), int(lanes), out)
+    import numba
+
+    jobs = c.shape[0] * -(-big_n // max(int(lanes), 1))
+    parallel = jobs > 1 and numba.get_num_threads() > 1 and 2 * n * n * int(lens.sum()) * big_n >= PARALLEL_CELLS
+    _kernel(parallel)(c, lens, v, tab, np.ascontiguousarray(gate, dtype=tab.dtype), bool(strict), int(lanes), out)
     return out
 
 
