@@ -15,7 +15,9 @@ Printed, from one run:
 * jaxmatch exact scorer (``score_bucket`` on every mesh, all host threads): compile time
   (first pass minus a warm pass) and run time (min / median of ``--reps``), meshes/s, cells/s;
 * the reference (numba ``@njit``, nopython, single thread, float32; the plain recurrence of
-  ``jaxmatch.scoring.reference.dp_reference``, written for this benchmark), checked to give identical
+  ``jaxmatch.scoring.reference.dp_reference`` with skip weights,
+  ``D[i][j] = max(D[i-1][j] + skip[c], D[i-1][j-1] + W[i-1, j-1])``, in the unshifted frame,
+  written for this benchmark), checked to give identical
   utilities for every mesh and shape; its throughput, and the ratio jaxmatch / reference
   (``ratio`` in the JSON). Also a second, SIMD-friendly numba reference (all 2n orientations in
   the innermost loop, which LLVM vectorises): ``ratio_vectorised``; and the strongest one
@@ -74,6 +76,7 @@ def parse_args(argv=None):
     ap.add_argument("--backend", choices=["default", "xla", "numba"], default="default",
                     help="exact host backend measured as 'jaxmatch' (default: the host's default)")
     ap.add_argument("--dtype", choices=["auto", "int32", "float32"], default="auto", help="force the DP number type")
+    ap.add_argument("--lattice", default="fine", help="lattice name or TOML path (default fine; the model includes its skip weights)")
     ap.add_argument("--skip-reference", action="store_true", help="jaxmatch only (no ratio)")
     ap.add_argument("--refs", default="plain,vectorised,strongest",
                     help="references to run, comma-separated (default plain,vectorised,strongest; plain takes ~18 s a repetition)")
@@ -112,7 +115,7 @@ def load_workload(args):
     cat = cat_mod.load(args.catalogue) if args.catalogue else cat_mod.default_catalogue()
     internal = cat_mod.parse_range(args.internal)
     buckets = list(cat.buckets(internal))
-    table = load_lattice("fine").table()
+    table = load_lattice(args.lattice).weights()  # the scoring model (match and skip weights)
     shapes = [annotate(load_shape(ROOT / "examples" / name), POINTS).codes for name in EXAMPLES]
     return cat, internal, buckets, table, shapes
 
@@ -165,12 +168,12 @@ def make_reference():
     import numba
     import numpy as np
 
-    from jaxmatch.scoring.exact import NEG
+    from jaxmatch.scoring.model import NEG, weights_of
 
     neg = np.float32(NEG)
 
     @numba.njit(nogil=True, cache=False)
-    def score_ref(codes, vals, tf):  # pragma: no cover - compiled
+    def score_ref(codes, vals, tf, sk):  # pragma: no cover - compiled
         big_n, n = vals.shape
         m = codes.shape[0]
         out = np.empty(big_n, np.float32)
@@ -193,12 +196,14 @@ def make_reference():
                 d[0] = 0.0
                 for j in range(1, n + 1):
                     d[j] = neg
-                for i in range(m):  # D[i][j] = max(D[i-1][j], D[i-1][j-1] + W[i-1, j-1])
+                for i in range(m):  # D[i][j] = max(D[i-1][j] + skip[c], D[i-1][j-1] + W[i-1, j-1])
                     c = codes[i]
+                    s = sk[c]
                     for j in range(n, 0, -1):
                         x = d[j - 1] + w[c, j - 1]
-                        if x > d[j]:
-                            d[j] = x
+                        y = d[j] + s
+                        d[j] = x if x > y else y
+                    d[0] += s
                 if d[n] > best:
                     best = d[n]
             out[b] = best if best > neg / 2 else -np.inf
@@ -207,7 +212,7 @@ def make_reference():
         return out
 
     @numba.njit(nogil=True, cache=False)
-    def score_vec(codes, vals, tf):  # pragma: no cover - compiled
+    def score_vec(codes, vals, tf, sk):  # pragma: no cover - compiled
         big_n, n = vals.shape
         m = codes.shape[0]
         out = np.empty(big_n, np.float32)
@@ -229,18 +234,24 @@ def make_reference():
             d[1:, :] = neg
             for i in range(m):
                 c = codes[i]
+                s = sk[c]
                 for j in range(n, 0, -1):
                     for o in range(2 * n):  # contiguous, independent: LLVM vectorises this loop
+                        y = d[j, o] + s
                         x = d[j - 1, o] + wt[c, j - 1, o]
-                        d[j, o] = x if x > d[j, o] else d[j, o]
+                        d[j, o] = x if x > y else y
+                for o in range(2 * n):
+                    d[0, o] += s
             best = d[n].max()
             out[b] = best if best > neg / 2 and n <= m else -np.inf
         return out
 
-    def run(buckets, table, shapes, fn=score_ref):
-        tf = np.where(np.isfinite(table) & (table > NEG), table, NEG).astype(np.float32).reshape(3, 64)
+    def run(buckets, weights, shapes, fn=score_ref):
+        w = weights_of(weights)
+        tf = np.ascontiguousarray(w.table, np.float32)  # (3, 64), NEG where forbidden
+        sk = np.ascontiguousarray(w.skip, np.float32)  # (3,), NEG where skipping is forbidden
         vals = [np.ascontiguousarray(b.valences, dtype=np.int64) for b in buckets]
-        return [[fn(np.asarray(c, np.int64), v, tf) for v in vals] for c in shapes]
+        return [[fn(np.asarray(c, np.int64), v, tf, sk) for v in vals] for c in shapes]
 
     return {"plain": run, "vectorised": lambda b, t, s: run(b, t, s, fn=score_vec)}
 
@@ -479,7 +490,7 @@ from jaxmatch.scoring.lattice import load_lattice
 from jaxmatch.scoring.exact import align
 from jaxmatch.shape import annotate, default_points, load_shape
 _enable_compile_cache()
-shape, table, cat = load_shape("examples/lshape.json"), load_lattice("fine").table(), catalogue.default_catalogue()
+shape, table, cat = load_shape("examples/lshape.json"), load_lattice("fine").weights(), catalogue.default_catalogue()
 ann = annotate(shape, default_points(shape, max(cat.lengths)))
 for r in bulk.top_k(ann.codes, cat.buckets(), table, top=5, prune=PRUNE).rows[:5]:
     align(ann.codes, r[6], table, r[4], r[5])

@@ -33,6 +33,7 @@ from jaxmatch.scoring.exact import (
     reduce_orientations,
     score_bucket,
 )
+from jaxmatch.scoring.model import make_weights
 from jaxmatch.shape import annotate, load_shape
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -44,6 +45,17 @@ def random_table(seed: int, forbidden: float, scale: float = 1.0) -> np.ndarray:
     t = (rng.integers(-5, 6, (3, 4, 4, 4)) * scale).astype(np.float32)
     t[rng.random(t.shape) < forbidden] = -np.inf
     return t
+
+
+SKIPS = [(0, 0, 0), (0, -3, -5), (-2, -20, -math.inf), (1, -math.inf, -math.inf), (-1000, 0, 2)]
+"""Skip weight vectors the bulk paths are checked with (free, costly corners, must-match, extremes)."""
+
+
+def random_model(seed: int, forbidden: float, scale: float = 1.0, skip=None):
+    """A scoring model: random_table plus skip weights (drawn from SKIPS unless given)."""
+    rng = np.random.default_rng(seed + 1)
+    sk = SKIPS[int(rng.integers(len(SKIPS)))] if skip is None else skip
+    return make_weights(random_table(seed, forbidden, scale), np.asarray(sk, np.float64))
 
 
 def same(a, b) -> bool:
@@ -90,9 +102,9 @@ def test_every_number_type_gives_the_reference_utilities(seed, scale, forbidden)
     rng = np.random.default_rng(seed)
     m, n = int(rng.integers(1, 12)), int(rng.integers(1, 7))
     codes, vals = rng.integers(0, 3, m), rng.integers(2, 6, (3, n))
-    table = random_table(seed, forbidden, scale)
-    res = score_bucket(codes, vals, table)
-    expect = np.array([reference.dp_reference(codes, v, table) for v in vals], np.float32)
+    model = random_model(seed, forbidden, scale)
+    res = score_bucket(codes, vals, model)
+    expect = np.array([reference.dp_reference(codes, v, model.table_inf(), model.skip_inf()) for v in vals], np.float32)
     np.testing.assert_array_equal(res.utility, expect)
 
 
@@ -142,8 +154,8 @@ def test_score_distinct_equals_score_bucket(seed):
     base = rng.integers(2, 6, (4, n))
     vals = np.array([np.roll(base[i % 4][:: (-1) ** i], i) for i in range(12)])
     codes = rng.integers(0, 3, int(rng.integers(n, 16)))
-    table = random_table(seed, float(rng.choice([0.0, 0.4, 0.9])))
-    assert same(bulk.score_distinct(codes, vals, table), score_bucket(codes, vals, table))
+    model = random_model(seed, float(rng.choice([0.0, 0.4, 0.9])))
+    assert same(bulk.score_distinct(codes, vals, model), score_bucket(codes, vals, model))
 
 
 # --------------------------------------------------------------------------- bounds
@@ -156,17 +168,18 @@ def test_upper_bound_is_above_the_exact_utility(seed, forbidden):
     n = int(rng.integers(1, 7))
     seqs = rng.integers(2, 6, (5, n))
     codes = rng.integers(0, 3, int(rng.integers(1, 11)))
-    table = random_table(seed, forbidden)
-    ub = bulk.upper_bounds(seqs, codes, table)
+    model = random_model(seed, forbidden)
+    table, skip = model.table_inf(), model.skip_inf()
+    ub = bulk.upper_bounds(seqs, codes, model)
     finite = np.where(np.isfinite(table), table, NEG)
     for s, b in zip(seqs, ub):
-        exact = reference.dp_reference(codes, s, table)
+        exact = reference.dp_reference(codes, s, table, skip)
         if n > len(codes):
             assert b == -math.inf
         elif exact > -math.inf:
             assert b >= exact
-        else:  # unmatchable: the bound only promises >= the NEG-substituted optimum
-            assert b >= reference.dp_reference(codes, s, finite) - 1e-3
+        elif not model.has_skip:  # unmatchable: the bound only promises >= the NEG-substituted optimum
+            assert b >= reference.dp_reference(codes, s, finite, skip) - 1e-3
         if b <= NEG / 2:
             assert exact == -math.inf
 
@@ -182,6 +195,16 @@ def exhaustive_rows(codes, parts, table, top, per_size):
         for i in np.flatnonzero(~res.unmatchable):
             rows.append((float(res.utility[i]), int(p.k[i]), p.n, str(p.ids[i]), int(res.rotation[i]), bool(res.reflected[i])))
     return [r[:6] for r in bulk._select(rows, top, per_size)]
+
+
+@pytest.mark.parametrize("shape, skip", [("lshape.json", (0, -10, -10)), ("tshape.json", (0, -math.inf, -math.inf))])
+def test_pruned_top_k_equals_exhaustive_with_corner_skip_weights(shape, skip, small_parts):
+    """Skip penalties on corners: the bound (shifted frame + offset) must stay an upper bound."""
+    model = make_weights(load_lattice("fine").table(), np.asarray(skip, np.float64))
+    codes = annotate(load_shape(ROOT / "examples" / shape), 24).codes
+    expect = exhaustive_rows(codes, small_parts, model, 3, True)
+    got = bulk.top_k(codes, small_parts, model, top=3, per_size=True, round_size=4)
+    assert [r[:6] for r in got.rows] == expect and got.pruned > 0
 
 
 @pytest.mark.parametrize("shape", EXAMPLES)
@@ -203,9 +226,9 @@ def test_pruned_top_k_equals_exhaustive_on_examples(shape, per_size, m, small_pa
 def test_pruned_top_k_equals_exhaustive_random(seed, top, per_size, forbidden, small_parts):
     rng = np.random.default_rng(seed)
     codes = rng.integers(0, 3, int(rng.integers(8, 17)))  # one padded length: one compilation
-    table = random_table(seed, forbidden)
-    got = bulk.top_k(codes, small_parts, table, top=top, per_size=per_size, round_size=int(rng.integers(1, 20)))
-    assert [r[:6] for r in got.rows] == exhaustive_rows(codes, small_parts, table, top, per_size)
+    model = random_model(seed, forbidden)
+    got = bulk.top_k(codes, small_parts, model, top=top, per_size=per_size, round_size=int(rng.integers(1, 20)))
+    assert [r[:6] for r in got.rows] == exhaustive_rows(codes, small_parts, model, top, per_size)
     assert got.scored + got.pruned + got.unmatchable >= got.total
 
 
@@ -268,9 +291,12 @@ def test_configure_host_devices_after_jax_import_only_checks():
         bulk.configure_host_devices(0)
 
 
-def test_one_device_mesh_runs_the_sharded_code(fine):
+@pytest.mark.parametrize("skip", [None, (0, -4, -math.inf)])
+def test_one_device_mesh_runs_the_sharded_code(fine, skip):
     rng = np.random.default_rng(5)
     codes, vals = rng.integers(0, 3, 20), rng.integers(2, 6, (30, 8))
+    if skip is not None:
+        fine = make_weights(fine, np.asarray(skip, np.float64))
     assert same(bulk.score_sharded(codes, vals, fine, devices=1), score_bucket(codes, vals, fine))
     many = bulk.score_many([codes, codes[:9]], vals, fine, devices=1)
     assert same(many[0], score_bucket(codes, vals, fine)) and same(many[1], score_bucket(codes[:9], vals, fine))
@@ -285,7 +311,8 @@ SHARDED = textwrap.dedent("""
     from jaxmatch.scoring.lattice import load_lattice
     from jaxmatch.scoring.exact import score_bucket
     from jaxmatch.shape import annotate, load_shape
-    table = load_lattice("fine").table()
+    from jaxmatch.scoring.model import make_weights
+    table = make_weights(load_lattice("fine").table(), [0, -7, float("-inf")])  # skip weights, must-match corners
     cat = default_catalogue()
     rng = np.random.default_rng(0)
     shapes = [annotate(load_shape("examples/lshape.json"), 24).codes, annotate(load_shape("examples/circle.json"), 20).codes,

@@ -407,3 +407,81 @@ def test_triple_helpers():
         with pytest.raises(ValueError):
             parse_triple(bad)
     assert list(itertools.product(range(2, 6), repeat=3))[triple_index("4-5-2")] == (4, 5, 2)
+
+
+# ---------------------------------------------------------------------------------------------
+# skip weights ([skip])
+
+NO_SKIP_TEXT = re.sub(r"(?ms)^\[skip\].*?(?=^\[|\Z)", "", FINE_TEXT)
+"""fine.toml without its [skip] table (if any)."""
+SKIP_TEXT = NO_SKIP_TEXT.rstrip("\n") + "\n\n[skip]\ns = 0\nx = -5\nv = -inf\n"
+
+
+def test_skip_table_is_optional_and_defaults_to_zero():
+    lat = parse_lattice(NO_SKIP_TEXT, "f.toml")
+    assert lat.skip == (0, 0, 0)
+    assert not lat.weights().has_skip and lat.weights().skip.tolist() == [0, 0, 0]
+
+
+def test_skip_table_integers_and_minus_inf():
+    lat = parse_lattice(SKIP_TEXT, "f.toml")
+    assert lat.skip[:2] == (0, -5) and math.isinf(lat.skip[2]) and lat.skip[2] < 0
+    w = lat.weights()
+    assert w.skip[:2].tolist() == [0, -5] and w.must.tolist() == [False, False, True] and w.skip[2] == np.float32(NEG)
+    assert lattice_json(lat)["skip"] == {"s": 0, "x": -5, "v": None}
+    assert "skip" in lattice_text(lat) and "-inf" in lattice_text(lat).split("skip", 1)[1]
+    partial = parse_lattice(NO_SKIP_TEXT + "\n[skip]\nv = -3\n", "f.toml")
+    assert partial.skip == (0, 0, -3)  # missing types: 0
+
+
+SKIP_MUTATIONS = [
+    ("float skip", "x = -5", "x = -1.5", "integer or -inf"),
+    ("string skip", "x = -5", 'x = "-5"', "integer or -inf"),
+    ("plus inf skip", "x = -5", "x = inf", "integer or -inf"),
+    ("nan skip", "x = -5", "x = nan", "integer or -inf"),
+    ("huge skip", "x = -5", "x = -5000", "outside"),
+    ("unknown skip key", "x = -5", "x = -5\nw = 1", "unknown key"),
+]
+
+
+@pytest.mark.parametrize("what, old, new, fragment", SKIP_MUTATIONS, ids=[m[0] for m in SKIP_MUTATIONS])
+def test_bad_skip_table_names_the_line(what, old, new, fragment, tmp_path):
+    text = SKIP_TEXT.replace(old, new, 1)
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    with pytest.raises(InputError) as info:
+        load_lattice(path)
+    msg = str(info.value)
+    assert "\n" not in msg and fragment in msg
+    assert msg.startswith(f"{path}:{line_of(text, new.splitlines()[-1])}: "), msg
+
+
+def test_skip_not_a_table(tmp_path):
+    with pytest.raises(InputError, match="skip must be a table"):
+        parse_lattice('skip = 3\n' + NO_SKIP_TEXT, "f.toml")
+
+
+@pytest.mark.parametrize("skip", [(0, -5, -math.inf), (2, 0, 0), (-math.inf, -math.inf, -math.inf), (0, 0, 0)])
+def test_skip_round_trips_through_files_and_templates(skip, tmp_path):
+    from dataclasses import replace
+
+    lat = replace(load_lattice("fine"), skip=skip)
+    assert parse_lattice(lattice_toml(lat), "t.toml") == lat
+    for template in (SKIP_TEXT, NO_SKIP_TEXT):  # with and without a [skip] table of its own
+        path = tmp_path / "t.toml"
+        save_lattice(lat, path, template=template)
+        text = path.read_text()
+        assert load_lattice(path) == lat
+        assert "# Weeded (same for all types)" in text  # the template's comments are kept
+
+
+def test_with_level_weights_rounds_skip_and_keeps_minus_inf():
+    from dataclasses import replace
+
+    lat = replace(load_lattice("fine"), skip=(0, -5, -math.inf))
+    w = level_structure(lat).weights
+    new = with_level_weights(lat, w, [0.4, -7.6, 3.0])
+    assert new.skip[:2] == (0, -8) and math.isinf(new.skip[2])
+    assert with_level_weights(lat, w).skip == lat.skip
+    with pytest.raises(ValueError):
+        with_level_weights(lat, w, [0, 0])

@@ -1,6 +1,7 @@
 """Exact scorer (jaxmatch.scoring.exact) against the plain-Python references."""
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -15,12 +16,15 @@ from jaxmatch.scoring.exact import (
     ScoreResult,
     align,
     bucket_length,
+    dp_kind,
     finite_table,
     orientation_triples,
     oriented_sequence,
     score_bucket,
     utility_of,
+    utility_parts,
 )
+from jaxmatch.scoring.model import make_weights, weights_of
 
 S, X, V = 0, 1, 2
 
@@ -234,3 +238,150 @@ def test_utility_of_rejects_bad_alignments():
     for bad in ([0, 0, 1], [0, 1], [1, 2, 5], [-1, 0, 1]):
         with pytest.raises(ValueError):
             utility_of([S] * 5, [2, 3, 4], table, 0, False, bad)
+
+
+# --------------------------------------------------------------------------- skip weights
+
+SKIP_CHOICES = [0.0, -1.0, -3.0, -7.0, 2.0, -math.inf]
+
+
+@st.composite
+def skip_cases(draw, max_n=5, max_m=8, max_meshes=3):
+    """(codes, vals, table, skip): small cases with a skip weight per type (ints or -inf)."""
+    codes, vals, table = draw(cases(max_n=max_n, max_m=max_m, max_meshes=max_meshes))
+    skip = np.array([draw(st.sampled_from(SKIP_CHOICES)) for _ in range(3)], np.float32)
+    return codes, vals, table, skip
+
+
+@given(skip_cases())
+def test_skip_weights_equal_brute_force(case):
+    """D[i][j] = max(D[i-1][j] + skip[code], D[i-1][j-1] + W): best utility, winning orientation,
+    and an alignment whose utility (matched + skipped) is that utility, as the brute force says."""
+    codes, vals, table, skip = case
+    model = make_weights(table, skip)
+    res = score_bucket(codes, vals, model)
+    for k, v in enumerate(vals):
+        best, rot, refl, _ = reference.brute_force(codes, v, table, skip)
+        assert res.utility[k] == best
+        assert res.unmatchable[k] == (best == -math.inf)
+        if best == -math.inf:
+            continue
+        assert (res.rotation[k], bool(res.reflected[k])) == (rot, refl)
+        a = align(codes, v, model, int(res.rotation[k]), bool(res.reflected[k]))
+        parts = utility_parts(codes, v, model, res.rotation[k], res.reflected[k], a)
+        assert parts.total == utility_of(codes, v, model, res.rotation[k], res.reflected[k], a) == res.utility[k]
+        skipped = np.setdiff1d(np.arange(len(codes)), a)
+        assert parts.skip == float(np.sum(skip[np.asarray(codes)[skipped]])) and parts.match + parts.skip == parts.total
+        must = np.flatnonzero(np.isneginf(skip))
+        assert not np.isin(np.asarray(codes)[skipped], must).any()  # a -inf type is never skipped
+
+
+@given(cases())
+def test_zero_skip_weights_are_the_papers_free_skipping(case):
+    codes, vals, table = case
+    res = score_bucket(codes, vals, make_weights(table, np.zeros(3)))
+    expect = [reference.brute_force(codes, v, table)[0] for v in vals]  # no skip argument at all
+    np.testing.assert_array_equal(res.utility, np.array(expect, np.float32))
+    assert not make_weights(table, np.zeros(3)).has_skip
+
+
+@pytest.mark.parametrize("scale, dtype", [(1.0, np.int16), (1000.0, np.int32), (0.5, np.float32)])
+@pytest.mark.parametrize("skip", [(0, -4, -9), (-1000, -1000, 0), (3, -math.inf, -2), (-math.inf, -math.inf, -math.inf)])
+def test_every_number_type_with_skip_weights_equals_the_dp_reference(scale, dtype, skip):
+    """int16 / int32 / float32 kernels, with large negative and -inf skip weights (sentinel arithmetic)."""
+    rng = np.random.default_rng(int(scale * 10) + len(str(skip)))
+    codes, vals = rng.integers(0, 3, 23), rng.integers(2, 6, (9, 7))
+    table = (rng.integers(-5, 6, (3, 4, 4, 4)) * scale).astype(np.float32)
+    table[rng.random(table.shape) < 0.2] = -np.inf
+    model = make_weights(table, np.asarray(skip, np.float64) * (scale if abs(scale) < 10 else 1))
+    if skip != (-1000, -1000, 0) or scale == 1.0:
+        assert dp_kind(model, 7).dtype == dtype
+    expect = np.array([reference.dp_reference(codes, v, table, model.skip_inf()) for v in vals], np.float32)
+    np.testing.assert_array_equal(score_bucket(codes, vals, model).utility, expect)
+
+
+def test_int16_range_holds_with_large_skip_weights():
+    """|W - skip| * n must fit: the kernel widens to int32 when it would not."""
+    table = np.ones((3, 4, 4, 4), np.float32)
+    assert dp_kind(make_weights(table, [-1000, 0, 0]), 8).dtype == np.int16  # 8 * 1001 < 2**13
+    assert dp_kind(make_weights(table, [-1000, 0, 0]), 9).dtype == np.int32
+    codes = [0] * 40
+    vals = np.full((2, 9), 3)
+    res = score_bucket(codes, vals, make_weights(table, [-1000, 0, 0]))
+    np.testing.assert_array_equal(res.utility, np.float32(9 - 31 * 1000))
+
+
+def test_must_match_points_make_too_short_meshes_unmatchable():
+    table = np.zeros((3, 4, 4, 4), np.float32)
+    model = make_weights(table, [0, -math.inf, 0])
+    codes = [X, S, S, X, S, S, X, S, S, X, S, S]
+    assert score_bucket(codes, [[3, 3, 3]], model).unmatchable.tolist() == [True]  # 4 convex points need 4 vertices
+    assert score_bucket(codes, [[3, 3, 3, 3, 3]], model).unmatchable.tolist() == [False]
+    with pytest.raises(UnmatchableError):
+        align(codes, [3, 3, 3], model, 0, False)
+    a = align(codes, [3, 3, 3, 3, 3], model, 0, False)
+    assert set(np.flatnonzero(np.asarray(codes) == X)) <= set(a.tolist())
+
+
+def test_a_skip_penalty_keeps_the_concave_corner():
+    """Free skipping lets a mesh drop a concave corner for a better straight match; a penalty on
+    skipping v (or -inf) makes the alignment take it."""
+    table = np.full((3, 4, 4, 4), -np.inf, np.float32)
+    table[S] = 1.0
+    table[X, :, 0, :] = 2.0  # valence 2 on convex corners
+    table[V, :, 2, :] = -1.0  # valence 4 on the concave corner, worth less than a straight match
+    codes = [X, S, X, S, V, S, X, S, X, S]  # an L-like sequence
+    vals = [[2, 3, 2, 3, 4, 3, 2, 2]]  # two points fewer than the shape
+    free = score_bucket(codes, vals, table)
+    al = align(codes, vals[0], table, int(free.rotation[0]), bool(free.reflected[0]))
+    assert free.utility[0] == 11 and 4 not in al.tolist()  # free skipping drops the concave corner
+    for skip in ([0, -20, -20], [0, -math.inf, -math.inf]):
+        model = make_weights(table, skip)
+        res = score_bucket(codes, vals, model)
+        al = align(codes, vals[0], model, int(res.rotation[0]), bool(res.reflected[0]))
+        assert res.utility[0] == 10 and {0, 2, 4, 6, 8} <= set(al.tolist())  # every corner has a mesh vertex
+
+
+def test_weights_of_accepts_tables_lattices_and_weights():
+    from jaxmatch.scoring.lattice import load_lattice
+
+    t = random_table(1, 0.3)
+    w = weights_of(t)
+    assert weights_of(w) is w and w.skip.tolist() == [0, 0, 0] and not w.must.any()
+    np.testing.assert_array_equal(w.table_inf(), t)
+    lat = load_lattice("fine")
+    lw = weights_of(lat)
+    np.testing.assert_array_equal(lw.table_inf(), lat.table())
+    assert lw.skip_inf().tolist() == [float(x) for x in lat.skip]
+    with pytest.raises(ValueError):
+        weights_of(lat, skip=[0, 0, 0])
+    with pytest.raises(ValueError):
+        make_weights(t, [0, 0])
+    assert not w.table.flags.writeable  # frozen
+
+
+@pytest.mark.parametrize("skip", [(0, 0, 0), (0, -15, -15), (0, -math.inf, -math.inf)])
+def test_ranked_matches_carry_the_skip_contribution(skip):
+    """rank(): utility = match_utility + skip_utility, utility_of reproduces it from the alignment,
+    and the JSON record carries both parts."""
+    from dataclasses import replace
+
+    from jaxmatch.catalogue.store import default_catalogue
+    from jaxmatch.scoring.lattice import load_lattice
+    from jaxmatch.scoring.rank import rank
+    from jaxmatch.shape import load_shape
+
+    lat = replace(load_lattice("fine"), skip=skip)
+    shape = load_shape(Path(__file__).resolve().parents[1] / "examples" / "lshape.json")
+    r = rank(shape, default_catalogue(), lat, internal=[2], top=3, tie_break="id", prune=True)
+    vals = {b_id: v for b in default_catalogue().buckets([2]) for b_id, v in zip(b.ids, b.valences)}
+    corners = np.flatnonzero(np.asarray(r.annotation.codes) != 0)
+    for m in r.results:
+        assert m.match_utility + m.skip_utility == m.utility
+        assert utility_of(r.annotation.codes, vals[m.mesh_id], lat, m.rotation, m.reflected, m.alignment) == m.utility
+        skipped = np.setdiff1d(np.arange(len(r.annotation.codes)), m.alignment)
+        assert m.skip_utility == sum(0 if math.isinf(skip[c]) else skip[c] for c in np.asarray(r.annotation.codes)[skipped])
+        d = m.as_json()
+        assert d["match_utility"] == m.match_utility and d["skip_utility"] == m.skip_utility
+        if math.isinf(skip[2]):
+            assert np.isin(corners, m.alignment).all()

@@ -252,3 +252,50 @@ def test_table_parts():
     assert free.dtype == np.float32 and np.isfinite(free).all()
     np.testing.assert_array_equal(mask, np.isinf(table))
     np.testing.assert_array_equal(free[~mask], table[~mask])
+
+
+# --------------------------------------------------------------------------- skip weights
+
+
+@pytest.mark.parametrize("skip", [(0.0, -2.0, -5.0), (1.0, -math.inf, -3.0), (-math.inf, 0.0, 0.0)])
+@pytest.mark.parametrize("gamma", [0.5, 2.0])
+def test_soft_with_skip_weights_is_the_log_partition_function(skip, gamma):
+    rng = np.random.default_rng(11)
+    codes, vals = rng.integers(0, 3, 7), rng.integers(2, 6, (3, 4))
+    table = random_table(4, 0.2)
+    model = make_weights(table, np.asarray(skip))
+    got = np.asarray(soft_utility(codes, vals, model, gamma))
+    for k, v in enumerate(vals):
+        want = reference.brute_force_soft(codes, v, table, gamma, skip=np.asarray(skip))
+        if want == -math.inf:
+            assert got[k] <= NEG / 2
+        else:
+            assert got[k] == pytest.approx(want, rel=1e-5, abs=1e-4)
+
+
+def test_skip_gradient_is_the_expected_number_of_skipped_points():
+    """d soft / d skip[c] = expected count of skipped type-c points; -inf skip weights get none."""
+    rng = np.random.default_rng(12)
+    codes, vals = rng.integers(0, 3, 9), rng.integers(2, 6, (1, 5))
+    table = random_table(5, 0.0)
+    model = make_weights(table, [0.0, -1.0, -math.inf])
+    gamma = 0.7
+    g = np.asarray(jax.grad(lambda s: soft_utility(codes, vals, model, gamma, skip=s).sum())(jnp.asarray(model.skip)))
+    assert g[2] == 0.0  # fixed at -inf: no gradient
+    # expectation under the Gibbs distribution, by enumeration
+    us = [(u, a) for u, _, _, a in reference.all_utilities(codes, vals[0], table, model.skip_inf()) if u > -math.inf]
+    top = max(u for u, _ in us)
+    p = np.array([math.exp((u - top) / gamma) for u, _ in us])
+    p /= p.sum()
+    for c in (0, 1):
+        skipped = np.array([sum(1 for i in range(len(codes)) if i not in a and codes[i] == c) for _, a in us])
+        assert g[c] == pytest.approx(float(p @ skipped), rel=1e-4, abs=1e-5)
+
+
+def test_zero_skip_weights_give_the_same_soft_values():
+    rng = np.random.default_rng(13)
+    codes, vals = rng.integers(0, 3, 10), rng.integers(2, 6, (4, 5))
+    table = random_table(6, 0.3)
+    free, mask = table_parts(table)
+    np.testing.assert_array_equal(np.asarray(su(codes, vals, free, mask, 0.4)),
+                                  np.asarray(soft_utility(codes, vals, make_weights(table, np.zeros(3)), 0.4)))
