@@ -328,9 +328,13 @@ def make_strongest():
                     out[b0 + bl, o] = d[n, bl]
         return out
 
-    def run(buckets, table, shapes, skip=None):
-        t = np.asarray(table, np.float64).reshape(3, 64)
-        sk = np.zeros(3) if skip is None else np.asarray(skip, np.float64).reshape(3)
+    def run(buckets, model, shapes):
+        """``model``: a scoring model (``.table (3, 64)``, ``.skip (3,)``, NEG = forbidden) or a
+        ``(3, 4, 4, 4)`` table (-inf = forbidden, skip weights 0)."""
+        if hasattr(model, "skip"):
+            t, sk = np.asarray(model.table, np.float64).reshape(3, 64), np.asarray(model.skip, np.float64).reshape(3)
+        else:
+            t, sk = np.asarray(model, np.float64).reshape(3, 64), np.zeros(3)
         ok_t, ok_s = np.isfinite(t) & (t > -1e8), np.isfinite(sk) & (sk > -1e8)
         if not (np.all(t[ok_t] == np.round(t[ok_t])) and np.all(sk[ok_s] == np.round(sk[ok_s]))):
             raise ValueError("the int16 reference needs integer weights")
