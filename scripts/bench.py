@@ -83,6 +83,7 @@ def parse_args(argv=None):
     ap.add_argument("--skip-bulk", action="store_true", help="skip the distinct-sequence and pruning measurements")
     ap.add_argument("--skip-rss", action="store_true", help="skip the per-catalogue-size RSS subprocesses")
     ap.add_argument("--cli", action="store_true", help="also time cold and warm 'jaxmatch score examples/lshape.json'")
+    ap.add_argument("--skip-many", action="store_true", help="skip the 50-shape score-many and API measurements")
     ap.add_argument("--rss-probe", action="store_true", help=argparse.SUPPRESS)
     return ap.parse_args(argv)
 
@@ -527,6 +528,96 @@ def cli_times() -> dict:
     return out
 
 
+# --------------------------------------------------------------------------- many shapes, the API
+
+
+MANY = 50
+"""Shapes of the bulk measurement: the examples and the labelled shapes, then rotated copies."""
+
+
+def many_shapes(folder: Path) -> list[Path]:
+    """:data:`MANY` shape files: ``examples/*`` (the :data:`EXAMPLES`), ``examples/labels/shapes/*``,
+    then copies of the first ones rotated by 37 degrees and scaled by 1.7, written to ``folder``
+    (so every file is a different shape; fixed, so runs compare)."""
+    import numpy as np
+
+    from jaxmatch.shape import load_shape
+
+    files = [ROOT / "examples" / n for n in EXAMPLES] + sorted((ROOT / "examples" / "labels" / "shapes").glob("*.json"))
+    a = np.deg2rad(37.0)
+    rot = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]]) * 1.7
+    k = 0
+    while len(files) < MANY:
+        shp = load_shape(files[k])
+        pts = (np.asarray(shp.points) * shp.scale + shp.offset) @ rot.T
+        out = folder / f"rotated-{k:02d}-{files[k].stem}.json"
+        out.write_text(json.dumps({"boundary": pts.tolist(), "corners": [int(c) for c in shp.corners]}))
+        files.append(out)
+        k += 1
+    return files[:MANY]
+
+
+def many_and_api(args) -> dict:
+    """``score-many``'s loop in this process (one prepared catalogue, k <= 5, top-5, pruned,
+    geometric and id tie-break) over :data:`MANY` shapes, warm (a first pass compiles and fills
+    the caches): shapes/s; and one shape ranked and its top mesh placed through the Python API
+    (``jaxmatch.api.rank`` + ``place_top``), warm: milliseconds per shape (min and median)."""
+    from jaxmatch.api import rank
+    from jaxmatch.catalogue import store as cat_mod
+    from jaxmatch.placement.choose import place_top
+    from jaxmatch.scoring.lattice import load_lattice
+    from jaxmatch.scoring.rank import ranking_json
+    from jaxmatch.shape import load_shape
+
+    folder = Path(tempfile.mkdtemp(prefix="jaxmatch-bench-shapes-"))
+    try:
+        files = many_shapes(folder)
+        shapes = [load_shape(f) for f in files]
+        cat = cat_mod.load(args.catalogue) if args.catalogue else cat_mod.default_catalogue()
+        lat = load_lattice(args.lattice)
+        out: dict = {"shapes": len(shapes), "internal": "0..5 (all sizes compete)", "top": 5}
+        for tb in ("geometry", "id"):
+            times = []
+            for rep in range(2):  # the first pass compiles and loads; the second is measured
+                t = time.perf_counter()
+                for p, shp in zip(files, shapes):
+                    ranking_json(str(p), rank(shp, cat, lat, top=5, tie_break=tb, prune=True), lat.name, tb)
+                times.append(time.perf_counter() - t)
+            out[tb] = {"first_pass_s": times[0], "warm_pass_s": times[1], "shapes_per_s": len(shapes) / times[1]}
+        api = []
+        for i in range(7):
+            t = time.perf_counter()
+            r = rank(shapes[4], cat, lat, top=5, tie_break="geometry", prune=True)  # lshape.json
+            place_top(shapes[4], r, cat)[0]
+            api.append((time.perf_counter() - t) * 1e3)
+        out["api_shape_ms"] = {"shape": files[4].name, "first_ms": api[0], "min_ms": min(api[1:]),
+                               "median_ms": statistics.median(api[1:])}
+        return out
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+def score_many_cli(args) -> dict:
+    """Wall time of ``jaxmatch score-many`` on the :data:`MANY` shapes (top 5, geometric
+    tie-break), start-up included, with a warm compile cache (a first run fills it)."""
+    exe = Path(sys.executable).parent / "jaxmatch"
+    folder = Path(tempfile.mkdtemp(prefix="jaxmatch-bench-many-"))
+    try:
+        files = many_shapes(folder)
+        env = dict(os.environ, JAXMATCH_CACHE=str(folder / "cache"))
+        runs = []
+        for _ in range(2):
+            cmd = [str(exe), "score-many", *map(str, files), "--out", str(folder / "out.jsonl"), "--top", "5",
+                   "--tie-break", "geometry"]
+            t = time.perf_counter()
+            p = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=1800)
+            runs.append(time.perf_counter() - t if p.returncode == 0 else None)
+        return {"shapes": len(files), "cold_s": runs[0], "warm_s": runs[1],
+                "shapes_per_s": len(files) / runs[1] if runs[1] else None}
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
+
+
 # --------------------------------------------------------------------------- main
 
 
@@ -653,8 +744,24 @@ def main(argv=None) -> int:
         say("RSS       : " + ", ".join(f"{k}: {v.get('meshes')} meshes, peak {v.get('peak_rss_mb', float('nan')):.0f} MB "
                                        f"(after import {v.get('rss_after_import_mb', float('nan')):.0f} MB)"
                                        for k, v in result["rss_by_catalogue"].items()))
+    if not args.skip_many:
+        many = many_and_api(args)
+        result["many"] = many
+        result["score_many_shapes_per_s"] = many["geometry"]["shapes_per_s"]
+        result["score_many_id_shapes_per_s"] = many["id"]["shapes_per_s"]
+        result["api_shape_ms"] = many["api_shape_ms"]["min_ms"]
+        say(f"many      : {many['shapes']} shapes, top 5, pruned, one prepared catalogue: geometric tie-break "
+            f"{many['geometry']['shapes_per_s']:.1f} shapes/s, id tie-break {many['id']['shapes_per_s']:.1f} shapes/s (warm)")
+        say(f"API       : rank + place {many['api_shape_ms']['shape']}: {many['api_shape_ms']['min_ms']:.0f} ms min, "
+            f"{many['api_shape_ms']['median_ms']:.0f} ms median (warm; first {many['api_shape_ms']['first_ms']:.0f} ms)")
     if args.cli:
         result["cli"] = cli_times()
+        result["cli_cold_s"] = result["cli"]["default"]["cold_s"]
+        result["cli_warm_s"] = result["cli"]["default"]["warm_s"]
+        if not args.skip_many:
+            result["score_many_cli"] = score_many_cli(args)
+            say(f"score-many: CLI on {result['score_many_cli']['shapes']} shapes: cold {result['score_many_cli']['cold_s']:.2f} s, "
+                f"warm {result['score_many_cli']['warm_s']:.2f} s")
         say("CLI       : " + ", ".join(f"{k}: cold {v['cold_s']:.2f} s, warm {v['warm_s']:.2f} s" for k, v in result["cli"].items()))
     load1 = os.getloadavg()
     result["peak_rss_mb"] = rss_mb()
