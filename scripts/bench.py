@@ -75,6 +75,8 @@ def parse_args(argv=None):
     ap.add_argument("--block-cells", type=int, default=None, help="DP cells per block step (default score.BLOCK_CELLS)")
     ap.add_argument("--backend", choices=["default", "xla", "numba"], default="default",
                     help="exact host backend measured as 'jaxmatch' (default: the host's default)")
+    ap.add_argument("--lanes", type=int, default=None, help="meshes per chunk of the numba backend (default backends.LANES)")
+    ap.add_argument("--strong-lanes", type=int, default=None, help="meshes per chunk of the strongest reference (default STRONG_LANES)")
     ap.add_argument("--dtype", choices=["auto", "int32", "float32"], default="auto", help="force the DP number type")
     ap.add_argument("--lattice", default="fine", help="lattice name or TOML path (default fine; the model includes its skip weights)")
     ap.add_argument("--skip-reference", action="store_true", help="jaxmatch only (no ratio)")
@@ -145,10 +147,10 @@ def make_backend(args):
         from jaxmatch.scoring.exact import CPUBackend
 
         return CPUBackend(args.threads)
-    if args.backend == "numba":
+    if args.backend == "numba" or args.lanes:
         from jaxmatch.scoring.backends import NumbaBackend
 
-        return NumbaBackend(args.threads)
+        return NumbaBackend(args.threads, **({"lanes": args.lanes} if args.lanes else {}))
     return None
 
 
@@ -488,19 +490,24 @@ def rss_by_catalogue(args) -> dict:
 
 
 CLI_PRUNED = """
-from jaxmatch.cli import _enable_compile_cache
+from jaxmatch.cli import enable_compile_cache
 from jaxmatch.scoring import bulk
 from jaxmatch.catalogue import store as catalogue
 from jaxmatch.scoring.lattice import load_lattice
 from jaxmatch.scoring.exact import align
 from jaxmatch.shape import annotate, default_points, load_shape
-_enable_compile_cache()
+enable_compile_cache()
 shape, table, cat = load_shape("examples/lshape.json"), load_lattice("fine").weights(), catalogue.default_catalogue()
 ann = annotate(shape, default_points(shape, max(cat.lengths)))
 for r in bulk.top_k(ann.codes, cat.buckets(), table, top=5, prune=PRUNE).rows[:5]:
     align(ann.codes, r[6], table, r[4], r[5])
 """
 """What ``jaxmatch score examples/lshape.json --tie-break id`` does, scoring through ``bulk.top_k``."""
+
+
+def _secs(x) -> str:
+    """``"1.23 s"``, or ``"failed"`` for a command that did not exit 0 (None)."""
+    return "failed" if x is None else f"{x:.2f} s"
 
 
 def cli_times() -> dict:
@@ -651,6 +658,9 @@ def main(argv=None) -> int:
     warm = time.perf_counter() - t
     compile_s = first - warm
 
+    if args.strong_lanes:
+        global STRONG_LANES
+        STRONG_LANES = int(args.strong_lanes)
     refs = {} if args.skip_reference else {**make_reference(), "strongest": make_strongest()}
     wanted = [r.strip() for r in args.refs.split(",") if r.strip()]
     unknown = sorted(set(wanted) - {"plain", "vectorised", "strongest"})
@@ -760,9 +770,9 @@ def main(argv=None) -> int:
         result["cli_warm_s"] = result["cli"]["default"]["warm_s"]
         if not args.skip_many:
             result["score_many_cli"] = score_many_cli(args)
-            say(f"score-many: CLI on {result['score_many_cli']['shapes']} shapes: cold {result['score_many_cli']['cold_s']:.2f} s, "
-                f"warm {result['score_many_cli']['warm_s']:.2f} s")
-        say("CLI       : " + ", ".join(f"{k}: cold {v['cold_s']:.2f} s, warm {v['warm_s']:.2f} s" for k, v in result["cli"].items()))
+            say(f"score-many: CLI on {result['score_many_cli']['shapes']} shapes: cold {_secs(result['score_many_cli']['cold_s'])}, "
+                f"warm {_secs(result['score_many_cli']['warm_s'])}")
+        say("CLI       : " + ", ".join(f"{k}: cold {_secs(v['cold_s'])}, warm {_secs(v['warm_s'])}" for k, v in result["cli"].items()))
     load1 = os.getloadavg()
     result["peak_rss_mb"] = rss_mb()
     result["load"] = {"before": list(load0), "after": list(load1)}
