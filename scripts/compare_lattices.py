@@ -63,7 +63,7 @@ def compare(
     files = [ROOT / p for p in DEFAULT_SHAPES] if not shapes else list(shapes)
     shp = [(p.stem if p.parent.name != "shapes" else f"labels/{p.stem}", load_shape(p)) for p in files]
     index = mesh_index(cat)
-    label_sets = {Path(p).stem: load_labels(ROOT / p if not Path(p).is_absolute() else Path(p), index)
+    label_sets = {Path(p).stem: load_labels(ROOT / p if not Path(p).is_absolute() else Path(p), index).examples
                   for p in (labels or DEFAULT_LABELS)}
     report = {}
     table = Table(title=f"rank-1 corner keeping (k in {k_list[0]}..{k_list[-1]}) and label accuracy (pessimistic)")

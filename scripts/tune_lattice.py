@@ -1,14 +1,16 @@
 #!/usr/bin/env python3
-"""Tune a lattice's level weights on labelled shapes.
+"""Tune a lattice's level weights and skip weights on labelled shapes.
 
     scripts/tune_lattice.py --labels examples/labels/synthetic-k3.jsonl --lattice lattices/fine.toml \\
         --out tuned.toml --report report.json [--epochs N] [--temperature G] [--seed S] \\
-        [--heldout FRACTION] [--skip-bad] [--eval-labels examples/labels/designer-k3.jsonl]
+        [--heldout FRACTION] [--skip-bad] [--eval-labels examples/labels/designer-k3.jsonl] [--fixed-skip]
 
 Trains with the soft scorer (softmax cross-entropy of the preferred mesh against the other
 catalogue meshes of its size), rounds to integers, evaluates with the exact scorer before and
 after on the training and held-out examples, and writes the tuned lattice (TOML, the input
-file's comments kept) and a JSON report, both atomically. All logic lives in jaxmatch/tune.py.
+file's comments kept) and a JSON report, both atomically. The finite skip weights (``[skip]``) are
+tuned too unless ``--fixed-skip``; ``-inf`` ones stay ``-inf``. All logic lives in
+jaxmatch/tuning/tune.py.
 """
 
 from __future__ import annotations
@@ -70,8 +72,9 @@ def tune(
     eval_labels: Optional[List[Path]] = typer.Option(None, "--eval-labels", help="more label files, evaluated only"),
     name: Optional[str] = typer.Option(None, help="name of the tuned lattice (default: <input>-tuned)"),
     catalogue: Optional[Path] = typer.Option(None, help="catalogue file (default: the shipped one)"),
+    fixed_skip: bool = typer.Option(False, "--fixed-skip", help="keep the lattice's skip weights as they are"),
 ) -> None:
-    """Tune the level weights of a lattice on labelled shapes; write the lattice and a report."""
+    """Tune the level and skip weights of a lattice on labelled shapes; write the lattice and a report."""
     from jaxmatch.tuning.tune import run_tuning
 
     if not (temperature > 0):
@@ -106,7 +109,7 @@ def tune(
         tuned, rep = run_tuning(
             lat, loaded.examples, cat, heldout=heldout, seed=seed, epochs=epochs, temperature=temperature,
             learning_rate=learning_rate, batch_size=batch_size, l2=l2, max_candidates=max_candidates,
-            name=name, extra=extra, progress=progress, stage=stage,
+            name=name, extra=extra, progress=progress, stage=stage, tune_skip=not fixed_skip,
         )
     command = " ".join(["scripts/tune_lattice.py", *sys.argv[1:]])
     rep["command"] = command
@@ -125,6 +128,8 @@ def tune(
         b, a = rep[key]["before"], rep[key]["after"]
         table.add_row(key, str(b["examples"]), _pct(b["top1"]), _pct(a["top1"]), _pct(b["top5"]), _pct(a["top5"]))
     out.print(table)
+    out.print("skip weights s/x/v: " + " -> ".join("/".join("-inf" if v is None else str(v) for v in rep["weights"][w]["skip"].values())
+                                                  for w in ("before", "after")))
     out.print(f"wrote {out_path}" + (f" and {report}" if report is not None else "") + f" ({rep['seconds']} s)")
 
 

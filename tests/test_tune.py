@@ -2,6 +2,7 @@
 determinism, and a tiny end-to-end run."""
 
 import json
+import math
 import subprocess
 import sys
 from pathlib import Path
@@ -203,3 +204,17 @@ def test_end_to_end_script_writes_a_loadable_lattice_and_a_report(tmp_path, tiny
     score = subprocess.run([str(Path(sys.executable).parent / "jaxmatch"), "score", str(ROOT / "examples" / "square.json"),
                             "--lattice", str(out), "--internal", "1", "--top", "1", "--json"], capture_output=True, text=True, cwd=ROOT)
     assert score.returncode == 0, score.stderr
+
+
+def test_finite_skip_weights_are_learned_and_minus_inf_stays(index, tiny_examples):
+    from dataclasses import replace
+
+    lat = replace(load_lattice("fine"), skip=(0, -3, -math.inf))
+    res = tune.train(lat, tiny_examples, index, seed=0, **TINY)
+    assert math.isinf(res.skip[2]) and res.skip[2] < 0  # -inf: fixed
+    assert np.all(np.isfinite(res.skip[:2])) and not np.allclose(res.skip[:2], [0, -3])  # free: moved
+    fixed = tune.train(lat, tiny_examples, index, seed=0, tune_skip=False, **TINY)
+    assert fixed.skip[:2].tolist() == [0, -3] and math.isinf(fixed.skip[2])
+    # rounding keeps -inf and scales the finite ones with the levels
+    tuned, scale, _ = tune.choose_scale(lat, res.weights, tiny_examples[:4], index, scales=(2,), skip=res.skip)
+    assert math.isinf(tuned.skip[2]) and tuned.skip[:2] == tuple(int(np.clip(np.rint(2 * x), -1000, 1000)) for x in res.skip[:2])
