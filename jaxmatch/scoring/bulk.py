@@ -460,10 +460,11 @@ def top_k(
     def score_some(p: Part, sel: np.ndarray, plan) -> None:
         from jaxmatch.scoring.exact import reduce_orientations
 
-        rep = np.full((p.groups.seqs.shape[0], 2 * p.n), -np.inf, np.float32)
-        rep[sel] = _values(codes, p.groups.seqs[sel], weights, plan=plan, batch=batch, threads=threads, devices=devices)
+        rep = _values(codes, p.groups.seqs[sel], weights, plan=plan, batch=batch, threads=threads, devices=devices)
         mesh_rows = np.flatnonzero(np.isin(p.groups.index, sel))
-        res = reduce_orientations(fan_out(rep, p.groups, mesh_rows))
+        # fan_out of the scored rows only (sel is sorted): no (U, 2n) array per call
+        at = np.searchsorted(sel, p.groups.index[mesh_rows])
+        res = reduce_orientations(np.asarray(rep)[at[:, None], p.groups.orient[mesh_rows]])
         ok = np.isfinite(res.utility)
         keep = ok & (res.utility >= cutoffs()[group_of(p.k[mesh_rows])])  # the others cannot be selected
         st["rows"] = _select(st["rows"] + [
@@ -490,11 +491,7 @@ def top_k(
                 score_some(p, sel, None)
     else:
         # which ranking groups (k values with per_size) each sequence can enter
-        member = []
-        for p in parts:
-            mem = np.zeros((len(p.groups.seqs), len(keys)), bool)
-            mem[p.groups.index, group_of(p.k)] = True
-            member.append(mem)
+        member = _membership(parts, keys, group_of)
         live = [np.flatnonzero(~h) for h in hopeless]
         ob = np.concatenate([b[lv] for b, lv in zip(bounds, live)] + [np.zeros(0)])
         op = np.concatenate([np.full(lv.size, i, np.int64) for i, lv in enumerate(live)] + [np.zeros(0, np.int64)])
@@ -502,7 +499,7 @@ def top_k(
         order = np.lexsort((os_, op, -ob))  # decreasing bound; ties by part, then sequence
         ob, op, os_ = ob[order], op[order], os_[order]
         offsets = np.cumsum([0] + [len(p.groups.seqs) for p in parts])
-        mem_all = np.concatenate(member + [np.zeros((0, len(keys)), bool)])[offsets[op] + os_]
+        mem_all = member[offsets[op] + os_]
         pending = np.ones(ob.size, bool)
         size = max(int(round_size), 1)
         while True:
@@ -521,6 +518,28 @@ def top_k(
         progress(total, total)
     return TopK(st["rows"], total, st["scored"], total - st["done"], st["unmatchable"],
                 sum(len(p.groups.seqs) for p in parts), st["seq_scored"])
+
+
+_MEMBERS: list = []  # [((the parts' index arrays, keys), membership)], a few recent ones
+
+
+def _membership(parts, keys: list, group_of) -> np.ndarray:
+    """``(sum U, len(keys)) bool``: which ranking groups (k values with ``per_size``, else the
+    one group) each distinct sequence of the stacked parts can enter. Shape independent, so kept
+    for the last few part lists."""
+    ident = [p.groups.index for p in parts]
+    for (key, kk), value in _MEMBERS:
+        if kk == keys and len(key) == len(ident) and all(a is b for a, b in zip(key, ident)):
+            return value
+    member = []
+    for p in parts:
+        mem = np.zeros((len(p.groups.seqs), len(keys)), bool)
+        mem[p.groups.index, group_of(p.k)] = True
+        member.append(mem)
+    value = np.concatenate(member + [np.zeros((0, len(keys)), bool)])
+    _MEMBERS.insert(0, ((ident, list(keys)), value))
+    del _MEMBERS[4:]
+    return value
 
 
 def _as_parts(parts) -> list:
