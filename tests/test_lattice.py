@@ -80,16 +80,28 @@ def test_levels_best_first(lat):
 
 
 @pytest.mark.parametrize("kind, best", [("s", "3-3-3"), ("x", "3-2-3"), ("v", "3-4-3")])
-def test_ideal_triple_is_the_unique_best(lat, kind, best):
+def test_ideal_triple_is_the_best(lat, kind, best):
     w = weights(lat, kind)
     assert w[best] == max(v for v in w.values() if v is not None)
-    assert [t for t, v in w.items() if v == w[best]] == [best]
+    # a tie only with 2-2-2 on a convex corner: it occurs on the single quad alone (k = 0)
+    assert set(t for t, v in w.items() if v == w[best]) <= {best, "2-2-2"}
 
 
 def test_matched_corners_outweigh_straight_points(lat):
-    # the LCS skips shape points for free: putting mesh corners on shape corners must pay
     best = {kind: max(w for w in weights(lat, kind).values() if w is not None) for kind in TYPES}
     assert best["x"] > best["s"] and best["v"] > best["s"]
+
+
+def test_shipped_lattices_make_skipping_a_corner_costly(lat):
+    """Straight points are skipped at (almost) no cost, corners only at a cost of several times
+    any single weight difference: a mesh keeps every corner when some mesh of its size can
+    (measured: scripts/compare_lattices.py; the shipped TOML files say how the values were chosen)."""
+    w = lat.weights()
+    finite = w.table[~w.forbidden]
+    span = float(finite.max() - finite.min())
+    assert abs(float(w.skip[0])) <= 1 and not w.must[0]
+    for k in (1, 2):
+        assert w.must[k] or -float(w.skip[k]) > 3 * span
 
 
 def test_convex_corner_never_takes_valence_4_or_5(lat):
@@ -334,7 +346,8 @@ def test_bad_lattice_names_the_line(what, old, new, at, fragment, tmp_path):
     assert "\n" not in msg
     assert fragment.lower() in msg.lower()
     if what == "missing weight":  # reported at the level header before the removed line
-        line = [i for i, l in enumerate(text.splitlines(), 1) if l.strip() == "[[x.levels]]"][3]
+        before = FINE_TEXT[: FINE_TEXT.index(old)].splitlines()
+        line = max(i for i, l in enumerate(before, 1) if l.strip().startswith("[["))
         assert msg.startswith(f"{path}:{line}: ")
     elif what == "syntax error":
         assert re.match(rf"{re.escape(str(path))}:\d+: ", msg)

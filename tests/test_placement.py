@@ -121,7 +121,7 @@ def test_place_match_user_coordinates_and_same_utility(ranked, cat, lat):
         assert pl.mesh_area == pytest.approx(float(quad_areas(pl.xy, pl.mesh.quads).sum()))
         # the re-spread alignment keeps the ranked utility
         vals = cat.bucket(m.boundary_length).valences[list(cat.bucket(m.boundary_length).ids).index(m.mesh_id)]
-        assert utility_of(ann.codes, vals, lat.table(), m.rotation, m.reflected, pl.alignment) == m.utility
+        assert utility_of(ann.codes, vals, lat, m.rotation, m.reflected, pl.alignment) == m.utility  # skip weights included
 
 
 def test_place_match_follows_translation_and_scaling(ranked, cat):
@@ -229,8 +229,9 @@ def test_per_size_with_geometry(cat, lat):
 # walking for a valid mesh
 
 
-def test_first_valid_skips_folded(ranked, cat):
-    shp, r_id, _ = ranked["triangle"]
+def test_first_valid_skips_folded(ranked, cat, lat):
+    shp = ranked["triangle"][0]
+    r_id = rank(shp, cat, lat, top=16)  # deep enough to hold folded meshes too (the top 8 of fine all embed)
     ann = r_id.annotation
     cache = {}
     pls = [place_match(shp, ann, cat, m, placements=cache) for m in r_id.results]

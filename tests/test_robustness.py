@@ -232,7 +232,7 @@ def test_ranking_invariant_under_relisting(small, poly, data):
     x, y = Ann(a, m), Ann(b, m)
     s = cyclic_shift(x, y, m)
     _, _, _, vals = small
-    table = small[2].table()
+    table = small[2]  # the lattice: utility_of includes its skip weights
     for mb in rb.results:  # every matching of B, moved to A, is optimal there too
         rot, refl, align = transported(mb, vals[mb.mesh_id], s, m)
         assert np.all(np.diff(align) > 0)

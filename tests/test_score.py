@@ -385,3 +385,48 @@ def test_ranked_matches_carry_the_skip_contribution(skip):
         assert d["match_utility"] == m.match_utility and d["skip_utility"] == m.skip_utility
         if math.isinf(skip[2]):
             assert np.isin(corners, m.alignment).all()
+
+
+class _NumpyBackend:
+    """A second backend for the exact host, plain numpy (the seam's contract: raw shifted-frame
+    values ``(S, meshes, 2n)`` in the problem's number type, mesh-major)."""
+
+    mesh_lanes = 1
+
+    def __init__(self):
+        self.calls = 0
+
+    def run(self, problem, vals):
+        self.calls += vals.shape[0]
+        tab, gate, neg = problem.tab.astype(np.int64), problem.gate.astype(np.int64), problem.kind.neg
+        meshes = vals.reshape(-1, problem.n)
+        out = np.empty((problem.codes.shape[0], meshes.shape[0], 2 * problem.n), np.int64)
+        for s, codes in enumerate(problem.codes):
+            for b, v in enumerate(meshes):
+                for o in range(2 * problem.n):
+                    seq = oriented_sequence(v, o % problem.n, o >= problem.n)
+                    t = mesh.triples(seq) - 2
+                    w = tab[:, t[:, 0] * 16 + t[:, 1] * 4 + t[:, 2]]  # (4, n)
+                    d, z = np.full(problem.n, neg, np.int64), 0
+                    for c in codes:
+                        shifted = np.concatenate([[z], d[:-1]]) + w[c]
+                        d, z = np.maximum(np.minimum(d, gate[c]), shifted), min(z, gate[c])
+                    out[s, b, o] = d[-1]
+        return out.astype(problem.kind.dtype)
+
+
+@pytest.mark.parametrize("skip", [(0, 0, 0), (0, -6, -math.inf)])
+def test_a_second_backend_plugs_into_the_exact_host(skip):
+    from jaxmatch.scoring.exact import exact_values
+
+    rng = np.random.default_rng(21)
+    model = make_weights(random_table(21, 0.2), np.asarray(skip, np.float64))
+    shapes = [rng.integers(0, 3, 11), rng.integers(0, 3, 7)]
+    vals = rng.integers(2, 6, (5, 4))
+    be = _NumpyBackend()
+    got = exact_values(shapes, vals, model, backend=be)
+    assert be.calls >= 1 and got.shape == (2, 5, 8)
+    np.testing.assert_array_equal(got, exact_values(shapes, vals, model))
+    for s, codes in enumerate(shapes):
+        expect = [reference.dp_reference(codes, v, model.table_inf(), model.skip_inf()) for v in vals]
+        np.testing.assert_array_equal(got[s].max(axis=1), np.array(expect, np.float32))

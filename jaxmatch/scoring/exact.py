@@ -80,7 +80,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxmatch.errors import UnmatchableError
-from jaxmatch.scoring.model import NEG, SkipFrame, Weights, skip_frame, skip_offset, weights_of  # noqa: F401 (re-exported)
+from jaxmatch.scoring.model import NEG, SkipFrame, skip_frame, skip_offset, weights_of  # noqa: F401 (SkipFrame re-exported)
 
 UNROLL = 1
 """``lax.scan`` unroll factor (1, 2, 4, 8 measured on XLA:CPU: 1 is fastest, and compiles fastest)."""

@@ -582,16 +582,23 @@ def lattice_toml(lat: Lattice) -> str:
     ]
     if lat.description:
         lines.append(f"description = {_toml_str(lat.description)}")
+    lines += _skip_lines(lat)
     for k, kind in enumerate(TYPES):
         lines += ["", f"# {kind}: {TYPE_NAMES[kind]}", f"[{kind}]"]
         lines.append(f"weeded = {_triple_array(lat.weeded[k])}")
         lines.append(f"forbidden = {_triple_array(lat.forbidden[k])}")
         for lev in lat.levels[k]:
             lines += ["", f"[[{kind}.levels]]", f"weight = {int(lev.weight)}", f"triples = {_triple_array(lev.triples)}"]
-    if any(w != 0 for w in lat.skip):
-        lines += ["", "# skip weights: the cost of leaving a shape point of that type without a mesh vertex", "[skip]"]
-        lines += [f"{kind} = {_skip_value(w)}" for kind, w in zip(TYPES, lat.skip)]
     return "\n".join(lines) + "\n"
+
+
+def _skip_lines(lat: Lattice) -> list[str]:
+    """The ``[skip]`` table (with a blank line and a comment before it), or nothing when all are 0.
+    It goes before the type tables, so a truncated file never loses it silently."""
+    if not any(w != 0 for w in lat.skip):
+        return []
+    return ["", "# skip weights: what leaving a shape point of that type without a mesh vertex adds to the utility",
+            "[skip]", *[f"{kind} = {_skip_value(w)}" for kind, w in zip(TYPES, lat.skip)]]
 
 
 def _patched(lat: Lattice, template: str) -> str | None:
@@ -633,10 +640,11 @@ def _patched(lat: Lattice, template: str) -> str | None:
             if count != 1:
                 return None
             lines[n - 1] = new
-        if loc.header("skip") is None:
-            tail = "" if not lines or lines[-1].endswith("\n") else "\n"
-            lines.append(tail + "\n# skip weights: the cost of leaving a shape point of that type without a mesh vertex\n[skip]\n"
-                         + "".join(f"{kind} = {_skip_value(w)}\n" for kind, w in zip(TYPES, lat.skip)))
+        if loc.header("skip") is None:  # after name / description, else before the first table
+            at = loc.key("", "description") or loc.key("", "name")
+            if at is None:
+                at = next((i for i, code in enumerate(loc.code) if loc._HEADER.match(code)), len(lines))
+            lines.insert(at, "\n".join(_skip_lines(lat)[1:]) + "\n\n")
     text = "".join(lines)
     n = loc.key("", "name")
     if old.name != lat.name:
