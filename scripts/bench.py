@@ -272,9 +272,10 @@ def make_strongest():
     """The strongest reference a reader would write today: numba, int16, vectorised across the
     lanes of a chunk of same-length meshes (lanes innermost and contiguous, ``np.int16`` casts so
     LLVM keeps 16-bit lanes: 32 per AVX-512 op), chunks spread over all cores with ``prange``.
-    Every cell of every orientation is computed (no band); skip weights are added directly
-    (``D[i][j] = max(D[i-1][j] + skip[c], D[i-1][j-1] + W)``, clamped at the sentinel), not
-    through jaxmatch's shifted frame. Written for the benchmark only."""
+    Every cell of every orientation is computed (no band). Finite skip weights are folded into
+    the match weights (its own few lines, not jaxmatch's shifted frame); a must-match (-inf) skip
+    weight takes the recurrence's skip branch directly (``D[i][j] = max(D[i-1][j] + skip[c],
+    D[i-1][j-1] + W)``, clamped at the sentinel). Written for the benchmark only."""
     import numba
     import numpy as np
     from numba import prange
@@ -344,17 +345,22 @@ def make_strongest():
         ok_t, ok_s = np.isfinite(t) & (t > -1e8), np.isfinite(sk) & (sk > -1e8)
         if not (np.all(t[ok_t] == np.round(t[ok_t])) and np.all(sk[ok_s] == np.round(sk[ok_s]))):
             raise ValueError("the int16 reference needs integer weights")
-        tab = np.where(ok_t, t, neg16).astype(np.int16)
-        skip16 = np.where(ok_s, sk, neg16).astype(np.int16)
+        # a finite skip weight is folded into the match weights of its type (every point is either
+        # matched or skipped: utility = sum of (w - skip) over matched points + sum of all skips);
+        # only a -inf one (the point must be matched) stays in the recurrence
+        fold = np.where(ok_s, sk, 0.0)
+        tab = np.where(ok_t, t - fold[:, None], neg16).astype(np.int16)
+        skip16 = np.where(ok_s, 0, neg16).astype(np.int16)
         has_skip = bool(np.any(skip16 != 0))
         vals = [np.ascontiguousarray(b.valences, dtype=np.int32) for b in buckets]
         res = []
         for c in shapes:
             cc = np.asarray(c, np.int64)
+            offset = float(fold[cc].sum())
             row = []
             for v in vals:
                 raw = strong(cc, v, tab, skip16, has_skip, STRONG_LANES).max(axis=1)
-                u = raw.astype(np.float32)
+                u = (raw.astype(np.float64) + offset).astype(np.float32)
                 u[raw <= neg16 // 2] = -np.inf
                 if v.shape[1] > len(cc):
                     u[:] = -np.inf
