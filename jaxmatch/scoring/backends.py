@@ -7,11 +7,11 @@ returns the raw ``E[m][n]`` of every orientation, the same numbers' classificati
 :func:`jaxmatch.scoring.exact.final_blocks` (valid values bit for bit; invalid ones, at or below
 ``kind.neg / 2``, may differ in their exact sentinel value, which the host maps to ``-inf``).
 
-Kernel (:func:`_dp_kernel`), per chunk of :data:`LANES` meshes of one boundary length and one
-shape, chunks spread over all cores with ``numba.prange``:
+Kernel (:mod:`jaxmatch.scoring._numba_dp`, int16 models only; others go to the XLA kernel), per
+chunk of :data:`LANES` meshes of one boundary length and one shape, chunks spread over all cores
+with ``numba.prange`` (problems under :data:`PARALLEL_CELLS` on the calling thread):
 
-* lanes = meshes, innermost and contiguous, in the DP number type (int16 for the shipped
-  lattices: 32 lanes per AVX-512 op); per-vertex weights ``(2, 4, n, lanes)`` of the sequence
+* lanes = meshes, innermost and contiguous, int16 (32 lanes per AVX-512 op); per-vertex weights ``(2, 4, n, lanes)`` of the sequence
   and of its mirror are built once per chunk, and orientation ``r`` reads row ``(r + j) % n``
   of them (no per-orientation weight copies);
 * per orientation the DP row ``d (n + 1, lanes)`` stays in L1;
@@ -38,7 +38,6 @@ LANES = 256
 """Meshes per chunk (vector lanes of one DP row; 64 / 128 / 256 / 512 measured: docs/perf.md)."""
 
 _LOCK = threading.Lock()
-
 
 PARALLEL_CELLS = 1 << 22
 """Smallest problem (DP cells) run on all cores; smaller ones (e.g. the pruned search's rounds)
@@ -97,7 +96,7 @@ class NumbaBackend:
 
         flat = np.asarray(vals).reshape(-1, problem.n)
         top = numba.config.NUMBA_NUM_THREADS
-        with _LOCK:  # one parallel kernel at a time (numba's default threading layer is not re-entrant)
+        with _LOCK:  # one parallel kernel at a time (numba's workqueue layer, its fallback, is not re-entrant)
             numba.set_num_threads(top if self.threads is None else max(1, min(int(self.threads), top)))
             return numba_values(problem.codes, problem.lengths, flat, problem.tab, problem.gate, problem.strict, self.lanes)
 
