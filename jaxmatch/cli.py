@@ -277,11 +277,17 @@ def score_many(
     devices: Optional[int] = typer.Option(None, min=1, metavar="N", help="Shard the scoring over N JAX devices."),
     skip_bad: bool = typer.Option(False, "--skip-bad", help="Record a bad or unmatchable shape as {shape, error} and go on "
                                   "(exit 0); without it the first bad shape stops the run before any scoring (exit 2)."),
+    coordinator: Optional[str] = typer.Option(None, metavar="HOST:PORT", help="Address of process 0: share the shapes among "
+                                              "--num-processes processes (jax.distributed; start the same command once per process)."),
+    num_processes: int = typer.Option(1, min=1, metavar="P", help="Processes sharing the run (with --coordinator)."),
+    process_id: int = typer.Option(0, min=0, metavar="I", help="This process's id, 0..P-1 (with --coordinator); process 0 writes --out."),
 ) -> None:
     """Score many shapes in one run (bulk mode), with the same defaults and records as 'score --json'.
 
     Every shape is read and checked before scoring. A summary line goes to stderr at the end.
+    With --coordinator, each process ranks every P-th shape and process 0 writes all records.
     """
+    cluster = _cluster(coordinator, num_processes, process_id, devices)
     if devices is not None:
         from jaxmatch.scoring.bulk import configure_host_devices
 
@@ -304,13 +310,17 @@ def score_many(
             if not skip_bad:
                 raise
             loaded.append((p, str(e)))
-    records, failed = [], 0
+    from jaxmatch.scoring import distributed
+
+    distributed.initialize(cluster)
+    mine = distributed.share(len(loaded), cluster)
+    records = []
     with _progress() as prog:
-        task = prog.add_task("shapes", total=len(loaded))
-        for p, shp in loaded:
+        task = prog.add_task("shapes", total=len(mine))
+        for i in mine:
+            p, shp = loaded[i]
             if isinstance(shp, str):
                 records.append({"shape": str(p), "error": shp})
-                failed += 1
             else:
                 try:
                     ranking = rank(shp, cat, lat, internal=ks, top=top, points=points, per_size=per_size, tie_break=tb,
@@ -320,11 +330,30 @@ def score_many(
                     if not skip_bad:
                         raise UnmatchableError(f"{p}: {e}") from None
                     records.append({"shape": str(p), "error": f"no match: {e}"})
-                    failed += 1
             prog.advance(task)
-    write_jsonl(out_path, records)
-    note = f", {failed} failed (records with \"error\")" if failed else ""
-    print(f"wrote {out_path}: {len(records)} shapes, {len(records) - failed} scored{note}", file=sys.stderr)  # one line
+    records = distributed.gather_records(records, mine, len(loaded), cluster)
+    if cluster.process_id == 0:
+        failed = sum(1 for r in records if "error" in r)
+        write_jsonl(out_path, records)
+        note = f", {failed} failed (records with \"error\")" if failed else ""
+        print(f"wrote {out_path}: {len(records)} shapes, {len(records) - failed} scored{note}", file=sys.stderr)  # one line
+    distributed.shutdown(cluster)
+
+
+def _cluster(coordinator: Optional[str], num_processes: int, process_id: int, devices: Optional[int]):
+    """The :class:`jaxmatch.scoring.distributed.Cluster` of score-many's options (one process without --coordinator)."""
+    from jaxmatch.scoring.distributed import Cluster, make_cluster
+
+    if coordinator is None:
+        if num_processes != 1 or process_id != 0:
+            raise InputError("needs --coordinator HOST:PORT", "--num-processes/--process-id")
+        return Cluster("", 1, 0)
+    if devices is not None:
+        raise InputError("use either --devices or --coordinator, not both", "--devices")
+    try:
+        return make_cluster(coordinator, num_processes, process_id)
+    except InputError as e:
+        raise InputError(e.problem, "--coordinator/--num-processes/--process-id") from None
 
 
 @app.command()

@@ -20,7 +20,12 @@ Printed, from one run:
   written for this benchmark), checked to give identical
   utilities for every mesh and shape; its throughput, and the ratio jaxmatch / reference
   (``ratio`` in the JSON). Also a second, SIMD-friendly numba reference (all 2n orientations in
-  the innermost loop, which LLVM vectorises): ``ratio_vectorised``;
+  the innermost loop, which LLVM vectorises): ``ratio_vectorised``; and the strongest one
+  (:func:`make_strongest`: int16, meshes as vector lanes, ``prange`` over chunks on all cores):
+  ``ratio_strongest``. ``--refs`` picks which run. For each, the fraction of the machine's peak
+  (:func:`machine_peak`: int16 lanes x cores x clock) it reaches, and the ratio of process CPU
+  time (all threads; less sensitive to other users of the machine than wall time,
+  ``ratio_*_cpu``);
 * the same workload through ``jaxmatch.scoring.bulk``: each distinct boundary sequence once (sharing
   per k), and pruned exact top-5 against exhaustive top-5 (speed-up, sequences scored);
 * peak RSS: of this process, and of a scorer-only subprocess for catalogue parts k <= 4 and
@@ -68,12 +73,22 @@ def parse_args(argv=None):
     ap.add_argument("--threads", type=int, default=None, help="jaxmatch host threads (default: all CPUs of this process)")
     ap.add_argument("--batch", type=int, default=None, help="meshes per compiled call (default score.DEFAULT_BATCH)")
     ap.add_argument("--block-cells", type=int, default=None, help="DP cells per block step (default score.BLOCK_CELLS)")
+    ap.add_argument("--backend", choices=["default", "xla", "numba"], default="default",
+                    help="exact host backend measured as 'jaxmatch' (default: the host's default)")
+    ap.add_argument("--lanes", type=int, default=None, help="meshes per chunk of the numba backend (default backends.LANES)")
+    ap.add_argument("--strong-lanes", type=int, default=None, help="meshes per chunk of the strongest reference (default STRONG_LANES)")
     ap.add_argument("--dtype", choices=["auto", "int32", "float32"], default="auto", help="force the DP number type")
     ap.add_argument("--lattice", default="fine", help="lattice name or TOML path (default fine; the model includes its skip weights)")
     ap.add_argument("--skip-reference", action="store_true", help="jaxmatch only (no ratio)")
+    ap.add_argument("--refs", default="plain,vectorised,strongest",
+                    help="references to run, comma-separated (default plain,vectorised,strongest; plain takes ~18 s a repetition)")
     ap.add_argument("--skip-bulk", action="store_true", help="skip the distinct-sequence and pruning measurements")
     ap.add_argument("--skip-rss", action="store_true", help="skip the per-catalogue-size RSS subprocesses")
     ap.add_argument("--cli", action="store_true", help="also time cold and warm 'jaxmatch score examples/lshape.json'")
+    ap.add_argument("--k6", action="store_true", help="also rank one shape against the k <= 6 catalogue (built once into --k6-cache)")
+    ap.add_argument("--k6-cache", default=str(Path(os.environ.get("JAXMATCH_CACHE", Path.home() / ".cache" / "jaxmatch")) / "bench"),
+                    help="folder for the k <= 6 catalogue (default $JAXMATCH_CACHE/bench or ~/.cache/jaxmatch/bench)")
+    ap.add_argument("--skip-many", action="store_true", help="skip the 50-shape score-many and API measurements")
     ap.add_argument("--rss-probe", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--refine", action="store_true", help="only the refinement benchmark (bench_refine): a 10,000-quad mesh")
     return ap.parse_args(argv)
@@ -130,11 +145,26 @@ def configure(args):
         score.dp_kind = lambda table, n: forced  # noqa: E731 - benchmark-only override
 
 
+def make_backend(args):
+    """The exact host's backend the benchmark measures (``--backend``); None: the host's default."""
+    if args.backend == "xla":
+        from jaxmatch.scoring.exact import CPUBackend
+
+        return CPUBackend(args.threads)
+    if args.backend == "numba" or args.lanes:
+        from jaxmatch.scoring.backends import NumbaBackend
+
+        return NumbaBackend(args.threads, **({"lanes": args.lanes} if args.lanes else {}))
+    return None
+
+
 def jax_pass(buckets, table, shapes, args) -> list:
     from jaxmatch.scoring.exact import DEFAULT_BATCH, score_bucket
 
     batch = args.batch or DEFAULT_BATCH
-    return [[score_bucket(c, b.valences, table, batch=batch, threads=args.threads).utility for b in buckets] for c in shapes]
+    backend = make_backend(args)
+    return [[score_bucket(c, b.valences, table, batch=batch, threads=args.threads, backend=backend).utility
+             for b in buckets] for c in shapes]
 
 
 # --------------------------------------------------------------------------- the reference
@@ -233,6 +263,147 @@ def make_reference():
     return {"plain": run, "vectorised": lambda b, t, s: run(b, t, s, fn=score_vec)}
 
 
+# --------------------------------------------------------------------------- the strongest reference
+
+STRONG_LANES = 128
+"""Meshes per chunk of the strongest reference (lanes of one DP row; 64 / 128 / 256 measured)."""
+
+
+def make_strongest():
+    """The strongest reference a reader would write today: numba, int16, vectorised across the
+    lanes of a chunk of same-length meshes (lanes innermost and contiguous, ``np.int16`` casts so
+    LLVM keeps 16-bit lanes: 32 per AVX-512 op), chunks spread over all cores with ``prange``.
+    Every cell of every orientation is computed (no band). Finite skip weights are folded into
+    the match weights (its own few lines, not jaxmatch's shifted frame); a must-match (-inf) skip
+    weight takes the recurrence's skip branch directly (``D[i][j] = max(D[i-1][j] + skip[c],
+    D[i-1][j-1] + W)``, clamped at the sentinel). Written for the benchmark only."""
+    import numba
+    import numpy as np
+    from numba import prange
+
+    neg16 = np.int16(-16384)
+
+    @numba.njit(parallel=True, nogil=True, cache=False, boundscheck=False)
+    def strong(codes, vals, tab, skip, has_skip, lanes_per_chunk):  # pragma: no cover - compiled
+        big_n, n = vals.shape
+        m = codes.shape[0]
+        n_chunks = (big_n + lanes_per_chunk - 1) // lanes_per_chunk
+        out = np.empty((big_n, 2 * n), np.int16)
+        for ch in prange(n_chunks):
+            b0 = ch * lanes_per_chunk
+            lanes = min(lanes_per_chunk, big_n - b0)
+            pv = np.empty((2, 3, n, lanes), np.int16)  # per-vertex weights of vals and of vals[::-1]
+            d = np.empty((n + 1, lanes), np.int16)
+            for bl in range(lanes):
+                b = b0 + bl
+                for k in range(n):
+                    t = (vals[b, (k + 1) % n] - 2) * 16 + (vals[b, k] - 2) * 4 + (vals[b, (k - 1 + n) % n] - 2)
+                    tr = (vals[b, (k - 1 + n) % n] - 2) * 16 + (vals[b, k] - 2) * 4 + (vals[b, (k + 1) % n] - 2)
+                    for c in range(3):
+                        pv[0, c, k, bl] = tab[c, t]
+                        pv[1, c, n - 1 - k, bl] = tab[c, tr]
+            for o in range(2 * n):
+                h = 0 if o < n else 1
+                r = o % n
+                d[0, :] = 0
+                d[1:, :] = neg16
+                for i in range(m):
+                    c = codes[i]
+                    if has_skip:
+                        sk = skip[c]
+                        for j in range(n, 0, -1):
+                            dj = d[j]
+                            dm = d[j - 1]
+                            w = pv[h, c, (r + j - 1) % n]
+                            for l in range(lanes):
+                                x = np.int16(dm[l] + w[l])
+                                y = np.int16(dj[l] + sk)
+                                y = y if y > neg16 else neg16
+                                dj[l] = x if x > y else y
+                        d0 = d[0]
+                        for l in range(lanes):
+                            y = np.int16(d0[l] + sk)
+                            d0[l] = y if y > neg16 else neg16
+                    else:
+                        for j in range(n, 0, -1):
+                            dj = d[j]
+                            dm = d[j - 1]
+                            w = pv[h, c, (r + j - 1) % n]
+                            for l in range(lanes):
+                                x = np.int16(dm[l] + w[l])
+                                dj[l] = x if x > dj[l] else dj[l]
+                for bl in range(lanes):
+                    out[b0 + bl, o] = d[n, bl]
+        return out
+
+    def run(buckets, model, shapes):
+        """``model``: a scoring model (``.table (3, 64)``, ``.skip (3,)``, NEG = forbidden) or a
+        ``(3, 4, 4, 4)`` table (-inf = forbidden, skip weights 0)."""
+        if hasattr(model, "skip"):
+            t, sk = np.asarray(model.table, np.float64).reshape(3, 64), np.asarray(model.skip, np.float64).reshape(3)
+        else:
+            t, sk = np.asarray(model, np.float64).reshape(3, 64), np.zeros(3)
+        ok_t, ok_s = np.isfinite(t) & (t > -1e8), np.isfinite(sk) & (sk > -1e8)
+        if not (np.all(t[ok_t] == np.round(t[ok_t])) and np.all(sk[ok_s] == np.round(sk[ok_s]))):
+            raise ValueError("the int16 reference needs integer weights")
+        # a finite skip weight is folded into the match weights of its type (every point is either
+        # matched or skipped: utility = sum of (w - skip) over matched points + sum of all skips);
+        # only a -inf one (the point must be matched) stays in the recurrence
+        fold = np.where(ok_s, sk, 0.0)
+        tab = np.where(ok_t, t - fold[:, None], neg16).astype(np.int16)
+        skip16 = np.where(ok_s, 0, neg16).astype(np.int16)
+        has_skip = bool(np.any(skip16 != 0))
+        vals = [np.ascontiguousarray(b.valences, dtype=np.int32) for b in buckets]
+        res = []
+        for c in shapes:
+            cc = np.asarray(c, np.int64)
+            offset = float(fold[cc].sum())
+            row = []
+            for v in vals:
+                raw = strong(cc, v, tab, skip16, has_skip, STRONG_LANES).max(axis=1)
+                u = (raw.astype(np.float64) + offset).astype(np.float32)
+                u[raw <= neg16 // 2] = -np.inf
+                if v.shape[1] > len(cc):
+                    u[:] = -np.inf
+                row.append(u)
+            res.append(row)
+        return res
+
+    return run
+
+
+def machine_peak() -> dict:
+    """``lanes x cores x clock``: int16 lanes per vector op from the CPU flags (AVX-512 BW: 32,
+    AVX2: 16, else SSE2: 8), the cores this process may use, the clock from /proc/cpuinfo
+    (the largest ``cpu MHz``; ``lscpu``'s max MHz if it is larger)."""
+    flags, mhz = set(), 0.0
+    try:
+        with open("/proc/cpuinfo") as fh:
+            for line in fh:
+                key, _, val = line.partition(":")
+                if key.strip() == "flags":
+                    flags |= set(val.split())
+                elif key.strip() == "cpu MHz":
+                    mhz = max(mhz, float(val))
+    except OSError:
+        pass
+    try:
+        out = subprocess.run(["lscpu"], capture_output=True, text=True, timeout=10).stdout
+        for line in out.splitlines():
+            if line.startswith("CPU max MHz:"):
+                mhz = max(mhz, float(line.split(":")[1]))
+    except (OSError, ValueError, subprocess.SubprocessError):
+        pass
+    lanes = 32 if "avx512bw" in flags else 16 if "avx2" in flags else 8
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - not Linux
+        cores = os.cpu_count() or 1
+    return {"int16_lanes": lanes, "isa": "avx512bw" if lanes == 32 else "avx2" if lanes == 16 else "sse2",
+            "cores": cores, "clock_mhz": mhz, "peak_cells_per_s": lanes * cores * mhz * 1e6,
+            "definition": "one DP cell per int16 lane per core per clock cycle"}
+
+
 # --------------------------------------------------------------------------- bulk measurements
 
 
@@ -329,19 +500,24 @@ def rss_by_catalogue(args) -> dict:
 
 
 CLI_PRUNED = """
-from jaxmatch.cli import _enable_compile_cache
+from jaxmatch.cli import enable_compile_cache
 from jaxmatch.scoring import bulk
 from jaxmatch.catalogue import store as catalogue
 from jaxmatch.scoring.lattice import load_lattice
 from jaxmatch.scoring.exact import align
 from jaxmatch.shape import annotate, default_points, load_shape
-_enable_compile_cache()
+enable_compile_cache()
 shape, table, cat = load_shape("examples/lshape.json"), load_lattice("fine").weights(), catalogue.default_catalogue()
 ann = annotate(shape, default_points(shape, max(cat.lengths)))
 for r in bulk.top_k(ann.codes, cat.buckets(), table, top=5, prune=PRUNE).rows[:5]:
     align(ann.codes, r[6], table, r[4], r[5])
 """
 """What ``jaxmatch score examples/lshape.json --tie-break id`` does, scoring through ``bulk.top_k``."""
+
+
+def _secs(x) -> str:
+    """``"1.23 s"``, or ``"failed"`` for a command that did not exit 0 (None)."""
+    return "failed" if x is None else f"{x:.2f} s"
 
 
 def cli_times() -> dict:
@@ -367,6 +543,150 @@ def cli_times() -> dict:
     finally:
         shutil.rmtree(cache, ignore_errors=True)
     return out
+
+
+# --------------------------------------------------------------------------- many shapes, the API
+
+
+MANY = 50
+"""Shapes of the bulk measurement: the examples and the labelled shapes, then rotated copies."""
+
+
+def many_shapes(folder: Path) -> list[Path]:
+    """:data:`MANY` shape files: ``examples/*`` (the :data:`EXAMPLES`), ``examples/labels/shapes/*``,
+    then copies of the first ones rotated by 37 degrees and scaled by 1.7, written to ``folder``
+    (so every file is a different shape; fixed, so runs compare)."""
+    import numpy as np
+
+    from jaxmatch.shape import load_shape
+
+    files = [ROOT / "examples" / n for n in EXAMPLES] + sorted((ROOT / "examples" / "labels" / "shapes").glob("*.json"))
+    a = np.deg2rad(37.0)
+    rot = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]]) * 1.7
+    k = 0
+    while len(files) < MANY:
+        shp = load_shape(files[k])
+        pts = (np.asarray(shp.points) * shp.scale + shp.offset) @ rot.T
+        out = folder / f"rotated-{k:02d}-{files[k].stem}.json"
+        out.write_text(json.dumps({"boundary": pts.tolist(), "corners": [int(c) for c in shp.corners]}))
+        files.append(out)
+        k += 1
+    return files[:MANY]
+
+
+def many_and_api(args) -> dict:
+    """``score-many``'s loop in this process (one prepared catalogue, k <= 5, top-5, pruned,
+    geometric and id tie-break) over :data:`MANY` shapes, warm (a first pass compiles and fills
+    the caches): shapes/s; and one shape ranked and its top mesh placed through the Python API
+    (``jaxmatch.api.rank`` + ``place_top``), warm: milliseconds per shape (min and median)."""
+    from jaxmatch.api import rank
+    from jaxmatch.catalogue import store as cat_mod
+    from jaxmatch.placement.choose import place_top
+    from jaxmatch.scoring.lattice import load_lattice
+    from jaxmatch.scoring.rank import ranking_json
+    from jaxmatch.shape import load_shape
+
+    folder = Path(tempfile.mkdtemp(prefix="jaxmatch-bench-shapes-"))
+    try:
+        files = many_shapes(folder)
+        shapes = [load_shape(f) for f in files]
+        cat = cat_mod.load(args.catalogue) if args.catalogue else cat_mod.default_catalogue()
+        lat = load_lattice(args.lattice)
+        out: dict = {"shapes": len(shapes), "internal": "0..5 (all sizes compete)", "top": 5}
+        for tb in ("geometry", "id"):
+            times = []
+            for rep in range(2):  # the first pass compiles and loads; the second is measured
+                t = time.perf_counter()
+                for p, shp in zip(files, shapes):
+                    ranking_json(str(p), rank(shp, cat, lat, top=5, tie_break=tb, prune=True), lat.name, tb)
+                times.append(time.perf_counter() - t)
+            out[tb] = {"first_pass_s": times[0], "warm_pass_s": times[1], "shapes_per_s": len(shapes) / times[1]}
+        api = []
+        for i in range(7):
+            t = time.perf_counter()
+            r = rank(shapes[4], cat, lat, top=5, tie_break="geometry", prune=True)  # lshape.json
+            place_top(shapes[4], r, cat)[0]
+            api.append((time.perf_counter() - t) * 1e3)
+        out["api_shape_ms"] = {"shape": files[4].name, "first_ms": api[0], "min_ms": min(api[1:]),
+                               "median_ms": statistics.median(api[1:])}
+        return out
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+def score_many_cli(args) -> dict:
+    """Wall time of ``jaxmatch score-many`` on the :data:`MANY` shapes (top 5, geometric
+    tie-break), start-up included, with a warm compile cache (a first run fills it)."""
+    exe = Path(sys.executable).parent / "jaxmatch"
+    folder = Path(tempfile.mkdtemp(prefix="jaxmatch-bench-many-"))
+    try:
+        files = many_shapes(folder)
+        env = dict(os.environ, JAXMATCH_CACHE=str(folder / "cache"))
+        runs = []
+        for _ in range(2):
+            cmd = [str(exe), "score-many", *map(str, files), "--out", str(folder / "out.jsonl"), "--top", "5",
+                   "--tie-break", "geometry"]
+            t = time.perf_counter()
+            p = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=1800)
+            runs.append(time.perf_counter() - t if p.returncode == 0 else None)
+        return {"shapes": len(files), "cold_s": runs[0], "warm_s": runs[1],
+                "shapes_per_s": len(files) / runs[1] if runs[1] else None}
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+# --------------------------------------------------------------------------- k <= 6
+
+
+K6_PROBE = """
+import json, sys, time
+from jaxmatch.catalogue import store
+from jaxmatch.scoring import bulk
+from jaxmatch.scoring.lattice import load_lattice
+from jaxmatch.api import rank
+from jaxmatch.shape import load_shape
+def hwm():
+    for line in open("/proc/self/status"):
+        if line.startswith("VmHWM:"):
+            return int(line.split()[1]) / 1024.0
+cat = store.load(sys.argv[1])
+lat = load_lattice("fine")
+shape = load_shape("examples/lshape.json")
+t = time.perf_counter()
+bulk.prepared(cat, None)
+prep = time.perf_counter() - t
+runs = []
+for _ in range(4):
+    t = time.perf_counter()
+    r = rank(shape, cat, lat, top=5, tie_break="id", prune=True)
+    runs.append(time.perf_counter() - t)
+print(json.dumps({"meshes": r.scored, "pruned": r.pruned, "prepare_s": prep, "first_s": runs[0], "warm_s": min(runs[1:]),
+                  "top": [m.mesh_id for m in r.results], "peak_rss_mb": hwm()}))
+"""
+"""Pruned top-5 (id tie-break) of examples/lshape.json against the k <= 6 catalogue, in a fresh
+process (its peak RSS is the job's): grouping once, then the first and the best warm ranking."""
+
+
+def k6_measure(args) -> dict:
+    """``--k6``: build ``catalogue-k0-6.npz`` into ``--k6-cache`` once (``jaxmatch catalogue build
+    --internal 0..6 --workers <CPUs>``, ~10 min on 2 idle cores, 2.8 GB peak), then :data:`K6_PROBE`."""
+    folder = Path(args.k6_cache)
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / "catalogue-k0-6.npz"
+    out: dict = {"catalogue": str(path)}
+    if not path.exists():
+        exe = Path(sys.executable).parent / "jaxmatch"
+        t = time.perf_counter()
+        p = subprocess.run([str(exe), "catalogue", "build", "--internal", "0..6", "--out", str(path),
+                            "--workers", str(len(os.sched_getaffinity(0)))], cwd=ROOT, capture_output=True, text=True)
+        out["build_s"] = time.perf_counter() - t
+        if p.returncode != 0:
+            return {**out, "error": p.stderr[-500:]}
+    p = subprocess.run([sys.executable, "-c", K6_PROBE, str(path)], cwd=ROOT, capture_output=True, text=True, timeout=1800,
+                       env=dict(os.environ, JAXMATCH_CACHE=str(folder / "cache")))
+    if p.returncode != 0:
+        return {**out, "error": p.stderr[-500:]}
+    return {**out, **json.loads(p.stdout.strip().splitlines()[-1])}
 
 
 # --------------------------------------------------------------------------- main
@@ -466,8 +786,19 @@ def main(argv=None) -> int:
     warm = time.perf_counter() - t
     compile_s = first - warm
 
-    refs = {} if args.skip_reference else make_reference()
+    if args.strong_lanes:
+        global STRONG_LANES
+        STRONG_LANES = int(args.strong_lanes)
+    refs = {} if args.skip_reference else {**make_reference(), "strongest": make_strongest()}
+    wanted = [r.strip() for r in args.refs.split(",") if r.strip()]
+    unknown = sorted(set(wanted) - {"plain", "vectorised", "strongest"})
+    if unknown:
+        raise SystemExit(f"bench.py: --refs: unknown reference(s) {', '.join(unknown)}")
+    refs = {k: v for k, v in refs.items() if k in wanted}
+    peak = machine_peak()
     ref_times: dict = {name: [] for name in refs}
+    ref_cpu: dict = {name: [] for name in refs}
+    jax_cpu: list[float] = []
     ref_compile: dict = {}
     for name, fn in refs.items():
         t = time.perf_counter()
@@ -477,15 +808,17 @@ def main(argv=None) -> int:
     identical: dict = {}
     for rep in range(max(args.reps, args.ref_reps if refs else 0)):  # interleaved, so load hits all alike
         if rep < args.reps:
-            t = time.perf_counter()
+            t, tc = time.perf_counter(), time.process_time()
             ours = jax_pass(buckets, table, shapes, args)
             jax_times.append(time.perf_counter() - t)
+            jax_cpu.append(time.process_time() - tc)
             say(f"  jaxmatch rep {rep + 1}: {jax_times[-1]:.3f} s")
         for name, fn in refs.items():
             if rep < args.ref_reps:
-                t = time.perf_counter()
+                t, tc = time.perf_counter(), time.process_time()
                 theirs = fn(buckets, table, shapes)
                 ref_times[name].append(time.perf_counter() - t)
+                ref_cpu[name].append(time.process_time() - tc)
                 say(f"  reference ({name}) rep {rep + 1}: {ref_times[name][-1]:.3f} s")
                 if name not in identical:
                     identical[name] = all(np.array_equal(a, b) for xs, ys in zip(ours, theirs) for a, b in zip(xs, ys))
@@ -496,26 +829,39 @@ def main(argv=None) -> int:
                      "cell_definition": "2n orientations x n mesh vertices x m shape points per mesh and shape"},
         "jaxmatch": {"threads": threads, "first_pass_s": first, "warm_pass_s": warm, "compile_s": compile_s,
                      "run_s": summary(jax_times), "cells_per_s": cells / jb, "meshes_per_s": pairs / jb,
-                     "dtype": np.dtype(score.dp_kind(table, max(b.n for b in buckets)).dtype).name,
+                     "dtype": np.dtype(score.dp_kind(table, max(b.n for b in buckets)).dtype).name, "backend": args.backend,
                      "block_cells": score.BLOCK_CELLS, "batch": args.batch or score.DEFAULT_BATCH},
     }
+    result["machine_peak"] = peak
+    result["jaxmatch"]["peak_fraction"] = cells / jb / peak["peak_cells_per_s"]
+    result["jaxmatch"]["cpu_s"] = summary(jax_cpu)
+    result["jaxmatch"]["cells_per_cpu_s"] = cells / min(jax_cpu)
+    say(f"peak      : {peak['int16_lanes']} int16 lanes ({peak['isa']}) x {peak['cores']} cores x {peak['clock_mhz']:.0f} MHz "
+        f"= {peak['peak_cells_per_s']:.3g} cells/s; jaxmatch reaches {result['jaxmatch']['peak_fraction']:.1%}")
     say(f"jaxmatch  : compile {compile_s:.2f} s (first pass of one shape {first:.2f} s, warm {warm:.2f} s); "
         f"run min {jb:.3f} s, median {statistics.median(jax_times):.3f} s over {len(jax_times)}; "
         f"{pairs / jb:,.0f} meshes/s, {cells / jb:.3g} cells/s")
     impl = {"plain": "numba njit, nopython, 1 thread, float32: per orientation a 1-D row, j inner (dp_reference)",
             "vectorised": "numba njit, nopython, 1 thread, float32: rows over all 2n orientations, orientation "
-                          "innermost (LLVM SIMD)"}
+                          "innermost (LLVM SIMD)",
+            "strongest": f"numba njit, parallel (prange over chunks of {STRONG_LANES} same-length meshes, all cores), "
+                         "int16, meshes as lanes innermost (LLVM AVX-512/AVX2), every cell"}
     for name, ts in ref_times.items():
         rb = min(ts)
         key = "reference" if name == "plain" else f"reference_{name}"
         result[key] = {"impl": impl[name], "compile_s": ref_compile[name], "run_s": summary(ts),
-                       "cells_per_s": cells / rb, "meshes_per_s": pairs / rb, "identical_utilities": identical[name]}
+                       "cells_per_s": cells / rb, "meshes_per_s": pairs / rb, "identical_utilities": identical[name],
+                       "peak_fraction": cells / rb / peak["peak_cells_per_s"],
+                       "cpu_s": summary(ref_cpu[name]), "cells_per_cpu_s": cells / min(ref_cpu[name])}
+        result[f"ratio_{name}_cpu" if name != "plain" else "ratio_cpu"] = min(ref_cpu[name]) / min(jax_cpu)
         ratio, ratio_median = rb / jb, statistics.median(ts) / statistics.median(jax_times)
         result["ratio" if name == "plain" else f"ratio_{name}"] = ratio
         result["ratio_median" if name == "plain" else f"ratio_{name}_median"] = ratio_median
         say(f"reference ({name}): compile {ref_compile[name]:.2f} s; run min {rb:.3f} s, median {statistics.median(ts):.3f} s; "
-            f"{pairs / rb:,.0f} meshes/s, {cells / rb:.3g} cells/s; utilities identical: {identical[name]}")
-        say(f"ratio jaxmatch / reference ({name}): {ratio:.2f}x (min vs min), {ratio_median:.2f}x (median vs median)")
+            f"{pairs / rb:,.0f} meshes/s, {cells / rb:.3g} cells/s ({cells / rb / peak['peak_cells_per_s']:.1%} of peak); "
+            f"utilities identical: {identical[name]}")
+        say(f"ratio jaxmatch / reference ({name}): {ratio:.2f}x (min vs min), {ratio_median:.2f}x (median vs median); "
+            f"CPU time (all threads): {min(ref_cpu[name]) / min(jax_cpu):.2f}x")
 
     if not args.skip_bulk:
         result["sharing"] = sharing(buckets)
@@ -536,9 +882,33 @@ def main(argv=None) -> int:
         say("RSS       : " + ", ".join(f"{k}: {v.get('meshes')} meshes, peak {v.get('peak_rss_mb', float('nan')):.0f} MB "
                                        f"(after import {v.get('rss_after_import_mb', float('nan')):.0f} MB)"
                                        for k, v in result["rss_by_catalogue"].items()))
+    if not args.skip_many:
+        many = many_and_api(args)
+        result["many"] = many
+        result["score_many_shapes_per_s"] = many["geometry"]["shapes_per_s"]
+        result["score_many_id_shapes_per_s"] = many["id"]["shapes_per_s"]
+        result["api_shape_ms"] = many["api_shape_ms"]["min_ms"]
+        say(f"many      : {many['shapes']} shapes, top 5, pruned, one prepared catalogue: geometric tie-break "
+            f"{many['geometry']['shapes_per_s']:.1f} shapes/s, id tie-break {many['id']['shapes_per_s']:.1f} shapes/s (warm)")
+        say(f"API       : rank + place {many['api_shape_ms']['shape']}: {many['api_shape_ms']['min_ms']:.0f} ms min, "
+            f"{many['api_shape_ms']['median_ms']:.0f} ms median (warm; first {many['api_shape_ms']['first_ms']:.0f} ms)")
     if args.cli:
         result["cli"] = cli_times()
-        say("CLI       : " + ", ".join(f"{k}: cold {v['cold_s']:.2f} s, warm {v['warm_s']:.2f} s" for k, v in result["cli"].items()))
+        result["cli_cold_s"] = result["cli"]["default"]["cold_s"]
+        result["cli_warm_s"] = result["cli"]["default"]["warm_s"]
+        if not args.skip_many:
+            result["score_many_cli"] = score_many_cli(args)
+            say(f"score-many: CLI on {result['score_many_cli']['shapes']} shapes: cold {_secs(result['score_many_cli']['cold_s'])}, "
+                f"warm {_secs(result['score_many_cli']['warm_s'])}")
+        say("CLI       : " + ", ".join(f"{k}: cold {_secs(v['cold_s'])}, warm {_secs(v['warm_s'])}" for k, v in result["cli"].items()))
+    if args.k6:
+        result["k6"] = k6 = k6_measure(args)
+        if "error" in k6:
+            say(f"k <= 6    : failed: {k6['error']}")
+        else:
+            say(f"k <= 6    : {k6['meshes']} meshes, grouping {k6['prepare_s']:.2f} s once; pruned top-5 of lshape: first "
+                f"{k6['first_s']:.2f} s, warm {k6['warm_s']:.3f} s ({k6['pruned']} meshes skipped by the bound); peak RSS "
+                f"{k6['peak_rss_mb']:.0f} MB")
     load1 = os.getloadavg()
     result["peak_rss_mb"] = rss_mb()
     result["load"] = {"before": list(load0), "after": list(load1)}

@@ -341,3 +341,28 @@ def test_sharded_results_equal_single_device_on_4_simulated_devices():
     proc = subprocess.run([sys.executable, "-c", SHARDED], cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr[-3000:]
     assert "SHARDED-OK" in proc.stdout
+
+
+# --------------------------------------------------------------------------- reuse of one prepared catalogue
+
+
+@pytest.mark.parametrize("m", [6, 10, 24])
+@pytest.mark.parametrize("skip", [None, [0.0, -2.0, -np.inf]])
+def test_part_bounds_equal_per_part_upper_bounds(m, skip, small_parts):
+    from jaxmatch.scoring.model import make_weights
+
+    weights = make_weights(random_table(m, 0.2), skip)
+    codes = np.random.default_rng(m).integers(0, 3, m)  # m = 6, 10: some parts are longer than the shape
+    got = bulk.part_bounds(small_parts, codes, weights)
+    for p, b in zip(small_parts, got):
+        np.testing.assert_array_equal(b, bulk.upper_bounds(p.groups.seqs, codes, weights, hist=p.hist))
+
+
+def test_prepared_is_computed_once_per_catalogue_and_selection():
+    cat = default_catalogue()
+    first = bulk.prepared(cat, [0, 1, 2])
+    assert bulk.prepared(cat, [2, 1, 0]) is first  # same selection, any order
+    assert bulk.prepared(cat, [0, 1]) is not first
+    assert [p.n for p in first] == [b.n for b in cat.buckets([0, 1, 2])]
+    for p, b in zip(first, cat.buckets([0, 1, 2])):
+        np.testing.assert_array_equal(p.ids, b.ids)

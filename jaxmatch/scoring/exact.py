@@ -519,9 +519,12 @@ def exact_values(
     codes_list: ``S`` shapes ``(m_s,)``; vals: ``(N, n)`` boundary valences; weights: the model
     (:func:`jaxmatch.scoring.model.weights_of`). Meshes are padded to whole calls of
     ``mesh_lanes x blocks per call x block`` (:func:`plan_chunks` of ``batch``, or ``plan``);
-    ``backend`` (default :class:`CPUBackend`) computes the raw values.
+    ``backend`` (default :func:`jaxmatch.scoring.backends.default_backend`) computes the raw values.
     """
-    backend = CPUBackend() if backend is None else backend
+    if backend is None:
+        from jaxmatch.scoring.backends import default_backend
+
+        backend = default_backend()
     v = _check_vals(vals)
     big_n, n = v.shape
     prob = dp_problem(codes_list, weights, n, m_pad)
@@ -553,8 +556,12 @@ def final_values(
     """Best utility of every orientation for one shape: ``(N, 2n) float32``, ``-inf`` where the
     orientation has no finite alignment (or ``n > m``). Column ``o`` is orientation ``o`` of the
     module docstring. :func:`exact_values` for one shape (``threads``, ``unroll``: of the
-    default :class:`CPUBackend`)."""
-    be = CPUBackend(threads, unroll) if backend is None else backend
+    default backend, :func:`jaxmatch.scoring.backends.default_backend`)."""
+    if backend is None:
+        from jaxmatch.scoring.backends import default_backend
+
+        backend = default_backend(threads, unroll)
+    be = backend
     return exact_values([codes], vals, weights, backend=be, batch=batch, m_pad=m_pad, plan=plan)[0]
 
 

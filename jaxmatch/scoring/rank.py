@@ -138,23 +138,27 @@ def rank(
     """
     if not (tie_break == "id" or callable(tie_break)):
         raise ValueError(f"tie_break must be 'id' or a tie breaker function, got {tie_break!r}")
-    lengths = selected_lengths(catalogue, internal)
+    bulk_path = prune or (devices is not None and devices > 1)
+    if bulk_path:  # the catalogue grouped once (bulk.prepared), not re-read for every shape
+        from jaxmatch.scoring.bulk import prepared, top_k
+
+        parts = prepared(catalogue, internal)
+        lengths = [p.n for p in parts]
+    else:
+        lengths = selected_lengths(catalogue, internal)
     if not lengths:
         raise _unmatchable(f"the catalogue has no mesh with {internal_text(internal)}", "internal")
     m = points if points is not None else default_points(shape, max(lengths))
     ann = annotate(shape, m)
     weights = weights_of(lattice)
-    buckets = list(catalogue.buckets(internal))
-    total = sum(len(b.ids) for b in buckets)
+    buckets = [] if bulk_path else list(catalogue.buckets(internal))
+    total = sum(len(p.ids) for p in parts) if bulk_path else sum(len(b.ids) for b in buckets)
     rows = []  # (utility, k, n, id, rotation, reflected, vals)
     done = unmatchable = pruned = 0
-    if prune or (devices is not None and devices > 1):
-        from jaxmatch.scoring.bulk import top_k
-
-        tk = top_k(ann.codes, buckets, weights, top=top, per_size=per_size, prune=prune,
+    if bulk_path:
+        tk = top_k(ann.codes, parts, weights, top=top, per_size=per_size, prune=prune,
                    devices=devices if devices is not None and devices > 1 else None, progress=progress)
         rows, unmatchable, pruned = list(tk.rows), tk.unmatchable, tk.pruned
-        buckets = []
     for b in buckets:
         res = score_bucket(ann.codes, b.valences, weights)
         ok = ~res.unmatchable

@@ -1,0 +1,117 @@
+"""The numba backend of the exact host (jaxmatch.scoring.backends) against the XLA backend and
+the plain-Python DP, with and without skip weights (must-match types included)."""
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from jaxmatch.scoring import reference
+from jaxmatch.errors import InputError
+from jaxmatch.scoring.backends import NumbaBackend, default_backend, numba_values
+from jaxmatch.scoring.exact import CPUBackend, dp_problem, exact_values, score_bucket
+from jaxmatch.scoring.model import make_weights
+
+
+def random_model(seed: int, forbidden: float, skip: str):
+    """Integer weights in -5..5 (a fraction ``forbidden`` of them -inf) and skip weights:
+    ``"zero"``, ``"neg"`` (integers in -3..0) or ``"must"`` (some -inf)."""
+    rng = np.random.default_rng(seed)
+    t = rng.integers(-5, 6, (3, 4, 4, 4)).astype(np.float32)
+    t[rng.random(t.shape) < forbidden] = -np.inf
+    s = np.zeros(3, np.float32)
+    if skip != "zero":
+        s = rng.integers(-3, 1, 3).astype(np.float32)
+    if skip == "must":
+        s[rng.integers(0, 3)] = -np.inf
+    return t, s
+
+
+@st.composite
+def problems(draw, max_n=12, max_m=30, max_meshes=300):
+    n = draw(st.integers(1, max_n))
+    shapes = [np.array(draw(st.lists(st.integers(0, 2), min_size=1, max_size=max_m)), np.int32)
+              for _ in range(draw(st.integers(1, 3)))]
+    big_n = draw(st.integers(1, max_meshes))
+    rng = np.random.default_rng(draw(st.integers(0, 2**32 - 1)))
+    vals = rng.integers(2, 6, (big_n, n)).astype(np.int32)
+    table, skip = random_model(draw(st.integers(0, 2**32 - 1)), draw(st.sampled_from([0.0, 0.2, 0.6])),
+                               draw(st.sampled_from(["zero", "neg", "must"])))
+    lanes = draw(st.sampled_from([1, 7, 32, 128]))
+    return shapes, vals, make_weights(table, skip), lanes
+
+
+@settings(max_examples=40, deadline=None)
+@given(problems())
+def test_numba_backend_equals_the_xla_backend(case):
+    shapes, vals, weights, lanes = case
+    ours = exact_values(shapes, vals, weights, backend=NumbaBackend(lanes=lanes))
+    theirs = exact_values(shapes, vals, weights, backend=CPUBackend())
+    np.testing.assert_array_equal(ours, theirs)  # -inf included
+
+
+@pytest.mark.parametrize("skip", ["zero", "neg", "must"])
+@pytest.mark.parametrize("seed", range(3))
+def test_numba_backend_equals_the_plain_dp(seed, skip):
+    rng = np.random.default_rng(seed)
+    codes = rng.integers(0, 3, 21)
+    vals = rng.integers(2, 6, (9, 7))
+    table, sk = random_model(seed, 0.2, skip)
+    res = score_bucket(codes, vals, make_weights(table, sk), backend=NumbaBackend(lanes=4))
+    expect = [reference.dp_reference(codes, v, table, sk) for v in vals]
+    np.testing.assert_array_equal(res.utility, np.array(expect, np.float32))
+    assert np.array_equal(res.unmatchable, [e == -math.inf for e in expect])
+
+
+def test_band_edges_longest_boundary_equal_to_points():
+    """n = m: the band is one cell wide (every point takes a vertex), and n = m + 1 is unmatchable."""
+    table, sk = random_model(5, 0.0, "neg")
+    w = make_weights(table, sk)
+    codes = np.array([1, 0, 2, 0, 1, 1], np.int32)
+    for n in (len(codes), len(codes) + 1):
+        vals = np.random.default_rng(n).integers(2, 6, (20, n)).astype(np.int32)
+        np.testing.assert_array_equal(exact_values([codes], vals, w, backend=NumbaBackend()),
+                                      exact_values([codes], vals, w, backend=CPUBackend()))
+
+
+def test_numba_values_rejects_wider_types_and_backend_falls_back():
+    table = np.full((3, 4, 4, 4), 1000.0, np.float32)  # n * 1000 >= 2**13: int32 DP
+    w = make_weights(table)
+    prob = dp_problem([np.zeros(12, np.int32)], w, 10)
+    assert np.dtype(prob.kind.dtype) == np.int32
+    with pytest.raises(ValueError, match="int16"):
+        numba_values(prob.codes, prob.lengths, np.full((3, 10), 3, np.int32), prob.tab, prob.gate)
+    vals = np.random.default_rng(0).integers(2, 6, (5, 10))
+    np.testing.assert_array_equal(exact_values([np.zeros(12, np.int32)], vals, w, backend=NumbaBackend()),
+                                  exact_values([np.zeros(12, np.int32)], vals, w, backend=CPUBackend()))
+
+
+@pytest.mark.parametrize("value, kind", [("numba", NumbaBackend), ("xla", CPUBackend), ("auto", NumbaBackend), ("", NumbaBackend)])
+def test_default_backend_follows_the_environment(monkeypatch, value, kind):
+    monkeypatch.setenv("JAXMATCH_BACKEND", value)
+    assert isinstance(default_backend(), kind)  # tests run JAX on the CPU: auto = numba
+
+
+def test_default_backend_rejects_unknown_names(monkeypatch):
+    monkeypatch.setenv("JAXMATCH_BACKEND", "cuda")
+    with pytest.raises(InputError, match="JAXMATCH_BACKEND: must be one of auto, numba, xla"):
+        default_backend()
+
+
+@pytest.mark.parametrize("skip", ["zero", "must"])
+def test_parallel_and_serial_kernels_agree(monkeypatch, skip):
+    from jaxmatch.scoring import backends
+
+    rng = np.random.default_rng(11)
+    shapes = [rng.integers(0, 3, 40), rng.integers(0, 3, 17)]
+    vals = rng.integers(2, 6, (700, 9))
+    table, sk = random_model(11, 0.2, skip)
+    w = make_weights(table, sk)
+    monkeypatch.setattr(backends, "PARALLEL_CELLS", 0)
+    par = exact_values(shapes, vals, w, backend=NumbaBackend(lanes=64))
+    monkeypatch.setattr(backends, "PARALLEL_CELLS", 1 << 62)
+    ser = exact_values(shapes, vals, w, backend=NumbaBackend(lanes=64))
+    np.testing.assert_array_equal(par, ser)
+    np.testing.assert_array_equal(par, exact_values(shapes, vals, w, backend=CPUBackend()))
