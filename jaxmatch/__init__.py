@@ -43,6 +43,10 @@ _API = {
     "Match": "jaxmatch.scoring.rank",
     "Placement": "jaxmatch.placement.embed",
     "MeshChoice": "jaxmatch.placement.choose",
+    # sizes, concave shapes, layouts
+    "refine_mesh": "jaxmatch.api",
+    "mesh_concave": "jaxmatch.api",
+    "mesh_layout": "jaxmatch.api",
     # writing
     "write_mesh": "jaxmatch.api",
     # errors

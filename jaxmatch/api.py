@@ -53,9 +53,12 @@ __all__ = [
     "load_lattice",
     "load_shape",
     "make_shape",
+    "mesh_concave",
+    "mesh_layout",
     "parse_shape",
     "place",
     "rank",
+    "refine_mesh",
     "sizes_text",
     "write_mesh",
 ]
@@ -206,3 +209,46 @@ def annotate_shape(shape: Shape, catalogue: str | os.PathLike | Catalogue | None
         lengths = [b.n for b in cat.buckets(ks)]
         points = default_points(shape, max(lengths) if lengths else 0)
     return annotate(shape, points)
+
+
+def refine_mesh(shape: Shape, catalogue: str | os.PathLike | Catalogue | None = None,
+                lattice: str | os.PathLike | Lattice = DEFAULT_LATTICE, *, sides=None, size: float | None = None,
+                internal: Sizes = None):
+    """A mesh of ``shape`` with the requested edges per side (``sides``: one count per side, side
+    i from corner i to corner i+1 in the file's order) or edges of about ``size`` (shape units):
+    what ``jaxmatch mesh --sides/--size`` does (:func:`jaxmatch.placement.refine.refine_mesh`).
+
+    Returns a :class:`~jaxmatch.placement.refine.RefineChoice`: ``mesh`` (a
+    :class:`~jaxmatch.placement.refine.RefinedMesh`: ``xy (V, 2)``, ``quads (Q, 4)``,
+    ``side_vertices``, ``counts (n_sides,)``, quality), ``template``, ``passed_over``, ``note``.
+    Raises :class:`~jaxmatch.placement.refine.InfeasibleRequest` (an :class:`InputError`) naming
+    the sides and the nearest feasible counts when no template can meet ``sides``.
+    """
+    from jaxmatch.placement.refine import refine_mesh as _refine_mesh
+
+    cat = load_catalogue(catalogue)
+    ks = check_sizes(cat, internal)
+    return _refine_mesh(shape, cat, _lattice(lattice), sides=sides, size=size, internal=ks)
+
+
+def mesh_layout(layout, catalogue: str | os.PathLike | Catalogue | None = None,
+                lattice: str | os.PathLike | Lattice = DEFAULT_LATTICE, *, size: float | None = None, counts=None):
+    """One conforming quad mesh of a multi-patch layout (``jaxmatch layout``): ``layout`` is a
+    path to a layout JSON file or a :class:`~jaxmatch.placement.layout.Layout`; ``size`` the
+    target edge length (user units) and/or ``counts`` fixed edge counts per side. Returns a
+    :class:`~jaxmatch.placement.layout.LayoutMesh`; write it with
+    :func:`jaxmatch.placement.layout.write_layout_mesh` (``.msh`` with physical groups)."""
+    from jaxmatch.placement.layout import Layout, load_layout, mesh_layout as _mesh_layout
+
+    lay = layout if isinstance(layout, Layout) else load_layout(layout)
+    return _mesh_layout(lay, load_catalogue(catalogue), _lattice(lattice), size=size, counts=counts)
+
+
+def mesh_concave(shape: Shape, size: float, catalogue: str | os.PathLike | Catalogue | None = None,
+                 lattice: str | os.PathLike | Lattice = DEFAULT_LATTICE):
+    """``shape`` meshed with edges of about ``size`` as one template and as splits at its concave
+    corners; the best is kept (``jaxmatch layout SHAPE``; :func:`jaxmatch.placement.decompose.mesh_shape`).
+    Returns a :class:`~jaxmatch.placement.decompose.ShapeChoice` (``chosen`` names the split)."""
+    from jaxmatch.placement.decompose import mesh_shape
+
+    return mesh_shape(shape, load_catalogue(catalogue), _lattice(lattice), size=size)

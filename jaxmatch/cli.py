@@ -469,7 +469,9 @@ def mesh(
         out.print(f"corners kept: {pl.kept_corners} of {pl.corners}; scaled Jacobian: min {pl.min_scaled_jacobian:.3f}, "
                   f"mean {pl.mean_scaled_jacobian:.3f}; max edge ratio {pl.max_edge_ratio:.2f}; inverted quads: {pl.inverted}; "
                   f"mesh area / shape area {pl.area_ratio:.6f}", markup=False, highlight=False)
-        for note in notes:  # warnings (FOLDED, next valid mesh) go to stderr, as in --json mode
+        if choice.size is not None:  # part of the answer: which size and why
+            out.print(notes[0], markup=False, highlight=False)
+        for note in notes[1 if choice.size is not None else 0:]:  # warnings (FOLDED, next valid mesh): stderr, as with --json
             err.print(note, markup=False, highlight=False)
         for path in written.values():
             out.print(f"wrote {path}", markup=False, highlight=False)

@@ -117,3 +117,32 @@ def test_huge_coordinates_place_with_finite_areas(small_cat):
     assert np.isfinite([pl.region_area, pl.mesh_area, pl.min_scaled_jacobian]).all() and pl.area_ratio > 0
     with pytest.raises(InputError, match="too large"):
         jaxmatch.make_shape(pts * 1e300)
+
+
+def test_refine_mesh_meets_the_requested_counts(small_cat):
+    """``jaxmatch.refine_mesh`` gives exactly the edges asked for per side, and its boundary
+    vertices lie on the shape's sides (distances computed here with shapely)."""
+    from shapely.geometry import LineString, Point
+
+    shape = jaxmatch.load_shape(EXAMPLES / "square.json")
+    choice = jaxmatch.refine_mesh(shape, small_cat, sides=[4, 2, 4, 2])
+    mesh = choice.mesh
+    assert [len(v) - 1 for v in mesh.side_vertices] == [4, 2, 4, 2]
+    outline = LineString(np.vstack([shape.user_points, shape.user_points[:1]]))
+    far = max(outline.distance(Point(*mesh.xy[i])) for side in mesh.side_vertices for i in side)
+    assert far <= 1e-9 * float(np.ptp(shape.user_points, axis=0).max())
+
+
+def test_refine_mesh_refuses_an_odd_total(small_cat):
+    shape = jaxmatch.load_shape(EXAMPLES / "square.json")
+    with pytest.raises(InputError):
+        jaxmatch.refine_mesh(shape, small_cat, sides=[3, 2, 2, 2])
+
+
+def test_mesh_layout_is_one_conforming_mesh(small_cat):
+    """Every edge of the merged two-block layout lies in one or two quads (no hanging node)."""
+    lm = jaxmatch.mesh_layout(EXAMPLES / "layouts" / "two-blocks.json", small_cat, size=0.5)
+    quads = np.asarray(lm.quads)
+    e = np.sort(np.stack([quads, np.roll(quads, -1, axis=1)], axis=-1).reshape(-1, 2), axis=1)
+    _, uses = np.unique(e, axis=0, return_counts=True)
+    assert set(uses.tolist()) <= {1, 2} and (uses == 2).any()
