@@ -34,3 +34,24 @@ def index(cat):
     from jaxmatch.tuning.labels import mesh_index
 
     return mesh_index(cat)
+
+
+@pytest.fixture
+def cli(capsys, monkeypatch, tmp_path):
+    """``cli(*args) -> (exit code, stdout, stderr)``: the ``jaxmatch`` command run in-process."""
+    from jaxmatch.cli import main
+
+    monkeypatch.setenv("JAXMATCH_CACHE", str(tmp_path / "cache"))
+
+    def run(*args):
+        monkeypatch.setattr(sys, "argv", ["jaxmatch", *map(str, args)])
+        capsys.readouterr()
+        try:
+            main()
+            code = 0
+        except SystemExit as e:
+            code = e.code if isinstance(e.code, int) else 1
+        out, err = capsys.readouterr()
+        return code, out, err
+
+    return run

@@ -55,22 +55,6 @@ def folded(small_cat):
     return bad, want, r.results[want - 1].mesh_id
 
 
-@pytest.fixture
-def cli(capsys, monkeypatch, tmp_path):
-    monkeypatch.setenv("JAXMATCH_CACHE", str(tmp_path / "cache"))
-
-    def run(*args):
-        monkeypatch.setattr(sys, "argv", ["jaxmatch", *map(str, args)])
-        capsys.readouterr()
-        try:
-            main()
-            code = 0
-        except SystemExit as e:
-            code = e.code if isinstance(e.code, int) else 1
-        out, err = capsys.readouterr()
-        return code, out, err
-
-    return run
 
 
 def test_mesh_writes_vtk_and_pictures_json(cli, small_cat, tmp_path):

@@ -485,24 +485,6 @@ def test_notched_plate_many_patches(cat, lat, tmp_path):
 # the command
 
 
-@pytest.fixture
-def cli(capsys, monkeypatch, tmp_path):
-    from jaxmatch.cli import main
-
-    monkeypatch.setenv("JAXMATCH_CACHE", str(tmp_path / "cache"))
-
-    def run(*args):
-        monkeypatch.setattr(sys, "argv", ["jaxmatch", *map(str, args)])
-        capsys.readouterr()
-        try:
-            main()
-            code = 0
-        except SystemExit as e:
-            code = e.code if isinstance(e.code, int) else 1
-        out, err = capsys.readouterr()
-        return code, out, err
-
-    return run
 
 
 def test_cli_layout_msh_png_json(cli, tmp_path):
