@@ -33,7 +33,6 @@ import numpy as np
 from jaxmatch.errors import InputError
 from jaxmatch.catalogue.mesh import boundary_valences, valences
 from jaxmatch.placement.embed import Placement, edge_ratios, inverted_mask, oriented_boundary, place, quality
-from jaxmatch.placement.embed import boundary_paths as embed_boundary_paths
 from jaxmatch.shape import S as S_CODE
 from jaxmatch.shape import cumulative_length
 from jaxmatch.shape import point_at as shape_point_at
@@ -275,8 +274,11 @@ def spread_optimal_alignment(t: np.ndarray, perimeter: float, codes: np.ndarray,
         U = bu
         G = np.take_along_axis(tg, arg[..., None], axis=2)[..., 0]
         back[j] = arg
-        if all_ties:
-            ties[j] = (tg == G[..., None]) & np.isfinite(tg)
+        if all_ties:  # ties[j][(s, i)]: the points i' of vertex j - 1 that tie for (s, i)
+            tj: dict[tuple[int, int], list[int]] = {}
+            for a, b, c in zip(*[x.tolist() for x in np.nonzero((tg == G[..., None]) & np.isfinite(tg))]):
+                tj.setdefault((a, b), []).append(c)
+            ties[j] = tj
     U = U + suffix[None, :]
     G = G + np.round((perimeter - tt[None, :] + tt[starts][:, None]) ** 2 / unit)
     G = np.where(U == best, G, np.inf)
@@ -296,8 +298,8 @@ def spread_optimal_alignment(t: np.ndarray, perimeter: float, codes: np.ndarray,
         if j == 0:
             outs.append(np.array([i, *tail], np.int64))
             return
-        for ip in np.flatnonzero(ties[j][s_, i]):
-            walk(s_, j - 1, int(ip), [i, *tail])
+        for ip in ties[j].get((s_, i), ()):
+            walk(s_, j - 1, ip, [i, *tail])
 
     for s_, i in zip(*np.nonzero(G == g_min)):
         walk(int(s_), n - 1, int(i), [])
@@ -551,8 +553,17 @@ def place_match(shape: Shape, annotation: Annotation, catalogue: Catalogue, matc
         # one candidate per distinct boundary (orientations that differ by a symmetry of the mesh
         # give the same placement), in a geometric order, at most MAX_CANDIDATES
         unique = {}
+        val = valences(mesh.quads, mesh.n_vertices)
+        boundaries: dict[tuple, Boundary] = {}  # corner_boundary depends on the corner points only
+        loops: dict[tuple[int, bool], np.ndarray] = {}
         for rot, refl, al in cands:
-            unique.setdefault(_boundary_signature(shape, annotation, mesh, rot, refl, al), (rot, refl, al))
+            key = _pin_key(annotation, al)
+            if key not in boundaries:
+                boundaries[key] = corner_boundary(shape, annotation, al)
+            if (rot, refl) not in loops:
+                loops[rot, refl] = val[oriented_boundary(mesh, rot, refl)[1]]
+            sig = _boundary_signature(boundaries[key], loops[rot, refl])
+            unique.setdefault(sig, (rot, refl, al))
         best = None
         for sig in sorted(unique)[:MAX_CANDIDATES]:
             rot, refl, al = unique[sig]
@@ -566,45 +577,40 @@ def place_match(shape: Shape, annotation: Annotation, catalogue: Catalogue, matc
     return user
 
 
-def _boundary_signature(shape, annotation, mesh, rot, refl, al) -> tuple:
+def _pin_key(annotation: Annotation, alignment: np.ndarray) -> tuple:
+    """What :func:`corner_boundary` depends on: which vertices stand on which corner points
+    (with no corner matched, the whole alignment). Alignments that differ only in the
+    straight points they take share one boundary."""
+    al = np.asarray(alignment, dtype=np.int64)
+    J = np.flatnonzero(np.asarray(annotation.codes)[al] != S_CODE)
+    if J.size == 0:
+        return (al.shape[0], tuple(al.tolist()))
+    return (al.shape[0], tuple(J.tolist()), tuple(al[J].tolist()))
+
+
+def _boundary_signature(b: Boundary, loop_valences: np.ndarray) -> tuple:
     """Sorted (rounded position, valence) of the boundary vertices of a candidate: equal for
-    two orientations that differ by a symmetry of the mesh."""
-    b = corner_boundary(shape, annotation, al)
-    _, loop = oriented_boundary(mesh, rot, refl)
-    val = valences(mesh.quads, mesh.n_vertices)[loop]
+    two orientations that differ by a symmetry of the mesh. b: its boundary; loop_valences:
+    ``(n,)`` valences of the oriented boundary loop."""
     xy = np.round(b.xy, COORD_DIGITS) + 0.0
-    return tuple(sorted(zip(xy[:, 0].tolist(), xy[:, 1].tolist(), val.tolist())))
+    return tuple(sorted(zip(xy[:, 0].tolist(), xy[:, 1].tolist(), np.asarray(loop_valences).tolist())))
 
 
 def _place_candidate(shape, annotation, mesh, rot, refl, al, smooth_iters):
     """Placements (unit box) of one orientation and alignment: evenly spread, and, when that
     folds or is poor, with sliding straight-side vertices too."""
     b = corner_boundary(shape, annotation, al)
+    per = float(cumulative_length(shape.points)[-1])
 
     def put(groups):
-        pl = place(shape.points, annotation.t, al, mesh, rot, refl, boundary_xy=b.xy, slide_groups=groups,
-                   smooth_iters=smooth_iters)
-        paths = boundary_paths_between(shape.points, b.u, pl.xy[pl.mesh.boundary])
-        return dataclasses.replace(pl, boundary_paths=paths, missed_corners=b.missed, corners=shape.n_corners)
+        pl = place(shape.points, annotation.t, al, mesh, rot, refl, boundary_xy=b.xy, boundary_t=np.mod(b.u, per),
+                   slide_groups=groups, smooth_iters=smooth_iters)
+        return dataclasses.replace(pl, missed_corners=b.missed, corners=shape.n_corners)
 
     pl = put(())
     yield pl
     if b.slide_groups and smooth_iters > 0 and (pl.inverted or pl.min_scaled_jacobian < SLIDE_BELOW):
         yield put(b.slide_groups)
-
-
-def boundary_paths_between(points: np.ndarray, u: np.ndarray, bxy: np.ndarray) -> tuple[np.ndarray, ...]:
-    """The outline between consecutive boundary vertices (parameters ``u``), with the ends
-    replaced by the vertices' exact positions ``bxy (n, 2)``."""
-    paths = embed_boundary_paths(points, np.mod(u, cumulative_length(points)[-1]))
-    out = []
-    n = len(paths)
-    for j, p in enumerate(paths):
-        p = p.copy()
-        p[0] = bxy[j]
-        p[-1] = bxy[(j + 1) % n]
-        out.append(p)
-    return tuple(out)
 
 
 def to_user_placement(shape: Shape, pl: Placement) -> Placement:

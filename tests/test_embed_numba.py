@@ -1,0 +1,93 @@
+"""The compiled smoother (placement/_numba_smooth.py) is the numpy reference in embed.py, step
+for step: same energy and gradient, same parametrisation of sliding vertices, same L-BFGS
+iterates, hence the same smoothed placements (up to round-off)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from jaxmatch.placement import _numba_smooth as nb
+from jaxmatch.placement.embed import LBFGS_FTOL, LBFGS_GTOL, LBFGS_MEMORY, Slide, _energy, _lbfgs, _objective, _Params
+from jaxmatch.placement.embed import inverted_mask, quality, smooth
+
+from test_embed import grid, star
+
+
+def _strip_case(seed: int, amp: float):
+    """A 4 x 3 grid with jittered internal vertices and its bottom side free to slide."""
+    mesh, lattice = grid(4, 3)
+    rng = np.random.default_rng(seed)
+    xy = lattice.copy()
+    internal = np.setdiff1d(np.arange(mesh.n_vertices), mesh.boundary)
+    xy[internal] += rng.uniform(-amp, amp, size=(internal.size, 2))
+    bottom = sorted((v for v in mesh.boundary if lattice[v, 1] == 0 and 0 < lattice[v, 0] < 4), key=lambda v: lattice[v, 0])
+    xy[bottom, 0] += rng.uniform(-0.3, 0.3, len(bottom))
+    xy[bottom] = xy[bottom][np.argsort(xy[bottom, 0])]
+    slides = (Slide(np.array([0.0, 0.0]), np.array([4.0, 0.0]), np.array(bottom)),)
+    return mesh, xy, internal, slides
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), amp=st.floats(0.0, 0.6), delta=st.sampled_from([1e-6, 1e-3, 0.1]),
+       power=st.sampled_from([1.0, 2.0, 8.0, 16.0]))
+def test_energy_and_gradient_equal_the_reference(seed, amp, delta, power):
+    """Including folded corners (amp up to 0.6 folds some quads): the regularised energy is
+    finite there, and both versions agree."""
+    mesh, xy, _, _ = _strip_case(seed, amp)
+    f_ref, g_ref = _energy(xy, mesh.quads, delta, power)
+    f, g = nb.energy(xy, np.asarray(mesh.quads, np.int64), delta, power)
+    if np.isfinite(f_ref):
+        assert f == pytest.approx(f_ref, rel=1e-12)
+        np.testing.assert_allclose(g, g_ref, rtol=1e-9, atol=1e-12 * np.abs(g_ref).max())
+    else:
+        assert not np.isfinite(f)
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), amp=st.floats(0.0, 0.3))
+def test_objective_with_sliding_vertices_equals_the_reference(seed, amp):
+    mesh, xy, internal, slides = _strip_case(seed, amp)
+    params = _Params(xy, internal, slides)
+    x = params.start(xy) + np.random.default_rng(seed).normal(0, 0.1, params.start(xy).shape)
+    f_ref, g_ref = _objective(x, params, mesh.quads, 1e-3, 4.0)
+    f, g = nb.objective(x, params.base, internal.astype(np.int64), *params.flat, np.asarray(mesh.quads, np.int64), 1e-3, 4.0)
+    assert f == pytest.approx(f_ref, rel=1e-12)
+    np.testing.assert_allclose(g, g_ref, rtol=1e-9, atol=1e-12 * np.abs(g_ref).max())
+
+
+@pytest.mark.parametrize("seed", range(4))
+@pytest.mark.parametrize("power", [1.0, 4.0, 16.0])
+def test_lbfgs_iterates_match_the_reference(seed, power):
+    """A few iterations follow the same path (identical up to round-off); the minimum found
+    after many is the same to optimiser precision."""
+    mesh, xy, internal, slides = _strip_case(seed, 0.25)
+    params = _Params(xy, internal, slides)
+    q = np.asarray(mesh.quads, np.int64)
+    x0 = params.start(xy)
+    for iters, tol in ((3, 1e-9), (200, 1e-5)):
+        ref = _lbfgs(lambda z: _objective(z, params, q, 1e-3, power), x0, iters)
+        got = nb.lbfgs(x0, params.base, internal.astype(np.int64), *params.flat, q, 1e-3, power, iters,
+                       LBFGS_MEMORY, LBFGS_FTOL, LBFGS_GTOL)
+        np.testing.assert_allclose(params.positions(got), params.positions(ref), atol=tol)
+
+
+@pytest.mark.parametrize("k", [3, 4, 5])
+def test_untangling_a_folded_star_agrees_with_the_reference(k):
+    """Start from a fold (the centre pushed outside): both optimisers untangle it, to the
+    same quality."""
+    mesh = star(k)
+    ang = 2 * np.pi * np.arange(k) / k
+    xy = np.zeros((mesh.n_vertices, 2))
+    xy[1:k + 1] = np.c_[np.cos(ang), np.sin(ang)]
+    mid = ang + np.pi / k
+    xy[k + 1:] = 1.4 * np.c_[np.cos(mid), np.sin(mid)]
+    xy[0] = [1.6, 0.1]
+    boundary = np.arange(1, 2 * k + 1)
+    assert inverted_mask(xy, mesh.quads).any()
+    ref = smooth(xy, mesh.quads, boundary, reference=True)
+    got = smooth(xy, mesh.quads, boundary)
+    assert not inverted_mask(got, mesh.quads).any() and not inverted_mask(ref, mesh.quads).any()
+    assert quality(got, mesh.quads)[0].min() == pytest.approx(quality(ref, mesh.quads)[0].min(), abs=1e-6)
