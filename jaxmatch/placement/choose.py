@@ -32,10 +32,11 @@ import numpy as np
 
 from jaxmatch.errors import InputError
 from jaxmatch.catalogue.mesh import boundary_valences, valences
-from jaxmatch.placement.embed import Placement, edge_ratios, inverted_mask, oriented_boundary, place, quality
+from jaxmatch.placement.embed import Placement, edge_ratios, exact_paths, inverted_mask, oriented_boundary, place, quality
 from jaxmatch.shape import S as S_CODE
 from jaxmatch.shape import cumulative_length
 from jaxmatch.shape import point_at as shape_point_at
+from jaxmatch.scoring.model import weights_of
 from jaxmatch.scoring.rank import TIE_CAP, Match, Ranking, TieBreaker
 from jaxmatch.scoring.rank import rank as rank_meshes
 
@@ -160,17 +161,14 @@ def lattice_weights(lattice) -> tuple[np.ndarray, np.ndarray]:
     """``(table (3, 64) float64, skip (3,) float64)`` of a lattice: the pairing weights
     ``[code, 16 (u-2) + 4 (v-2) + (w-2)]`` and the weight of skipping a point of each code
     (``-inf``: forbidden; zeros for a lattice without skip weights, the paper's free skipping).
-    ``lattice``: a :class:`~jaxmatch.scoring.lattice.Lattice`, or a ``(table, skip)`` pair."""
+    ``lattice``: a :class:`~jaxmatch.scoring.lattice.Lattice` or :class:`~jaxmatch.scoring.model.Weights`, or a ``(table, skip)`` pair."""
     if isinstance(lattice, tuple):
         table, skip = lattice
-    else:
-        table = lattice.table()
-        skip = getattr(lattice, "skip", None)
-        if callable(skip):
-            skip = skip()
-    tab = np.asarray(table, dtype=np.float64).reshape(3, 64)
-    sk = np.zeros(3) if skip is None else np.asarray(skip, dtype=np.float64).reshape(3)
-    return tab, sk
+        tab = np.asarray(table, dtype=np.float64).reshape(3, 64)
+        sk = np.zeros(3) if skip is None else np.asarray(skip, dtype=np.float64).reshape(3)
+        return tab, sk
+    w = weights_of(lattice)  # compiled once per lattice
+    return w.table_inf().astype(np.float64).reshape(3, 64), w.skip_inf().astype(np.float64)
 
 
 def _pair_weights(codes: np.ndarray, seq: np.ndarray, table: np.ndarray) -> np.ndarray:
@@ -214,7 +212,7 @@ so that equal spacings compare equal whatever the round-off of where the loop st
 
 
 def spread_optimal_alignment(t: np.ndarray, perimeter: float, codes: np.ndarray, seq: np.ndarray,
-                             lattice, *, all_ties: bool = False) -> tuple[float, np.ndarray | None, int]:
+                             lattice, *, all_ties: bool = False, reference: bool = False) -> tuple[float, np.ndarray | None, int]:
     """The alignment of the oriented sequence ``seq`` with the highest utility, and among those
     the most evenly spread one.
 
@@ -228,6 +226,9 @@ def spread_optimal_alignment(t: np.ndarray, perimeter: float, codes: np.ndarray,
     utility and the smallest gap cost (at most :data:`MAX_TIED_ALIGNMENTS`), since which of
     several equally good ones a single answer picks depends on where the loop is labelled to
     start.
+
+    The forward pass and the walk over ties run compiled (:mod:`jaxmatch.placement._numba_spread`);
+    ``reference``: the numpy version they are tested against.
     """
     tt = np.asarray(t, dtype=np.float64).ravel()
     c = np.asarray(codes, dtype=np.int64).ravel()
@@ -263,22 +264,13 @@ def spread_optimal_alignment(t: np.ndarray, perimeter: float, codes: np.ndarray,
     S = starts.size
     U = np.full((S, m), -np.inf)
     U[np.arange(S), starts] = prefix[starts] + E[0, starts]
-    G = np.zeros((S, m))
-    back = np.zeros((n, S, m), np.int64)
-    ties = [None] * n
-    for j in range(1, n):
-        tot = U[:, None, :] + between.T[None, :, :] + E[j][None, :, None]  # (S, i, i')
-        bu = tot.max(axis=2)
-        tg = np.where(tot == bu[..., None], G[:, None, :] + gq.T[None, :, :], np.inf)
-        arg = np.argmin(tg, axis=2)
-        U = bu
-        G = np.take_along_axis(tg, arg[..., None], axis=2)[..., 0]
-        back[j] = arg
-        if all_ties:  # ties[j][(s, i)]: the points i' of vertex j - 1 that tie for (s, i)
-            tj: dict[tuple[int, int], list[int]] = {}
-            for a, b, c in zip(*[x.tolist() for x in np.nonzero((tg == G[..., None]) & np.isfinite(tg))]):
-                tj.setdefault((a, b), []).append(c)
-            ties[j] = tj
+    if reference:
+        U, G, back, ties = _spread_forward(E, between, gq, U, all_ties)
+    else:
+        from jaxmatch.placement import _numba_spread as nb
+
+        U, G, back, ties = nb.forward(np.ascontiguousarray(E), np.ascontiguousarray(between), np.ascontiguousarray(gq),
+                                      U, bool(all_ties))
     U = U + suffix[None, :]
     G = G + np.round((perimeter - tt[None, :] + tt[starts][:, None]) ** 2 / unit)
     G = np.where(U == best, G, np.inf)
@@ -290,6 +282,40 @@ def spread_optimal_alignment(t: np.ndarray, perimeter: float, codes: np.ndarray,
             out[j] = i
             i = int(back[j, s_, i])
         return best, out, int(g_min)
+    ends = np.stack(np.nonzero(G == g_min), axis=1).astype(np.int64)
+    outs = _spread_walk(ties, ends) if reference else list(nb.walk(ties, ends, MAX_TIED_ALIGNMENTS))
+    return best, outs, int(g_min)
+
+
+def _spread_forward(E, between, gq, U, all_ties):
+    """numpy forward pass of :func:`spread_optimal_alignment` (the reference of
+    ``_numba_spread.forward``): ``(U, G, back, ties)`` with ``ties[j][(s, i)]`` the points ``i'``
+    of vertex ``j - 1`` that tie for vertex ``j`` on ``i`` (a dict per vertex)."""
+    n = E.shape[0]
+    S, m = U.shape
+    G = np.zeros((S, m))
+    back = np.zeros((n, S, m), np.int64)
+    ties = [None] * n
+    for j in range(1, n):
+        tot = U[:, None, :] + between.T[None, :, :] + E[j][None, :, None]  # (S, i, i')
+        bu = tot.max(axis=2)
+        tg = np.where(tot == bu[..., None], G[:, None, :] + gq.T[None, :, :], np.inf)
+        arg = np.argmin(tg, axis=2)
+        U = bu
+        G = np.take_along_axis(tg, arg[..., None], axis=2)[..., 0]
+        back[j] = arg
+        if all_ties:
+            tj: dict[tuple[int, int], list[int]] = {}
+            for a, b, c in zip(*[x.tolist() for x in np.nonzero((tg == G[..., None]) & np.isfinite(tg))]):
+                tj.setdefault((a, b), []).append(c)
+            ties[j] = tj
+    return U, G, back, ties
+
+
+def _spread_walk(ties, ends) -> list[np.ndarray]:
+    """Every tied alignment from the ``(start, last point)`` pairs ``ends``, depth first, at
+    most :data:`MAX_TIED_ALIGNMENTS` (the reference of ``_numba_spread.walk``)."""
+    n = len(ties)
     outs: list[np.ndarray] = []
 
     def walk(s_, j, i, tail):
@@ -301,9 +327,9 @@ def spread_optimal_alignment(t: np.ndarray, perimeter: float, codes: np.ndarray,
         for ip in ties[j].get((s_, i), ()):
             walk(s_, j - 1, ip, [i, *tail])
 
-    for s_, i in zip(*np.nonzero(G == g_min)):
+    for s_, i in ends.tolist():
         walk(int(s_), n - 1, int(i), [])
-    return best, outs, int(g_min)
+    return outs
 
 
 # ---------------------------------------------------------------------------------------------
@@ -567,11 +593,13 @@ def place_match(shape: Shape, annotation: Annotation, catalogue: Catalogue, matc
         best = None
         for sig in sorted(unique)[:MAX_CANDIDATES]:
             rot, refl, al = unique[sig]
-            for pl in _place_candidate(shape, annotation, mesh, rot, refl, al, smooth_iters):
+            for pl, u in _place_candidate(shape, annotation, mesh, rot, refl, al, smooth_iters):
                 key = placement_key(pl)
                 if best is None or key < best[0]:
-                    best = (key, pl)
-        user = to_user_placement(shape, best[1])
+                    best = (key, pl, u)
+        _, pl, u = best  # boundary paths only for the one kept
+        pl = dataclasses.replace(pl, boundary_paths=exact_paths(shape.points, u, pl.xy[pl.mesh.boundary]))
+        user = to_user_placement(shape, pl)
     if placements is not None:
         placements[match.mesh_id] = user
     return user
@@ -597,18 +625,19 @@ def _boundary_signature(b: Boundary, loop_valences: np.ndarray) -> tuple:
 
 
 def _place_candidate(shape, annotation, mesh, rot, refl, al, smooth_iters):
-    """Placements (unit box) of one orientation and alignment: evenly spread, and, when that
-    folds or is poor, with sliding straight-side vertices too."""
+    """Placements (unit box, without boundary paths) of one orientation and alignment, each with
+    its boundary vertices' arc-length parameters ``(n,)``: evenly spread, and, when that folds
+    or is poor, with sliding straight-side vertices too."""
     b = corner_boundary(shape, annotation, al)
     per = float(cumulative_length(shape.points)[-1])
 
     def put(groups):
-        pl = place(shape.points, annotation.t, al, mesh, rot, refl, boundary_xy=b.xy, boundary_t=np.mod(b.u, per),
-                   slide_groups=groups, smooth_iters=smooth_iters)
-        return dataclasses.replace(pl, missed_corners=b.missed, corners=shape.n_corners)
+        pl = place(shape.points, annotation.t, al, mesh, rot, refl, boundary_xy=b.xy, slide_groups=groups,
+                   smooth_iters=smooth_iters, paths=False)
+        return dataclasses.replace(pl, missed_corners=b.missed, corners=shape.n_corners), np.mod(b.u, per)
 
-    pl = put(())
-    yield pl
+    pl, u = put(())
+    yield pl, u
     if b.slide_groups and smooth_iters > 0 and (pl.inverted or pl.min_scaled_jacobian < SLIDE_BELOW):
         yield put(b.slide_groups)
 

@@ -631,6 +631,7 @@ def place(
     boundary_t: np.ndarray | None = None,
     slide_groups: tuple = (),
     smooth_iters: int = 200,
+    paths: bool = True,
 ) -> Placement:
     """Place ``mesh`` in the shape ``points`` following a match.
 
@@ -647,6 +648,8 @@ def place(
     ``js`` (in order) lie on the straight segment from boundary vertex ``ja`` to ``jb`` and may
     slide along it during untangling and smoothing (:class:`Slide`); ``ja``/``jb`` stay put.
     smooth_iters: L-BFGS iterations per untangling/smoothing round (0: plain Tutte).
+    paths: False leaves ``boundary_paths`` empty (for candidates that are only compared; the
+    caller adds them to the one it keeps with :func:`exact_paths`).
     """
     pts = np.asarray(points, dtype=np.float64)
     tt = np.asarray(t, dtype=np.float64).ravel()
@@ -684,9 +687,11 @@ def place(
     internal = np.ones(V, bool)
     internal[loop] = False
     irregular = np.flatnonzero(internal & (val != 4))
-    if boundary_xy is not None or positions is not None:
+    if not paths:
+        paths = ()
+    elif boundary_xy is not None or positions is not None:
         tb = tt[al] if boundary_t is None else np.asarray(boundary_t, dtype=np.float64).ravel()
-        paths = _paths_exact(pts, tb, bxy)
+        paths = exact_paths(pts, tb, bxy)
     else:
         paths = boundary_paths(pts, tt[al])
     return Placement(
@@ -708,8 +713,9 @@ def place(
     )
 
 
-def _paths_exact(points, t_aligned, bxy):
-    """Boundary paths whose end points are exactly the given boundary vertex positions."""
+def exact_paths(points: np.ndarray, t_aligned: np.ndarray, bxy: np.ndarray) -> tuple[np.ndarray, ...]:
+    """:func:`boundary_paths` between the parameters ``t_aligned (n,)`` whose end points are
+    exactly the boundary vertex positions ``bxy (n, 2)``."""
     paths = boundary_paths(points, t_aligned)
     n = len(paths)
     out = []

@@ -47,6 +47,7 @@ import math
 import re
 import tomllib
 from dataclasses import dataclass, replace
+from functools import cached_property
 from pathlib import Path
 from typing import NamedTuple
 
@@ -131,17 +132,23 @@ class Lattice:
     skip: tuple[float, float, float] = (0, 0, 0)
 
     def weights(self) -> Weights:
-        """The compiled scoring model (match table and skip weights) every scorer takes."""
-        return make_weights(self.table(), np.asarray(self.skip, np.float64), self.name)
+        """The compiled scoring model (match table and skip weights) every scorer takes;
+        compiled once per lattice object."""
+        return self._compiled
 
-    def table(self) -> np.ndarray:
-        """``(3, 4, 4, 4) float32`` weights ``[type, u-2, v-2, w-2]``; ``-inf`` when excluded."""
+    @cached_property
+    def _compiled(self) -> Weights:
         t = np.full((3, 64), -np.inf, np.float32)
         for k, levels in enumerate(self.levels):
             for lev in levels:
                 for tr in lev.triples:
                     t[k, triple_index(tr)] = lev.weight
-        return t.reshape(3, 4, 4, 4)
+        return make_weights(t, np.asarray(self.skip, np.float64), self.name)
+
+    def table(self) -> np.ndarray:
+        """``(3, 4, 4, 4) float32`` weights ``[type, u-2, v-2, w-2]``; ``-inf`` when excluded
+        (a new array each call)."""
+        return self._compiled.table_inf()
 
     def weight(self, kind: str, triple: str) -> float:
         """Weight of ``triple`` (``"u-v-w"``) for point type ``kind`` (``"s"``, ``"x"``, ``"v"``)."""
