@@ -91,3 +91,18 @@ def test_untangling_a_folded_star_agrees_with_the_reference(k):
     got = smooth(xy, mesh.quads, boundary)
     assert not inverted_mask(got, mesh.quads).any() and not inverted_mask(ref, mesh.quads).any()
     assert quality(got, mesh.quads)[0].min() == pytest.approx(quality(ref, mesh.quads)[0].min(), abs=1e-6)
+
+
+@settings(max_examples=15, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), amp=st.floats(0.0, 0.45), slide=st.booleans())
+def test_compiled_smooth_equals_the_reference(seed, amp, slide):
+    """The whole loop (untangling rounds, power continuation, best-so-far choice) gives the
+    same positions as the numpy version, with and without sliding vertices, folded or not."""
+    mesh, xy, internal, slides = _strip_case(seed, amp)
+    fixed = mesh.boundary
+    kw = dict(slides=slides) if slide else {}
+    ref = smooth(xy, mesh.quads, fixed, reference=True, **kw)
+    got = smooth(xy, mesh.quads, fixed, **kw)
+    assert inverted_mask(got, mesh.quads).sum() == inverted_mask(ref, mesh.quads).sum()
+    assert quality(got, mesh.quads)[0].min() == pytest.approx(quality(ref, mesh.quads)[0].min(), abs=1e-6)
+    np.testing.assert_allclose(got, ref, atol=1e-5)

@@ -29,6 +29,7 @@ from jaxmatch.placement.choose import (
     check_outputs,
     choose_mesh,
     choose_size,
+    match_candidates,
     orientation_utilities,
     size_key,
     spread_optimal_alignment,
@@ -606,3 +607,16 @@ def test_compiled_spread_equals_the_reference_on_a_real_shape(cat, lat):
             b = spread_optimal_alignment(ann.t, ann.perimeter, ann.codes, seq, lat, all_ties=True, reference=True)
             assert a[0] == b[0] and a[2] == b[2]
             assert [x.tolist() for x in a[1]] == [x.tolist() for x in b[1]]
+
+
+@pytest.mark.parametrize("name", ["lshape", "hexagon", "tshape", "square"])
+def test_compiled_match_candidates_equal_the_reference(cat, lat, name):
+    """All orientations in one compiled call give the same candidates, in the same order, as
+    one numpy spread per orientation."""
+    shp = load_shape(EXAMPLES / f"{name}.json")
+    ann = annotate(shp, 28)
+    for n in (8, 10, 12):
+        for vals in cat.bucket(n).valences[:8]:
+            a = match_candidates(ann, vals, lat)
+            b = match_candidates(ann, vals, lat, reference=True)
+            assert [(r, f, al.tolist()) for r, f, al in a] == [(r, f, al.tolist()) for r, f, al in b]

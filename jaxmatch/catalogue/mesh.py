@@ -57,8 +57,14 @@ class QuadMesh:
 def edges(quads: np.ndarray) -> np.ndarray:
     """Undirected edges, ``(E, 2) int`` sorted pairs, each once."""
     q = np.asarray(quads)
-    d = np.stack([q, np.roll(q, -1, axis=1)], axis=-1).reshape(-1, 2)
-    return np.unique(np.sort(d, axis=1), axis=0)
+    if q.size == 0:
+        return np.zeros((0, 2), q.dtype)
+    a = q.reshape(-1).astype(np.int64)
+    b = np.roll(q, -1, axis=1).reshape(-1).astype(np.int64)
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    V = int(hi.max()) + 1
+    key = np.unique(lo * V + hi)  # one integer per pair: a 1-D unique, lexicographic order
+    return np.stack([key // V, key % V], axis=1).astype(q.dtype)
 
 
 def valences(quads: np.ndarray, n_vertices: int | None = None) -> np.ndarray:

@@ -231,7 +231,14 @@ class Catalogue:
                 yield b
 
     def mesh(self, mesh_id: str) -> QuadMesh:
-        """The stored mesh with this id. Raises InputError if absent."""
+        """The stored mesh with this id (verified on first use, then kept; its arrays are
+        read-only). Raises InputError if absent."""
+        key = ("mesh", mesh_id)
+        if key not in self._cache:
+            self._cache[key] = self._load_mesh(mesh_id)
+        return self._cache[key]
+
+    def _load_mesh(self, mesh_id: str) -> QuadMesh:
         for n in self.lengths:
             a = self._checked(n)
             hit = np.flatnonzero(a["ids"] == mesh_id)
@@ -248,6 +255,8 @@ class Catalogue:
                     problems = ["stored internal vertex count differs from the quads"]
                 if problems:
                     raise InputError(f"mesh {mesh_id} is not a valid catalogue mesh ({problems[0]}); {_REBUILD}", str(self.path))
+                quads.setflags(write=False)
+                boundary.setflags(write=False)
                 return m
         raise InputError(f"no mesh with id {mesh_id!r}", str(self.path))
 

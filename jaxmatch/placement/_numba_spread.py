@@ -104,3 +104,83 @@ def walk(ties, ends, limit):  # pragma: no cover - compiled
                 j -= 1
                 nxt[j] = 0
     return out[:count]
+
+
+@numba.njit(cache=True, nogil=True)
+def candidates(codes, seqs, table, between, prefix, suffix, gq, tt, perimeter, unit, limit):  # pragma: no cover
+    """:func:`forward` and :func:`walk` for several orientations of one mesh at once (what
+    ``choose.match_candidates`` asks of ``spread_optimal_alignment(..., all_ties=True)`` for
+    each orientation).
+
+    codes: ``(m,) int64``; seqs: ``(O, n) int64`` oriented valence sequences; table: ``(3, 64)``
+    pairing weights (``-inf`` forbidden); between / prefix / suffix / gq / tt / perimeter / unit:
+    as in ``choose._SpreadSetup``. Returns ``(utility (O,), gap cost (O,), orientation (K,),
+    alignments (K, n))``: per orientation its best utility and least gap cost, and its tied
+    alignments (at most ``limit`` each) in walk order; ``-inf`` utility: no alignment.
+    """
+    O, n = seqs.shape
+    m = codes.shape[0]
+    util = np.full(O, -np.inf)
+    gap = np.zeros(O)
+    outs = []
+    owner = []
+    for o in range(O):
+        E = np.empty((n, m))
+        for j in range(n):
+            f = 16 * (seqs[o, (j + 1) % n] - 2) + 4 * (seqs[o, j] - 2) + (seqs[o, (j - 1 + n) % n] - 2)
+            for i in range(m):
+                E[j, i] = table[codes[i], f]
+        B = E[n - 1] + suffix
+        for j in range(n - 2, -1, -1):
+            Bn = np.empty(m)
+            for i in range(m):
+                mx = -np.inf
+                for ip in range(m):
+                    v = between[i, ip] + B[ip]
+                    if v > mx:
+                        mx = v
+                Bn[i] = E[j, i] + mx
+            B = Bn
+        total = prefix + B
+        best = total.max()
+        if not np.isfinite(best):
+            continue
+        starts = np.flatnonzero(total == best)
+        S = starts.shape[0]
+        U0 = np.full((S, m), -np.inf)
+        for s in range(S):
+            U0[s, starts[s]] = prefix[starts[s]] + E[0, starts[s]]
+        U, G, back, ties = forward(E, between, gq, U0, True)
+        g_min = np.inf
+        for s in range(S):
+            for i in range(m):
+                g = G[s, i] + np.rint((perimeter - tt[i] + tt[starts[s]]) ** 2 / unit)
+                G[s, i] = g if U[s, i] + suffix[i] == best else np.inf
+                if G[s, i] < g_min:
+                    g_min = G[s, i]
+        cnt = 0
+        for s in range(S):
+            for i in range(m):
+                if G[s, i] == g_min:
+                    cnt += 1
+        ends = np.empty((cnt, 2), np.int64)
+        cnt = 0
+        for s in range(S):
+            for i in range(m):
+                if G[s, i] == g_min:
+                    ends[cnt, 0] = s
+                    ends[cnt, 1] = i
+                    cnt += 1
+        util[o] = best
+        gap[o] = g_min
+        als = walk(ties, ends, limit)
+        for r in range(als.shape[0]):
+            outs.append(als[r].copy())
+            owner.append(o)
+    K = len(outs)
+    A = np.empty((K, n), np.int64)
+    own = np.empty(K, np.int64)
+    for r in range(K):
+        A[r] = outs[r]
+        own[r] = owner[r]
+    return util, gap, own, A

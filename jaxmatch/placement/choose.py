@@ -24,6 +24,7 @@ import dataclasses
 import math
 import os
 from dataclasses import dataclass
+from functools import lru_cache
 from itertools import groupby, islice
 from pathlib import Path
 from typing import TYPE_CHECKING, Callable, Iterable, NamedTuple, Sequence
@@ -230,26 +231,12 @@ def spread_optimal_alignment(t: np.ndarray, perimeter: float, codes: np.ndarray,
     The forward pass and the walk over ties run compiled (:mod:`jaxmatch.placement._numba_spread`);
     ``reference``: the numpy version they are tested against.
     """
-    tt = np.asarray(t, dtype=np.float64).ravel()
-    c = np.asarray(codes, dtype=np.int64).ravel()
     sq = np.asarray(seq, dtype=np.int64).ravel()
-    table, skip = lattice_weights(lattice)
+    tt, c, table, between, prefix, suffix, unit, gq = _spread_setup(t, perimeter, codes, lattice)
     n, m = sq.shape[0], c.shape[0]
     if n == 0 or n > m:
         return -math.inf, ([] if all_ties else None), 0
     E = _pair_weights(c, sq, table)  # (n, m)
-    sk = skip[c]
-    fin = np.isfinite(sk)
-    P = np.concatenate([[0.0], np.cumsum(np.where(fin, sk, 0.0))])  # finite skip sums
-    Fb = np.concatenate([[0], np.cumsum(~fin)])  # forbidden-skip counts
-
-    def skipped(a, b):  # skip weight of points a..b-1 (arrays broadcast)
-        return np.where(Fb[b] - Fb[a] > 0, -np.inf, P[b] - P[a])
-
-    idx = np.arange(m)
-    between = np.where(idx[:, None] < idx[None, :], skipped(np.minimum(idx[:, None] + 1, m), np.maximum(idx[None, :], idx[:, None] + 1)), -np.inf)  # [i', i]
-    prefix = skipped(np.zeros(m, np.int64), idx)  # points before i
-    suffix = skipped(np.minimum(idx + 1, m), np.full(m, m))  # points after i
     # backward best utilities: B[j][i] with vertex j on point i, vertices j.. and the suffix
     B = E[n - 1] + suffix
     for j in range(n - 2, -1, -1):
@@ -259,8 +246,6 @@ def spread_optimal_alignment(t: np.ndarray, perimeter: float, codes: np.ndarray,
     if not np.isfinite(best):
         return best, ([] if all_ties else None), 0
     starts = np.flatnonzero(total == best)
-    unit = GAP_UNIT * perimeter * perimeter
-    gq = np.round((tt[None, :] - tt[:, None]) ** 2 / unit)  # [i', i]
     S = starts.size
     U = np.full((S, m), -np.inf)
     U[np.arange(S), starts] = prefix[starts] + E[0, starts]
@@ -269,8 +254,7 @@ def spread_optimal_alignment(t: np.ndarray, perimeter: float, codes: np.ndarray,
     else:
         from jaxmatch.placement import _numba_spread as nb
 
-        U, G, back, ties = nb.forward(np.ascontiguousarray(E), np.ascontiguousarray(between), np.ascontiguousarray(gq),
-                                      U, bool(all_ties))
+        U, G, back, ties = nb.forward(np.ascontiguousarray(E), between, gq, U, bool(all_ties))
     U = U + suffix[None, :]
     G = G + np.round((perimeter - tt[None, :] + tt[starts][:, None]) ** 2 / unit)
     G = np.where(U == best, G, np.inf)
@@ -285,6 +269,59 @@ def spread_optimal_alignment(t: np.ndarray, perimeter: float, codes: np.ndarray,
     ends = np.stack(np.nonzero(G == g_min), axis=1).astype(np.int64)
     outs = _spread_walk(ties, ends) if reference else list(nb.walk(ties, ends, MAX_TIED_ALIGNMENTS))
     return best, outs, int(g_min)
+
+
+class _SpreadSetup(NamedTuple):
+    """What :func:`spread_optimal_alignment` needs of the shape and the lattice, whatever the
+    mesh: tt ``(m,)``, c ``(m,) int64``, table ``(3, 64)``, between ``(m, m)`` ``[i', i]`` (skip
+    weight of the points strictly between), prefix / suffix ``(m,)`` (of the points before /
+    after ``i``), unit (the gap unit), gq ``(m, m)`` ``[i', i]`` squared gaps in units."""
+
+    tt: np.ndarray
+    c: np.ndarray
+    table: np.ndarray
+    between: np.ndarray
+    prefix: np.ndarray
+    suffix: np.ndarray
+    unit: float
+    gq: np.ndarray
+
+
+def _spread_setup(t, perimeter, codes, lattice) -> _SpreadSetup:
+    """:class:`_SpreadSetup` of one shape annotation and lattice (cached: every orientation of
+    every mesh placed for one shape shares it)."""
+    tt = np.asarray(t, dtype=np.float64).ravel()
+    c = np.asarray(codes, dtype=np.int64).ravel()
+    table, skip = lattice_weights(lattice)
+    return _spread_setup_cached(tt.tobytes(), float(perimeter), c.tobytes(), table.tobytes(), skip.tobytes())
+
+
+@lru_cache(maxsize=16)
+def _spread_setup_cached(tt_b: bytes, perimeter: float, c_b: bytes, table_b: bytes, skip_b: bytes) -> _SpreadSetup:
+    tt = np.frombuffer(tt_b, dtype=np.float64)
+    c = np.frombuffer(c_b, dtype=np.int64)
+    table = np.frombuffer(table_b, dtype=np.float64).reshape(3, 64)
+    skip = np.frombuffer(skip_b, dtype=np.float64)
+    m = c.shape[0]
+    sk = skip[c]
+    fin = np.isfinite(sk)
+    P = np.concatenate([[0.0], np.cumsum(np.where(fin, sk, 0.0))])  # finite skip sums
+    Fb = np.concatenate([[0], np.cumsum(~fin)])  # forbidden-skip counts
+
+    def skipped(a, b):  # skip weight of points a..b-1 (arrays broadcast)
+        return np.where(Fb[b] - Fb[a] > 0, -np.inf, P[b] - P[a])
+
+    idx = np.arange(m)
+    between = np.where(idx[:, None] < idx[None, :], skipped(np.minimum(idx[:, None] + 1, m), np.maximum(idx[None, :], idx[:, None] + 1)), -np.inf)  # [i', i]
+    prefix = skipped(np.zeros(m, np.int64), idx)  # points before i
+    suffix = skipped(np.minimum(idx + 1, m), np.full(m, m))  # points after i
+    unit = GAP_UNIT * perimeter * perimeter
+    gq = np.round((tt[None, :] - tt[:, None]) ** 2 / unit)  # [i', i]
+    out = _SpreadSetup(tt, c, table, np.ascontiguousarray(between), prefix, suffix, unit, np.ascontiguousarray(gq))
+    for a in out:
+        if isinstance(a, np.ndarray):
+            a.setflags(write=False)
+    return out
 
 
 def _spread_forward(E, between, gq, U, all_ties):
@@ -507,26 +544,40 @@ def placement_key(pl: Placement) -> tuple:
             tuple(coords[order].ravel().tolist()))
 
 
-def match_candidates(annotation: Annotation, vals: np.ndarray, lattice, utility: float | None = None) -> list[tuple[int, bool, np.ndarray]]:
+def match_candidates(annotation: Annotation, vals: np.ndarray, lattice, utility: float | None = None, *,
+                     reference: bool = False) -> list[tuple[int, bool, np.ndarray]]:
     """Every orientation of a mesh with the best utility, each with its most evenly spread
     best alignments (:func:`spread_optimal_alignment`, one per first point), keeping those of
     the smallest gap cost:
     ``[(rotation, reflected, alignment (n,) int64)]``.
 
     Which orientation the scorer reports among equal utilities depends on where the shape's
-    loop starts; this set does not (up to the loop's relabelling)."""
+    loop starts; this set does not (up to the loop's relabelling). Compiled
+    (``_numba_spread.candidates``); ``reference``: one numpy :func:`spread_optimal_alignment`
+    per orientation, which it is tested against."""
     v = np.asarray(vals, dtype=np.int64).ravel()
     n = v.shape[0]
     ut = orientation_utilities(annotation.codes, v, lattice)
     best = float(np.max(ut)) if ut.size else -math.inf
     if utility is not None and np.isfinite(best) and abs(best - float(utility)) > 1e-6 * max(1.0, abs(best)):
         raise ValueError(f"mesh utility {utility} differs from its best orientation's {best}: wrong lattice?")
-    cands = []
-    for o in np.flatnonzero(ut == best):
-        rot, refl = int(o % n), bool(o >= n)
-        seq = np.roll(v[::-1] if refl else v, -rot)
-        u, als, g = spread_optimal_alignment(annotation.t, annotation.perimeter, annotation.codes, seq, lattice, all_ties=True)
-        cands.extend((g, rot, refl, al) for al in als)
+    orients = np.flatnonzero(ut == best)
+    if orients.size == 0 or n == 0 or n > len(annotation.codes):
+        return []
+    seqs = np.stack([np.roll(v[::-1] if o >= n else v, -int(o % n)) for o in orients]).astype(np.int64)
+    if reference:
+        cands = []
+        for o, seq in zip(orients, seqs):
+            u, als, g = spread_optimal_alignment(annotation.t, annotation.perimeter, annotation.codes, seq, lattice,
+                                                 all_ties=True, reference=True)
+            cands.extend((g, int(o % n), bool(o >= n), al) for al in als)
+    else:  # the same, compiled, all orientations in one call
+        from jaxmatch.placement import _numba_spread as nb
+
+        st = _spread_setup(annotation.t, annotation.perimeter, annotation.codes, lattice)
+        _, gap, own, A = nb.candidates(st.c, seqs, st.table, st.between, st.prefix, st.suffix, st.gq, st.tt,
+                                       float(annotation.perimeter), st.unit, MAX_TIED_ALIGNMENTS)
+        cands = [(int(gap[k]), int(orients[k] % n), bool(orients[k] >= n), A[r]) for r, k in enumerate(own.tolist())]
     if not cands:
         return []
     g0 = min(c[0] for c in cands)
@@ -580,10 +631,13 @@ def place_match(shape: Shape, annotation: Annotation, catalogue: Catalogue, matc
         # give the same placement), in a geometric order, at most MAX_CANDIDATES
         unique = {}
         val = valences(mesh.quads, mesh.n_vertices)
-        boundaries: dict[tuple, Boundary] = {}  # corner_boundary depends on the corner points only
+        boundaries: dict[bytes, Boundary] = {}  # corner_boundary depends on the corner points only
         loops: dict[tuple[int, bool], np.ndarray] = {}
-        for rot, refl, al in cands:
-            key = _pin_key(annotation, al)
+        seen = set()
+        for (rot, refl, al), key in zip(cands, _pin_keys(annotation, [c[2] for c in cands])):
+            if (rot, refl, key) in seen:  # same boundary, same valences: same signature
+                continue
+            seen.add((rot, refl, key))
             if key not in boundaries:
                 boundaries[key] = corner_boundary(shape, annotation, al)
             if (rot, refl) not in loops:
@@ -605,15 +659,19 @@ def place_match(shape: Shape, annotation: Annotation, catalogue: Catalogue, matc
     return user
 
 
-def _pin_key(annotation: Annotation, alignment: np.ndarray) -> tuple:
-    """What :func:`corner_boundary` depends on: which vertices stand on which corner points
-    (with no corner matched, the whole alignment). Alignments that differ only in the
-    straight points they take share one boundary."""
-    al = np.asarray(alignment, dtype=np.int64)
-    J = np.flatnonzero(np.asarray(annotation.codes)[al] != S_CODE)
-    if J.size == 0:
-        return (al.shape[0], tuple(al.tolist()))
-    return (al.shape[0], tuple(J.tolist()), tuple(al[J].tolist()))
+def _pin_keys(annotation: Annotation, alignments: Sequence[np.ndarray]) -> list[bytes]:
+    """What :func:`corner_boundary` depends on, one key per alignment (all ``(n,)``, same
+    ``n``): which vertices stand on which corner points (with no corner matched, the whole
+    alignment). Alignments that differ only in the straight points they take share a key."""
+    if not alignments:
+        return []
+    A = np.asarray(alignments, dtype=np.int64)  # (c, n)
+    m = len(annotation.codes)
+    corner = np.asarray(annotation.codes)[A] != S_CODE
+    P = np.where(corner, A, -1)
+    none = ~corner.any(axis=1)
+    P[none] = A[none] + m  # no corner matched: the whole alignment (offset by m: no clash)
+    return [row.tobytes() for row in P]
 
 
 def _boundary_signature(b: Boundary, loop_valences: np.ndarray) -> tuple:

@@ -507,21 +507,10 @@ def _lbfgs(fg, x0: np.ndarray, maxiter: int, mem: int = LBFGS_MEMORY, ftol: floa
     return x
 
 
-def _minimise(xy, params, quads, delta, power, maxiter, reference: bool = False):
-    """L-BFGS on the free vertices (and sliding boundary vertices); returns new (V, 2) positions.
-
-    The compiled optimiser (:mod:`jaxmatch.placement._numba_smooth`) by default; ``reference``:
-    the numpy one (:func:`_lbfgs` on :func:`_objective`), which the compiled one is tested
-    against."""
-    x0 = params.start(xy)
-    if reference:
-        x = _lbfgs(lambda z: _objective(z, params, quads, delta, power), x0, maxiter)
-    else:
-        from jaxmatch.placement import _numba_smooth as nb
-
-        x = nb.lbfgs(x0, params.base, params.free.astype(np.int64), *params.flat,
-                     np.ascontiguousarray(quads, dtype=np.int64), float(delta), float(power), int(maxiter),
-                     LBFGS_MEMORY, LBFGS_FTOL, LBFGS_GTOL)
+def _minimise(xy, params, quads, delta, power, maxiter):
+    """L-BFGS on the free vertices (and sliding boundary vertices); returns new (V, 2) positions
+    (numpy reference of the compiled loop in :mod:`jaxmatch.placement._numba_smooth`)."""
+    x = _lbfgs(lambda z: _objective(z, params, quads, delta, power), params.start(xy), maxiter)
     return params.positions(x)
 
 
@@ -547,7 +536,8 @@ def smooth(
     fixed: vertex ids that stay put. ``iters``: L-BFGS iterations per round (0: return ``xy``).
     slides: boundary vertices (listed in ``fixed``) that may nevertheless move along a straight
     side (:class:`Slide`); they stay on it, in order, so the region covered is unchanged.
-    reference: use the numpy optimiser instead of the compiled one (same steps; for tests).
+    reference: run this numpy version instead of the compiled one
+    (:func:`jaxmatch.placement._numba_smooth.smooth`, the same steps; for tests).
 
     Untangling: rounds of the regularised objective (power 1) with ``delta`` from the worst
     corner area (Escobar et al.'s rule ``delta^2 = eps (eps - min_area)``) until every corner
@@ -565,6 +555,11 @@ def smooth(
     if (free.size == 0 and not slides) or iters <= 0 or q.size == 0:
         return xy.copy()
     params = _Params(xy, free, slides)
+    if not reference:
+        from jaxmatch.placement import _numba_smooth as nb
+
+        return nb.smooth(xy, np.ascontiguousarray(q, dtype=np.int64), free.astype(np.int64), *params.flat, int(iters),
+                         np.asarray(powers, dtype=np.float64), int(untangle_rounds), LBFGS_MEMORY, LBFGS_FTOL, LBFGS_GTOL)
     F = q.shape[0]
     area = float(np.abs(quad_areas(xy, q)).sum()) or 1.0
     eps = 1e-2 * area / F  # corner area under which a corner counts as nearly folded
@@ -576,11 +571,11 @@ def smooth(
         if s_min >= eps:
             break
         delta = np.sqrt(eps * (eps - s_min))
-        cur = _minimise(cur, params, q, delta, 1.0, iters, reference)
+        cur = _minimise(cur, params, q, delta, 1.0, iters)
         best, best_key = _pick(best, best_key, cur, q)
     cur = best
     for p in powers:
-        cur = _minimise(cur, params, q, floor, float(p), iters, reference)
+        cur = _minimise(cur, params, q, floor, float(p), iters)
         best, best_key = _pick(best, best_key, cur, q)
     return best
 
