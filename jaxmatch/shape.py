@@ -46,6 +46,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 from typing import NamedTuple
 
 import numpy as np
@@ -147,6 +148,13 @@ class Shape:
     @property
     def n_points(self) -> int:
         return int(self.points.shape[0])
+
+    @cached_property
+    def arc_length(self) -> np.ndarray:
+        """``(P + 1,) float64`` :func:`cumulative_length` of ``points`` (computed once; read-only)."""
+        cum = cumulative_length(self.points)
+        cum.setflags(write=False)
+        return cum
 
     @property
     def n_corners(self) -> int:

@@ -437,9 +437,11 @@ def corner_boundary(shape: Shape, annotation: Annotation, alignment: np.ndarray,
                 for qi, (tc, c) in zip(_snap(even, np.array([tc for tc, _ in skipped])), skipped):
                     pin[int((ja + 1 + qi) % n)] = int(c)
     groups = []
+    cum = shape.arc_length
     if pin:
         P = np.array(sorted(pin))
-        cum = cumulative_length(pts)
+        L = cum[-1]
+        loop3 = (np.concatenate([cum[:-1], cum[:-1] + L, cum[:-1] + 2 * L]), np.concatenate([pts, pts, pts]))
         for q, ja in enumerate(P):
             jb = P[(q + 1) % P.size]
             r = (jb - ja - 1) % n if P.size > 1 else n - 1
@@ -450,9 +452,9 @@ def corner_boundary(shape: Shape, annotation: Annotation, alignment: np.ndarray,
             u[ja] = ta
             js = (ja + 1 + np.arange(r)) % n
             u[js] = ta + (tb - ta) * (np.arange(1, r + 1) / (r + 1))
-            if r and P.size > 1 and _straight(pts, cum, ta, tb):
+            if r and P.size > 1 and _straight(pts, cum, ta, tb, loop3):
                 groups.append((int(ja), int(jb), js.astype(np.int64)))
-    xy = shape_point_at(pts, u)
+    xy = shape_point_at(pts, u, cum)
     for j, c in pin.items():
         xy[j] = annotation.positions[c]  # corners exactly
     return Boundary(u, xy, tuple(groups), missed_corners(annotation, xy))
@@ -495,16 +497,18 @@ def missed_corners(annotation: Annotation, bxy: np.ndarray, tol: float = 1e-9) -
     return corner[d > tol].reshape(-1, 2)
 
 
-def _straight(points: np.ndarray, cum: np.ndarray, t0: float, t1: float) -> bool:
-    """The outline between parameters ``t0 < t1`` is one straight segment."""
+def _straight(points: np.ndarray, cum: np.ndarray, t0: float, t1: float, loop3=None) -> bool:
+    """The outline between parameters ``t0 < t1`` is one straight segment. ``loop3``: the
+    loop's parameters and points three times over, when the caller has them."""
     per = cum[-1]
-    c2 = np.concatenate([cum[:-1], cum[:-1] + per, cum[:-1] + 2 * per])
-    p2 = np.concatenate([points, points, points])
+    if loop3 is None:
+        loop3 = (np.concatenate([cum[:-1], cum[:-1] + per, cum[:-1] + 2 * per]), np.concatenate([points, points, points]))
+    c2, p2 = loop3
     tol = 1e-12 * per
     inner = p2[(c2 > t0 + tol) & (c2 < t1 - tol)]
     if inner.shape[0] == 0:
         return True
-    a, b = shape_point_at(points, np.array([t0, t1]))
+    a, b = shape_point_at(points, np.array([t0, t1]), cum)
     d = b - a
     ln = float(np.hypot(*d))
     if ln == 0:
@@ -577,7 +581,8 @@ def match_candidates(annotation: Annotation, vals: np.ndarray, lattice, utility:
         st = _spread_setup(annotation.t, annotation.perimeter, annotation.codes, lattice)
         _, gap, own, A = nb.candidates(st.c, seqs, st.table, st.between, st.prefix, st.suffix, st.gq, st.tt,
                                        float(annotation.perimeter), st.unit, MAX_TIED_ALIGNMENTS)
-        cands = [(int(gap[k]), int(orients[k] % n), bool(orients[k] >= n), A[r]) for r, k in enumerate(own.tolist())]
+        gl, ol = gap.tolist(), orients.tolist()
+        cands = [(int(gl[k]), ol[k] % n, ol[k] >= n, a) for k, a in zip(own.tolist(), A)]
     if not cands:
         return []
     g0 = min(c[0] for c in cands)
@@ -687,7 +692,7 @@ def _place_candidate(shape, annotation, mesh, rot, refl, al, smooth_iters):
     its boundary vertices' arc-length parameters ``(n,)``: evenly spread, and, when that folds
     or is poor, with sliding straight-side vertices too."""
     b = corner_boundary(shape, annotation, al)
-    per = float(cumulative_length(shape.points)[-1])
+    per = float(shape.arc_length[-1])
 
     def put(groups):
         pl = place(shape.points, annotation.t, al, mesh, rot, refl, boundary_xy=b.xy, slide_groups=groups,
