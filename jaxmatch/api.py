@@ -32,7 +32,7 @@ from jaxmatch.catalogue.store import load as _load_catalogue
 from jaxmatch.errors import InputError
 from jaxmatch.io.meshfile import write_mesh
 from jaxmatch.io.readers import load_shape, parse_shape
-from jaxmatch.placement.choose import MeshChoice, choose_mesh as _choose_mesh, geometry_tie_breaker, place_match
+from jaxmatch.placement.choose import UTILITY_BAND, MeshChoice, choose_mesh as _choose_mesh, geometry_tie_breaker, place_match
 from jaxmatch.placement.embed import Placement
 from jaxmatch.scoring.lattice import Lattice, load_lattice
 from jaxmatch.scoring.rank import Match, Ranking
@@ -183,20 +183,22 @@ def place(shape: Shape, ranking: Ranking, which: int | Match = 1,
 def choose_mesh(shape: Shape, catalogue: str | os.PathLike | Catalogue | None = None,
                 lattice: str | os.PathLike | Lattice = DEFAULT_LATTICE, *, rank: int = 1, internal: Sizes = None,
                 points: int | None = None, tie_break: str = DEFAULT_TIE_BREAK, require_valid: bool = False,
-                progress: Callable[[int, int], None] | None = None) -> MeshChoice:
+                band: float = UTILITY_BAND, progress: Callable[[int, int], None] | None = None) -> MeshChoice:
     """Rank, take the ``rank``-th mesh and place it (what ``jaxmatch mesh`` does):
     :func:`jaxmatch.placement.choose.choose_mesh` with the command line's defaults.
 
     require_valid: walk down the ranking to the first mesh that embeds without inverted
-    quads. Returns a :class:`~jaxmatch.placement.choose.MeshChoice` (``match``,
-    ``placement``, ``rank``, ``valid``, ``alternative``).
+    quads. band: the quality band (a mesh within this fraction of the requested mesh's
+    utility that places with min scaled Jacobian >= 0.3 is placed instead of one that does
+    not; 0: off). Returns a :class:`~jaxmatch.placement.choose.MeshChoice` (``match``,
+    ``placement``, ``rank``, ``valid``, ``alternative``, ``passed_over``).
     """
     if tie_break not in TIE_BREAKS:
         raise ValueError(f"tie_break must be one of {TIE_BREAKS}, got {tie_break!r}")
     cat = load_catalogue(catalogue)
     ks = check_sizes(cat, internal)
     return _choose_mesh(shape, cat, _lattice(lattice), rank=rank, internal=ks, points=points, tie_break=tie_break,
-                        require_valid=require_valid, progress=progress)
+                        require_valid=require_valid, band=band, progress=progress)
 
 
 def annotate_shape(shape: Shape, catalogue: str | os.PathLike | Catalogue | None = None, *, internal: Sizes = None,

@@ -372,6 +372,9 @@ def mesh(
                                        "mesh that keeps every corner, has no inverted quad and passes --min-quality and --max-edge-ratio."),
     min_quality: float = typer.Option(0.2, "--min-quality", help="Quality floor: smallest acceptable min scaled Jacobian."),
     max_edge_ratio: float = typer.Option(8.0, "--max-edge-ratio", help="Quality floor: largest acceptable longest/shortest edge of a quad."),
+    band: float = typer.Option(0.1, "--band", help="Quality band: when the mesh falls short of min scaled Jacobian 0.3, "
+                               "place the first following mesh whose utility is within this fraction of its utility "
+                               "and that reaches 0.3 (0: place the ranked mesh as is)."),
     tie_break: str = typer.Option(DEFAULT_TIE_BREAK, "--tie-break", help=TIE_BREAK_HELP),
     corner_angle: float = typer.Option(DEFAULT_CORNER_ANGLE, help="Corner threshold (degrees from straight) when the shape lists no corners."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object."),
@@ -388,7 +391,7 @@ def mesh(
     vertex, or inverted quads); the files are written anyway.
     """
     from jaxmatch.io.meshfile import write_mesh
-    from jaxmatch.placement.choose import DEFAULT_WALK, check_outputs, choose_mesh, draw_placements, fit_json, panel_title
+    from jaxmatch.placement.choose import DEFAULT_WALK, GOOD_QUALITY, check_outputs, choose_mesh, draw_placements, fit_json, panel_title
 
     check_outputs(out_path, png, svg)
     tb = _tie_break(tie_break)
@@ -396,6 +399,8 @@ def mesh(
         raise InputError(f"must lie in [-1, 1] (a scaled Jacobian), got {min_quality:g}", "--min-quality")
     if not max_edge_ratio >= 1.0:
         raise InputError(f"must be at least 1, got {max_edge_ratio:g}", "--max-edge-ratio")
+    if not 0.0 <= band <= 1.0:
+        raise InputError(f"must lie in [0, 1] (a fraction of the utility), got {band:g}", "--band")
     if sides is not None or size is not None:
         _mesh_refined(shape, sides, size, catalogue=catalogue, internal=internal, lattice=lattice, rank_=rank_,
                       out_path=out_path, png=png, svg=svg, corner_angle=corner_angle, as_json=as_json)
@@ -406,7 +411,8 @@ def mesh(
         task = prog.add_task("scoring meshes", total=None)
         choice = choose_mesh(shp, cat, lat, rank=rank_, internal=ks, points=points, tie_break=tb,
                              require_valid=require_valid, walk=DEFAULT_WALK, min_quality=min_quality,
-                             max_edge_ratio=max_edge_ratio, progress=lambda d, t: prog.update(task, completed=d, total=t))
+                             max_edge_ratio=max_edge_ratio, band=band,
+                             progress=lambda d, t: prog.update(task, completed=d, total=t))
     m, pl, ann = choice.match, choice.placement, choice.ranking.annotation
     written = {}
     if out_path is not None:
@@ -418,7 +424,12 @@ def mesh(
     notes = []
     if choice.size is not None:
         notes.append(choice.size.describe())
-    if choice.rank != choice.requested_rank:
+    if choice.passed_over is not None:
+        pr, pm, ppl = choice.passed_over
+        notes.append(f"quality band: mesh #{pr} {pm.mesh_id} (utility {pm.utility:g}) places with min scaled Jacobian "
+                     f"{ppl.min_scaled_jacobian:.3f}, below {GOOD_QUALITY:g}; placed #{choice.rank} {m.mesh_id} (utility "
+                     f"{m.utility:g}, within {band:g} of it) with {pl.min_scaled_jacobian:.3f} (--band 0 places #{pr})")
+    elif choice.rank != choice.requested_rank:
         notes.append(f"mesh #{choice.requested_rank} is not a good mesh of the shape; placed #{choice.rank} {m.mesh_id}, the first "
                      f"mesh of the ranking that keeps every corner, has no inverted quad and {floor}")
     if pl.missed_corners.shape[0]:
@@ -454,6 +465,11 @@ def mesh(
             "alignment": [int(i) for i in pl.alignment],
             "size_choice": None if choice.size is None else choice.size.as_json(),
             "out": written.get("out"), "png": written.get("png"), "svg": written.get("svg"),
+            "band": band,
+            "passed_over": None if choice.passed_over is None else {
+                "rank": choice.passed_over[0], "mesh_id": choice.passed_over[1].mesh_id,
+                "utility": float(choice.passed_over[1].utility),
+                "min_scaled_jacobian": choice.passed_over[2].min_scaled_jacobian},
             "next_valid": None if alt is None else {"rank": alt[0], "mesh_id": alt[1].mesh_id, "utility": float(alt[1].utility),
                                                     "min_scaled_jacobian": alt[2].min_scaled_jacobian},
         }))

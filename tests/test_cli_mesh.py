@@ -111,7 +111,7 @@ def test_mesh_text_output_and_picture_only(cli, small_cat, tmp_path):
 
 def test_mesh_not_good_names_the_next_good_one(cli, small_cat, tmp_path, folded):
     bad, want, want_id = folded
-    code, stdout, err = cli("mesh", U_SHAPE, "--catalogue", small_cat, "--internal", "1..3", "--rank", bad, "--json")
+    code, stdout, err = cli("mesh", U_SHAPE, "--catalogue", small_cat, "--internal", "1..3", "--rank", bad, "--json", "--band", "0")
     d = json.loads(stdout)
     assert not d["good"] and d["rank"] == bad
     assert code == (0 if d["valid"] else EXIT_INVERTED)
@@ -217,3 +217,23 @@ def test_mesh_chooses_the_size_and_says_which_rule_decided(cli, small_cat):
     assert d["size_choice"] is None and d["internal_vertices"] == 2
     code, stdout, err = cli("mesh", EXAMPLES / "square.json", "--catalogue", small_cat)
     assert code == 0 and "chosen by rule" in stdout and "corners kept: 4 of 4" in stdout and "max edge ratio" in stdout
+
+
+STAIRS = EXAMPLES / "labels" / "shapes" / "stairs.json"
+
+
+def test_mesh_quality_band_is_reported_and_can_be_turned_off(cli, small_cat):
+    code, stdout, err = cli("mesh", STAIRS, "--catalogue", small_cat, "--internal", "3", "--json")
+    assert code == 0, err
+    d = json.loads(stdout)
+    assert d["passed_over"]["rank"] == 1 and d["rank"] > 1 and d["min_scaled_jacobian"] >= 0.3 > d["passed_over"]["min_scaled_jacobian"]
+    assert d["utility"] >= 0.9 * d["passed_over"]["utility"] and "quality band" in err
+    code, stdout, err = cli("mesh", STAIRS, "--catalogue", small_cat, "--internal", "3", "--json", "--band", "0")
+    d0 = json.loads(stdout)
+    assert code == 0 and d0["rank"] == 1 and d0["passed_over"] is None and d0["mesh_id"] == d["passed_over"]["mesh_id"]
+
+
+@pytest.mark.parametrize("value", ["-0.1", "1.5"])
+def test_mesh_band_out_of_range_is_a_clear_error(cli, small_cat, value):
+    code, stdout, err = cli("mesh", STAIRS, "--catalogue", small_cat, "--internal", "3", "--band", value)
+    assert code == EXIT_BAD_INPUT and "--band" in err and "Traceback" not in err

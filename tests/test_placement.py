@@ -24,6 +24,8 @@ from jaxmatch.placement.embed import place
 from jaxmatch.placement.choose import (
     AREA_BAND,
     GAP_UNIT,
+    GOOD_QUALITY,
+    UTILITY_BAND,
     SIZE_RULES,
     acceptable,
     check_outputs,
@@ -620,3 +622,41 @@ def test_compiled_match_candidates_equal_the_reference(cat, lat, name):
             a = match_candidates(ann, vals, lat)
             b = match_candidates(ann, vals, lat, reference=True)
             assert [(r, f, al.tolist()) for r, f, al in a] == [(r, f, al.tolist()) for r, f, al in b]
+
+
+# ---------------------------------------------------------------------------------------------
+# the quality band of choose_mesh
+
+STAIRS = EXAMPLES / "labels" / "shapes" / "stairs.json"
+
+
+def _measured_min_sj(pl) -> float:
+    """Min scaled Jacobian from the vertex positions alone (not the placement's own field)."""
+    p = pl.xy[pl.mesh.quads]
+    e1, e2 = np.roll(p, -1, axis=1) - p, np.roll(p, 1, axis=1) - p
+    cross = e1[..., 0] * e2[..., 1] - e1[..., 1] * e2[..., 0]
+    return float((cross / (np.linalg.norm(e1, axis=-1) * np.linalg.norm(e2, axis=-1))).min())
+
+
+def test_quality_band_places_a_near_top_mesh_that_reaches_the_target(cat, lat):
+    """Stairs at k = 3: the top mesh keeps every corner but its thinnest quad has min scaled
+    Jacobian ~0.25; a mesh within 10 % of its utility places at >= 0.3 and is placed instead,
+    and the requested one is reported as passed over."""
+    shp = load_shape(STAIRS)
+    plain = choose_mesh(shp, cat, lat, internal=[3], band=0)
+    assert plain.rank == 1 and plain.passed_over is None
+    assert _measured_min_sj(plain.placement) < GOOD_QUALITY
+    c = choose_mesh(shp, cat, lat, internal=[3])
+    assert c.passed_over is not None and c.passed_over[0] == 1 and c.passed_over[1].mesh_id == plain.match.mesh_id
+    assert c.rank > 1 and c.requested_rank == 1
+    assert float(c.match.utility) >= (1 - UTILITY_BAND) * float(plain.match.utility)
+    assert c.placement.valid and _measured_min_sj(c.placement) >= GOOD_QUALITY
+
+
+@pytest.mark.parametrize("name, k", [("square", 1), ("lshape", 2), ("hexagon", 1)])
+def test_quality_band_keeps_a_top_mesh_that_is_good_already(cat, lat, name, k):
+    shp = load_shape(EXAMPLES / f"{name}.json")
+    c = choose_mesh(shp, cat, lat, internal=[k])
+    plain = choose_mesh(shp, cat, lat, internal=[k], band=0)
+    assert _measured_min_sj(plain.placement) >= GOOD_QUALITY
+    assert c.passed_over is None and c.rank == 1 and c.match.mesh_id == plain.match.mesh_id

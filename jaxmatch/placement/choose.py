@@ -25,7 +25,7 @@ import math
 import os
 from dataclasses import dataclass
 from functools import lru_cache
-from itertools import groupby, islice
+from itertools import groupby, islice, takewhile
 from pathlib import Path
 from typing import TYPE_CHECKING, Callable, Iterable, NamedTuple, Sequence
 
@@ -48,6 +48,8 @@ if TYPE_CHECKING:  # pragma: no cover
 
 __all__ = [
     "DEFAULT_WALK",
+    "GOOD_QUALITY",
+    "UTILITY_BAND",
     "MAX_EDGE_RATIO",
     "MIN_QUALITY",
     "MeshChoice",
@@ -787,6 +789,16 @@ def geometry_tie_breaker(catalogue: Catalogue, lattice=None, *, smooth_iters: in
 MIN_QUALITY = 0.2
 """Default floor on the min scaled Jacobian for a placement to count as good (``--min-quality``)."""
 
+GOOD_QUALITY = 0.3
+"""Min scaled Jacobian a placed mesh should reach (the placement table's target). When the
+mesh :func:`choose_mesh` would place falls short, a mesh of nearly the same utility that
+reaches it is placed instead (:data:`UTILITY_BAND`)."""
+
+UTILITY_BAND = 0.1
+""":func:`choose_mesh`'s quality band: meshes whose utility is at most this fraction (of the
+requested mesh's utility's magnitude) below it count as equally good fits for the purpose of
+placing a mesh of good quality (:data:`GOOD_QUALITY`). 0 places the requested mesh as ranked."""
+
 MAX_EDGE_RATIO = 8.0
 """Default ceiling on the longest/shortest edge ratio of any quad for a placement to count as
 good: a min scaled Jacobian near 1 does not catch a long thin quad (a 1 x 13 rectangle)."""
@@ -947,7 +959,9 @@ class MeshChoice:
     ``placement`` is acceptable); searched: how many ranked meshes after the requested one were
     placed looking for an acceptable one (0 when none was needed); size: the
     :class:`SizeChoice` when the size was chosen (no ``internal`` given), else None;
-    min_quality / max_edge_ratio: the quality floor used.
+    min_quality / max_edge_ratio: the quality floor used; passed_over: when the quality band
+    (:data:`UTILITY_BAND`) replaced the requested mesh, that mesh as ``(rank, match,
+    placement)``, else None; band: the band used.
     """
 
     ranking: Ranking
@@ -960,6 +974,8 @@ class MeshChoice:
     size: SizeChoice | None = None
     min_quality: float = MIN_QUALITY
     max_edge_ratio: float = MAX_EDGE_RATIO
+    passed_over: tuple[int, Match, Placement] | None = None
+    band: float = UTILITY_BAND
 
     @property
     def valid(self) -> bool:
@@ -975,7 +991,7 @@ class MeshChoice:
 def choose_mesh(shape: Shape, catalogue: Catalogue, lattice: Lattice, *, rank: int = 1,
                 internal: list[int] | None = None, points: int | None = None, tie_break: str = "geometry",
                 tie_cap: int = TIE_CAP, require_valid: bool = False, walk: int = DEFAULT_WALK,
-                min_quality: float = MIN_QUALITY, max_edge_ratio: float = MAX_EDGE_RATIO,
+                min_quality: float = MIN_QUALITY, max_edge_ratio: float = MAX_EDGE_RATIO, band: float = UTILITY_BAND,
                 progress: Callable[[int, int], None] | None = None) -> MeshChoice:
     """Rank the catalogue for ``shape``, take the ``rank``-th mesh (1-based) and place it.
 
@@ -990,6 +1006,14 @@ def choose_mesh(shape: Shape, catalogue: Catalogue, lattice: Lattice, *, rank: i
     ``rank``-th is kept and ``alternative`` is None); otherwise the ``rank``-th is kept and the
     next ``walk`` meshes are searched for ``alternative``. Raises :class:`InputError` when fewer
     than ``rank`` meshes match, :class:`UnmatchableError` when none does.
+
+    Quality band (before any of that): when the ``rank``-th mesh is not :func:`acceptable` at
+    ``max(min_quality, GOOD_QUALITY)``, the following meshes whose utility is within ``band``
+    (a fraction of its utility's magnitude) below it are placed in ranking order (at most
+    ``walk``), and the first that is acceptable at that quality is placed instead
+    (``MeshChoice.passed_over`` keeps the requested one). Utilities that close are nearly as
+    good a fit, and a mesh that cannot be placed well is no use to the user; ``band=0`` turns
+    this off.
     """
     r = int(rank)
     if r < 1:
@@ -1013,13 +1037,34 @@ def choose_mesh(shape: Shape, catalogue: Catalogue, lattice: Lattice, *, rank: i
     ann = ranking.annotation
     match = ranking.results[r - 1]
     pl = place_match(shape, ann, catalogue, match, lattice=lattice, placements=cache)
-    common = dict(size=size, min_quality=min_quality, max_edge_ratio=max_edge_ratio)
-    if acceptable(pl, min_quality, max_edge_ratio):
-        return MeshChoice(ranking, r, match, pl, r, **common)
+    common = dict(size=size, min_quality=min_quality, max_edge_ratio=max_edge_ratio, band=float(band))
     following = ranking.following if ranking.following is not None else iter(())
-    tried: list[Match] = []
-    candidates = (tried.append(m) or m for m in following)
-    found = first_valid(shape, ann, catalogue, candidates, limit=max(int(walk) - 1, 0), placements=cache, lattice=lattice,
+    tried: list[Match] = []  # the matches after the r-th, as far as they were looked at
+    limit = max(int(walk) - 1, 0)
+
+    def after(start: int = 0):
+        i = start
+        while i < limit:
+            if i == len(tried):
+                m = next(following, None)
+                if m is None:
+                    return
+                tried.append(m)
+            yield tried[i]
+            i += 1
+
+    good = max(min_quality, GOOD_QUALITY)
+    if band > 0 and not acceptable(pl, good, max_edge_ratio):
+        floor_u = float(match.utility) - float(band) * abs(float(match.utility))
+        band_matches = takewhile(lambda m: float(m.utility) >= floor_u, after())
+        found = first_valid(shape, ann, catalogue, band_matches, limit=limit, placements=cache, lattice=lattice,
+                            min_quality=good, max_edge_ratio=max_edge_ratio)
+        if found is not None:
+            return MeshChoice(ranking, r + 1 + found[0], found[1], found[2], r, None, len(tried), passed_over=(r, match, pl),
+                              **common)
+    if acceptable(pl, min_quality, max_edge_ratio):
+        return MeshChoice(ranking, r, match, pl, r, None, len(tried), **common)
+    found = first_valid(shape, ann, catalogue, after(), limit=limit, placements=cache, lattice=lattice,
                         min_quality=min_quality, max_edge_ratio=max_edge_ratio)
     alt = None if found is None else (r + 1 + found[0], found[1], found[2])
     if require_valid and alt is not None:
