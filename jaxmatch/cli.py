@@ -426,9 +426,10 @@ def mesh(
         notes.append(choice.size.describe())
     if choice.passed_over is not None:
         pr, pm, ppl = choice.passed_over
+        how = "in another orientation or alignment, " if choice.reoriented else ""
         notes.append(f"quality band: mesh #{pr} {pm.mesh_id} (utility {pm.utility:g}) places with min scaled Jacobian "
-                     f"{ppl.min_scaled_jacobian:.3f}, below {GOOD_QUALITY:g}; placed #{choice.rank} {m.mesh_id} (utility "
-                     f"{m.utility:g}, within {band:g} of it) with {pl.min_scaled_jacobian:.3f} (--band 0 places #{pr})")
+                     f"{ppl.min_scaled_jacobian:.3f}, below {GOOD_QUALITY:g}; placed #{choice.rank} {m.mesh_id} ({how}utility "
+                     f"{choice.utility:g}, within {band:g} of it) with {pl.min_scaled_jacobian:.3f} (--band 0 places #{pr})")
     elif choice.rank != choice.requested_rank:
         notes.append(f"mesh #{choice.requested_rank} is not a good mesh of the shape; placed #{choice.rank} {m.mesh_id}, the first "
                      f"mesh of the ranking that keeps every corner, has no inverted quad and {floor}")
@@ -459,7 +460,7 @@ def mesh(
             "shape": str(shape), "sequence": ann.symbols, "lattice": lat.name, "tie_break": tb,
             "rank": choice.rank, "requested_rank": choice.requested_rank, "mesh_id": m.mesh_id,
             "internal_vertices": int(m.internal_vertices), "boundary_length": int(m.boundary_length),
-            "utility": float(m.utility), "rotation": int(pl.rotation), "reflected": bool(pl.reflected),
+            "utility": choice.utility, "rotation": int(pl.rotation), "reoriented": choice.reoriented, "reflected": bool(pl.reflected),
             **fit_json(pl), "irregular": int(len(pl.irregular)), "good": choice.good,
             "min_quality": min_quality, "max_edge_ratio_allowed": max_edge_ratio,
             "alignment": [int(i) for i in pl.alignment],
@@ -480,7 +481,7 @@ def mesh(
         out.print(f"lattice {lat.name}; scored {choice.ranking.scored} meshes, {choice.ranking.unmatchable} unmatchable; "
                   f"ties broken by {tb}", highlight=False)
         out.print(f"mesh #{choice.rank} {m.mesh_id}: {m.internal_vertices} internal, {m.boundary_length} boundary vertices, "
-                  f"{pl.mesh.n_quads} quads, {len(pl.irregular)} irregular internal; utility {m.utility:g}, rotation {pl.rotation}, "
+                  f"{pl.mesh.n_quads} quads, {len(pl.irregular)} irregular internal; utility {choice.utility:g}, rotation {pl.rotation}, "
                   f"{'reflected' if pl.reflected else 'not reflected'}", markup=False, highlight=False)
         out.print(f"corners kept: {pl.kept_corners} of {pl.corners}; scaled Jacobian: min {pl.min_scaled_jacobian:.3f}, "
                   f"mean {pl.mean_scaled_jacobian:.3f}; max edge ratio {pl.max_edge_ratio:.2f}; inverted quads: {pl.inverted}; "

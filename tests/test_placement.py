@@ -312,12 +312,12 @@ def test_choose_mesh_reports_and_requires_valid(cat, lat):
     bad = ok.index(False) + 1  # 1-based rank of a mesh that is not acceptable
     want = next(i for i in range(bad, len(ok)) if ok[i]) + 1
 
-    c = choose_mesh(shp, cat, lat, rank=bad, internal=ks)
+    c = choose_mesh(shp, cat, lat, rank=bad, internal=ks, band=0)  # the quality band off: the ranked mesh as is
     assert not c.good and c.rank == bad and c.match.mesh_id == ranking.results[bad - 1].mesh_id and c.size is None
     assert c.alternative is not None and c.alternative[0] == want
     assert c.alternative[1].mesh_id == ranking.results[want - 1].mesh_id and acceptable(c.alternative[2])
 
-    v = choose_mesh(shp, cat, lat, rank=bad, internal=ks, require_valid=True)
+    v = choose_mesh(shp, cat, lat, rank=bad, internal=ks, require_valid=True, band=0)
     assert v.good and v.valid and v.rank == want and v.requested_rank == bad and v.alternative is None
 
     with pytest.raises(InputError, match="only 1 meshes"):
@@ -660,3 +660,22 @@ def test_quality_band_keeps_a_top_mesh_that_is_good_already(cat, lat, name, k):
     plain = choose_mesh(shp, cat, lat, internal=[k], band=0)
     assert _measured_min_sj(plain.placement) >= GOOD_QUALITY
     assert c.passed_over is None and c.rank == 1 and c.match.mesh_id == plain.match.mesh_id
+
+
+def test_quality_band_last_resort_tries_other_orientations(cat, lat):
+    """Stairs at k = 1: no mesh reaches 0.3 with its most evenly spread best alignments, but
+    the top mesh does with another orientation/alignment whose utility is within the band
+    (``scripts/corner_placements.py`` found it by exhaustive search); that placement is chosen
+    and its utility is the utility of its own alignment."""
+    from jaxmatch.catalogue.mesh import boundary_valences
+    from jaxmatch.scoring.exact import utility_of
+
+    shp = load_shape(STAIRS)
+    c = choose_mesh(shp, cat, lat, internal=[1])
+    top = c.passed_over
+    assert top is not None and top[0] == 1 and _measured_min_sj(top[2]) < GOOD_QUALITY
+    assert c.reoriented and c.placement.valid and _measured_min_sj(c.placement) >= GOOD_QUALITY
+    assert (1 - UTILITY_BAND) * float(top[1].utility) <= c.utility <= float(top[1].utility)
+    pl = c.placement
+    vals = boundary_valences(cat.mesh(c.match.mesh_id))
+    assert utility_of(c.ranking.annotation.codes, vals, lat, pl.rotation, pl.reflected, pl.alignment) == c.utility

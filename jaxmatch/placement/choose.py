@@ -527,6 +527,10 @@ MAX_CANDIDATES = 8
 """At most this many equally good orientations/alignments of one mesh are placed to choose
 among them (:func:`place_match`)."""
 
+MAX_REORIENTED = 48
+"""At most this many orientations/alignments of one mesh are placed by ``place_match(...,
+min_utility=...)`` (the quality band's search over orientations of lower utility)."""
+
 SLIDE_BELOW = 0.5
 """A placement whose min scaled Jacobian is below this (or that folds) is tried again with the
 vertices of straight sides free to slide along them (:func:`place_match`)."""
@@ -551,14 +555,17 @@ def placement_key(pl: Placement) -> tuple:
 
 
 def match_candidates(annotation: Annotation, vals: np.ndarray, lattice, utility: float | None = None, *,
-                     reference: bool = False) -> list[tuple[int, bool, np.ndarray]]:
+                     reference: bool = False, min_utility: float | None = None) -> list[tuple[int, bool, np.ndarray]]:
     """Every orientation of a mesh with the best utility, each with its most evenly spread
     best alignments (:func:`spread_optimal_alignment`, one per first point), keeping those of
     the smallest gap cost:
     ``[(rotation, reflected, alignment (n,) int64)]``.
 
     Which orientation the scorer reports among equal utilities depends on where the shape's
-    loop starts; this set does not (up to the loop's relabelling). Compiled
+    loop starts; this set does not (up to the loop's relabelling).
+
+    min_utility: instead, every orientation whose utility is at least this, each with its own
+    most evenly spread best alignments (no gap-cost comparison across orientations). Compiled
     (``_numba_spread.candidates``); ``reference``: one numpy :func:`spread_optimal_alignment`
     per orientation, which it is tested against."""
     v = np.asarray(vals, dtype=np.int64).ravel()
@@ -567,7 +574,7 @@ def match_candidates(annotation: Annotation, vals: np.ndarray, lattice, utility:
     best = float(np.max(ut)) if ut.size else -math.inf
     if utility is not None and np.isfinite(best) and abs(best - float(utility)) > 1e-6 * max(1.0, abs(best)):
         raise ValueError(f"mesh utility {utility} differs from its best orientation's {best}: wrong lattice?")
-    orients = np.flatnonzero(ut == best)
+    orients = np.flatnonzero(ut == best) if min_utility is None else np.flatnonzero(ut >= float(min_utility))
     if orients.size == 0 or n == 0 or n > len(annotation.codes):
         return []
     seqs = np.stack([np.roll(v[::-1] if o >= n else v, -int(o % n)) for o in orients]).astype(np.int64)
@@ -588,11 +595,12 @@ def match_candidates(annotation: Annotation, vals: np.ndarray, lattice, utility:
     if not cands:
         return []
     g0 = min(c[0] for c in cands)
-    return [(rot, refl, al) for g, rot, refl, al in cands if g == g0]
+    return [(rot, refl, al) for g, rot, refl, al in cands if g == g0 or min_utility is not None]
 
 
 def place_match(shape: Shape, annotation: Annotation, catalogue: Catalogue, match: Match, *, lattice=None,
-                smooth_iters: int = 200, spread: bool = True, placements: dict | None = None) -> Placement:
+                smooth_iters: int = 200, spread: bool = True, placements: dict | None = None,
+                min_utility: float | None = None) -> Placement:
     """Place the ranked ``match`` in ``shape``; the result is in the user's coordinates.
 
     annotation: the annotation the match was computed for (``ranking.annotation``).
@@ -616,9 +624,15 @@ def place_match(shape: Shape, annotation: Annotation, catalogue: Catalogue, matc
     coordinates, so it agrees with what is drawn and written. ``placements``: optional cache
     keyed by mesh id (read and filled; only for one shape, annotation, catalogue, lattice and
     ``spread``/``smooth_iters`` setting).
+
+    min_utility (with ``lattice``): every orientation of utility at least this is a candidate
+    (:func:`match_candidates`), up to :data:`MAX_REORIENTED` of them, not only those of the
+    match's utility: the quality band's last resort (:func:`choose_mesh`). Such placements
+    are cached under ``(mesh id, min_utility)``.
     """
-    if placements is not None and match.mesh_id in placements:
-        return placements[match.mesh_id]
+    key = match.mesh_id if min_utility is None else (match.mesh_id, float(min_utility))
+    if placements is not None and key in placements:
+        return placements[key]
     mesh = catalogue.mesh(match.mesh_id)
     given = np.asarray(match.alignment, dtype=np.int64)
     if not spread:
@@ -627,7 +641,9 @@ def place_match(shape: Shape, annotation: Annotation, catalogue: Catalogue, matc
         miss = missed_corners(annotation, annotation.positions[given])
         user = to_user_placement(shape, dataclasses.replace(pl, missed_corners=miss, corners=shape.n_corners))
     else:
-        if lattice is not None:
+        if lattice is not None and min_utility is not None:
+            cands = match_candidates(annotation, boundary_valences(mesh), lattice, min_utility=min_utility)
+        elif lattice is not None:
             cands = match_candidates(annotation, boundary_valences(mesh), lattice, match.utility)
         else:
             cands = []
@@ -652,7 +668,7 @@ def place_match(shape: Shape, annotation: Annotation, catalogue: Catalogue, matc
             sig = _boundary_signature(boundaries[key], loops[rot, refl])
             unique.setdefault(sig, (rot, refl, al))
         best = None
-        for sig in sorted(unique)[:MAX_CANDIDATES]:
+        for sig in sorted(unique)[:MAX_CANDIDATES if min_utility is None else MAX_REORIENTED]:
             rot, refl, al = unique[sig]
             for pl, u in _place_candidate(shape, annotation, mesh, rot, refl, al, smooth_iters):
                 key = placement_key(pl)
@@ -662,7 +678,7 @@ def place_match(shape: Shape, annotation: Annotation, catalogue: Catalogue, matc
         pl = dataclasses.replace(pl, boundary_paths=exact_paths(shape.points, u, pl.xy[pl.mesh.boundary]))
         user = to_user_placement(shape, pl)
     if placements is not None:
-        placements[match.mesh_id] = user
+        placements[key] = user
     return user
 
 
@@ -793,6 +809,10 @@ GOOD_QUALITY = 0.3
 """Min scaled Jacobian a placed mesh should reach (the placement table's target). When the
 mesh :func:`choose_mesh` would place falls short, a mesh of nearly the same utility that
 reaches it is placed instead (:data:`UTILITY_BAND`)."""
+
+REORIENT_MESHES = 8
+"""The quality band's last resort (other orientations, :func:`choose_mesh`) looks at most at
+this many meshes of the band."""
 
 UTILITY_BAND = 0.1
 """:func:`choose_mesh`'s quality band: meshes whose utility is at most this fraction (of the
@@ -961,7 +981,10 @@ class MeshChoice:
     :class:`SizeChoice` when the size was chosen (no ``internal`` given), else None;
     min_quality / max_edge_ratio: the quality floor used; passed_over: when the quality band
     (:data:`UTILITY_BAND`) replaced the requested mesh, that mesh as ``(rank, match,
-    placement)``, else None; band: the band used.
+    placement)``, else None; band: the band used; reoriented: the placed mesh is in another
+    orientation or alignment than its best-utility, most evenly spread ones (its utility may be
+    lower than ``match.utility``, within the band; the alignment is in ``placement``) and
+    placed_utility its utility (None otherwise; see :attr:`utility`).
     """
 
     ranking: Ranking
@@ -976,6 +999,14 @@ class MeshChoice:
     max_edge_ratio: float = MAX_EDGE_RATIO
     passed_over: tuple[int, Match, Placement] | None = None
     band: float = UTILITY_BAND
+    reoriented: bool = False
+    placed_utility: float | None = None
+
+    @property
+    def utility(self) -> float:
+        """Utility of what was placed: the placed orientation's when ``reoriented``, else the
+        match's."""
+        return float(self.match.utility) if self.placed_utility is None else float(self.placed_utility)
 
     @property
     def valid(self) -> bool:
@@ -1011,9 +1042,12 @@ def choose_mesh(shape: Shape, catalogue: Catalogue, lattice: Lattice, *, rank: i
     ``max(min_quality, GOOD_QUALITY)``, the following meshes whose utility is within ``band``
     (a fraction of its utility's magnitude) below it are placed in ranking order (at most
     ``walk``), and the first that is acceptable at that quality is placed instead
-    (``MeshChoice.passed_over`` keeps the requested one). Utilities that close are nearly as
-    good a fit, and a mesh that cannot be placed well is no use to the user; ``band=0`` turns
-    this off.
+    (``MeshChoice.passed_over`` keeps the requested one). When none is, the first
+    :data:`REORIENT_MESHES` of those meshes (the requested one first) are placed again in every
+    orientation whose utility is within the band (``place_match(..., min_utility=)``), and the
+    first acceptable one is placed (``MeshChoice.reoriented``). Utilities that close are nearly
+    as good a fit, and a mesh that cannot be placed well is no use to the user; ``band=0``
+    turns this off.
     """
     r = int(rank)
     if r < 1:
@@ -1062,6 +1096,16 @@ def choose_mesh(shape: Shape, catalogue: Catalogue, lattice: Lattice, *, rank: i
         if found is not None:
             return MeshChoice(ranking, r + 1 + found[0], found[1], found[2], r, None, len(tried), passed_over=(r, match, pl),
                               **common)
+        # last resort: the same meshes in other orientations/alignments whose utility is within the band too
+        band_list = [match, *takewhile(lambda m: float(m.utility) >= floor_u, after())][:REORIENT_MESHES]
+        for i, m in enumerate(band_list):
+            alt_pl = place_match(shape, ann, catalogue, m, lattice=lattice, placements=cache, min_utility=floor_u)
+            if acceptable(alt_pl, good, max_edge_ratio):
+                n = alt_pl.mesh.n_boundary
+                o = alt_pl.rotation + (n if alt_pl.reflected else 0)
+                u = float(orientation_utilities(ann.codes, boundary_valences(catalogue.mesh(m.mesh_id)), lattice)[o])
+                return MeshChoice(ranking, r + i, m, alt_pl, r, None, len(tried), passed_over=(r, match, pl),
+                                  reoriented=True, placed_utility=u, **common)
     if acceptable(pl, min_quality, max_edge_ratio):
         return MeshChoice(ranking, r, match, pl, r, None, len(tried), **common)
     found = first_valid(shape, ann, catalogue, after(), limit=limit, placements=cache, lattice=lattice,
