@@ -115,18 +115,33 @@ def _progress():
     return Heartbeat()
 
 
+COMPILE_CACHE_SETTINGS = {"jax_persistent_cache_min_compile_time_secs": 0.0, "jax_persistent_cache_min_entry_size_bytes": 0}
+"""JAX options set with the cache folder (every compiled kernel is kept)."""
+
+
 def enable_compile_cache() -> None:
     """JAX's persistent compilation cache (``JAXMATCH_CACHE``, default ``~/.cache/jaxmatch``),
-    so a second run does not compile again."""
-    import jax
+    so a second run does not compile again.
 
+    Does not import JAX (the default CPU path never does): if JAX is not loaded yet, the
+    settings go into the environment variables JAX reads when it is imported
+    (``JAX_COMPILATION_CACHE_DIR``, ...); if it is, into ``jax.config``."""
     cache = Path(os.environ.get("JAXMATCH_CACHE", Path.home() / ".cache" / "jaxmatch")) / "xla"
     try:
         cache.mkdir(parents=True, exist_ok=True)
-        jax.config.update("jax_compilation_cache_dir", str(cache))
-        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
-        jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
-    except Exception:  # a read-only home: run without the cache
+    except OSError:  # a read-only home: run without the cache
+        return
+    settings = {"jax_compilation_cache_dir": str(cache), **COMPILE_CACHE_SETTINGS}
+    if "jax" not in sys.modules:
+        for name, value in settings.items():
+            os.environ[name.upper()] = str(value)
+        return
+    import jax
+
+    try:
+        for name, value in settings.items():
+            jax.config.update(name, value)
+    except Exception:  # an older JAX without one of the options: run without the cache
         pass
 
 

@@ -29,7 +29,7 @@ import threading
 
 import numpy as np
 
-__all__ = ["BACKENDS", "LANES", "PARALLEL_CELLS", "NumbaBackend", "default_backend", "numba_values"]
+__all__ = ["BACKENDS", "LANES", "PARALLEL_CELLS", "NumbaBackend", "default_backend", "jax_on_cpu", "numba_values"]
 
 BACKENDS = ("auto", "numba", "xla")
 """Values of ``JAXMATCH_BACKEND`` (:func:`default_backend`)."""
@@ -102,33 +102,60 @@ class NumbaBackend:
 
 
 def _numba_available() -> bool:
-    try:
-        import numba  # noqa: F401
-    except ImportError:  # pragma: no cover - numba is a dependency
-        return False
-    return True
+    import importlib.util
+
+    return importlib.util.find_spec("numba") is not None
+
+
+def _jax_plugins_installed() -> bool:
+    """Whether a JAX accelerator platform could be present: a PJRT plugin (the ``jax_plugins``
+    namespace package or its entry points, as :func:`jax._src.xla_bridge.discover_pjrt_plugins`
+    finds them: CUDA, ROCm, Metal, ...) or ``libtpu``. Answered without importing JAX."""
+    import importlib.util
+    from importlib.metadata import entry_points
+
+    if importlib.util.find_spec("jax_plugins") is not None or importlib.util.find_spec("libtpu") is not None:
+        return True
+    return bool(entry_points(group="jax_plugins"))
+
+
+def jax_on_cpu() -> bool:
+    """Whether JAX computes on the CPU (``jax.default_backend() == "cpu"``), without importing
+    JAX when the answer is certain anyway: ``JAX_PLATFORMS=cpu``, or no accelerator plugin
+    installed (:func:`_jax_plugins_installed`). Otherwise (JAX already imported, another
+    ``JAX_PLATFORMS``, a plugin present) JAX itself is asked."""
+    import os
+    import sys
+
+    if "jax" not in sys.modules:
+        platforms = os.environ.get("JAX_PLATFORMS", "").strip().lower()
+        if platforms == "cpu" or (not platforms and not _jax_plugins_installed()):
+            return True
+    import jax
+
+    return jax.default_backend() == "cpu"
 
 
 def default_backend(threads: int | None = None, unroll: int | None = None):
     """The exact host's backend when none is given.
 
     ``JAXMATCH_BACKEND`` = ``auto`` (default): :class:`NumbaBackend` when JAX computes on the CPU
-    and numba is installed (int16 models; others fall back to the XLA kernel), else the XLA
-    kernel :class:`jaxmatch.scoring.exact.CPUBackend` (GPUs, TPUs); ``numba`` or ``xla`` force one.
-    Both give identical utilities (tests/test_backends.py). InputError for another value.
+    (:func:`jax_on_cpu`) and numba is installed (int16 models; others fall back to the XLA
+    kernel), else the XLA kernel :class:`jaxmatch.scoring.exact.CPUBackend` (GPUs, TPUs);
+    ``numba`` or ``xla`` force one. Both give identical utilities (tests/test_backends.py).
+    The numba choice does not import JAX. InputError for another value.
     """
     import os
 
     from jaxmatch.errors import InputError
-    from jaxmatch.scoring.exact import UNROLL, CPUBackend
 
     choice = os.environ.get("JAXMATCH_BACKEND", "auto").strip().lower() or "auto"
     if choice not in BACKENDS:
         raise InputError(f"must be one of {', '.join(BACKENDS)}, got {choice!r}", "JAXMATCH_BACKEND")
     if choice == "auto":
-        import jax
-
-        choice = "numba" if jax.default_backend() == "cpu" and _numba_available() else "xla"
+        choice = "numba" if _numba_available() and jax_on_cpu() else "xla"
     if choice == "numba":
         return NumbaBackend(threads)
+    from jaxmatch.scoring.exact import UNROLL, CPUBackend
+
     return CPUBackend(threads, UNROLL if unroll is None else int(unroll))
