@@ -236,9 +236,12 @@ def score(
         configure_host_devices(devices)  # before JAX is imported
     from jaxmatch.api import rank
     from jaxmatch.scoring.rank import ranking_json
-    from jaxmatch.placement.choose import check_outputs, draw_placements, panel_title, place_top
 
-    check_outputs(png=png, svg=svg)
+    pictures = png is not None or svg is not None
+    if pictures:  # placement (and scipy) only loads when something is placed
+        from jaxmatch.placement.choose import check_outputs, draw_placements, panel_title, place_top
+
+        check_outputs(png=png, svg=svg)
     tb = _tie_break(tie_break)
     enable_compile_cache()
     shp, lat, cat, ks = _inputs(shape, corner_angle, lattice, catalogue, internal)
@@ -248,7 +251,7 @@ def score(
                        prune=not exhaustive, devices=devices,
                        progress=lambda d, t: prog.update(task, completed=d, total=t))
     written = []
-    if png is not None or svg is not None:
+    if pictures:
         placed = place_top(shp, ranking, cat, lattice=lat)
         items = [(panel_title(i, r, pl), pl) for i, (r, pl) in enumerate(zip(ranking.results, placed), 1)]
         head = f"{shape.name}: {'best per size' if per_size else f'top {len(items)}'}"
