@@ -24,20 +24,22 @@ the argument); a shape no selected mesh can match raises
 from __future__ import annotations
 
 import os
-from typing import Callable, Iterable, Union
+from typing import TYPE_CHECKING, Callable, Iterable, Union
 
 from jaxmatch.catalogue.store import Catalogue, default_catalogue, parse_range
-from jaxmatch.defaults import DEFAULT_LATTICE, DEFAULT_PRUNE, DEFAULT_TIE_BREAK, DEFAULT_TOP, TIE_BREAKS
+from jaxmatch.defaults import DEFAULT_BAND, DEFAULT_LATTICE, DEFAULT_PRUNE, DEFAULT_TIE_BREAK, DEFAULT_TOP, TIE_BREAKS
 from jaxmatch.catalogue.store import load as _load_catalogue
 from jaxmatch.errors import InputError
-from jaxmatch.io.meshfile import write_mesh
 from jaxmatch.io.readers import load_shape, parse_shape
-from jaxmatch.placement.choose import UTILITY_BAND, MeshChoice, choose_mesh as _choose_mesh, geometry_tie_breaker, place_match
-from jaxmatch.placement.embed import Placement
 from jaxmatch.scoring.lattice import Lattice, load_lattice
 from jaxmatch.scoring.rank import Match, Ranking
 from jaxmatch.scoring.rank import rank as _rank
 from jaxmatch.shape import DEFAULT_CORNER_ANGLE, Annotation, Shape, annotate, default_points, make_shape
+
+if TYPE_CHECKING:  # at run time served by __getattr__ below
+    from jaxmatch.io.meshfile import write_mesh
+    from jaxmatch.placement.choose import MeshChoice
+    from jaxmatch.placement.embed import Placement
 
 __all__ = [
     "DEFAULT_CORNER_ANGLE",
@@ -62,6 +64,22 @@ __all__ = [
     "sizes_text",
     "write_mesh",
 ]
+
+_LAZY = {"write_mesh": "jaxmatch.io.meshfile", "Placement": "jaxmatch.placement.embed", "MeshChoice": "jaxmatch.placement.choose"}
+"""Names served on first access: the placement modules (and scipy) load only when a mesh is placed
+or written, so ranking with ``tie_break="id"`` does not pay for them."""
+
+
+def __getattr__(name: str):
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    import importlib
+
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
 
 Sizes = Union[int, str, Iterable[int], None]
 """Mesh sizes (numbers of internal vertices): ``4``, ``"3..5"``, ``[3, 4]``, or None for all."""
@@ -150,7 +168,11 @@ def rank(shape: Shape, catalogue: str | os.PathLike | Catalogue | None = None, l
     cat = load_catalogue(catalogue)
     ks = check_sizes(cat, internal)
     lat = _lattice(lattice)
-    tb = geometry_tie_breaker(cat, lat) if tie_break == "geometry" else "id"
+    tb = "id"
+    if tie_break == "geometry":
+        from jaxmatch.placement.choose import geometry_tie_breaker
+
+        tb = geometry_tie_breaker(cat, lat)
     return _rank(shape, cat, lat, internal=ks, top=top, points=points, per_size=per_size, tie_break=tb,
                  prune=prune, devices=devices, progress=progress, tie_cap=tie_cap)
 
@@ -175,6 +197,8 @@ def place(shape: Shape, ranking: Ranking, which: int | Match = 1,
         if not 1 <= r <= len(ranking.results):
             raise InputError(f"rank {r} is not in the ranking (it holds {len(ranking.results)} results; raise top)")
         match = ranking.results[r - 1]
+    from jaxmatch.placement.choose import place_match
+
     cache = ranking.placements if ranking.placements is not None else None
     return place_match(shape, ranking.annotation, load_catalogue(catalogue), match, placements=cache,
                        lattice=_lattice(lattice))
@@ -183,7 +207,7 @@ def place(shape: Shape, ranking: Ranking, which: int | Match = 1,
 def choose_mesh(shape: Shape, catalogue: str | os.PathLike | Catalogue | None = None,
                 lattice: str | os.PathLike | Lattice = DEFAULT_LATTICE, *, rank: int = 1, internal: Sizes = None,
                 points: int | None = None, tie_break: str = DEFAULT_TIE_BREAK, require_valid: bool = False,
-                band: float = UTILITY_BAND, progress: Callable[[int, int], None] | None = None) -> MeshChoice:
+                band: float = DEFAULT_BAND, progress: Callable[[int, int], None] | None = None) -> MeshChoice:
     """Rank, take the ``rank``-th mesh and place it (what ``jaxmatch mesh`` does):
     :func:`jaxmatch.placement.choose.choose_mesh` with the command line's defaults.
 
@@ -195,6 +219,8 @@ def choose_mesh(shape: Shape, catalogue: str | os.PathLike | Catalogue | None = 
     """
     if tie_break not in TIE_BREAKS:
         raise ValueError(f"tie_break must be one of {TIE_BREAKS}, got {tie_break!r}")
+    from jaxmatch.placement.choose import choose_mesh as _choose_mesh
+
     cat = load_catalogue(catalogue)
     ks = check_sizes(cat, internal)
     return _choose_mesh(shape, cat, _lattice(lattice), rank=rank, internal=ks, points=points, tie_break=tie_break,

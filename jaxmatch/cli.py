@@ -21,7 +21,7 @@ from rich.table import Table
 from jaxmatch import __version__
 from jaxmatch.catalogue import store as cat_mod
 from jaxmatch.errors import EXIT_BAD_INPUT, EXIT_INVERTED, EXIT_UNMATCHABLE, InputError, InputWarning, UnmatchableError
-from jaxmatch.defaults import DEFAULT_LATTICE, DEFAULT_TIE_BREAK, DEFAULT_TOP, TIE_BREAKS
+from jaxmatch.defaults import DEFAULT_BAND, DEFAULT_LATTICE, DEFAULT_TIE_BREAK, DEFAULT_TOP, TIE_BREAKS
 from jaxmatch.shape import DEFAULT_CORNER_ANGLE
 
 try:  # typer >= 0.2x vendors click as typer._click and no longer installs click
@@ -115,18 +115,33 @@ def _progress():
     return Heartbeat()
 
 
+COMPILE_CACHE_SETTINGS = {"jax_persistent_cache_min_compile_time_secs": 0.0, "jax_persistent_cache_min_entry_size_bytes": 0}
+"""JAX options set with the cache folder (every compiled kernel is kept)."""
+
+
 def enable_compile_cache() -> None:
     """JAX's persistent compilation cache (``JAXMATCH_CACHE``, default ``~/.cache/jaxmatch``),
-    so a second run does not compile again."""
-    import jax
+    so a second run does not compile again.
 
+    Does not import JAX (the default CPU path never does): if JAX is not loaded yet, the
+    settings go into the environment variables JAX reads when it is imported
+    (``JAX_COMPILATION_CACHE_DIR``, ...); if it is, into ``jax.config``."""
     cache = Path(os.environ.get("JAXMATCH_CACHE", Path.home() / ".cache" / "jaxmatch")) / "xla"
     try:
         cache.mkdir(parents=True, exist_ok=True)
-        jax.config.update("jax_compilation_cache_dir", str(cache))
-        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
-        jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
-    except Exception:  # a read-only home: run without the cache
+    except OSError:  # a read-only home: run without the cache
+        return
+    settings = {"jax_compilation_cache_dir": str(cache), **COMPILE_CACHE_SETTINGS}
+    if "jax" not in sys.modules:
+        for name, value in settings.items():
+            os.environ[name.upper()] = str(value)
+        return
+    import jax
+
+    try:
+        for name, value in settings.items():
+            jax.config.update(name, value)
+    except Exception:  # an older JAX without one of the options: run without the cache
         pass
 
 
@@ -221,9 +236,12 @@ def score(
         configure_host_devices(devices)  # before JAX is imported
     from jaxmatch.api import rank
     from jaxmatch.scoring.rank import ranking_json
-    from jaxmatch.placement.choose import check_outputs, draw_placements, panel_title, place_top
 
-    check_outputs(png=png, svg=svg)
+    pictures = png is not None or svg is not None
+    if pictures:  # placement (and scipy) only loads when something is placed
+        from jaxmatch.placement.choose import check_outputs, draw_placements, panel_title, place_top
+
+        check_outputs(png=png, svg=svg)
     tb = _tie_break(tie_break)
     enable_compile_cache()
     shp, lat, cat, ks = _inputs(shape, corner_angle, lattice, catalogue, internal)
@@ -233,7 +251,7 @@ def score(
                        prune=not exhaustive, devices=devices,
                        progress=lambda d, t: prog.update(task, completed=d, total=t))
     written = []
-    if png is not None or svg is not None:
+    if pictures:
         placed = place_top(shp, ranking, cat, lattice=lat)
         items = [(panel_title(i, r, pl), pl) for i, (r, pl) in enumerate(zip(ranking.results, placed), 1)]
         head = f"{shape.name}: {'best per size' if per_size else f'top {len(items)}'}"
@@ -372,7 +390,7 @@ def mesh(
                                        "mesh that keeps every corner, has no inverted quad and passes --min-quality and --max-edge-ratio."),
     min_quality: float = typer.Option(0.2, "--min-quality", help="Quality floor: smallest acceptable min scaled Jacobian."),
     max_edge_ratio: float = typer.Option(8.0, "--max-edge-ratio", help="Quality floor: largest acceptable longest/shortest edge of a quad."),
-    band: float = typer.Option(0.1, "--band", help="Quality band: when the mesh falls short of min scaled Jacobian 0.3, "
+    band: float = typer.Option(DEFAULT_BAND, "--band", help="Quality band: when the mesh falls short of min scaled Jacobian 0.3, "
                                "place the first following mesh whose utility is within this fraction of its utility "
                                "and that reaches 0.3 (0: place the ranked mesh as is)."),
     tie_break: str = typer.Option(DEFAULT_TIE_BREAK, "--tie-break", help=TIE_BREAK_HELP),

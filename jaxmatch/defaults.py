@@ -21,3 +21,8 @@ DEFAULT_TIE_BREAK = "geometry"
 
 DEFAULT_PRUNE = True
 """Pruned top-K search (``--exhaustive`` turns it off; the ranking is the same)."""
+
+DEFAULT_BAND = 0.1
+"""The quality band of ``jaxmatch mesh`` (``--band``): a mesh whose utility is within this
+fraction of the ranked mesh's and that places with min scaled Jacobian >= 0.3 is placed
+instead of one that does not (:func:`jaxmatch.placement.choose.choose_mesh`; 0: off)."""

@@ -42,6 +42,9 @@ def cli(capsys, monkeypatch, tmp_path):
     from jaxmatch.cli import main
 
     monkeypatch.setenv("JAXMATCH_CACHE", str(tmp_path / "cache"))
+    for name in ("JAX_COMPILATION_CACHE_DIR", "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS",
+                 "JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES"):  # set by the command while JAX is not loaded:
+        monkeypatch.delenv(name, raising=False)  # restored when the test ends
 
     def run(*args):
         monkeypatch.setattr(sys, "argv", ["jaxmatch", *map(str, args)])

@@ -1,5 +1,6 @@
-"""The numba backend of the exact host (jaxmatch.scoring.backends) against the XLA backend and
-the plain-Python DP, with and without skip weights (must-match types included)."""
+"""The numba backend of the exact host (jaxmatch.scoring.backends) and its numpy kernel for small
+problems against the XLA backend and the plain-Python DP, with and without skip weights
+(must-match types included)."""
 
 import math
 
@@ -10,7 +11,7 @@ from hypothesis import strategies as st
 
 from jaxmatch.scoring import reference
 from jaxmatch.errors import InputError
-from jaxmatch.scoring.backends import NumbaBackend, default_backend, numba_values
+from jaxmatch.scoring.backends import NumbaBackend, default_backend, numba_values, numpy_values
 from jaxmatch.scoring.exact import CPUBackend, dp_problem, exact_values, score_bucket
 from jaxmatch.scoring.model import make_weights
 
@@ -50,6 +51,48 @@ def test_numba_backend_equals_the_xla_backend(case):
     ours = exact_values(shapes, vals, weights, backend=NumbaBackend(lanes=lanes))
     theirs = exact_values(shapes, vals, weights, backend=CPUBackend())
     np.testing.assert_array_equal(ours, theirs)  # -inf included
+
+
+@settings(max_examples=40, deadline=None)
+@given(problems(), st.sampled_from([None, np.int32, np.float32]))
+def test_numpy_kernel_equals_the_xla_backend(case, wider):
+    """The numpy kernel (small problems before numba is loaded), in every DP number type."""
+    from jaxmatch.scoring import exact
+
+    shapes, vals, weights, _ = case
+    big_n, n = vals.shape
+    kind = None if wider is None else exact.DPKind(wider, exact.NEG32 if wider is np.int32 else exact.NEG)
+    prob = dp_problem(shapes, weights, n, kind=kind)
+    theirs = CPUBackend().run(prob, vals.reshape(1, 1, big_n, n))
+    ours = numpy_values(prob.codes, prob.lengths, vals, prob.tab, prob.gate, prob.strict)
+    assert ours.dtype == theirs.dtype
+    valid = theirs > prob.kind.neg / 2
+    np.testing.assert_array_equal(ours > prob.kind.neg / 2, valid)
+    np.testing.assert_array_equal(ours[valid], theirs[valid])
+
+
+def test_numba_backend_runs_small_problems_in_numpy_within_its_budget(monkeypatch):
+    from jaxmatch.scoring import backends
+
+    rng = np.random.default_rng(3)
+    shapes, vals = [rng.integers(0, 3, 30)], rng.integers(2, 6, (40, 8))
+    w = make_weights(*random_model(3, 0.2, "must"))
+    ref = exact_values(shapes, vals, w, backend=CPUBackend())
+    ran = []
+    monkeypatch.setattr(backends, "numpy_values", lambda *a: ran.append("numpy") or numpy_values(*a))
+    monkeypatch.setattr(backends, "numba_values", lambda *a: ran.append("numba") or numba_values(*a))
+    monkeypatch.setattr(backends, "_NUMPY_SPENT", [0])
+    monkeypatch.setattr(backends, "_NUMBA_LOADED", [False])
+    exact_values(shapes, vals, w, backend=NumbaBackend(numpy_cells=1 << 40))
+    cells = backends._NUMPY_SPENT[0]  # 2n * n * m * meshes (padded to the chunk)
+    assert ran == ["numpy"] and cells == 2 * 8 * 8 * 30 * 64
+    be = NumbaBackend(numpy_cells=3 * cells)
+    for _ in range(3):  # two more within the budget, then numba
+        np.testing.assert_array_equal(exact_values(shapes, vals, w, backend=be), ref)
+    assert ran == ["numpy", "numpy", "numpy", "numba"] and backends._NUMPY_SPENT == [3 * cells]
+    np.testing.assert_array_equal(exact_values(shapes, vals, w, backend=NumbaBackend(numpy_cells=1 << 40)), ref)
+    assert ran[-1] == "numba"  # the numba kernel is loaded now: numba from here on
+    assert default_backend().numpy_cells == backends.NUMPY_CELLS and NumbaBackend().numpy_cells == 0
 
 
 @pytest.mark.parametrize("skip", ["zero", "neg", "must"])

@@ -262,6 +262,30 @@ def test_piped_run_says_it_is_alive(small_cat):
     assert re.search(r"^scoring meshes: \d+/\d+ \(\d+ s\)$", r.stderr, re.M), r.stderr
 
 
+NO_JAX = """
+import sys
+from jaxmatch.cli import main
+sys.argv = ["jaxmatch", *sys.argv[1:]]
+try:
+    main()
+except SystemExit as e:
+    assert not e.code, e.code
+loaded = sorted(m for m in sys.modules if m == "jax" or m.startswith(("jax.", "jaxlib")))
+assert not loaded, loaded[:5]
+print("no jax")
+"""
+
+
+@pytest.mark.parametrize("env", [{"JAXMATCH_BACKEND": "numba"}, {"JAXMATCH_BACKEND": "auto", "JAX_PLATFORMS": "cpu"}])
+def test_score_on_the_numba_backend_never_imports_jax(small_cat, tmp_path, env):
+    """The default CPU path (numba kernel, numpy backtrack, compile-cache settings) runs without JAX."""
+    env = {**os.environ, "JAXMATCH_CACHE": str(tmp_path / "cache"), **env}
+    r = subprocess.run([sys.executable, "-c", NO_JAX, "score", str(EXAMPLES / "lshape.json"), "--catalogue", str(small_cat),
+                        "--tie-break", "id", "--json"], capture_output=True, text=True, cwd=ROOT, timeout=300, env=env)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.rstrip().endswith("no jax") and json.loads(r.stdout.rstrip()[: -len("no jax")])["results"]
+
+
 def test_make_labels_refuses_bad_variants_and_empty_output(tmp_path):
     script = ROOT / "scripts" / "make_labels.py"
     out = tmp_path / "l.jsonl"

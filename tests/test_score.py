@@ -141,6 +141,28 @@ def test_align_any_orientation_achieves_its_dp_value():
         assert utility_of(codes, v, table, r, refl, a) == best
 
 
+@given(st.integers(1, 40), st.integers(1, 14), st.sampled_from(["zero", "neg", "must"]), st.integers(0, 2**32 - 1))
+def test_dp_rows_are_the_rows_of_dp_scan(m, n, skip, seed):
+    """align's numpy rows (dp_rows) equal the JAX recurrence dp_scan (keep_rows) bit for bit."""
+    import jax.numpy as jnp
+
+    from jaxmatch.scoring.exact import dp_rows, dp_scan
+    from jaxmatch.scoring.model import skip_frame
+
+    rng = np.random.default_rng(seed)
+    codes, seq = rng.integers(0, 3, m), rng.integers(2, 6, n)
+    sk = np.zeros(3) if skip == "zero" else rng.integers(-3, 1, 3).astype(np.float64)
+    if skip == "must":
+        sk[rng.integers(0, 3)] = -np.inf
+    w = make_weights(random_table(seed, 0.3), sk)
+    fr = skip_frame(w)
+    t = np.stack([np.roll(seq, -1), seq, np.roll(seq, 1)], axis=-1) - 2
+    wc = fr.table.astype(np.float32).reshape(3, 64)[:, t[:, 0] * 16 + t[:, 1] * 4 + t[:, 2]]
+    gate = np.where(fr.gate, NEG, 0.0).astype(np.float32)
+    _, rows = dp_scan(jnp.asarray(wc), jnp.asarray(codes), jnp.ones(m, bool), jnp.maximum, gate=jnp.asarray(gate), keep_rows=True)
+    np.testing.assert_array_equal(dp_rows(codes, seq, w), np.asarray(rows))
+
+
 # --------------------------------------------------------------------------- unmatchable, padding
 
 

@@ -57,14 +57,14 @@ class QuadMesh:
 def edges(quads: np.ndarray) -> np.ndarray:
     """Undirected edges, ``(E, 2) int`` sorted pairs, each once."""
     q = np.asarray(quads)
-    if q.size == 0:
-        return np.zeros((0, 2), q.dtype)
-    a = q.reshape(-1).astype(np.int64)
-    b = np.roll(q, -1, axis=1).reshape(-1).astype(np.int64)
-    lo, hi = np.minimum(a, b), np.maximum(a, b)
-    V = int(hi.max()) + 1
-    key = np.unique(lo * V + hi)  # one integer per pair: a 1-D unique, lexicographic order
-    return np.stack([key // V, key % V], axis=1).astype(q.dtype)
+    d = np.sort(np.stack([q, np.roll(q, -1, axis=1)], axis=-1).reshape(-1, 2), axis=1)
+    if d.size == 0 or d.dtype.kind not in "iu" or d.min() < 0:
+        return np.unique(d, axis=0)
+    # one int64 key per pair, a * base + b: its order is the pairs' lexicographic order, so this
+    # is np.unique(d, axis=0), ~10x faster (placement calls it for every candidate)
+    base = int(d.max()) + 1
+    key = np.unique(d[:, 0].astype(np.int64) * base + d[:, 1])
+    return np.stack([key // base, key % base], axis=1).astype(d.dtype)
 
 
 def valences(quads: np.ndarray, n_vertices: int | None = None) -> np.ndarray:

@@ -31,7 +31,6 @@ from typing import Callable, Iterator, NamedTuple
 import numpy as np
 
 from jaxmatch.catalogue.canon import mesh_id, relabel
-from jaxmatch.catalogue.canon_fast import canonical_key
 from jaxmatch.errors import InputError
 from jaxmatch.files import atomic_path
 from jaxmatch.catalogue.mesh import QuadMesh, boundary_valences, triples, validate, valences
@@ -108,6 +107,8 @@ def generate(max_internal: int, progress: Callable | None = None, workers: int =
 
 def entry_from_quads(quads, boundary, vals, k: int) -> Entry:
     """Canonicalise one disk mesh into a catalogue :class:`Entry`."""
+    from jaxmatch.catalogue.canon_fast import canonical_key  # numba: loaded only when building
+
     c = canonical_key(quads, boundary, vals)
     q, b = relabel(quads, boundary, c.start)
     return Entry(id=mesh_id(c.key, k), k=k, mesh=QuadMesh(quads=q, boundary=b), aut=c.aut, chiral=c.chiral)

@@ -31,6 +31,7 @@ from typing import TYPE_CHECKING, Callable, Iterable, NamedTuple, Sequence
 
 import numpy as np
 
+from jaxmatch.defaults import DEFAULT_BAND
 from jaxmatch.errors import InputError
 from jaxmatch.catalogue.mesh import boundary_valences, valences
 from jaxmatch.placement.embed import Placement, edge_ratios, exact_paths, inverted_mask, oriented_boundary, place, quality
@@ -814,8 +815,8 @@ REORIENT_MESHES = 8
 """The quality band's last resort (other orientations, :func:`choose_mesh`) looks at most at
 this many meshes of the band."""
 
-UTILITY_BAND = 0.1
-""":func:`choose_mesh`'s quality band: meshes whose utility is at most this fraction (of the
+UTILITY_BAND = DEFAULT_BAND
+""":func:`choose_mesh`'s quality band (``jaxmatch.defaults.DEFAULT_BAND``): meshes whose utility is at most this fraction (of the
 requested mesh's utility's magnitude) below it count as equally good fits for the purpose of
 placing a mesh of good quality (:data:`GOOD_QUALITY`). 0 places the requested mesh as ranked."""
 

@@ -20,6 +20,13 @@ with ``numba.prange`` (problems under :data:`PARALLEL_CELLS` on the calling thre
   for ``m = 2n`` that is ``(n + 1) / (2n)`` of the cells, about half;
 * padded input points (code 3) are not visited at all (``problem.lengths``).
 
+Start-up: importing numba and loading its cached kernel costs ~0.45 s per process, far more than
+the pruned search of one shape computes (a few million DP cells, ~3 ms in numpy). So the default
+backend (:func:`default_backend`, ``auto``) runs small problems with :func:`numpy_values` (the
+same recurrence as the XLA kernel, vectorised over meshes x orientations) until the process has
+spent :data:`NUMPY_CELLS` cells on them, and numba from then on (or at once for a larger problem,
+or when the kernel is already loaded). All kernels give the same utilities (tests/test_backends.py).
+
 Measurements and the alternatives tried: ``docs/perf.md``.
 """
 
@@ -29,7 +36,8 @@ import threading
 
 import numpy as np
 
-__all__ = ["BACKENDS", "LANES", "PARALLEL_CELLS", "NumbaBackend", "default_backend", "numba_values"]
+__all__ = ["BACKENDS", "LANES", "NUMPY_CELLS", "PARALLEL_CELLS", "NumbaBackend", "default_backend", "jax_on_cpu",
+           "numba_values", "numpy_values"]
 
 BACKENDS = ("auto", "numba", "xla")
 """Values of ``JAXMATCH_BACKEND`` (:func:`default_backend`)."""
@@ -44,10 +52,62 @@ PARALLEL_CELLS = 1 << 22
 run on the calling thread: waking the thread pool costs milliseconds on a loaded machine."""
 
 
+NUMPY_CELLS = 1 << 28
+"""DP cells (``S * N * 2n * n * m`` summed over calls) the default backend computes with
+:func:`numpy_values` per process before it loads the numba kernel (~0.13 s of numpy at 2e9
+cells/s, against ~0.45 s to import numba and load its kernel; a single pruned ranking needs
+~3-5e6). A call above what is left goes to numba at once."""
+
+_NUMPY_SPENT = [0]  # cells computed by numpy_values for NumbaBackend(numpy_cells=...) in this process
+_NUMBA_LOADED = [False]  # the numba kernel has been loaded in this process (_kernel)
+
+
+def numpy_values(codes, lengths, vals, tab, gate, strict: bool = False) -> np.ndarray:
+    """:func:`numba_values` in numpy, for any DP number type: ``(S, N, 2n)`` in ``tab.dtype``.
+
+    Arguments as :func:`numba_values`. The recurrence of the XLA kernel
+    (:func:`jaxmatch.scoring.xla._final_block`: ``E[i][j] = max(min(E[i-1][j], gate[c]),
+    E[i-1][j-1] + W'[c, j])``, ``E[i][0]`` capped by the gate) on one array ``(n + 1, N * 2n)``
+    (rows ``j``; lanes = meshes x orientations), one vector step per input point; padded points
+    (beyond ``lengths``) are not visited. Same operations in the same number type, so valid values
+    are bit for bit those of the other kernels (invalid ones, at or below ``tab[3, 0] / 2``, may
+    differ in their sentinel value). Memory: ``~(4 * 2 + 8) * N * 2n * n`` bytes.
+    """
+    tab = np.ascontiguousarray(tab)
+    v = np.asarray(vals, np.int64)
+    big_n, n = v.shape
+    c = np.asarray(codes, np.int64).reshape(-1, np.shape(codes)[-1])
+    lens = np.minimum(np.asarray(lengths, np.int64).reshape(-1), c.shape[1])
+    out = np.empty((c.shape[0], big_n, 2 * n), tab.dtype)
+    if big_n == 0 or c.shape[0] == 0:
+        return out
+    rot = (np.arange(n)[:, None] + np.arange(n)[None, :]) % n  # [r, j]: vertex j of rotation r is vertex (r + j) % n
+
+    def per_vertex(s):  # triple index of [s[k+1], s[k], s[k-1]]: (N, n)
+        return (np.roll(s, -1, 1) - 2) * 16 + (s - 2) * 4 + (np.roll(s, 1, 1) - 2)
+
+    f = np.concatenate([per_vertex(v)[:, rot], per_vertex(v[:, ::-1])[:, rot]], axis=1)  # (N, 2n, n), orientation o
+    wc = tab[:, f.transpose(2, 0, 1)].reshape(4, n, big_n * 2 * n)  # [code, j, b * 2n + o]
+    g = np.asarray(gate, tab.dtype)
+    d = np.empty((n + 1, big_n * 2 * n), tab.dtype)
+    for s in range(c.shape[0]):
+        d[0] = 0
+        d[1:] = tab[3, 0]
+        for i in range(int(lens[s])):
+            ci = c[s, i]
+            match = d[:-1] + wc[ci]  # from E[i-1] (row 0 = E[i-1][0])
+            if strict:
+                np.minimum(d, g[ci], out=d)  # skip branch capped (must-match codes), E[i][0] too
+            np.maximum(d[1:], match, out=d[1:])
+        out[s] = d[n].reshape(big_n, 2 * n)
+    return out
+
+
 def _kernel(parallel: bool):
     """The compiled int16 kernel (:mod:`jaxmatch.scoring._numba_dp`, imported on first use)."""
     from jaxmatch.scoring import _numba_dp
 
+    _NUMBA_LOADED[0] = True
     return _numba_dp.dp_kernel_i16 if parallel else _numba_dp.dp_kernel_i16_serial
 
 
@@ -79,22 +139,41 @@ def numba_values(codes, lengths, vals, tab, gate, strict: bool = False, lanes: i
 
 class NumbaBackend:
     """Backend of :func:`jaxmatch.scoring.exact.exact_values` running :func:`numba_values` on all
-    cores of this process (``numba.set_num_threads``: ``threads``, default all)."""
+    cores of this process (``numba.set_num_threads``: ``threads``, default all).
+
+    numpy_cells: run a problem with :func:`numpy_values` instead while the numba kernel is not
+    loaded in this process and the problems so run (by any instance) stay within this many DP
+    cells in all (:data:`NUMPY_CELLS` for :func:`default_backend`'s choice; 0: always numba).
+    int32 / float32 models go to the XLA kernel (or numpy within that budget)."""
 
     mesh_lanes = 1
 
-    def __init__(self, threads: int | None = None, lanes: int = LANES):
+    def __init__(self, threads: int | None = None, lanes: int = LANES, numpy_cells: int = 0):
         self.threads = threads
         self.lanes = int(lanes)
+        self.numpy_cells = int(numpy_cells)
+
+    def _numpy_first(self, problem, big_n: int) -> bool:
+        """Whether this problem runs in numpy (and book its cells): see ``numpy_cells``."""
+        if self.numpy_cells <= 0 or _NUMBA_LOADED[0]:
+            return False
+        cells = 2 * problem.n * problem.n * big_n * int(np.minimum(problem.lengths, problem.codes.shape[1]).sum())
+        with _LOCK:
+            if _NUMPY_SPENT[0] + cells > self.numpy_cells:
+                return False
+            _NUMPY_SPENT[0] += cells
+        return True
 
     def run(self, problem, vals: np.ndarray) -> np.ndarray:
+        flat = np.asarray(vals).reshape(-1, problem.n)
+        if self._numpy_first(problem, flat.shape[0]):
+            return numpy_values(problem.codes, problem.lengths, flat, problem.tab, problem.gate, problem.strict)
         if np.dtype(problem.kind.dtype) != np.int16:  # int32 / float32 models: the XLA kernel
             from jaxmatch.scoring.exact import CPUBackend
 
             return CPUBackend(self.threads).run(problem, vals)
         import numba
 
-        flat = np.asarray(vals).reshape(-1, problem.n)
         top = numba.config.NUMBA_NUM_THREADS
         with _LOCK:  # one parallel kernel at a time (numba's workqueue layer, its fallback, is not re-entrant)
             numba.set_num_threads(top if self.threads is None else max(1, min(int(self.threads), top)))
@@ -102,33 +181,63 @@ class NumbaBackend:
 
 
 def _numba_available() -> bool:
-    try:
-        import numba  # noqa: F401
-    except ImportError:  # pragma: no cover - numba is a dependency
-        return False
-    return True
+    import importlib.util
+
+    return importlib.util.find_spec("numba") is not None
+
+
+def _jax_plugins_installed() -> bool:
+    """Whether a JAX accelerator platform could be present: a PJRT plugin (the ``jax_plugins``
+    namespace package or its entry points, as :func:`jax._src.xla_bridge.discover_pjrt_plugins`
+    finds them: CUDA, ROCm, Metal, ...) or ``libtpu``. Answered without importing JAX."""
+    import importlib.util
+    from importlib.metadata import entry_points
+
+    if importlib.util.find_spec("jax_plugins") is not None or importlib.util.find_spec("libtpu") is not None:
+        return True
+    return bool(entry_points(group="jax_plugins"))
+
+
+def jax_on_cpu() -> bool:
+    """Whether JAX computes on the CPU (``jax.default_backend() == "cpu"``), without importing
+    JAX when the answer is certain anyway: ``JAX_PLATFORMS=cpu``, or no accelerator plugin
+    installed (:func:`_jax_plugins_installed`). Otherwise (JAX already imported, another
+    ``JAX_PLATFORMS``, a plugin present) JAX itself is asked."""
+    import os
+    import sys
+
+    if "jax" not in sys.modules:
+        platforms = os.environ.get("JAX_PLATFORMS", "").strip().lower()
+        if platforms == "cpu" or (not platforms and not _jax_plugins_installed()):
+            return True
+    import jax
+
+    return jax.default_backend() == "cpu"
 
 
 def default_backend(threads: int | None = None, unroll: int | None = None):
     """The exact host's backend when none is given.
 
     ``JAXMATCH_BACKEND`` = ``auto`` (default): :class:`NumbaBackend` when JAX computes on the CPU
-    and numba is installed (int16 models; others fall back to the XLA kernel), else the XLA
-    kernel :class:`jaxmatch.scoring.exact.CPUBackend` (GPUs, TPUs); ``numba`` or ``xla`` force one.
-    Both give identical utilities (tests/test_backends.py). InputError for another value.
+    (:func:`jax_on_cpu`) and numba is installed (int16 models; others fall back to the XLA
+    kernel), small problems first in numpy (``numpy_cells=NUMPY_CELLS``, module docstring),
+    else the XLA kernel :class:`jaxmatch.scoring.exact.CPUBackend` (GPUs, TPUs); ``numba``
+    (always the numba kernel) or ``xla`` force one. Both give identical utilities (tests/test_backends.py).
+    The numba choice does not import JAX. InputError for another value.
     """
     import os
 
     from jaxmatch.errors import InputError
-    from jaxmatch.scoring.exact import UNROLL, CPUBackend
 
     choice = os.environ.get("JAXMATCH_BACKEND", "auto").strip().lower() or "auto"
     if choice not in BACKENDS:
         raise InputError(f"must be one of {', '.join(BACKENDS)}, got {choice!r}", "JAXMATCH_BACKEND")
     if choice == "auto":
-        import jax
-
-        choice = "numba" if jax.default_backend() == "cpu" and _numba_available() else "xla"
+        if _numba_available() and jax_on_cpu():
+            return NumbaBackend(threads, numpy_cells=NUMPY_CELLS)
+        choice = "xla"
     if choice == "numba":
         return NumbaBackend(threads)
+    from jaxmatch.scoring.exact import UNROLL, CPUBackend
+
     return CPUBackend(threads, UNROLL if unroll is None else int(unroll))

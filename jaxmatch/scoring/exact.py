@@ -55,28 +55,32 @@ whose best value is ``<= NEG / 2``, or with ``n > m``, is *unmatchable*: utility
 Implementation
 --------------
 :func:`dp_scan` is the generic form (one ``jax.lax.scan`` over input points, any reduction;
-used by :mod:`jaxmatch.scoring.soft` and :func:`align`). Exact scoring goes through one host,
+used by :mod:`jaxmatch.scoring.soft`); :func:`dp_rows` is the same recurrence in numpy for one
+orientation (the rows :func:`align` backtracks). Exact scoring goes through one host,
 :func:`exact_values`: it compiles the model for a DP number type (:func:`dp_problem`: the
 narrowest exact one, :func:`dp_kind`: int16 for the shipped lattices), pads input lengths to
 a few bucket sizes (:func:`bucket_length`) and mesh batches to a fixed chunk size
 (:func:`plan_chunks`), hands the padded chunks to a *backend* and turns the raw values back
-into utilities. Backends (:class:`Backend`): :class:`CPUBackend` (this module: the max-plus
-recurrence in a flat ``(n, 2n * block)`` layout with cache-sized blocks, :func:`final_blocks`,
-calls dispatched on several host threads) and :class:`jaxmatch.scoring.bulk.ShardedBackend`
-(the same blocks over several devices). A new backend (e.g. a GPU kernel) implements
-``mesh_lanes`` and ``run``; it never sees the padding or the chunking. Weights are integers,
-so all number types give identical utilities. Measurements: ``docs/perf.md``.
+into utilities. Backends (:class:`Backend`): :class:`jaxmatch.scoring.backends.NumbaBackend`
+(the default on CPUs), :class:`CPUBackend` (the XLA kernel: the max-plus recurrence in a flat
+``(n, 2n * block)`` layout with cache-sized blocks, :func:`final_blocks`, calls dispatched on
+several host threads) and :class:`jaxmatch.scoring.bulk.ShardedBackend` (the same blocks over
+several devices). A new backend (e.g. a GPU kernel) implements ``mesh_lanes`` and ``run``; it
+never sees the padding or the chunking. Weights are integers, so all number types give
+identical utilities. Measurements: ``docs/perf.md``.
+
+This module imports numpy only. The JAX code (:func:`dp_scan`, :func:`final_blocks`,
+:class:`CPUBackend`, :func:`orientation_weights`, ...) lives in :mod:`jaxmatch.scoring.xla` and
+is re-exported here on first access (:data:`XLA_NAMES`), so JAX is loaded only when one of
+those names is used: the default CPU path (numba backend, numpy :func:`align`) never loads it.
 """
 
 from __future__ import annotations
 
 import os
 from concurrent.futures import ThreadPoolExecutor
-from functools import partial
-from typing import Callable, NamedTuple, Protocol, Sequence
+from typing import NamedTuple, Protocol, Sequence
 
-import jax
-import jax.numpy as jnp
 import numpy as np
 
 from jaxmatch.errors import UnmatchableError
@@ -105,14 +109,6 @@ class ScoreResult(NamedTuple):
 
 
 # --------------------------------------------------------------------------- helpers
-
-
-def finite_table(table) -> jnp.ndarray:
-    """``(3, 4, 4, 4) float32`` with ``-inf`` (and anything ``<= NEG``) replaced by ``NEG``."""
-    t = jnp.asarray(table, dtype=jnp.float32)
-    if t.shape != (3, 4, 4, 4):
-        raise ValueError(f"table must have shape (3, 4, 4, 4), got {t.shape}")
-    return jnp.where(t > NEG, t, jnp.float32(NEG))
 
 
 def bucket_length(m: int) -> int:
@@ -144,95 +140,12 @@ def _rotation_index(n: int) -> np.ndarray:
     return (np.arange(n)[:, None] + np.arange(n)[None, :]) % n  # [r, j] -> (r + j) % n
 
 
-def oriented_sequences(vals) -> jnp.ndarray:
-    """``(N, n) -> (N, 2n, n)``: all rotations of ``vals``, then all rotations of ``vals[:, ::-1]``."""
-    v = jnp.asarray(vals)
-    n = v.shape[-1]
-    rot = _rotation_index(n)
-    return jnp.concatenate([v[..., rot], v[..., ::-1][..., rot]], axis=-2)
-
-
-def orientation_triples(vals) -> jnp.ndarray:
-    """``(N, n) -> (N, 2n, n, 3)`` triples ``[u, v, w]`` of every oriented sequence (orientation ``o``)."""
-    s = oriented_sequences(vals)
-    return jnp.stack([jnp.roll(s, -1, axis=-1), s, jnp.roll(s, 1, axis=-1)], axis=-1)
-
-
 def oriented_sequence(vals_one, rotation: int, reflected: bool) -> np.ndarray:
     """The ``(n,)`` valences in matched order: ``np.roll(vals[::-1] if reflected else vals, -rotation)``."""
     s = np.asarray(vals_one, dtype=np.int32).reshape(-1)
     if reflected:
         s = s[::-1]
     return np.roll(s, -int(rotation))
-
-
-def orientation_weights(vals, table_finite) -> jnp.ndarray:
-    """Weights per input code ``(3, n, N, 2n)``: ``[c, j, b, o] = table[c, t_{b,o,j}]``
-    (triple of vertex ``j`` of orientation ``o`` of mesh ``b``)."""
-    t = orientation_triples(vals) - 2  # (N, 2n, n, 3)
-    flat = t[..., 0] * 16 + t[..., 1] * 4 + t[..., 2]  # (N, 2n, n)
-    return table_finite.reshape(3, 64)[:, jnp.transpose(flat, (2, 0, 1))]
-
-
-# --------------------------------------------------------------------------- the one DP
-
-
-def dp_scan(
-    wc: jnp.ndarray,
-    codes: jnp.ndarray,
-    valid: jnp.ndarray,
-    reduce: Callable[[jnp.ndarray, jnp.ndarray], jnp.ndarray],
-    *,
-    gate=None,
-    keep_rows: bool = False,
-    unroll: int = UNROLL,
-):
-    """The modified-LCS recurrence in the shifted frame (module docstring), once, for any reduction.
-
-    wc: ``(3, n, *batch)`` finite shifted weights per input code (``W'[i, j] = wc[codes[i], j]``);
-    codes: ``(m,)`` int; valid: ``(m,)`` bool, invalid (padding) input points are skipped
-    (the row is carried unchanged); reduce: elementwise ``(skip, match) -> value``
-    (``jnp.maximum`` exact, a smoothed maximum soft); gate: ``(3,)`` added to the skip branch
-    per code (0, or NEG for a point that must be matched; None: zeros). ``D[i][0]`` starts at 0
-    and takes the gate too.
-
-    One ``lax.scan`` over input points; the carry is the row array ``(n, *batch)`` (rows
-    ``j = 1..n``) and ``D[i][0]`` (the weights are gathered inside the step, so no
-    ``(m, n, *batch)`` array is built). Returns the last row ``D[m]`` ``(n + 1, *batch)``, and
-    with ``keep_rows`` also all rows ``(m + 1, n + 1, *batch)``.
-    """
-    n = wc.shape[1]
-    batch = wc.shape[2:]
-    # the carry holds rows j = 1..n only: the shifted row is a padded slice, which XLA:CPU
-    # fuses into one vectorised loop (a concatenate in the step fusion was ~5x slower, docs/perf.md)
-    d0 = jnp.full((n, *batch), NEG, wc.dtype)
-    z0 = jnp.zeros((), wc.dtype)
-    pad = [(1, 0)] + [(0, 0)] * len(batch)
-    g = None if gate is None else jnp.asarray(gate, wc.dtype)
-
-    def step(carry, x):
-        d, z = carry
-        c, ok = x
-        wi = jax.lax.dynamic_index_in_dim(wc, c, axis=0, keepdims=False)
-        shifted = jnp.pad(d[:-1], pad, constant_values=z) + wi
-        if g is None:
-            new, z_new = reduce(d, shifted), z
-        else:
-            gi = g[c]
-            new, z_new = reduce(d + gi, shifted), z + gi
-        new = jnp.where(ok, new, d)
-        z_new = jnp.where(ok, z_new, z)
-        return (new, z_new), ((new, z_new) if keep_rows else None)
-
-    (last, z_last), rows = jax.lax.scan(step, (d0, z0), (codes, valid), unroll=unroll)
-    last = jnp.concatenate([jnp.broadcast_to(z_last, (1, *batch)), last], axis=0)
-    if keep_rows:
-        r, zs = rows
-        m = r.shape[0]
-        r = jnp.concatenate([jnp.broadcast_to(zs.reshape((m, 1) + (1,) * len(batch)), (m, 1, *batch)), r], axis=1)
-        first = jnp.concatenate([jnp.zeros((1, *batch), wc.dtype), d0], axis=0)
-        return last, jnp.concatenate([first[None], r], axis=0)
-    return last
 
 
 # --------------------------------------------------------------------------- the CPU kernel
@@ -300,79 +213,6 @@ def block_size(n: int, cells: int = BLOCK_CELLS) -> int:
     """Meshes per block: the largest power of two with ``block * 2n * n <= cells`` (at least 1)."""
     per = 2 * n * n
     return 1 << max(int(cells // per).bit_length() - 1, 0)
-
-
-def orientation_slabs(vals, tab) -> jnp.ndarray:
-    """``(B, n)`` valences, ``(4, 64)`` weights -> ``(4, n, 2n * B)``: ``[c, j, o * B + b]`` is the
-    weight of code ``c`` against vertex ``j`` of orientation ``o`` of mesh ``b`` (the weights of
-    :func:`orientation_weights`, orientation-major, mesh-minor).
-
-    Built without a gather per orientation: per-vertex weights ``x[c, k, b]`` (of ``vals`` and of
-    ``vals[::-1]``), tiled ``n + 1`` times along ``k`` and read as ``(n, n + 1)``, give the
-    circulant ``[j, r] = x[(j + r) % n]`` (vertex ``j`` of rotation ``r`` is vertex ``(r + j) % n``).
-    """
-    v = jnp.asarray(vals, jnp.int32)
-    b, n = v.shape
-
-    def per_vertex(s):  # triple [s[k+1], s[k], s[k-1]] -> (4, n, B)
-        s = s.T
-        return tab[:, (jnp.roll(s, -1, 0) - 2) * 16 + (s - 2) * 4 + (jnp.roll(s, 1, 0) - 2)]
-
-    halves = [jnp.tile(x, (1, n + 1, 1)).reshape(4, n, n + 1, b)[:, :, :n, :]
-              for x in (per_vertex(v), per_vertex(v[:, ::-1]))]
-    return jnp.concatenate(halves, 2).reshape(4, n, 2 * n * b)
-
-
-def _final_block(codes, vals, tab, gate, strict: bool, unroll: int):
-    """``E[m][n]`` of every orientation: ``(B, n)`` -> ``(B, 2n)`` in ``tab.dtype``.
-
-    The max-plus recurrence of :func:`dp_scan` (shifted frame) on the flat layout
-    ``(n, 2n * B)``; padded input points carry code 3 (all weights the sentinel), which never
-    changes a valid value. ``strict`` (some type must be matched): the skip branch is capped at
-    ``gate[c]`` (the sentinel for a must-match code, a no-op otherwise) and ``E[i][0]`` is carried
-    (0 until the first must-match point, then the sentinel); without it the step is the plain
-    ``max(d, shift(d) + w)``. Values never leave ``[2 * sentinel, n * max|W'|]``.
-    """
-    b, n = vals.shape
-    wc = orientation_slabs(vals, tab)
-    neg = tab[_INVALID, 0]
-    d0 = jnp.full(wc.shape[1:], neg, tab.dtype)
-    pad = ((1, 0), (0, 0))
-
-    if not strict:
-        def step(d, c):
-            wi = jax.lax.dynamic_index_in_dim(wc, c, axis=0, keepdims=False)
-            return jnp.maximum(d, jnp.pad(d[:-1], pad) + wi), None
-
-        last = jax.lax.scan(step, d0, codes, unroll=unroll)[0]
-    else:
-        def step(carry, c):
-            d, z = carry
-            wi = jax.lax.dynamic_index_in_dim(wc, c, axis=0, keepdims=False)
-            g = gate[c]
-            new = jnp.maximum(jnp.minimum(d, g), jnp.pad(d[:-1], pad, constant_values=z) + wi)
-            return (new, jnp.minimum(z, g)), None
-
-        last = jax.lax.scan(step, (d0, jnp.zeros((), tab.dtype)), codes, unroll=unroll)[0][0]
-    return last[-1].reshape(2 * n, b).T
-
-
-def _blocks(codes, vals, tab, gate, strict: bool, unroll: int):
-    """``codes (S, m_pad)``, ``vals (C, B, n)`` -> ``(S, C, B, 2n)``: shapes and blocks one after
-    another (``lax.map``), so each block's working set stays in cache."""
-    def one(c):
-        return jax.lax.map(lambda v: _final_block(c, v, tab, gate, strict, unroll), vals)
-
-    if codes.shape[0] == 1:
-        return one(codes[0])[None]
-    return jax.lax.map(one, codes)
-
-
-@partial(jax.jit, static_argnames=("strict", "unroll"))
-def final_blocks(codes, vals, tab, gate, strict: bool = False, unroll: int = UNROLL):
-    """``codes (S, m_pad)`` (3 = padding), ``vals (C, B, n)``, ``tab (4, 64)``, ``gate (4,)`` ->
-    ``(S, C, B, 2n)`` raw shifted-frame values (:func:`_final_block`)."""
-    return _blocks(codes, vals, tab, gate, strict, unroll)
 
 
 def _check_vals(vals) -> np.ndarray:
@@ -480,29 +320,6 @@ class Backend(Protocol):
     def run(self, problem: DPProblem, vals: np.ndarray) -> np.ndarray: ...
 
 
-class CPUBackend:
-    """:func:`final_blocks` on this process's default device, calls dispatched on ``threads``
-    host threads (default :func:`default_threads`)."""
-
-    mesh_lanes = 1
-
-    def __init__(self, threads: int | None = None, unroll: int = UNROLL):
-        self.threads = threads
-        self.unroll = int(unroll)
-
-    def run(self, problem: DPProblem, vals: np.ndarray) -> np.ndarray:
-        s, n = problem.codes.shape[0], problem.n
-
-        def call(k):
-            return np.asarray(final_blocks(problem.codes, vals[k], problem.tab, problem.gate,
-                                           strict=problem.strict, unroll=self.unroll)).reshape(s, -1, 2 * n)
-
-        outs = run_calls(call, range(vals.shape[0]), self.threads)
-        if not outs:
-            return np.empty((s, 0, 2 * n), problem.kind.dtype)
-        return np.concatenate(outs, axis=1)
-
-
 def exact_values(
     codes_list: Sequence,
     vals,
@@ -608,13 +425,29 @@ def score_bucket(
 # --------------------------------------------------------------------------- one mesh
 
 
-@jax.jit
-def _rows_one(codes, valid, seq, table_shifted, gate):
-    """All DP rows ``(m + 1, n + 1)`` (shifted frame) for one oriented sequence ``seq: (n,)``."""
-    t = jnp.stack([jnp.roll(seq, -1), seq, jnp.roll(seq, 1)], axis=-1) - 2
-    flat = t[:, 0] * 16 + t[:, 1] * 4 + t[:, 2]
-    wc = table_shifted.reshape(3, 64)[:, flat]  # (3, n)
-    _, rows = dp_scan(wc, codes, valid, jnp.maximum, gate=gate, keep_rows=True)
+def dp_rows(codes, seq, weights) -> np.ndarray:
+    """All DP rows ``(m + 1, n + 1) float32`` of one oriented sequence (shifted frame).
+
+    codes: ``(m,)`` ints 0/1/2; seq: ``(n,)`` valences in matched order
+    (:func:`oriented_sequence`); weights: the model. Row ``i`` is ``E[i]`` of
+    :func:`dp_scan` with ``reduce = max`` and the model's gate (``keep_rows=True``, unpadded):
+    the same float32 operations in the same order, so the same values bit for bit (tested).
+    numpy only (``m`` vector steps of length ``n``; no compilation).
+    """
+    fr = skip_frame(weights)
+    s = np.asarray(seq, np.int64).reshape(-1)
+    c = np.asarray(codes, np.int64).reshape(-1)
+    m, n = c.shape[0], s.shape[0]
+    flat = (np.roll(s, -1) - 2) * 16 + (s - 2) * 4 + (np.roll(s, 1) - 2)  # triple [s[j+1], s[j], s[j-1]]
+    wc = fr.table.astype(np.float32).reshape(3, 64)[:, flat]  # (3, n): W'[code, j]
+    gate = np.where(fr.gate, NEG, 0.0).astype(np.float32)
+    rows = np.empty((m + 1, n + 1), np.float32)
+    rows[0, 0] = 0.0
+    rows[0, 1:] = NEG
+    for i in range(m):
+        prev, cur, g = rows[i], rows[i + 1], gate[c[i]]
+        np.maximum(prev[1:] + g, prev[:-1] + wc[c[i]], out=cur[1:])  # skip point i, or match it to vertex j - 1
+        cur[0] = prev[0] + g
     return rows
 
 
@@ -622,11 +455,12 @@ def align(codes, vals_one, weights, rotation: int, reflected: bool, *, m_pad: in
     """Best alignment for one orientation: ``(n,) int32`` strictly increasing input indices.
 
     ``alignment[j]`` is the input point taken by ``oriented_sequence(vals_one, rotation,
-    reflected)[j]``. Backtracks the DP rows of :func:`dp_scan` (recomputed for this one
-    orientation, shifted frame) from ``D[m][n]``; at a tie between skipping input point
-    ``i - 1`` (allowed unless its type must be matched) and matching it, skipping wins (so each
-    vertex takes the earliest best point counted from the end). Raises
-    :class:`UnmatchableError` when this orientation has no finite alignment.
+    reflected)[j]``. Backtracks the DP rows (:func:`dp_rows`, the recurrence of :func:`dp_scan`
+    for this one orientation, shifted frame) from ``D[m][n]``; at a tie between skipping input
+    point ``i - 1`` (allowed unless its type must be matched) and matching it, skipping wins (so
+    each vertex takes the earliest best point counted from the end). Raises
+    :class:`UnmatchableError` when this orientation has no finite alignment. ``m_pad`` is only
+    checked (``>= m``): padded points never change the rows up to ``m``.
     """
     seq = oriented_sequence(vals_one, rotation, reflected)
     n = seq.shape[0]
@@ -635,12 +469,9 @@ def align(codes, vals_one, weights, rotation: int, reflected: bool, *, m_pad: in
     if n > m:
         raise UnmatchableError(f"mesh has {n} boundary vertices but the shape only {m} points")
     _check_vals(seq)
+    pad_codes(c, m_pad)  # checks the codes (and m_pad)
     fr = skip_frame(weights)
-    codes_pad, valid = pad_codes(c, m_pad)
-    gate = np.where(fr.gate, NEG, 0.0).astype(np.float32)
-    rows = np.asarray(_rows_one(jnp.asarray(codes_pad), jnp.asarray(valid), jnp.asarray(seq),
-                                jnp.asarray(fr.table.astype(np.float32)), jnp.asarray(gate)))
-    rows = rows[: m + 1]  # padded rows only repeat D[m]
+    rows = dp_rows(c, seq, weights)
     if rows[m, n] <= NEG / 2:
         raise UnmatchableError("every alignment of this orientation uses a forbidden weight or skips a point that must be matched")
     out = np.empty(n, np.int32)
@@ -689,3 +520,20 @@ def utility_of(codes, vals_one, weights, rotation: int, reflected: bool, alignme
     """Utility of one explicit alignment, skip weights included (:func:`utility_parts`;
     ``-inf`` if it uses a forbidden weight or skips a point that must be matched)."""
     return utility_parts(codes, vals_one, weights, rotation, reflected, alignment).total
+
+
+# --------------------------------------------------------------------------- the JAX side, on demand
+
+XLA_NAMES = frozenset({"CPUBackend", "dp_scan", "final_blocks", "finite_table", "orientation_slabs",
+                       "orientation_triples", "orientation_weights", "oriented_sequences", "_blocks", "_final_block"})
+"""Names served from :mod:`jaxmatch.scoring.xla` (importing it imports JAX) on first access."""
+
+
+def __getattr__(name: str):
+    if name in XLA_NAMES:
+        from jaxmatch.scoring import xla
+
+        value = getattr(xla, name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
