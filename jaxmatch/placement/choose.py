@@ -631,9 +631,9 @@ def place_match(shape: Shape, annotation: Annotation, catalogue: Catalogue, matc
     match's utility: the quality band's last resort (:func:`choose_mesh`). Such placements
     are cached under ``(mesh id, min_utility)``.
     """
-    key = match.mesh_id if min_utility is None else (match.mesh_id, float(min_utility))
-    if placements is not None and key in placements:
-        return placements[key]
+    cache_key = match.mesh_id if min_utility is None else (match.mesh_id, float(min_utility))
+    if placements is not None and cache_key in placements:
+        return placements[cache_key]
     mesh = catalogue.mesh(match.mesh_id)
     given = np.asarray(match.alignment, dtype=np.int64)
     if not spread:
@@ -679,7 +679,7 @@ def place_match(shape: Shape, annotation: Annotation, catalogue: Catalogue, matc
         pl = dataclasses.replace(pl, boundary_paths=exact_paths(shape.points, u, pl.xy[pl.mesh.boundary]))
         user = to_user_placement(shape, pl)
     if placements is not None:
-        placements[key] = user
+        placements[cache_key] = user
     return user
 
 
