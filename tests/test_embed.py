@@ -611,3 +611,24 @@ def test_edge_ratios_of_rectangles(w, ratio):
     xy = np.array([[0, 0], [w, 0], [w, 1], [0, 1]], float)
     np.testing.assert_allclose(edge_ratios(xy, np.array([[0, 1, 2, 3]])), [ratio])
     assert edge_ratios(np.array([[0, 0], [1, 0], [1, 0], [0, 1]], float), np.array([[0, 1, 2, 3]]))[0] == np.inf
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), n=st.integers(1, 12), P=st.integers(3, 40))
+def test_boundary_paths_are_the_sub_polylines(seed, n, P):
+    """All pieces at once give exactly what cutting one piece at a time does."""
+    from jaxmatch.geometry import sub_polyline
+
+    rng = np.random.default_rng(seed)
+    ang = np.sort(rng.uniform(0, 2 * np.pi, P))
+    pts = np.c_[np.cos(ang), np.sin(ang)] * rng.uniform(0.5, 1.5, (P, 1))
+    cum = arc_lengths(pts)
+    t = np.sort(rng.uniform(0, cum[-1], n))
+    if n > 2:
+        t[1] = cum[int(rng.integers(0, P))]  # a piece starting exactly at a polyline vertex
+        t = np.sort(t)
+    got = boundary_paths(pts, t)
+    for j in range(n):
+        a, b = t[j], t[(j + 1) % n]
+        want = sub_polyline(pts, a, b if b > a else b + cum[-1], cum)
+        np.testing.assert_array_equal(got[j], want)

@@ -106,3 +106,17 @@ def test_compiled_smooth_equals_the_reference(seed, amp, slide):
     assert inverted_mask(got, mesh.quads).sum() == inverted_mask(ref, mesh.quads).sum()
     assert quality(got, mesh.quads)[0].min() == pytest.approx(quality(ref, mesh.quads)[0].min(), abs=1e-6)
     np.testing.assert_allclose(got, ref, atol=1e-5)
+
+
+@pytest.mark.parametrize("k", [3, 5, 6])
+@pytest.mark.parametrize("grid_shape", [(3, 2), (5, 4)])
+def test_compiled_tutte_equals_the_reference(k, grid_shape):
+    from jaxmatch.placement.embed import tutte
+
+    for mesh in (star(k), grid(*grid_shape)[0]):
+        n = len(mesh.boundary)
+        ang = 2 * np.pi * np.arange(n) / n
+        bxy = np.c_[np.cos(ang), 1.3 * np.sin(ang)]
+        a = tutte(mesh.quads, mesh.n_vertices, mesh.boundary, bxy)
+        b = tutte(mesh.quads, mesh.n_vertices, mesh.boundary, bxy, reference=True)
+        np.testing.assert_allclose(a, b, atol=1e-12)

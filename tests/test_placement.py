@@ -405,6 +405,7 @@ def test_orientation_utilities_match_brute_force(seed):
     for _ in range(15):
         codes, vals, table, skip, _, _ = random_case(rng)
         got = orientation_utilities(codes, vals, (table, skip))
+        np.testing.assert_array_equal(got, orientation_utilities(codes, vals, (table, skip), reference=True))
         n = len(vals)
         for o in range(2 * n):
             s = vals[::-1] if o >= n else vals

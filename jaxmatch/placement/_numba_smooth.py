@@ -411,3 +411,41 @@ def flat_slides(slides) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
         sp[i + 1] = sp[i] + len(s.vertices)
     sv = np.concatenate([np.asarray(s.vertices, np.int64) for s in slides]) if S else np.zeros(0, np.int64)
     return sa, sb, sp, sv
+
+
+@numba.njit(cache=True, nogil=True)
+def tutte_dense(quads, n_vertices, boundary, boundary_xy):  # pragma: no cover - compiled
+    """``embed.tutte`` for small meshes: uniform-weight Laplacian built from the quads' edges
+    (each once), free vertices solved densely. Returns ``(V, 2)``."""
+    V = n_vertices
+    A = np.zeros((V, V))
+    for q in range(quads.shape[0]):
+        for c in range(4):
+            a, b = quads[q, c], quads[q, (c + 1) % 4]
+            A[a, b] = 1.0
+            A[b, a] = 1.0
+    xy = np.zeros((V, 2))
+    fixed = np.zeros(V, np.bool_)
+    for j in range(boundary.shape[0]):
+        xy[boundary[j]] = boundary_xy[j]
+        fixed[boundary[j]] = True
+    free = np.flatnonzero(~fixed)
+    nf = free.shape[0]
+    if nf == 0:
+        return xy
+    L = np.zeros((nf, nf))
+    rhs = np.zeros((nf, 2))
+    for i in range(nf):
+        v = free[i]
+        L[i, i] = A[v].sum()
+        for i2 in range(nf):
+            if i2 != i:
+                L[i, i2] = -A[v, free[i2]]
+        for w in range(V):
+            if fixed[w] and A[v, w] != 0.0:
+                rhs[i, 0] += xy[w, 0]
+                rhs[i, 1] += xy[w, 1]
+    sol = np.linalg.solve(L, rhs)
+    for i in range(nf):
+        xy[free[i]] = sol[i]
+    return xy

@@ -184,3 +184,35 @@ def candidates(codes, seqs, table, between, prefix, suffix, gq, tt, perimeter, u
         A[r] = outs[r]
         own[r] = owner[r]
     return util, gap, own, A
+
+
+@numba.njit(cache=True, nogil=True)
+def orientation_utilities(codes, vals, table, skip):  # pragma: no cover - compiled
+    """Best utility of every orientation of one mesh (``choose.orientation_utilities``):
+    codes ``(m,) int64``, vals ``(n,) int64``, table ``(3, 64)`` and skip ``(3,)`` float64
+    with ``-inf``. Returns ``(2n,)``: rotation ``o``, then reflected rotations."""
+    n = vals.shape[0]
+    m = codes.shape[0]
+    out = np.empty(2 * n)
+    seq = np.empty(n, np.int64)
+    W = np.empty((n, m))
+    D = np.empty(n + 1)
+    for o in range(2 * n):
+        for j in range(n):
+            seq[j] = vals[(j + o) % n] if o < n else vals[n - 1 - (j + o - n) % n]
+        for j in range(n):
+            f = 16 * (seq[(j + 1) % n] - 2) + 4 * (seq[j] - 2) + (seq[(j - 1 + n) % n] - 2)
+            for i in range(m):
+                W[j, i] = table[codes[i], f]
+        D[0] = 0.0
+        for j in range(1, n + 1):
+            D[j] = -np.inf
+        for i in range(m):
+            sk = skip[codes[i]]
+            for j in range(n, 0, -1):
+                a = D[j] + sk
+                b = D[j - 1] + W[j - 1, i]
+                D[j] = a if a > b else b
+            D[0] = D[0] + sk
+        out[o] = D[n]
+    return out

@@ -182,17 +182,22 @@ def _pair_weights(codes: np.ndarray, seq: np.ndarray, table: np.ndarray) -> np.n
     return table[codes[None, :], flat[..., None]]
 
 
-def orientation_utilities(codes, vals, lattice) -> np.ndarray:
+def orientation_utilities(codes, vals, lattice, *, reference: bool = False) -> np.ndarray:
     """Utility of every orientation of one mesh, ``(2n,) float64`` (``-inf``: none).
 
     codes: (m,) point codes; vals: (n,) ccw boundary valences; orientation ``o < n`` is
     rotation ``o``, ``o >= n`` rotation ``o - n`` reflected (as in :mod:`jaxmatch.scoring.exact`).
     Plain numpy, the recurrence ``D[i][j] = max(D[i-1][j] + skip[code[i-1]], D[i-1][j-1] +
-    W[i-1, j-1])`` for all orientations at once (one mesh: microseconds)."""
+    W[i-1, j-1])`` for all orientations at once; compiled
+    (``_numba_spread.orientation_utilities``), ``reference``: numpy."""
     c = np.asarray(codes, dtype=np.int64).ravel()
     v = np.asarray(vals, dtype=np.int64).ravel()
     table, skip = lattice_weights(lattice)
     n, m = v.shape[0], c.shape[0]
+    if not reference and n > 0:
+        from jaxmatch.placement import _numba_spread as nb
+
+        return nb.orientation_utilities(c, v, np.ascontiguousarray(table), np.ascontiguousarray(skip))
     rot = (np.arange(n)[:, None] + np.arange(n)[None, :]) % n
     seqs = np.concatenate([v[rot], v[::-1][rot]])  # (2n, n)
     W = _pair_weights(c, seqs, table)  # (2n, n, m)

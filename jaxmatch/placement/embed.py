@@ -47,11 +47,9 @@ from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import numpy as np
-import scipy.sparse
-import scipy.sparse.linalg
 
 from jaxmatch.catalogue.mesh import QuadMesh, edges, valences
-from jaxmatch.geometry import cumulative_length, point_at, signed_area, sub_polyline
+from jaxmatch.geometry import VERTEX_SNAP, cumulative_length, point_at, signed_area, sub_polyline
 
 __all__ = [
     "Placement",
@@ -194,16 +192,21 @@ def boundary_paths(points: np.ndarray, t_aligned: np.ndarray) -> tuple[np.ndarra
     p = np.asarray(points, dtype=np.float64)
     cum = arc_lengths(p)
     per = cum[-1]
-    ta = np.asarray(t_aligned, dtype=np.float64)
+    ta = np.asarray(t_aligned, dtype=np.float64).ravel()
     n = ta.shape[0]
-    out = []
-    for j in range(n):
-        t0 = float(ta[j])
-        t1 = float(ta[(j + 1) % n])
-        if t1 <= t0:
-            t1 += per
-        out.append(sub_polyline(p, t0, t1, cum))
-    return tuple(out)
+    t0 = ta
+    t1 = np.roll(ta, -1)
+    t1 = np.where(t1 <= t0, t1 + per, t1)
+    P = p.shape[0]
+    if n * 3 * P > 4_000_000:  # one piece at a time: bounded memory
+        return tuple(sub_polyline(p, float(a), float(b), cum) for a, b in zip(t0, t1))
+    # all pieces at once, as sub_polyline cuts each (same end points, same inner vertices)
+    tol = VERTEX_SNAP * per
+    c3 = np.concatenate([cum[:-1], cum[:-1] + per, cum[:-1] + 2 * per])
+    p3 = np.concatenate([p, p, p])
+    inside = (c3[None, :] > t0[:, None] + tol) & (c3[None, :] < t1[:, None] - tol)  # (n, 3P)
+    ends = point_at(p, np.concatenate([t0, t1]), cum)
+    return tuple(np.concatenate([ends[j:j + 1], p3[inside[j]], ends[n + j:n + j + 1]]) for j in range(n))
 
 
 polygon_area = signed_area
@@ -295,13 +298,21 @@ free vertices of catalogue meshes that takes ~0.1 ms against ~1 ms for the spars
 set-up; refined meshes (thousands of vertices) use the sparse solver."""
 
 
-def tutte(quads: np.ndarray, n_vertices: int, boundary: np.ndarray, boundary_xy: np.ndarray) -> np.ndarray:
+def tutte(quads: np.ndarray, n_vertices: int, boundary: np.ndarray, boundary_xy: np.ndarray, *,
+          reference: bool = False) -> np.ndarray:
     """Uniform-weight (Tutte / harmonic) embedding.
 
     quads: (F, 4); boundary: (n,) vertex ids fixed at ``boundary_xy`` (n, 2). Every other vertex
-    is the average of its edge neighbours (one sparse solve). Returns ``(V, 2) float64``.
+    is the average of its edge neighbours (one linear solve: dense and compiled,
+    ``_numba_smooth.tutte_dense``, up to :data:`DENSE_TUTTE` free vertices; sparse beyond).
+    ``reference``: the numpy/scipy version (tests). Returns ``(V, 2) float64``.
     """
     V = int(n_vertices)
+    if not reference and 0 < V - len(boundary) <= DENSE_TUTTE:
+        from jaxmatch.placement import _numba_smooth as nb
+
+        return nb.tutte_dense(np.ascontiguousarray(quads, dtype=np.int64), V, np.asarray(boundary, dtype=np.int64),
+                              np.ascontiguousarray(boundary_xy, dtype=np.float64))
     xy = np.zeros((V, 2))
     b = np.asarray(boundary)
     xy[b] = boundary_xy
@@ -318,6 +329,9 @@ def tutte(quads: np.ndarray, n_vertices: int, boundary: np.ndarray, boundary_xy:
         rhs = -(L[np.ix_(free, b)] @ xy[b])
         sol = np.linalg.solve(L[np.ix_(free, free)], rhs)
     else:
+        import scipy.sparse  # only here: importing it costs ~0.1 s of a ~1 s command
+        import scipy.sparse.linalg
+
         A = scipy.sparse.csr_matrix((np.ones(rows.size), (rows, cols)), shape=(V, V))
         deg = np.asarray(A.sum(axis=1)).ravel()
         L = (scipy.sparse.diags(deg) - A).tocsr()
