@@ -299,11 +299,14 @@ def score_many(
                                               "--num-processes processes (jax.distributed; start the same command once per process)."),
     num_processes: int = typer.Option(1, min=1, metavar="P", help="Processes sharing the run (with --coordinator)."),
     process_id: int = typer.Option(0, min=0, metavar="I", help="This process's id, 0..P-1 (with --coordinator); process 0 writes --out."),
+    jobs: Optional[int] = typer.Option(None, "--jobs", min=1, metavar="N", help="Worker processes on this machine "
+                                       "(default: its CPUs; 1 with --coordinator or --devices, which load JAX)."),
 ) -> None:
     """Score many shapes in one run (bulk mode), with the same defaults and records as 'score --json'.
 
     Every shape is read and checked before scoring. A summary line goes to stderr at the end.
     With --coordinator, each process ranks every P-th shape and process 0 writes all records.
+    On one machine the shapes are shared among --jobs worker processes (results in input order).
     """
     cluster = _cluster(coordinator, num_processes, process_id, devices)
     if devices is not None:
@@ -332,22 +335,38 @@ def score_many(
 
     distributed.initialize(cluster)
     mine = distributed.share(len(loaded), cluster)
+
+    def one(i: int):
+        """(record, None) or (None, message of an unmatchable shape without --skip-bad)."""
+        p, shp = loaded[i]
+        if isinstance(shp, str):
+            return {"shape": str(p), "error": shp}, None
+        try:
+            ranking = rank(shp, cat, lat, internal=ks, top=top, points=points, per_size=per_size, tie_break=tb,
+                           prune=True, devices=devices)
+            return ranking_json(str(p), ranking, lat.name, tb), None
+        except UnmatchableError as e:
+            if not skip_bad:
+                return None, f"{p}: {e}"
+            return {"shape": str(p), "error": f"no match: {e}"}, None
+
+    from jaxmatch.parallel import available_cpus, ordered_map
+    from jaxmatch.scoring.backends import serial_only
+
+    workers = 1 if (coordinator is not None or devices is not None) else (available_cpus() if jobs is None else jobs)
     records = []
     with _progress() as prog:
         task = prog.add_task("shapes", total=len(mine))
-        for i in mine:
-            p, shp = loaded[i]
-            if isinstance(shp, str):
-                records.append({"shape": str(p), "error": shp})
-            else:
-                try:
-                    ranking = rank(shp, cat, lat, internal=ks, top=top, points=points, per_size=per_size, tie_break=tb,
-                                   prune=True, devices=devices)
-                    records.append(ranking_json(str(p), ranking, lat.name, tb))
-                except UnmatchableError as e:
-                    if not skip_bad:
-                        raise UnmatchableError(f"{p}: {e}") from None
-                    records.append({"shape": str(p), "error": f"no match: {e}"})
+        def worker_start():  # in each worker process
+            serial_only()
+            cat.reopen()
+
+        if workers > 1:
+            serial_only()  # one core per process (and numba's OpenMP layer must not start before fork)
+        for record, fatal in ordered_map(one, list(mine), workers, initializer=worker_start, warm_first=True):
+            if fatal is not None:
+                raise UnmatchableError(fatal)
+            records.append(record)
             prog.advance(task)
     records = distributed.gather_records(records, mine, len(loaded), cluster)
     if cluster.process_id == 0:

@@ -159,6 +159,12 @@ class Catalogue:
     _npz: object = field(repr=False)
     _cache: dict = field(default_factory=dict, repr=False)
 
+    def reopen(self) -> None:
+        """Open the file again for this process: a process forked from the one that opened it
+        must not read through the shared file offset (:func:`jaxmatch.parallel.ordered_map`'s
+        workers call this). Buckets already read stay."""
+        self._npz = np.load(self.path, allow_pickle=False)
+
     @property
     def internal(self) -> list[int]:
         return list(self.meta["internal"])

@@ -103,6 +103,16 @@ def numpy_values(codes, lengths, vals, tab, gate, strict: bool = False) -> np.nd
     return out
 
 
+_SERIAL_ONLY = [False]
+
+
+def serial_only() -> None:
+    """Use only the single-thread kernel in this process from now on: for worker processes of
+    :func:`jaxmatch.parallel.ordered_map` (one core each; and numba's OpenMP layer is not
+    fork-safe once the parent has used it)."""
+    _SERIAL_ONLY[0] = True
+
+
 def _kernel(parallel: bool):
     """The compiled int16 kernel (:mod:`jaxmatch.scoring._numba_dp`, imported on first use)."""
     from jaxmatch.scoring import _numba_dp
@@ -132,7 +142,7 @@ def numba_values(codes, lengths, vals, tab, gate, strict: bool = False, lanes: i
     import numba
 
     jobs = c.shape[0] * -(-big_n // max(int(lanes), 1))
-    parallel = jobs > 1 and numba.get_num_threads() > 1 and 2 * n * n * int(lens.sum()) * big_n >= PARALLEL_CELLS
+    parallel = not _SERIAL_ONLY[0] and jobs > 1 and numba.get_num_threads() > 1 and 2 * n * n * int(lens.sum()) * big_n >= PARALLEL_CELLS
     _kernel(parallel)(c, lens, v, tab, np.ascontiguousarray(gate, dtype=tab.dtype), bool(strict), int(lanes), out)
     return out
 

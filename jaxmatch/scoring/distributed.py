@@ -55,10 +55,10 @@ def initialize(cluster: Cluster, timeout_s: int = 120) -> None:
     """Join the cluster (``jax.distributed.initialize``) before any JAX computation; on CPU the
     processes' collectives go through gloo. Blocks until all ``num_processes`` have joined
     (or ``timeout_s``, then RuntimeError from JAX)."""
+    if cluster.num_processes == 1:
+        return  # one process: nothing to join (and no JAX to import)
     import jax
 
-    if cluster.num_processes == 1:
-        return
     jax.config.update("jax_cpu_collectives_implementation", "gloo")
     jax.distributed.initialize(coordinator_address=cluster.coordinator, num_processes=cluster.num_processes,
                                process_id=cluster.process_id, initialization_timeout=int(timeout_s))

@@ -1,0 +1,52 @@
+"""jaxmatch.parallel.ordered_map: a process pool that behaves like a plain loop."""
+
+from __future__ import annotations
+
+import os
+
+import pytest
+
+from jaxmatch.parallel import available_cpus, can_fork, ordered_map
+
+needs_fork = pytest.mark.skipif(not can_fork(), reason="no fork here (or JAX already imported in this process)")
+
+
+@pytest.mark.parametrize("jobs", [1, 2, 3])
+def test_results_come_in_input_order(jobs):
+    items = list(range(23))
+    assert list(ordered_map(lambda x: x * x, items, jobs)) == [x * x for x in items]
+
+
+@needs_fork
+def test_workers_are_other_processes_that_inherit_the_callers_state():
+    big = {"loaded": list(range(1000))}  # a closure over state the parent loaded: inherited, not pickled
+    pids = list(ordered_map(lambda i: (os.getpid(), big["loaded"][i]), list(range(8)), 2))
+    assert [v for _, v in pids] == list(range(8))
+    assert os.getpid() not in {p for p, _ in pids}
+
+
+@pytest.mark.parametrize("jobs", [1, 2])
+def test_an_exception_surfaces_at_its_item(jobs):
+    def f(x):
+        if x == 3:
+            raise ValueError("bad item 3")
+        return x
+
+    got = []
+    with pytest.raises(ValueError, match="bad item 3"):
+        for v in ordered_map(f, list(range(6)), jobs):
+            got.append(v)
+    assert got == [0, 1, 2]
+
+
+def test_initializer_runs_in_each_worker_not_here():
+    marker = []
+    list(ordered_map(lambda x: x, [1, 2, 3], 1, initializer=lambda: marker.append(1)))
+    assert marker == []  # no workers for jobs = 1: nothing to initialise
+    assert available_cpus() >= 1
+
+
+@needs_fork
+def test_warm_first_runs_the_first_item_here():
+    pids = list(ordered_map(lambda i: os.getpid(), list(range(5)), 2, warm_first=True))
+    assert pids[0] == os.getpid() and os.getpid() not in pids[1:]
