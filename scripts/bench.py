@@ -90,6 +90,7 @@ def parse_args(argv=None):
                     help="folder for the k <= 6 catalogue (default $JAXMATCH_CACHE/bench or ~/.cache/jaxmatch/bench)")
     ap.add_argument("--skip-many", action="store_true", help="skip the 50-shape score-many and API measurements")
     ap.add_argument("--rss-probe", action="store_true", help=argparse.SUPPRESS)
+    ap.add_argument("--many-probe", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--refine", action="store_true", help="only the refinement benchmark (bench_refine): a 10,000-quad mesh")
     return ap.parse_args(argv)
 
@@ -601,6 +602,14 @@ def many_and_api(args) -> dict:
                     ranking_json(str(p), rank(shp, cat, lat, top=5, tie_break=tb, prune=True), lat.name, tb)
                 times.append(time.perf_counter() - t)
             out[tb] = {"first_pass_s": times[0], "warm_pass_s": times[1], "shapes_per_s": len(shapes) / times[1]}
+        # what score-many does by default: the shapes shared among worker processes (one per CPU);
+        # in a fresh process, as this one has imported JAX (not fork-safe)
+        cmd = [sys.executable, str(Path(__file__).resolve()), "--many-probe", "--lattice", args.lattice]
+        if args.catalogue:
+            cmd += ["--catalogue", str(args.catalogue)]
+        p = subprocess.run(cmd, cwd=ROOT, env=dict(os.environ), capture_output=True, text=True, timeout=1800)
+        if p.returncode == 0 and p.stdout.strip():
+            out["geometry_workers"] = json.loads(p.stdout.strip().splitlines()[-1])
         api = []
         for i in range(7):
             t = time.perf_counter()
@@ -610,6 +619,43 @@ def many_and_api(args) -> dict:
         out["api_shape_ms"] = {"shape": files[4].name, "first_ms": api[0], "min_ms": min(api[1:]),
                                "median_ms": statistics.median(api[1:])}
         return out
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+def many_probe(args) -> dict | None:
+    """(In a fresh process.) The geometric-tie-break loop of :func:`many_and_api` run as
+    ``score-many`` runs it by default: one warm pass in this process, then the shapes shared
+    among one forked worker process per CPU (``jaxmatch.parallel.ordered_map``; their start-up
+    is included), the records checked identical to this process's. None with one CPU or no fork."""
+    from jaxmatch.api import rank
+    from jaxmatch.catalogue import store as cat_mod
+    from jaxmatch.parallel import available_cpus, can_fork, ordered_map
+    from jaxmatch.scoring.backends import serial_only
+    from jaxmatch.scoring.lattice import load_lattice
+    from jaxmatch.scoring.rank import ranking_json
+    from jaxmatch.shape import load_shape
+
+    jobs = available_cpus()
+    if jobs < 2 or not can_fork():
+        return None
+    serial_only()
+    folder = Path(tempfile.mkdtemp(prefix="jaxmatch-bench-probe-"))
+    try:
+        files = many_shapes(folder)
+        shapes = [load_shape(f) for f in files]
+        cat = cat_mod.load(args.catalogue) if args.catalogue else cat_mod.default_catalogue()
+        lat = load_lattice(args.lattice)
+
+        def one(i):
+            return ranking_json(str(files[i]), rank(shapes[i], cat, lat, top=5, tie_break="geometry", prune=True),
+                                lat.name, "geometry")
+
+        serial = [one(i) for i in range(len(shapes))]  # warm pass (one process)
+        t = time.perf_counter()
+        recs = list(ordered_map(one, list(range(len(shapes))), jobs, initializer=cat.reopen))
+        dt = time.perf_counter() - t
+        return {"jobs": jobs, "warm_pass_s": dt, "shapes_per_s": len(shapes) / dt, "identical_to_one_process": recs == serial}
     finally:
         shutil.rmtree(folder, ignore_errors=True)
 
@@ -758,6 +804,9 @@ def main(argv=None) -> int:
         if args.json:
             print(json.dumps({"refine": r}))
         return 0
+    if args.many_probe:
+        print(json.dumps(many_probe(args)))
+        return 0
     if args.rss_probe:
         print(json.dumps(rss_probe(args)))
         return 0
@@ -885,11 +934,15 @@ def main(argv=None) -> int:
     if not args.skip_many:
         many = many_and_api(args)
         result["many"] = many
-        result["score_many_shapes_per_s"] = many["geometry"]["shapes_per_s"]
+        w = many.get("geometry_workers")
+        result["score_many_shapes_per_s"] = (w or many["geometry"])["shapes_per_s"]
         result["score_many_id_shapes_per_s"] = many["id"]["shapes_per_s"]
         result["api_shape_ms"] = many["api_shape_ms"]["min_ms"]
         say(f"many      : {many['shapes']} shapes, top 5, pruned, one prepared catalogue: geometric tie-break "
             f"{many['geometry']['shapes_per_s']:.1f} shapes/s, id tie-break {many['id']['shapes_per_s']:.1f} shapes/s (warm)")
+        if w:
+            say(f"many      : geometric tie-break in {w['jobs']} worker processes (score-many's default): "
+                f"{w['shapes_per_s']:.1f} shapes/s; records identical to one process: {w['identical_to_one_process']}")
         say(f"API       : rank + place {many['api_shape_ms']['shape']}: {many['api_shape_ms']['min_ms']:.0f} ms min, "
             f"{many['api_shape_ms']['median_ms']:.0f} ms median (warm; first {many['api_shape_ms']['first_ms']:.0f} ms)")
     if args.cli:
