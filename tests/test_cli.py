@@ -329,3 +329,11 @@ def test_commands_share_their_defaults():
         assert {"corner_angle", "internal", "catalogue", "points"} <= set(got), name
     api = rank.__kwdefaults__
     assert (api["top"], api["tie_break"], api["prune"]) == (defaults.DEFAULT_TOP, defaults.DEFAULT_TIE_BREAK, True)
+
+
+def test_score_bad_shape_with_the_geometric_tie_break_exits_cleanly(tmp_path):
+    """A shape with two points, default options: one clear line naming the file, exit 2."""
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"boundary": [[0, 0], [1, 1]]}')
+    r = run("score", bad)
+    assert r.returncode == 2 and str(bad) in r.stderr and "Traceback" not in r.stderr
