@@ -555,9 +555,8 @@ def _mesh_refined(shape: Path, sides: Optional[str], size: Optional[float], *, c
     import numpy as np
 
     from jaxmatch.io.meshfile import write_mesh
-    from jaxmatch.placement.choose import draw_placements
     from jaxmatch.placement.refine import InfeasibleRequest, refine_mesh, refined_json
-    from jaxmatch.shape import S, V, X
+    from jaxmatch.shape import V, X
 
     if sides is not None and size is not None:
         raise InputError("give either --sides or --size, not both", "--size")

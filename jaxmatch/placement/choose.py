@@ -36,7 +36,6 @@ from jaxmatch.errors import InputError
 from jaxmatch.catalogue.mesh import boundary_valences, valences
 from jaxmatch.placement.embed import Placement, edge_ratios, exact_paths, inverted_mask, oriented_boundary, place, quality
 from jaxmatch.shape import S as S_CODE
-from jaxmatch.shape import cumulative_length
 from jaxmatch.shape import point_at as shape_point_at
 from jaxmatch.scoring.model import weights_of
 from jaxmatch.scoring.rank import TIE_CAP, Match, Ranking, TieBreaker
