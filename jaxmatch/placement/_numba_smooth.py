@@ -18,6 +18,29 @@ import numba
 import numpy as np
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _corner(pos, quads, q, c):  # pragma: no cover - compiled
+    """Corner ``c`` of quad ``q``: its vertex, the next and previous vertex ids, and the edge
+    vectors to them ``e1 = pos[next] - pos[vertex]``, ``e2 = pos[previous] - pos[vertex]``."""
+    p = quads[q, c]
+    nx = quads[q, (c + 1) % 4]
+    pv = quads[q, (c + 3) % 4]
+    return p, nx, pv, pos[nx, 0] - pos[p, 0], pos[nx, 1] - pos[p, 1], pos[pv, 0] - pos[p, 0], pos[pv, 1] - pos[p, 1]
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _softmax_norm(x, off, count):  # pragma: no cover - compiled
+    """``(max, sum of exp(z - max))`` of the logits ``x[off:off + count]``: softmax weight ``i``
+    is ``exp(x[off + i] - max) / sum``."""
+    zmax = -np.inf
+    for i in range(count):
+        zmax = max(zmax, x[off + i])
+    tot = 0.0
+    for i in range(count):
+        tot += math.exp(x[off + i] - zmax)
+    return zmax, tot
+
+
 @numba.njit(cache=True, nogil=True)
 def _positions(x, base, free, sa, sb, sp, sv, pos):  # pragma: no cover - compiled
     """Fill ``pos (V, 2)`` from ``x``: base, free vertices, slid vertices."""
@@ -29,12 +52,7 @@ def _positions(x, base, free, sa, sb, sp, sv, pos):  # pragma: no cover - compil
     off = 2 * nf
     for s in range(sa.shape[0]):
         r = sp[s + 1] - sp[s]
-        zmax = -np.inf
-        for i in range(r + 1):
-            zmax = max(zmax, x[off + i])
-        tot = 0.0
-        for i in range(r + 1):
-            tot += math.exp(x[off + i] - zmax)
+        zmax, tot = _softmax_norm(x, off, r + 1)
         u = 0.0
         dx, dy = sb[s, 0] - sa[s, 0], sb[s, 1] - sa[s, 1]
         for i in range(r):
@@ -66,11 +84,7 @@ def _energy(pos, quads, delta, power, grad, k, r, h):  # pragma: no cover - comp
     kmax = -np.inf
     for q in range(F):
         for c in range(4):
-            p = quads[q, c]
-            nx = quads[q, (c + 1) % 4]
-            pv = quads[q, (c + 3) % 4]
-            e1x, e1y = pos[nx, 0] - pos[p, 0], pos[nx, 1] - pos[p, 1]
-            e2x, e2y = pos[pv, 0] - pos[p, 0], pos[pv, 1] - pos[p, 1]
+            p, nx, pv, e1x, e1y, e2x, e2y = _corner(pos, quads, q, c)
             a = e1x * e2y - e1y * e2x
             rr = math.sqrt(a * a + d2)
             hh = 0.5 * (a + rr) if a >= 0 else d2 / (2.0 * (rr - a))
@@ -98,11 +112,7 @@ def _energy(pos, quads, delta, power, grad, k, r, h):  # pragma: no cover - comp
         return np.inf
     for q in range(F):
         for c in range(4):
-            p = quads[q, c]
-            nx = quads[q, (c + 1) % 4]
-            pv = quads[q, (c + 3) % 4]
-            e1x, e1y = pos[nx, 0] - pos[p, 0], pos[nx, 1] - pos[p, 1]
-            e2x, e2y = pos[pv, 0] - pos[p, 0], pos[pv, 1] - pos[p, 1]
+            p, nx, pv, e1x, e1y, e2x, e2y = _corner(pos, quads, q, c)
             x = k[q, c] / f
             dk = _pow(x, power, sq) / x / C if x > 0 else (k[q, c] / f) ** (power - 1.0) / C
             gN = dk / (2.0 * h[q, c])
@@ -134,12 +144,7 @@ def _pull(x, gpos, free, sa, sb, sp, sv, g):  # pragma: no cover - compiled
     off = 2 * nf
     for s in range(sa.shape[0]):
         r = sp[s + 1] - sp[s]
-        zmax = -np.inf
-        for i in range(r + 1):
-            zmax = max(zmax, x[off + i])
-        tot = 0.0
-        for i in range(r + 1):
-            tot += math.exp(x[off + i] - zmax)
+        zmax, tot = _softmax_norm(x, off, r + 1)
         dx, dy = sb[s, 0] - sa[s, 0], sb[s, 1] - sa[s, 1]
         gu = np.zeros(r + 1)
         u = 0.0
@@ -296,11 +301,7 @@ def _key(xy, quads):  # pragma: no cover - compiled
         sj = np.inf
         bad = False
         for c in range(4):
-            p = quads[q, c]
-            nx = quads[q, (c + 1) % 4]
-            pv = quads[q, (c + 3) % 4]
-            e1x, e1y = xy[nx, 0] - xy[p, 0], xy[nx, 1] - xy[p, 1]
-            e2x, e2y = xy[pv, 0] - xy[p, 0], xy[pv, 1] - xy[p, 1]
+            _, _, _, e1x, e1y, e2x, e2y = _corner(xy, quads, q, c)
             a = e1x * e2y - e1y * e2x
             if a <= 0:
                 bad = True
@@ -351,10 +352,8 @@ def smooth(xy, quads, free, sa, sb, sp, sv, iters, powers, untangle_rounds, mem,
         s_min = np.inf
         for q in range(F):
             for c in range(4):
-                p = quads[q, c]
-                nx = quads[q, (c + 1) % 4]
-                pv = quads[q, (c + 3) % 4]
-                a = (cur[nx, 0] - cur[p, 0]) * (cur[pv, 1] - cur[p, 1]) - (cur[nx, 1] - cur[p, 1]) * (cur[pv, 0] - cur[p, 0])
+                _, _, _, e1x, e1y, e2x, e2y = _corner(cur, quads, q, c)
+                a = e1x * e2y - e1y * e2x
                 s_min = min(s_min, a)
         if s_min >= eps:
             break
