@@ -360,6 +360,7 @@ def score_many(
         def worker_start():  # in each worker process
             serial_only()
             cat.reopen()
+            sys.stdout, sys.stderr = sys.__stdout__, sys.__stderr__  # not the progress display's proxies (their lock)
 
         if workers > 1:
             serial_only()  # one core per process (and numba's OpenMP layer must not start before fork)

@@ -337,3 +337,21 @@ def test_score_bad_shape_with_the_geometric_tie_break_exits_cleanly(tmp_path):
     bad.write_text('{"boundary": [[0, 0], [1, 1]]}')
     r = run("score", bad)
     assert r.returncode == 2 and str(bad) in r.stderr and "Traceback" not in r.stderr
+
+
+@pytest.mark.parametrize("jobs", ["1", "2"])
+def test_score_many_unmatchable_in_a_worker(small_cat, tmp_path, jobs):
+    """An unmatchable shape (5 points, meshes of 6 or more boundary vertices) stops the run with
+    exit 4 and one line naming the first one (nothing written), or with --skip-bad becomes an
+    error record in its place, whichever process scored it."""
+    shapes = [EXAMPLES / "square.json", EXAMPLES / "triangle.json", EXAMPLES / "circle.json"]
+    out = tmp_path / "r.jsonl"
+    args = ["score-many", *shapes, "--catalogue", small_cat, "--internal", "3", "--points", "5", "--out", out, "--jobs", jobs]
+    r = run(*args)
+    assert r.returncode == 4 and str(EXAMPLES / "square.json") in r.stderr and not out.exists()
+    assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr
+    r = run(*args, "--skip-bad")
+    assert r.returncode == 0, r.stderr
+    recs = [json.loads(x) for x in out.read_text().splitlines()]
+    assert [d["shape"] for d in recs] == [str(s) for s in shapes]
+    assert all("no match" in d["error"] for d in recs)
