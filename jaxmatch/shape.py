@@ -150,6 +150,11 @@ class Shape:
         return int(self.points.shape[0])
 
     @cached_property
+    def area(self) -> float:
+        """Area enclosed by ``points`` (unit box; positive: the loop is ccw), computed once."""
+        return float(signed_area(self.points))
+
+    @cached_property
     def arc_length(self) -> np.ndarray:
         """``(P + 1,) float64`` :func:`cumulative_length` of ``points`` (computed once; read-only)."""
         cum = cumulative_length(self.points)

@@ -115,9 +115,22 @@ def from_quads(quads) -> QuadMesh:
     return QuadMesh(quads=q, boundary=boundary_loop(q))
 
 
+def mesh_valences(mesh: QuadMesh) -> np.ndarray:
+    """:func:`valences` of ``mesh`` ``(V,) int32``; kept on the mesh object (read-only) when its
+    quads are read-only, as the catalogue's are, so placing one many times counts its edges once."""
+    val = mesh.__dict__.get("_valences")
+    if val is None:
+        val = valences(mesh.quads, mesh.n_vertices)
+        if mesh.quads.flags.writeable:  # only meshes that cannot change (catalogue meshes) keep it
+            return val
+        val.setflags(write=False)
+        object.__setattr__(mesh, "_valences", val)
+    return val
+
+
 def boundary_valences(mesh: QuadMesh) -> np.ndarray:
     """Valences along the ccw boundary loop, ``(n,) int32``."""
-    return valences(mesh.quads, mesh.n_vertices)[mesh.boundary]
+    return mesh_valences(mesh)[mesh.boundary]
 
 
 def triples(boundary_vals) -> np.ndarray:

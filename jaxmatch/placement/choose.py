@@ -33,7 +33,7 @@ import numpy as np
 
 from jaxmatch.defaults import DEFAULT_BAND
 from jaxmatch.errors import InputError
-from jaxmatch.catalogue.mesh import boundary_valences, valences
+from jaxmatch.catalogue.mesh import boundary_valences, mesh_valences
 from jaxmatch.placement.embed import Placement, edge_ratios, exact_paths, inverted_mask, oriented_boundary, place, quality
 from jaxmatch.shape import S as S_CODE
 from jaxmatch.shape import point_at as shape_point_at
@@ -658,7 +658,7 @@ def place_match(shape: Shape, annotation: Annotation, catalogue: Catalogue, matc
         # one candidate per distinct boundary (orientations that differ by a symmetry of the mesh
         # give the same placement), in a geometric order, at most MAX_CANDIDATES
         unique = {}
-        val = valences(mesh.quads, mesh.n_vertices)
+        val = mesh_valences(mesh)
         boundaries: dict[bytes, Boundary] = {}  # corner_boundary depends on the corner points only
         loops: dict[tuple[int, bool], np.ndarray] = {}
         seen = set()
@@ -719,7 +719,7 @@ def _place_candidate(shape, annotation, mesh, rot, refl, al, smooth_iters):
 
     def put(groups):
         pl = place(shape.points, annotation.t, al, mesh, rot, refl, boundary_xy=b.xy, slide_groups=groups,
-                   smooth_iters=smooth_iters, paths=False)
+                   smooth_iters=smooth_iters, paths=False, region_area=shape.area)
         return dataclasses.replace(pl, missed_corners=b.missed, corners=shape.n_corners), np.mod(b.u, per)
 
     pl, u = put(())

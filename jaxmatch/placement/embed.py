@@ -48,7 +48,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from jaxmatch.catalogue.mesh import QuadMesh, edges, valences
+from jaxmatch.catalogue.mesh import QuadMesh, edges, mesh_valences
 from jaxmatch.geometry import VERTEX_SNAP, cumulative_length, point_at, signed_area, sub_polyline
 
 __all__ = [
@@ -564,7 +564,9 @@ def smooth(
     q = np.asarray(quads)
     xy = np.asarray(xy, dtype=np.float64)
     V = xy.shape[0]
-    free = np.setdiff1d(np.arange(V), np.asarray(fixed))
+    keep = np.ones(V, bool)
+    keep[np.asarray(fixed, dtype=np.int64)] = False
+    free = np.flatnonzero(keep)  # = setdiff1d(arange(V), fixed), without its sort
     slides = tuple(s for s in slides if len(s.vertices))
     if (free.size == 0 and not slides) or iters <= 0 or q.size == 0:
         return xy.copy()
@@ -641,6 +643,7 @@ def place(
     slide_groups: tuple = (),
     smooth_iters: int = 200,
     paths: bool = True,
+    region_area: float | None = None,
 ) -> Placement:
     """Place ``mesh`` in the shape ``points`` following a match.
 
@@ -658,7 +661,8 @@ def place(
     slide along it during untangling and smoothing (:class:`Slide`); ``ja``/``jb`` stay put.
     smooth_iters: L-BFGS iterations per untangling/smoothing round (0: plain Tutte).
     paths: False leaves ``boundary_paths`` empty (for candidates that are only compared; the
-    caller adds them to the one it keeps with :func:`exact_paths`).
+    caller adds them to the one it keeps with :func:`exact_paths`). region_area: the area
+    enclosed by ``points``, when the caller has it (else computed).
     """
     pts = np.asarray(points, dtype=np.float64)
     tt = np.asarray(t, dtype=np.float64).ravel()
@@ -692,7 +696,7 @@ def place(
     xy[loop] = bxy  # exact boundary positions (no round-off from normalisation)
 
     sj, amin, amax = quality(xy, quads)
-    val = valences(quads, V)
+    val = mesh_valences(mesh)  # the oriented mesh has the same vertices
     internal = np.ones(V, bool)
     internal[loop] = False
     irregular = np.flatnonzero(internal & (val != 4))
@@ -713,7 +717,7 @@ def place(
         irregular=irregular,
         alignment=al,
         boundary_paths=paths,
-        region_area=polygon_area(pts),
+        region_area=polygon_area(pts) if region_area is None else float(region_area),
         mesh_area=float(quad_areas(xy, quads).sum()),
         edge_ratio=edge_ratios(xy, quads),
         rotation=int(rotation),
