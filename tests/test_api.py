@@ -102,6 +102,17 @@ def test_place_and_choose_mesh_agree(small_cat):
         jaxmatch.place(shape, ranking, 3, catalogue=small_cat)
 
 
+def test_choose_mesh_quality_band_through_the_api(small_cat):
+    """The stairs at k = 3: by default the API, like ``jaxmatch mesh``, places a near-top mesh
+    that reaches min scaled Jacobian 0.3 and says which one it passed over; band=0 places the
+    ranked mesh."""
+    shape = jaxmatch.load_shape(EXAMPLES / "labels" / "shapes" / "stairs.json")
+    banded = jaxmatch.choose_mesh(shape, small_cat, internal=3)
+    plain = jaxmatch.choose_mesh(shape, small_cat, internal=3, band=0)
+    assert plain.passed_over is None and plain.placement.min_scaled_jacobian < 0.3
+    assert banded.passed_over[1].mesh_id == plain.match.mesh_id and banded.placement.min_scaled_jacobian >= 0.3
+
+
 def test_annotation_matches_the_ranking(small_cat):
     shape = jaxmatch.load_shape(EXAMPLES / "lshape.json")
     ann = jaxmatch.annotate_shape(shape, small_cat, internal=3)
