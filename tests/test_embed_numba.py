@@ -1,6 +1,7 @@
-"""The compiled smoother (placement/_numba_smooth.py) is the numpy reference in embed.py, step
-for step: same energy and gradient, same parametrisation of sliding vertices, same L-BFGS
-iterates, hence the same smoothed placements (up to round-off)."""
+"""The compiled smoothers (the C library, placement/_ckernels.c through placement/kernels.py, and
+its numba fallback, placement/_numba_smooth.py) are the numpy reference in embed.py, step for
+step: same energy and gradient, same parametrisation of sliding vertices, same L-BFGS iterates,
+hence the same smoothed placements (up to round-off)."""
 
 from __future__ import annotations
 
@@ -9,11 +10,14 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from jaxmatch.placement import _numba_smooth as nb
+from jaxmatch.placement import _numba_smooth, kernels
 from jaxmatch.placement.embed import LBFGS_FTOL, LBFGS_GTOL, LBFGS_MEMORY, Slide, _energy, _lbfgs, _objective, _Params
 from jaxmatch.placement.embed import inverted_mask, quality, smooth
 
 from test_embed import grid, star
+
+BACKENDS = [kernels, _numba_smooth] if kernels.BACKEND == "c" else [_numba_smooth]
+"""The compiled versions this installation has (the C library when it was built, numba always)."""
 
 
 def _strip_case(seed: int, amp: float):
@@ -30,10 +34,11 @@ def _strip_case(seed: int, amp: float):
     return mesh, xy, internal, slides
 
 
+@pytest.mark.parametrize("nb", BACKENDS, ids=lambda m: m.__name__.rsplit(".", 1)[-1])
 @settings(max_examples=25, deadline=None)
 @given(seed=st.integers(0, 2**31 - 1), amp=st.floats(0.0, 0.6), delta=st.sampled_from([1e-6, 1e-3, 0.1]),
        power=st.sampled_from([1.0, 2.0, 8.0, 16.0]))
-def test_energy_and_gradient_equal_the_reference(seed, amp, delta, power):
+def test_energy_and_gradient_equal_the_reference(nb, seed, amp, delta, power):
     """Including folded corners (amp up to 0.6 folds some quads): the regularised energy is
     finite there, and both versions agree."""
     mesh, xy, _, _ = _strip_case(seed, amp)
@@ -46,9 +51,10 @@ def test_energy_and_gradient_equal_the_reference(seed, amp, delta, power):
         assert not np.isfinite(f)
 
 
+@pytest.mark.parametrize("nb", BACKENDS, ids=lambda m: m.__name__.rsplit(".", 1)[-1])
 @settings(max_examples=25, deadline=None)
 @given(seed=st.integers(0, 2**31 - 1), amp=st.floats(0.0, 0.3))
-def test_objective_with_sliding_vertices_equals_the_reference(seed, amp):
+def test_objective_with_sliding_vertices_equals_the_reference(nb, seed, amp):
     mesh, xy, internal, slides = _strip_case(seed, amp)
     params = _Params(xy, internal, slides)
     x = params.start(xy) + np.random.default_rng(seed).normal(0, 0.1, params.start(xy).shape)
@@ -58,9 +64,10 @@ def test_objective_with_sliding_vertices_equals_the_reference(seed, amp):
     np.testing.assert_allclose(g, g_ref, rtol=1e-9, atol=1e-12 * np.abs(g_ref).max())
 
 
+@pytest.mark.parametrize("nb", BACKENDS, ids=lambda m: m.__name__.rsplit(".", 1)[-1])
 @pytest.mark.parametrize("seed", range(4))
 @pytest.mark.parametrize("power", [1.0, 4.0, 16.0])
-def test_lbfgs_iterates_match_the_reference(seed, power):
+def test_lbfgs_iterates_match_the_reference(nb, seed, power):
     """A few iterations follow the same path (identical up to round-off); the minimum found
     after many is the same to optimiser precision."""
     mesh, xy, internal, slides = _strip_case(seed, 0.25)
@@ -120,3 +127,29 @@ def test_compiled_tutte_equals_the_reference(k, grid_shape):
         a = tutte(mesh.quads, mesh.n_vertices, mesh.boundary, bxy)
         b = tutte(mesh.quads, mesh.n_vertices, mesh.boundary, bxy, reference=True)
         np.testing.assert_allclose(a, b, atol=1e-12)
+
+
+needs_c = pytest.mark.skipif(kernels.BACKEND != "c", reason="the C library is not built in this installation")
+
+
+@needs_c
+@settings(max_examples=15, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), amp=st.floats(0.0, 0.45), slide=st.booleans())
+def test_c_and_numba_smoothing_loops_agree(seed, amp, slide):
+    """The fallback gives the same placements as the library it stands in for."""
+    mesh, xy, internal, slides = _strip_case(seed, amp)
+    flat = kernels.flat_slides(slides if slide else ())
+    args = (xy, np.asarray(mesh.quads, np.int64), internal.astype(np.int64), *flat, 200,
+            np.array([2.0, 4.0, 8.0, 16.0]), 12, LBFGS_MEMORY, LBFGS_FTOL, LBFGS_GTOL)
+    np.testing.assert_allclose(kernels.smooth(*args), _numba_smooth.smooth(*args), atol=1e-6)
+
+
+@needs_c
+@pytest.mark.parametrize("k", [3, 5])
+def test_c_and_numba_tutte_agree(k):
+    mesh = star(k)
+    n = len(mesh.boundary)
+    bxy = np.c_[np.cos(2 * np.pi * np.arange(n) / n), np.sin(2 * np.pi * np.arange(n) / n)]
+    a = kernels.tutte_dense(mesh.quads, mesh.n_vertices, mesh.boundary, bxy)
+    b = _numba_smooth.tutte_dense(np.asarray(mesh.quads, np.int64), mesh.n_vertices, np.asarray(mesh.boundary, np.int64), bxy)
+    np.testing.assert_allclose(a, b, atol=1e-12)

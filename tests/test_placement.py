@@ -680,3 +680,28 @@ def test_quality_band_last_resort_tries_other_orientations(cat, lat):
     pl = c.placement
     vals = boundary_valences(cat.mesh(c.match.mesh_id))
     assert utility_of(c.ranking.annotation.codes, vals, lat, pl.rotation, pl.reflected, pl.alignment) == c.utility
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_c_and_numba_alignment_kernels_agree(seed):
+    """The numba fallback of the alignment DPs gives what the C library gives: utilities of
+    every orientation, and per orientation the same tied alignments in the same order."""
+    from jaxmatch.placement import _numba_spread, kernels
+    from jaxmatch.placement.choose import MAX_TIED_ALIGNMENTS, _spread_setup
+
+    if kernels.BACKEND != "c":
+        pytest.skip("the C library is not built in this installation")
+    rng = np.random.default_rng(500 + seed)
+    for _ in range(20):
+        codes, vals, table, skip, t, per = random_case(rng)
+        if rng.random() < 0.5:
+            t, per = np.arange(len(t), dtype=float), float(len(t))
+        c, v = np.asarray(codes, np.int64), np.asarray(vals, np.int64)
+        np.testing.assert_array_equal(kernels.orientation_utilities(c, v, table, skip),
+                                      _numba_spread.orientation_utilities(c, v, table, skip))
+        st = _spread_setup(t, per, codes, (table, skip))
+        n = len(v)
+        seqs = np.stack([np.roll(v[::-1] if o >= n else v, -(o % n)) for o in range(2 * n)]).astype(np.int64)
+        args = (st.c, seqs, st.table, st.between, st.prefix, st.suffix, st.gq, st.tt, per, st.unit, MAX_TIED_ALIGNMENTS)
+        for x, y in zip(kernels.candidates(*args), _numba_spread.candidates(*args)):
+            np.testing.assert_array_equal(x, y)

@@ -1,5 +1,6 @@
-"""Compiled L-BFGS smoothing of :func:`jaxmatch.placement.embed.smooth` (numba; imported on first
-use and cached on disk after the first compile).
+"""Compiled L-BFGS smoothing of :func:`jaxmatch.placement.embed.smooth` in numba: the fallback of
+:mod:`jaxmatch.placement.kernels` where the C library was not built (imported on first use,
+cached on disk after the first compile).
 
 The same objective, parametrisation and optimiser as the numpy reference in
 :mod:`jaxmatch.placement.embed` (``_energy``, ``_Params``, ``_lbfgs``), written as loops: the
@@ -396,20 +397,6 @@ def objective(x, base, free, sa, sb, sp, sv, quads, delta, power):  # pragma: no
     f = _objective(x, base, free, sa, sb, sp, sv, quads, delta, power, np.empty((V, 2)), np.empty((V, 2)), g,
                    np.empty((F, 4)), np.empty((F, 4)), np.empty((F, 4)))
     return f, g
-
-
-def flat_slides(slides) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """``(sa (S, 2), sb (S, 2), sp (S + 1,) int64, sv (R,) int64)`` from ``embed.Slide`` s."""
-    S = len(slides)
-    sa = np.zeros((S, 2))
-    sb = np.zeros((S, 2))
-    sp = np.zeros(S + 1, np.int64)
-    for i, s in enumerate(slides):
-        sa[i] = s.a
-        sb[i] = s.b
-        sp[i + 1] = sp[i] + len(s.vertices)
-    sv = np.concatenate([np.asarray(s.vertices, np.int64) for s in slides]) if S else np.zeros(0, np.int64)
-    return sa, sb, sp, sv
 
 
 @numba.njit(cache=True, nogil=True)

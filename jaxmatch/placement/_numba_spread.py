@@ -1,5 +1,6 @@
 """Compiled forward pass and tie walk of :func:`jaxmatch.placement.choose.spread_optimal_alignment`
-(numba; imported on first use, cached on disk after the first compile).
+in numba: the fallback of :mod:`jaxmatch.placement.kernels` where the C library was not built
+(imported on first use, cached on disk after the first compile).
 
 The numpy version (``spread_optimal_alignment(..., reference=True)``) builds ``(S, m, m)``
 arrays per vertex; here the same lexicographic recurrence runs as loops, and the walk over

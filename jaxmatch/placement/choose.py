@@ -188,15 +188,15 @@ def orientation_utilities(codes, vals, lattice, *, reference: bool = False) -> n
     rotation ``o``, ``o >= n`` rotation ``o - n`` reflected (as in :mod:`jaxmatch.scoring.exact`).
     Plain numpy, the recurrence ``D[i][j] = max(D[i-1][j] + skip[code[i-1]], D[i-1][j-1] +
     W[i-1, j-1])`` for all orientations at once; compiled
-    (``_numba_spread.orientation_utilities``), ``reference``: numpy."""
+    (:func:`jaxmatch.placement.kernels.orientation_utilities`), ``reference``: numpy."""
     c = np.asarray(codes, dtype=np.int64).ravel()
     v = np.asarray(vals, dtype=np.int64).ravel()
     table, skip = lattice_weights(lattice)
     n, m = v.shape[0], c.shape[0]
     if not reference and n > 0:
-        from jaxmatch.placement import _numba_spread as nb
+        from jaxmatch.placement import kernels
 
-        return nb.orientation_utilities(c, v, np.ascontiguousarray(table), np.ascontiguousarray(skip))
+        return kernels.orientation_utilities(c, v, np.ascontiguousarray(table), np.ascontiguousarray(skip))
     rot = (np.arange(n)[:, None] + np.arange(n)[None, :]) % n
     seqs = np.concatenate([v[rot], v[::-1][rot]])  # (2n, n)
     W = _pair_weights(c, seqs, table)  # (2n, n, m)
@@ -235,8 +235,8 @@ def spread_optimal_alignment(t: np.ndarray, perimeter: float, codes: np.ndarray,
     several equally good ones a single answer picks depends on where the loop is labelled to
     start.
 
-    The forward pass and the walk over ties run compiled (:mod:`jaxmatch.placement._numba_spread`);
-    ``reference``: the numpy version they are tested against.
+    Compiled (:func:`jaxmatch.placement.kernels.candidates` for the one orientation);
+    ``reference``: the numpy version it is tested against.
     """
     sq = np.asarray(seq, dtype=np.int64).ravel()
     tt, c, table, between, prefix, suffix, unit, gq = _spread_setup(t, perimeter, codes, lattice)
@@ -256,12 +256,13 @@ def spread_optimal_alignment(t: np.ndarray, perimeter: float, codes: np.ndarray,
     S = starts.size
     U = np.full((S, m), -np.inf)
     U[np.arange(S), starts] = prefix[starts] + E[0, starts]
-    if reference:
-        U, G, back, ties = _spread_forward(E, between, gq, U, all_ties)
-    else:
-        from jaxmatch.placement import _numba_spread as nb
+    if not reference:  # the same DP compiled; its first tied alignment is the backtrack's
+        from jaxmatch.placement import kernels
 
-        U, G, back, ties = nb.forward(np.ascontiguousarray(E), between, gq, U, bool(all_ties))
+        _, gap, _, A = kernels.candidates(c, sq[None, :], table, between, prefix, suffix, gq, tt, float(perimeter), unit,
+                                          MAX_TIED_ALIGNMENTS if all_ties else 1)
+        return best, (list(A) if all_ties else A[0].copy()), int(gap[0])
+    U, G, back, ties = _spread_forward(E, between, gq, U, all_ties)
     U = U + suffix[None, :]
     G = G + np.round((perimeter - tt[None, :] + tt[starts][:, None]) ** 2 / unit)
     G = np.where(U == best, G, np.inf)
@@ -274,7 +275,7 @@ def spread_optimal_alignment(t: np.ndarray, perimeter: float, codes: np.ndarray,
             i = int(back[j, s_, i])
         return best, out, int(g_min)
     ends = np.stack(np.nonzero(G == g_min), axis=1).astype(np.int64)
-    outs = _spread_walk(ties, ends) if reference else list(nb.walk(ties, ends, MAX_TIED_ALIGNMENTS))
+    outs = _spread_walk(ties, ends)
     return best, outs, int(g_min)
 
 
@@ -333,7 +334,7 @@ def _spread_setup_cached(tt_b: bytes, perimeter: float, c_b: bytes, table_b: byt
 
 def _spread_forward(E, between, gq, U, all_ties):
     """numpy forward pass of :func:`spread_optimal_alignment` (the reference of
-    ``_numba_spread.forward``): ``(U, G, back, ties)`` with ``ties[j][(s, i)]`` the points ``i'``
+    the compiled forward pass): ``(U, G, back, ties)`` with ``ties[j][(s, i)]`` the points ``i'``
     of vertex ``j - 1`` that tie for vertex ``j`` on ``i`` (a dict per vertex)."""
     n = E.shape[0]
     S, m = U.shape
@@ -358,7 +359,7 @@ def _spread_forward(E, between, gq, U, all_ties):
 
 def _spread_walk(ties, ends) -> list[np.ndarray]:
     """Every tied alignment from the ``(start, last point)`` pairs ``ends``, depth first, at
-    most :data:`MAX_TIED_ALIGNMENTS` (the reference of ``_numba_spread.walk``)."""
+    most :data:`MAX_TIED_ALIGNMENTS` (the reference of the compiled walk)."""
     n = len(ties)
     outs: list[np.ndarray] = []
 
@@ -571,7 +572,7 @@ def match_candidates(annotation: Annotation, vals: np.ndarray, lattice, utility:
 
     min_utility: instead, every orientation whose utility is at least this, each with its own
     most evenly spread best alignments (no gap-cost comparison across orientations). Compiled
-    (``_numba_spread.candidates``); ``reference``: one numpy :func:`spread_optimal_alignment`
+    (:func:`jaxmatch.placement.kernels.candidates`); ``reference``: one numpy :func:`spread_optimal_alignment`
     per orientation, which it is tested against."""
     v = np.asarray(vals, dtype=np.int64).ravel()
     n = v.shape[0]
@@ -590,10 +591,10 @@ def match_candidates(annotation: Annotation, vals: np.ndarray, lattice, utility:
                                                  all_ties=True, reference=True)
             cands.extend((g, int(o % n), bool(o >= n), al) for al in als)
     else:  # the same, compiled, all orientations in one call
-        from jaxmatch.placement import _numba_spread as nb
+        from jaxmatch.placement import kernels
 
         st = _spread_setup(annotation.t, annotation.perimeter, annotation.codes, lattice)
-        _, gap, own, A = nb.candidates(st.c, seqs, st.table, st.between, st.prefix, st.suffix, st.gq, st.tt,
+        _, gap, own, A = kernels.candidates(st.c, seqs, st.table, st.between, st.prefix, st.suffix, st.gq, st.tt,
                                        float(annotation.perimeter), st.unit, MAX_TIED_ALIGNMENTS)
         gl, ol = gap.tolist(), orients.tolist()
         cands = [(int(gl[k]), ol[k] % n, ol[k] >= n, a) for k, a in zip(own.tolist(), A)]

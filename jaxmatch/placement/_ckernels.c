@@ -1,0 +1,679 @@
+/* Compiled placement kernels of jaxmatch (C, built with the package; called through ctypes by
+ * jaxmatch/placement/kernels.py).
+ *
+ * The same algorithms as the numpy references in embed.py and choose.py, step for step:
+ *   - the smoother: regularised corner condition numbers (power mean), their gradient, the
+ *     sliding-vertex parametrisation (softmax of gap logits), L-BFGS with Armijo backtracking,
+ *     and the untangle + power-continuation loop keeping the best positions seen;
+ *   - the dense Tutte solve (Cholesky);
+ *   - the alignment DPs: utilities of every orientation, and per orientation the best utility,
+ *     the least gap cost and its tied alignments in depth-first order.
+ * Why C and not numba here: a process pays ~0.55 s to import numba and load its cached code
+ * before the first placement (docs/perf.md); this library loads in milliseconds.
+ *
+ * Arrays are C-contiguous: double, or int64_t for indices. The module init makes it importable
+ * (its __file__ locates the library); it exports no Python functions.
+ */
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+#include <math.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+
+typedef int64_t i64;
+
+/* ------------------------------------------------------------------------------------------ */
+/* the smoother */
+
+static inline void corner(const double *pos, const i64 *quads, i64 q, int c, i64 *p, i64 *nx, i64 *pv,
+                          double *e1x, double *e1y, double *e2x, double *e2y) {
+    *p = quads[4 * q + c];
+    *nx = quads[4 * q + (c + 1) % 4];
+    *pv = quads[4 * q + (c + 3) % 4];
+    *e1x = pos[2 * *nx] - pos[2 * *p];
+    *e1y = pos[2 * *nx + 1] - pos[2 * *p + 1];
+    *e2x = pos[2 * *pv] - pos[2 * *p];
+    *e2y = pos[2 * *pv + 1] - pos[2 * *p + 1];
+}
+
+static inline void softmax_norm(const double *x, i64 off, i64 count, double *zmax, double *tot) {
+    double m = -INFINITY, t = 0.0;
+    for (i64 i = 0; i < count; i++) m = fmax(m, x[off + i]);
+    for (i64 i = 0; i < count; i++) t += exp(x[off + i] - m);
+    *zmax = m;
+    *tot = t;
+}
+
+typedef struct {
+    i64 V, F, nf, S;
+    const double *base; /* (V, 2) */
+    const i64 *quads;   /* (F, 4) */
+    const i64 *free_;   /* (nf,) */
+    const double *sa, *sb; /* (S, 2) */
+    const i64 *sp, *sv; /* (S + 1,), (R,) */
+} Problem;
+
+static void positions(const Problem *P, const double *x, double *pos) {
+    memcpy(pos, P->base, sizeof(double) * 2 * P->V);
+    for (i64 i = 0; i < P->nf; i++) {
+        pos[2 * P->free_[i]] = x[2 * i];
+        pos[2 * P->free_[i] + 1] = x[2 * i + 1];
+    }
+    i64 off = 2 * P->nf;
+    for (i64 s = 0; s < P->S; s++) {
+        i64 r = P->sp[s + 1] - P->sp[s];
+        double zmax, tot;
+        softmax_norm(x, off, r + 1, &zmax, &tot);
+        double u = 0.0, dx = P->sb[2 * s] - P->sa[2 * s], dy = P->sb[2 * s + 1] - P->sa[2 * s + 1];
+        for (i64 i = 0; i < r; i++) {
+            u += exp(x[off + i] - zmax) / tot;
+            i64 v = P->sv[P->sp[s] + i];
+            pos[2 * v] = P->sa[2 * s] + u * dx;
+            pos[2 * v + 1] = P->sa[2 * s + 1] + u * dy;
+        }
+        off += r + 1;
+    }
+}
+
+static inline double powsq(double x, double power, int squarings) {
+    if (squarings < 0) return pow(x, power);
+    for (int i = 0; i < squarings; i++) x = x * x;
+    return x;
+}
+
+/* energy at pos, gradient into grad (V, 2); INFINITY (grad zero) where not finite.
+   k, r, h: (F, 4) scratch */
+static double energy(const double *pos, const i64 *quads, i64 V, i64 F, double delta, double power, double *grad,
+                     double *k, double *r, double *h) {
+    double d2 = 4.0 * delta * delta, kmax = -INFINITY;
+    i64 p, nx, pv;
+    double e1x, e1y, e2x, e2y;
+    for (i64 q = 0; q < F; q++)
+        for (int c = 0; c < 4; c++) {
+            corner(pos, quads, q, c, &p, &nx, &pv, &e1x, &e1y, &e2x, &e2y);
+            double a = e1x * e2y - e1y * e2x;
+            double rr = sqrt(a * a + d2);
+            double hh = a >= 0 ? 0.5 * (a + rr) : d2 / (2.0 * (rr - a));
+            double N = e1x * e1x + e1y * e1y + e2x * e2x + e2y * e2y;
+            double kk = N / (2.0 * hh);
+            r[4 * q + c] = rr;
+            h[4 * q + c] = hh;
+            k[4 * q + c] = kk;
+            if (!(kk <= kmax)) kmax = kk; /* NaN propagates */
+        }
+    memset(grad, 0, sizeof(double) * 2 * V);
+    if (!(isfinite(kmax) && kmax > 0)) return INFINITY;
+    double C = 4.0 * (double)F;
+    int sq = -1;
+    for (int e = 0; e < 7; e++)
+        if (power == ldexp(1.0, e)) sq = e;
+    double acc = 0.0;
+    for (i64 i = 0; i < 4 * F; i++) acc += powsq(k[i] / kmax, power, sq);
+    double f = kmax * pow(acc / C, 1.0 / power);
+    if (!isfinite(f)) return INFINITY;
+    for (i64 q = 0; q < F; q++)
+        for (int c = 0; c < 4; c++) {
+            corner(pos, quads, q, c, &p, &nx, &pv, &e1x, &e1y, &e2x, &e2y);
+            i64 i = 4 * q + c;
+            double x = k[i] / f;
+            double dk = x > 0 ? powsq(x, power, sq) / x / C : pow(k[i] / f, power - 1.0) / C;
+            double gN = dk / (2.0 * h[i]);
+            double ga = -dk * k[i] / r[i];
+            double g1x = 2.0 * gN * e1x + ga * e2y, g1y = 2.0 * gN * e1y - ga * e2x;
+            double g2x = 2.0 * gN * e2x - ga * e1y, g2y = 2.0 * gN * e2y + ga * e1x;
+            grad[2 * p] -= g1x + g2x;
+            grad[2 * p + 1] -= g1y + g2y;
+            grad[2 * nx] += g1x;
+            grad[2 * nx + 1] += g1y;
+            grad[2 * pv] += g2x;
+            grad[2 * pv + 1] += g2y;
+        }
+    for (i64 v = 0; v < 2 * V; v++)
+        if (!isfinite(grad[v])) {
+            memset(grad, 0, sizeof(double) * 2 * V);
+            return INFINITY;
+        }
+    return f;
+}
+
+static void pull(const Problem *P, const double *x, const double *gpos, double *g, double *gu) {
+    for (i64 i = 0; i < P->nf; i++) {
+        g[2 * i] = gpos[2 * P->free_[i]];
+        g[2 * i + 1] = gpos[2 * P->free_[i] + 1];
+    }
+    i64 off = 2 * P->nf;
+    for (i64 s = 0; s < P->S; s++) {
+        i64 r = P->sp[s + 1] - P->sp[s];
+        double zmax, tot;
+        softmax_norm(x, off, r + 1, &zmax, &tot);
+        double dx = P->sb[2 * s] - P->sa[2 * s], dy = P->sb[2 * s + 1] - P->sa[2 * s + 1];
+        double u = 0.0, dot = 0.0;
+        for (i64 i = 0; i <= r; i++) gu[i] = 0.0;
+        for (i64 i = 0; i < r; i++) {
+            u += exp(x[off + i] - zmax) / tot;
+            i64 v = P->sv[P->sp[s] + i];
+            gu[i] = gpos[2 * v] * dx + gpos[2 * v + 1] * dy;
+            dot += gu[i] * u;
+        }
+        double tail = 0.0;
+        for (i64 i = r; i >= 0; i--) {
+            tail += gu[i];
+            g[off + i] = exp(x[off + i] - zmax) / tot * (tail - dot);
+        }
+        off += r + 1;
+    }
+}
+
+typedef struct {
+    double *pos, *gpos, *k, *r, *h, *gu;
+} Scratch;
+
+static int scratch_alloc(Scratch *W, i64 V, i64 F, i64 n) {
+    W->pos = malloc(sizeof(double) * 2 * (V > 0 ? V : 1));
+    W->gpos = malloc(sizeof(double) * 2 * (V > 0 ? V : 1));
+    W->k = malloc(sizeof(double) * 4 * (F > 0 ? F : 1));
+    W->r = malloc(sizeof(double) * 4 * (F > 0 ? F : 1));
+    W->h = malloc(sizeof(double) * 4 * (F > 0 ? F : 1));
+    W->gu = malloc(sizeof(double) * (n + 1));
+    return W->pos && W->gpos && W->k && W->r && W->h && W->gu;
+}
+
+static void scratch_free(Scratch *W) {
+    free(W->pos); free(W->gpos); free(W->k); free(W->r); free(W->h); free(W->gu);
+}
+
+static double objective(const Problem *P, const double *x, double delta, double power, double *g, Scratch *W, i64 n) {
+    positions(P, x, W->pos);
+    double f = energy(W->pos, P->quads, P->V, P->F, delta, power, W->gpos, W->k, W->r, W->h);
+    if (!isfinite(f)) {
+        memset(g, 0, sizeof(double) * n);
+        return INFINITY;
+    }
+    pull(P, x, W->gpos, g, W->gu);
+    return f;
+}
+
+static double dot(const double *a, const double *b, i64 n) {
+    double s = 0.0;
+    for (i64 i = 0; i < n; i++) s += a[i] * b[i];
+    return s;
+}
+
+/* L-BFGS from x (n,), in place; returns 0, or -1 when out of memory */
+static int lbfgs(const Problem *P, double *x, i64 n, double delta, double power, i64 maxiter, i64 mem, double ftol,
+                 double gtol, Scratch *W) {
+    double *g = malloc(sizeof(double) * n), *q = malloc(sizeof(double) * n), *xn = malloc(sizeof(double) * n),
+           *gn = malloc(sizeof(double) * n), *Sm = calloc(mem * n, sizeof(double)), *Ym = calloc(mem * n, sizeof(double)),
+           *crho = malloc(sizeof(double) * mem), *ca = malloc(sizeof(double) * mem);
+    int ok = g && q && xn && gn && Sm && Ym && crho && ca;
+    if (!ok) goto out;
+    double f = objective(P, x, delta, power, g, W, n);
+    if (!isfinite(f)) goto out;
+    i64 cnt = 0, head = 0;
+    for (i64 it = 0; it < maxiter; it++) {
+        double gmax = 0.0;
+        for (i64 i = 0; i < n; i++) gmax = fmax(gmax, fabs(g[i]));
+        if (gmax <= gtol) break;
+        memcpy(q, g, sizeof(double) * n);
+        for (i64 t = cnt - 1; t >= 0; t--) {
+            i64 row = (head + t) % mem;
+            double rho = 1.0 / dot(Ym + row * n, Sm + row * n, n);
+            double a = rho * dot(Sm + row * n, q, n);
+            for (i64 i = 0; i < n; i++) q[i] -= a * Ym[row * n + i];
+            crho[t] = rho;
+            ca[t] = a;
+        }
+        if (cnt > 0) {
+            i64 last = (head + cnt - 1) % mem;
+            double sc = dot(Sm + last * n, Ym + last * n, n) / dot(Ym + last * n, Ym + last * n, n);
+            for (i64 i = 0; i < n; i++) q[i] *= sc;
+        } else {
+            double sc = 0.05 / fmax(gmax, 1e-300);
+            for (i64 i = 0; i < n; i++) q[i] *= sc;
+        }
+        for (i64 t = 0; t < cnt; t++) {
+            i64 row = (head + t) % mem;
+            double b = ca[t] - crho[t] * dot(Ym + row * n, q, n);
+            for (i64 i = 0; i < n; i++) q[i] += Sm[row * n + i] * b;
+        }
+        double slope = -dot(g, q, n);
+        if (!(slope < 0)) {
+            cnt = 0;
+            head = 0;
+            double sc = 0.05 / fmax(gmax, 1e-300);
+            for (i64 i = 0; i < n; i++) q[i] = g[i] * sc;
+            slope = -dot(g, q, n);
+        }
+        double step = 1.0, fn;
+        for (;;) {
+            for (i64 i = 0; i < n; i++) xn[i] = x[i] - step * q[i];
+            fn = objective(P, xn, delta, power, gn, W, n);
+            if (isfinite(fn) && fn <= f + 1e-4 * step * slope) break;
+            step *= 0.5;
+            if (step < 1e-12) goto out;
+        }
+        double sy = 0.0, ss = 0.0;
+        for (i64 i = 0; i < n; i++) {
+            double si = xn[i] - x[i];
+            sy += si * (gn[i] - g[i]);
+            ss += si * si;
+        }
+        if (sy > 1e-12 * ss) {
+            i64 row;
+            if (cnt < mem) {
+                row = (head + cnt) % mem;
+                cnt++;
+            } else {
+                row = head;
+                head = (head + 1) % mem;
+            }
+            for (i64 i = 0; i < n; i++) {
+                Sm[row * n + i] = xn[i] - x[i];
+                Ym[row * n + i] = gn[i] - g[i];
+            }
+        }
+        int done = f - fn <= ftol * fmax(1.0, fabs(f));
+        memcpy(x, xn, sizeof(double) * n);
+        memcpy(g, gn, sizeof(double) * n);
+        f = fn;
+        if (done) break;
+    }
+out:
+    free(g); free(q); free(xn); free(gn); free(Sm); free(Ym); free(crho); free(ca);
+    return ok ? 0 : -1;
+}
+
+static void start(const Problem *P, const double *xy, double *x) {
+    for (i64 i = 0; i < P->nf; i++) {
+        x[2 * i] = xy[2 * P->free_[i]];
+        x[2 * i + 1] = xy[2 * P->free_[i] + 1];
+    }
+    i64 off = 2 * P->nf;
+    for (i64 s = 0; s < P->S; s++) {
+        i64 r = P->sp[s + 1] - P->sp[s];
+        double dx = P->sb[2 * s] - P->sa[2 * s], dy = P->sb[2 * s + 1] - P->sa[2 * s + 1];
+        double dd = dx * dx + dy * dy, prev = 0.0, tot = 0.0;
+        for (i64 i = 0; i < r; i++) {
+            i64 v = P->sv[P->sp[s] + i];
+            double u = ((xy[2 * v] - P->sa[2 * s]) * dx + (xy[2 * v + 1] - P->sa[2 * s + 1]) * dy) / dd;
+            x[off + i] = fmax(u - prev, 1e-12);
+            prev = u;
+        }
+        x[off + r] = fmax(1.0 - prev, 1e-12);
+        for (i64 i = 0; i <= r; i++) tot += x[off + i];
+        for (i64 i = 0; i <= r; i++) x[off + i] = log(x[off + i] / tot);
+        off += r + 1;
+    }
+}
+
+typedef struct {
+    i64 inv;
+    double lo, mean;
+} Key;
+
+static Key quality_key(const double *xy, const i64 *quads, i64 F) {
+    Key K = {0, INFINITY, 0.0};
+    double tot = 0.0, tiny = 2.2250738585072014e-308;
+    i64 p, nx, pv;
+    double e1x, e1y, e2x, e2y;
+    for (i64 q = 0; q < F; q++) {
+        double sj = INFINITY;
+        int bad = 0;
+        for (int c = 0; c < 4; c++) {
+            corner(xy, quads, q, c, &p, &nx, &pv, &e1x, &e1y, &e2x, &e2y);
+            double a = e1x * e2y - e1y * e2x;
+            if (a <= 0) bad = 1;
+            double ln = sqrt(e1x * e1x + e1y * e1y) * sqrt(e2x * e2x + e2y * e2y);
+            sj = fmin(sj, ln > tiny ? a / ln : 0.0);
+        }
+        sj = fmin(fmax(sj, -1.0), 1.0);
+        K.inv += bad;
+        K.lo = fmin(K.lo, sj);
+        tot += sj;
+    }
+    K.mean = tot / (double)F;
+    return K;
+}
+
+static int better(Key k, Key b, double tol) {
+    if (k.inv != b.inv) return k.inv < b.inv;
+    if (fabs(k.lo - b.lo) > tol) return k.lo > b.lo;
+    return k.mean > b.mean + tol;
+}
+
+/* embed.smooth: best positions into out (V, 2); returns 0, or -1 when out of memory */
+int jm_smooth(const double *xy, i64 V, const i64 *quads, i64 F, const i64 *free_, i64 nf, const double *sa,
+              const double *sb, const i64 *sp, const i64 *sv, i64 S, i64 iters, const double *powers, i64 npow,
+              i64 untangle_rounds, i64 mem, double ftol, double gtol, double *out) {
+    Problem P = {V, F, nf, S, xy, quads, free_, sa, sb, sp, sv};
+    i64 n = 2 * nf + (S ? sp[S] : 0) + S;
+    Scratch W;
+    double *cur = malloc(sizeof(double) * 2 * V), *x = malloc(sizeof(double) * (n > 0 ? n : 1));
+    int ok = scratch_alloc(&W, V, F, n) && cur && x;
+    if (!ok) goto out;
+    double area = 0.0;
+    for (i64 q = 0; q < F; q++) {
+        double a = 0.0;
+        for (int c = 0; c < 4; c++) {
+            i64 p0 = quads[4 * q + c], p1 = quads[4 * q + (c + 1) % 4];
+            a += xy[2 * p0] * xy[2 * p1 + 1] - xy[2 * p0 + 1] * xy[2 * p1];
+        }
+        area += fabs(0.5 * a);
+    }
+    if (area == 0.0) area = 1.0;
+    double eps = 1e-2 * area / (double)F, floor_ = 1e-4 * eps;
+    memcpy(out, xy, sizeof(double) * 2 * V);
+    memcpy(cur, xy, sizeof(double) * 2 * V);
+    Key bk = quality_key(out, quads, F);
+    i64 p, nx, pv;
+    double e1x, e1y, e2x, e2y;
+    for (i64 round = 0; round < untangle_rounds; round++) {
+        double s_min = INFINITY;
+        for (i64 q = 0; q < F; q++)
+            for (int c = 0; c < 4; c++) {
+                corner(cur, quads, q, c, &p, &nx, &pv, &e1x, &e1y, &e2x, &e2y);
+                s_min = fmin(s_min, e1x * e2y - e1y * e2x);
+            }
+        if (s_min >= eps) break;
+        double delta = sqrt(eps * (eps - s_min));
+        start(&P, cur, x);
+        if (lbfgs(&P, x, n, delta, 1.0, iters, mem, ftol, gtol, &W)) { ok = 0; goto out; }
+        positions(&P, x, cur);
+        Key k = quality_key(cur, quads, F);
+        if (better(k, bk, 1e-9)) {
+            memcpy(out, cur, sizeof(double) * 2 * V);
+            bk = k;
+        }
+    }
+    memcpy(cur, out, sizeof(double) * 2 * V);
+    for (i64 i = 0; i < npow; i++) {
+        start(&P, cur, x);
+        if (lbfgs(&P, x, n, floor_, powers[i], iters, mem, ftol, gtol, &W)) { ok = 0; goto out; }
+        positions(&P, x, cur);
+        Key k = quality_key(cur, quads, F);
+        if (better(k, bk, 1e-9)) {
+            memcpy(out, cur, sizeof(double) * 2 * V);
+            bk = k;
+        }
+    }
+out:
+    if (W.pos) scratch_free(&W);
+    free(cur); free(x);
+    return ok ? 0 : -1;
+}
+
+/* energy and gradient (V, 2) at pos (tests) */
+double jm_energy(const double *pos, i64 V, const i64 *quads, i64 F, double delta, double power, double *grad) {
+    double *k = malloc(sizeof(double) * 4 * (F > 0 ? F : 1)), *r = malloc(sizeof(double) * 4 * (F > 0 ? F : 1)),
+           *h = malloc(sizeof(double) * 4 * (F > 0 ? F : 1));
+    double f = (k && r && h) ? energy(pos, quads, V, F, delta, power, grad, k, r, h) : NAN;
+    free(k); free(r); free(h);
+    return f;
+}
+
+/* objective and gradient (n,) at the flat vector x (tests) */
+double jm_objective(const double *x, i64 n, const double *base, i64 V, const i64 *quads, i64 F, const i64 *free_,
+                    i64 nf, const double *sa, const double *sb, const i64 *sp, const i64 *sv, i64 S, double delta,
+                    double power, double *g) {
+    Problem P = {V, F, nf, S, base, quads, free_, sa, sb, sp, sv};
+    Scratch W;
+    double f = scratch_alloc(&W, V, F, n) ? objective(&P, x, delta, power, g, &W, n) : NAN;
+    scratch_free(&W);
+    return f;
+}
+
+/* L-BFGS from x (n,), in place (tests) */
+int jm_lbfgs(double *x, i64 n, const double *base, i64 V, const i64 *quads, i64 F, const i64 *free_, i64 nf,
+             const double *sa, const double *sb, const i64 *sp, const i64 *sv, i64 S, double delta, double power,
+             i64 maxiter, i64 mem, double ftol, double gtol) {
+    Problem P = {V, F, nf, S, base, quads, free_, sa, sb, sp, sv};
+    Scratch W;
+    int rc = scratch_alloc(&W, V, F, n) ? lbfgs(&P, x, n, delta, power, maxiter, mem, ftol, gtol, &W) : -1;
+    scratch_free(&W);
+    return rc;
+}
+
+/* ------------------------------------------------------------------------------------------ */
+/* Tutte: uniform weights, dense Cholesky; xy (V, 2) holds the boundary positions on entry and
+   all positions on exit; returns 0, -1 out of memory, -2 not positive definite */
+int jm_tutte(const i64 *quads, i64 F, i64 V, const i64 *boundary, i64 nb, double *xy) {
+    char *fixed = calloc(V, 1);
+    i64 *index = malloc(sizeof(i64) * V);
+    double *A = calloc(V * V, sizeof(double));
+    int rc = 0;
+    if (!fixed || !index || !A) { rc = -1; goto out0; }
+    for (i64 q = 0; q < F; q++)
+        for (int c = 0; c < 4; c++) {
+            i64 a = quads[4 * q + c], b = quads[4 * q + (c + 1) % 4];
+            A[a * V + b] = 1.0;
+            A[b * V + a] = 1.0;
+        }
+    for (i64 j = 0; j < nb; j++) fixed[boundary[j]] = 1;
+    i64 nf = 0;
+    for (i64 v = 0; v < V; v++) index[v] = fixed[v] ? -1 : nf++;
+    if (nf == 0) goto out0;
+    double *L = calloc(nf * nf, sizeof(double)), *rhs = calloc(2 * nf, sizeof(double));
+    if (!L || !rhs) { rc = -1; goto out1; }
+    for (i64 v = 0; v < V; v++) {
+        i64 i = index[v];
+        if (i < 0) continue;
+        double deg = 0.0;
+        for (i64 w = 0; w < V; w++) {
+            if (A[v * V + w] == 0.0) continue;
+            deg += A[v * V + w];
+            if (index[w] >= 0) L[i * nf + index[w]] = -A[v * V + w];
+            else { rhs[2 * i] += xy[2 * w]; rhs[2 * i + 1] += xy[2 * w + 1]; }
+        }
+        L[i * nf + i] = deg;
+    }
+    for (i64 j = 0; j < nf; j++) { /* Cholesky, lower triangle in place */
+        double d = L[j * nf + j];
+        for (i64 k = 0; k < j; k++) d -= L[j * nf + k] * L[j * nf + k];
+        if (!(d > 0)) { rc = -2; goto out1; }
+        d = sqrt(d);
+        L[j * nf + j] = d;
+        for (i64 i = j + 1; i < nf; i++) {
+            double s = L[i * nf + j];
+            for (i64 k = 0; k < j; k++) s -= L[i * nf + k] * L[j * nf + k];
+            L[i * nf + j] = s / d;
+        }
+    }
+    for (int c = 0; c < 2; c++) { /* L y = b, then L^T x = y */
+        for (i64 i = 0; i < nf; i++) {
+            double s = rhs[2 * i + c];
+            for (i64 k = 0; k < i; k++) s -= L[i * nf + k] * rhs[2 * k + c];
+            rhs[2 * i + c] = s / L[i * nf + i];
+        }
+        for (i64 i = nf - 1; i >= 0; i--) {
+            double s = rhs[2 * i + c];
+            for (i64 k = i + 1; k < nf; k++) s -= L[k * nf + i] * rhs[2 * k + c];
+            rhs[2 * i + c] = s / L[i * nf + i];
+        }
+    }
+    for (i64 v = 0; v < V; v++)
+        if (index[v] >= 0) { xy[2 * v] = rhs[2 * index[v]]; xy[2 * v + 1] = rhs[2 * index[v] + 1]; }
+out1:
+    free(L); free(rhs);
+out0:
+    free(fixed); free(index); free(A);
+    return rc;
+}
+
+/* ------------------------------------------------------------------------------------------ */
+/* alignment DPs */
+
+static inline i64 triple_index(const i64 *seq, i64 n, i64 j) {
+    return 16 * (seq[(j + 1) % n] - 2) + 4 * (seq[j] - 2) + (seq[(j - 1 + n) % n] - 2);
+}
+
+/* best utility of every orientation: out (2n,); rotation o, then reflected rotations */
+void jm_orientation_utilities(const i64 *codes, i64 m, const i64 *vals, i64 n, const double *table,
+                              const double *skip, double *out) {
+    i64 *seq = malloc(sizeof(i64) * n);
+    double *W = malloc(sizeof(double) * n * m), *D = malloc(sizeof(double) * (n + 1));
+    if (!seq || !W || !D) goto out;
+    for (i64 o = 0; o < 2 * n; o++) {
+        for (i64 j = 0; j < n; j++) seq[j] = o < n ? vals[(j + o) % n] : vals[n - 1 - (j + o - n) % n];
+        for (i64 j = 0; j < n; j++) {
+            i64 f = triple_index(seq, n, j);
+            for (i64 i = 0; i < m; i++) W[j * m + i] = table[codes[i] * 64 + f];
+        }
+        D[0] = 0.0;
+        for (i64 j = 1; j <= n; j++) D[j] = -INFINITY;
+        for (i64 i = 0; i < m; i++) {
+            double sk = skip[codes[i]];
+            for (i64 j = n; j >= 1; j--) {
+                double a = D[j] + sk, b = D[j - 1] + W[(j - 1) * m + i];
+                D[j] = a > b ? a : b;
+            }
+            D[0] = D[0] + sk;
+        }
+        out[o] = D[n];
+    }
+out:
+    free(seq); free(W); free(D);
+}
+
+/* depth-first walk over ties (n, S, m, m) from ends (e, 2); at most limit alignments into
+   out (limit, n); returns the count */
+static i64 walk(const char *ties, i64 n, i64 S, i64 m, const i64 *ends, i64 ne, i64 limit, i64 *out) {
+    i64 count = 0;
+    i64 *p = malloc(sizeof(i64) * n), *nxt = calloc(n, sizeof(i64));
+    if (!p || !nxt) goto done;
+    for (i64 e = 0; e < ne; e++) {
+        i64 s = ends[2 * e];
+        p[n - 1] = ends[2 * e + 1];
+        if (n == 1) {
+            if (count >= limit) goto done;
+            out[count * n] = p[0];
+            count++;
+            continue;
+        }
+        i64 j = n - 1;
+        nxt[j] = 0;
+        while (j < n) {
+            i64 found = -1;
+            const char *row = ties + ((j * S + s) * m + p[j]) * m;
+            for (i64 ip = nxt[j]; ip < m; ip++)
+                if (row[ip]) { found = ip; break; }
+            if (found < 0) { j++; continue; }
+            nxt[j] = found + 1;
+            p[j - 1] = found;
+            if (j - 1 == 0) {
+                if (count >= limit) goto done;
+                memcpy(out + count * n, p, sizeof(i64) * n);
+                count++;
+            } else {
+                j--;
+                nxt[j] = 0;
+            }
+        }
+    }
+done:
+    free(p); free(nxt);
+    return count;
+}
+
+/* per orientation seqs (O, n): best utility util (O,), least gap cost gap (O,), and its tied
+   alignments (at most limit each) into A (O * limit, n) with their orientation in own;
+   returns the number of alignments, or -1 when out of memory */
+i64 jm_candidates(const i64 *codes, i64 m, const i64 *seqs, i64 O, i64 n, const double *table, const double *between,
+                  const double *prefix, const double *suffix, const double *gq, const double *tt, double perimeter,
+                  double unit, i64 limit, double *util, double *gap, i64 *own, i64 *A) {
+    i64 K = 0;
+    double *E = malloc(sizeof(double) * n * m), *B = malloc(sizeof(double) * m), *Bn = malloc(sizeof(double) * m),
+           *tot = malloc(sizeof(double) * m);
+    i64 *starts = malloc(sizeof(i64) * m);
+    if (!E || !B || !Bn || !tot || !starts) { K = -1; goto out; }
+    for (i64 o = 0; o < O; o++) {
+        const i64 *seq = seqs + o * n;
+        util[o] = -INFINITY;
+        gap[o] = 0.0;
+        for (i64 j = 0; j < n; j++) {
+            i64 f = triple_index(seq, n, j);
+            for (i64 i = 0; i < m; i++) E[j * m + i] = table[codes[i] * 64 + f];
+        }
+        for (i64 i = 0; i < m; i++) B[i] = E[(n - 1) * m + i] + suffix[i];
+        for (i64 j = n - 2; j >= 0; j--) {
+            for (i64 i = 0; i < m; i++) {
+                double mx = -INFINITY;
+                for (i64 ip = 0; ip < m; ip++) {
+                    double v = between[i * m + ip] + B[ip];
+                    if (v > mx) mx = v;
+                }
+                Bn[i] = E[j * m + i] + mx;
+            }
+            memcpy(B, Bn, sizeof(double) * m);
+        }
+        double best = -INFINITY;
+        for (i64 i = 0; i < m; i++) if (prefix[i] + B[i] > best) best = prefix[i] + B[i];
+        if (!isfinite(best)) continue;
+        i64 S = 0;
+        for (i64 i = 0; i < m; i++) if (prefix[i] + B[i] == best) starts[S++] = i;
+        double *U = malloc(sizeof(double) * S * m), *G = calloc(S * m, sizeof(double)),
+               *Un = malloc(sizeof(double) * S * m), *Gn = malloc(sizeof(double) * S * m);
+        char *ties = calloc((size_t)n * S * m * m, 1);
+        i64 *ends = malloc(sizeof(i64) * 2 * S * m);
+        if (!U || !G || !Un || !Gn || !ties || !ends) {
+            free(U); free(G); free(Un); free(Gn); free(ties); free(ends);
+            K = -1;
+            goto out;
+        }
+        for (i64 k = 0; k < S * m; k++) U[k] = -INFINITY;
+        for (i64 s = 0; s < S; s++) U[s * m + starts[s]] = prefix[starts[s]] + E[starts[s]];
+        for (i64 j = 1; j < n; j++) {
+            for (i64 s = 0; s < S; s++)
+                for (i64 i = 0; i < m; i++) {
+                    double bu = -INFINITY;
+                    for (i64 ip = 0; ip < m; ip++) {
+                        double t = U[s * m + ip] + between[ip * m + i] + E[j * m + i];
+                        tot[ip] = t;
+                        if (t > bu) bu = t;
+                    }
+                    double gmin = INFINITY;
+                    for (i64 ip = 0; ip < m; ip++)
+                        if (tot[ip] == bu) {
+                            double tg = G[s * m + ip] + gq[ip * m + i];
+                            if (tg < gmin) gmin = tg;
+                        }
+                    Un[s * m + i] = bu;
+                    Gn[s * m + i] = gmin;
+                    if (isfinite(gmin))
+                        for (i64 ip = 0; ip < m; ip++)
+                            if (tot[ip] == bu && G[s * m + ip] + gq[ip * m + i] == gmin)
+                                ties[((j * S + s) * m + i) * m + ip] = 1;
+                }
+            memcpy(U, Un, sizeof(double) * S * m);
+            memcpy(G, Gn, sizeof(double) * S * m);
+        }
+        double g_min = INFINITY;
+        for (i64 s = 0; s < S; s++)
+            for (i64 i = 0; i < m; i++) {
+                double d = perimeter - tt[i] + tt[starts[s]];
+                double g = G[s * m + i] + nearbyint(d * d / unit);
+                G[s * m + i] = (U[s * m + i] + suffix[i] == best) ? g : INFINITY;
+                if (G[s * m + i] < g_min) g_min = G[s * m + i];
+            }
+        i64 ne = 0;
+        for (i64 s = 0; s < S; s++)
+            for (i64 i = 0; i < m; i++)
+                if (G[s * m + i] == g_min) { ends[2 * ne] = s; ends[2 * ne + 1] = i; ne++; }
+        util[o] = best;
+        gap[o] = g_min;
+        i64 got = walk(ties, n, S, m, ends, ne, limit, A + K * n);
+        for (i64 r = 0; r < got; r++) own[K + r] = o;
+        K += got;
+        free(U); free(G); free(Un); free(Gn); free(ties); free(ends);
+    }
+out:
+    free(E); free(B); free(Bn); free(tot); free(starts);
+    return K;
+}
+
+/* ------------------------------------------------------------------------------------------ */
+
+static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_ckernels",
+                                    "jaxmatch's compiled placement kernels (called through ctypes)", -1, NULL};
+
+PyMODINIT_FUNC PyInit__ckernels(void) { return PyModule_Create(&module); }
