@@ -5,6 +5,8 @@ hence the same smoothed placements (up to round-off)."""
 
 from __future__ import annotations
 
+import shutil
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -153,3 +155,10 @@ def test_c_and_numba_tutte_agree(k):
     a = kernels.tutte_dense(mesh.quads, mesh.n_vertices, mesh.boundary, bxy)
     b = _numba_smooth.tutte_dense(np.asarray(mesh.quads, np.int64), mesh.n_vertices, np.asarray(mesh.boundary, np.int64), bxy)
     np.testing.assert_allclose(a, b, atol=1e-12)
+
+
+@pytest.mark.skipif(not (shutil.which("cc") or shutil.which("gcc")), reason="no C compiler: numba is the expected backend")
+def test_the_c_library_was_built_where_a_compiler_exists():
+    """The extension is optional (installs without a compiler fall back to numba); where one
+    exists it must have been built, or the fast start-up silently disappears."""
+    assert kernels.BACKEND == "c"
