@@ -7,7 +7,8 @@
 Why two: loading numba and its cached code costs a process ~0.55 s before its first placement,
 the C library a few milliseconds (``docs/perf.md``); numba stays as the fallback where the
 package was installed without a C compiler. :data:`BACKEND` says which one this process uses;
-``JAXMATCH_PLACEMENT_KERNELS=numba`` forces numba.
+``JAXMATCH_PLACEMENT_KERNELS=numba`` forces numba. After editing ``_ckernels.c``, rebuild it with
+``.venv/bin/python -m pip install -e .`` (an editable install puts the library next to it).
 
 Functions (arrays C-contiguous; ``float64`` or ``int64``):
 
