@@ -2,13 +2,20 @@
 
 from __future__ import annotations
 
-import os
+import subprocess
+import sys
+import textwrap
 
 import pytest
 
-from jaxmatch.parallel import available_cpus, can_fork, ordered_map
+from jaxmatch.parallel import available_cpus, ordered_map
 
-needs_fork = pytest.mark.skipif(not can_fork(), reason="no fork here (or JAX already imported in this process)")
+
+def in_fresh_python(code: str) -> None:
+    """Run ``code`` in a new interpreter (where JAX is not loaded, so the pool is used; other
+    test modules of this process may have imported it); it fails by raising."""
+    r = subprocess.run([sys.executable, "-c", textwrap.dedent(code)], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
 
 
 @pytest.mark.parametrize("jobs", [1, 2, 3])
@@ -17,12 +24,16 @@ def test_results_come_in_input_order(jobs):
     assert list(ordered_map(lambda x: x * x, items, jobs)) == [x * x for x in items]
 
 
-@needs_fork
 def test_workers_are_other_processes_that_inherit_the_callers_state():
-    big = {"loaded": list(range(1000))}  # a closure over state the parent loaded: inherited, not pickled
-    pids = list(ordered_map(lambda i: (os.getpid(), big["loaded"][i]), list(range(8)), 2))
-    assert [v for _, v in pids] == list(range(8))
-    assert os.getpid() not in {p for p, _ in pids}
+    in_fresh_python("""
+        import os
+        from jaxmatch.parallel import can_fork, ordered_map
+        assert can_fork()
+        big = {"loaded": list(range(1000))}  # a closure over state the parent loaded: inherited, not pickled
+        pids = list(ordered_map(lambda i: (os.getpid(), big["loaded"][i]), list(range(8)), 2))
+        assert [v for _, v in pids] == list(range(8))
+        assert os.getpid() not in {p for p, _ in pids}
+    """)
 
 
 @pytest.mark.parametrize("jobs", [1, 2])
@@ -46,7 +57,10 @@ def test_initializer_runs_in_each_worker_not_here():
     assert available_cpus() >= 1
 
 
-@needs_fork
 def test_warm_first_runs_the_first_item_here():
-    pids = list(ordered_map(lambda i: os.getpid(), list(range(5)), 2, warm_first=True))
-    assert pids[0] == os.getpid() and os.getpid() not in pids[1:]
+    in_fresh_python("""
+        import os
+        from jaxmatch.parallel import ordered_map
+        pids = list(ordered_map(lambda i: os.getpid(), list(range(5)), 2, warm_first=True))
+        assert pids[0] == os.getpid() and os.getpid() not in pids[1:]
+    """)
