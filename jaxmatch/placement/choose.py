@@ -431,13 +431,7 @@ def corner_boundary(shape: Shape, annotation: Annotation, alignment: np.ndarray,
     elif snap:
         corner_pts = np.flatnonzero(codes != S_CODE)
         taken = set(pin.values())
-        for q, ja in enumerate(J):
-            jb = J[(q + 1) % J.size]
-            r = (jb - ja - 1) % n if J.size > 1 else n - 1
-            ta = tt[al[ja]]
-            tb = tt[al[jb]] if J.size > 1 else ta + per
-            if tb <= ta:
-                tb += per
+        for ja, jb, r, ta, tb in _runs(J, lambda j: al[j], tt, n, per):
             skipped = [(c, tt[c] + (per if tt[c] <= ta else 0.0)) for c in corner_pts if c not in taken]
             skipped = sorted((tc, c) for c, tc in skipped if ta < tc < tb)
             if 0 < len(skipped) <= r:
@@ -450,13 +444,7 @@ def corner_boundary(shape: Shape, annotation: Annotation, alignment: np.ndarray,
         P = np.array(sorted(pin))
         L = cum[-1]
         loop3 = (np.concatenate([cum[:-1], cum[:-1] + L, cum[:-1] + 2 * L]), np.concatenate([pts, pts, pts]))
-        for q, ja in enumerate(P):
-            jb = P[(q + 1) % P.size]
-            r = (jb - ja - 1) % n if P.size > 1 else n - 1
-            ta = tt[pin[ja]]
-            tb = tt[pin[jb]] if P.size > 1 else ta + per
-            if tb <= ta:
-                tb += per
+        for ja, jb, r, ta, tb in _runs(P, lambda j: pin[j], tt, n, per):
             u[ja] = ta
             js = (ja + 1 + np.arange(r)) % n
             u[js] = ta + (tb - ta) * (np.arange(1, r + 1) / (r + 1))
@@ -466,6 +454,22 @@ def corner_boundary(shape: Shape, annotation: Annotation, alignment: np.ndarray,
     for j, c in pin.items():
         xy[j] = annotation.positions[c]  # corners exactly
     return Boundary(u, xy, tuple(groups), missed_corners(annotation, xy))
+
+
+def _runs(J: np.ndarray, point_of, tt: np.ndarray, n: int, per: float):
+    """The runs of boundary vertices between consecutive pinned vertices ``J`` (sorted, of ``n``;
+    vertex ``j`` stands on point ``point_of(j)``): ``(ja, jb, r, ta, tb)`` per pinned vertex ``ja``,
+    with the next pinned vertex ``jb``, the ``r`` vertices strictly between, and the arc-length
+    parameters ``ta < tb`` of the two (``tb`` unwrapped past the perimeter ``per``; with one
+    pinned vertex the run is the whole loop)."""
+    for q, ja in enumerate(J):
+        jb = J[(q + 1) % len(J)]
+        r = (jb - ja - 1) % n if len(J) > 1 else n - 1
+        ta = tt[point_of(ja)]
+        tb = tt[point_of(jb)] if len(J) > 1 else ta + per
+        if tb <= ta:
+            tb += per
+        yield ja, jb, r, ta, tb
 
 
 def _snap(even: np.ndarray, tc: np.ndarray) -> list[int]:
