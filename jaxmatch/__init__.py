@@ -43,6 +43,11 @@ _API = {
     "Match": "jaxmatch.scoring.rank",
     "Placement": "jaxmatch.placement.embed",
     "MeshChoice": "jaxmatch.placement.choose",
+    # the meshing pipeline (the front door)
+    "mesh": "jaxmatch.meshing.pipeline",
+    "load_region": "jaxmatch.meshing.pipeline",
+    "QuadMesh": "jaxmatch.meshing.result",
+    "Quality": "jaxmatch.defaults",
     # sizes, concave shapes, layouts
     "refine_mesh": "jaxmatch.api",
     "mesh_concave": "jaxmatch.api",

@@ -22,7 +22,40 @@ DEFAULT_TIE_BREAK = "geometry"
 DEFAULT_PRUNE = True
 """Pruned top-K search (``--exhaustive`` turns it off; the ranking is the same)."""
 
+DEFAULT_DIVISIONS = 32
+"""``jaxmatch mesh`` without ``--size``: the target edge length is the outer perimeter / this."""
+
 DEFAULT_BAND = 0.1
 """The quality band of ``jaxmatch mesh`` (``--band``): a mesh whose utility is within this
 fraction of the ranked mesh's and that places with min scaled Jacobian >= 0.3 is placed
 instead of one that does not (:func:`jaxmatch.placement.choose.choose_mesh`; 0: off)."""
+
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class Quality:
+    """The meshing quality policy: every floor and band, defined once.
+
+    min_sj: quality floor of ``mesh --template`` (``--min-quality``; smallest acceptable min
+        scaled Jacobian, in ``[-1, 1]``).
+    good_sj: a placed or refined mesh "of good quality" reaches this min scaled Jacobian; below it
+        templates are passed over (refinement, layouts) and the quality band looks further.
+    max_edge_ratio: largest acceptable longest/shortest edge of a quad (``--max-edge-ratio``).
+    band: the utility band of ``mesh --template`` (``--band``, a fraction of the utility).
+    area_tol: a mesh keeps the region's area when ``|mesh area / region area - 1| <= area_tol``.
+    size_tol: a side conforms to the size ``h`` when its edge count ``n`` and length ``L`` satisfy
+        ``|n - L / h| <= max(1, size_tol * L / h)`` (one edge of rounding, or this fraction).
+    """
+
+    min_sj: float = 0.2
+    good_sj: float = 0.3
+    max_edge_ratio: float = 8.0
+    band: float = DEFAULT_BAND
+    area_tol: float = 0.01
+    size_tol: float = 0.25
+
+
+QUALITY = Quality()
+"""The default policy (:class:`Quality`)."""

@@ -31,7 +31,7 @@ from typing import TYPE_CHECKING, Callable, Iterable, NamedTuple, Sequence
 
 import numpy as np
 
-from jaxmatch.defaults import DEFAULT_BAND
+from jaxmatch.defaults import QUALITY
 from jaxmatch.errors import InputError
 from jaxmatch.catalogue.mesh import boundary_valences, mesh_valences
 from jaxmatch.placement.embed import Placement, edge_ratios, exact_paths, inverted_mask, oriented_boundary, place, quality
@@ -812,10 +812,10 @@ def geometry_tie_breaker(catalogue: Catalogue, lattice=None, *, smooth_iters: in
 # ---------------------------------------------------------------------------------------------
 # what counts as a good placement
 
-MIN_QUALITY = 0.2
+MIN_QUALITY = QUALITY.min_sj
 """Default floor on the min scaled Jacobian for a placement to count as good (``--min-quality``)."""
 
-GOOD_QUALITY = 0.3
+GOOD_QUALITY = QUALITY.good_sj
 """Min scaled Jacobian a placed mesh should reach (the placement table's target). When the
 mesh :func:`choose_mesh` would place falls short, a mesh of nearly the same utility that
 reaches it is placed instead (:data:`UTILITY_BAND`)."""
@@ -824,12 +824,12 @@ REORIENT_MESHES = 8
 """The quality band's last resort (other orientations, :func:`choose_mesh`) looks at most at
 this many meshes of the band."""
 
-UTILITY_BAND = DEFAULT_BAND
+UTILITY_BAND = QUALITY.band
 """:func:`choose_mesh`'s quality band (``jaxmatch.defaults.DEFAULT_BAND``): meshes whose utility is at most this fraction (of the
 requested mesh's utility's magnitude) below it count as equally good fits for the purpose of
 placing a mesh of good quality (:data:`GOOD_QUALITY`). 0 places the requested mesh as ranked."""
 
-MAX_EDGE_RATIO = 8.0
+MAX_EDGE_RATIO = QUALITY.max_edge_ratio
 """Default ceiling on the longest/shortest edge ratio of any quad for a placement to count as
 good: a min scaled Jacobian near 1 does not catch a long thin quad (a 1 x 13 rectangle)."""
 

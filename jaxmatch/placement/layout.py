@@ -49,6 +49,7 @@ from typing import TYPE_CHECKING, Mapping, NamedTuple, Sequence
 
 import numpy as np
 
+from jaxmatch.defaults import QUALITY
 from jaxmatch.errors import InputError
 from jaxmatch.files import read_limited
 from jaxmatch.placement.embed import inverted_mask, polygon_area, quad_areas, quality, smooth
@@ -106,7 +107,7 @@ folds)."""
 ROUNDS = 8
 """Largest number of (integer program, refine) rounds :func:`mesh_layout` runs."""
 
-MIN_SJ = 0.3
+MIN_SJ = QUALITY.good_sj
 """A refined patch whose minimum scaled Jacobian is below this (or that has inverted quads)
 gets its next template in the next round of :func:`mesh_layout` (the best round is kept)."""
 

@@ -45,6 +45,7 @@ import scipy.sparse.linalg
 from scipy.optimize import Bounds, LinearConstraint, milp
 
 from jaxmatch.catalogue.mesh import edges
+from jaxmatch.defaults import QUALITY
 from jaxmatch.errors import InputError
 from jaxmatch.placement.embed import Placement, inverted_mask, polygon_area, quad_areas, quality, smooth
 from jaxmatch.shape import Shape
@@ -113,7 +114,7 @@ TEMPLATE_SJ_MIN = 0.01
 about 180 degrees (e.g. a valence-2 boundary vertex on a straight side) stays one in every
 refinement and ends up inverted or degenerate."""
 
-SJ_FLOOR = 0.3
+SJ_FLOOR = QUALITY.good_sj
 """Minimum scaled Jacobian under which a large refined mesh is smoothed."""
 
 SIZE_ROUNDS = 6

@@ -1,0 +1,94 @@
+"""Each strategy's own mesh object turned into the one :class:`~jaxmatch.meshing.result.QuadMesh`.
+
+``from_layout`` takes a :class:`~jaxmatch.placement.layout.LayoutMesh` (a single patch, a
+decomposition or a layout file), ``from_placement`` a placed catalogue template
+(:class:`~jaxmatch.placement.embed.Placement`, the paper's answer), ``from_refined`` a refined
+template of a shape without two corners (:class:`~jaxmatch.placement.refine.RefinedMesh`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from jaxmatch.meshing.result import QuadMesh
+from jaxmatch.shape import Shape
+
+__all__ = ["as_quadmesh", "from_layout", "from_placement", "from_refined"]
+
+
+def _loop_edges(loop: np.ndarray) -> np.ndarray:
+    loop = np.asarray(loop, np.int64)
+    return np.stack([loop, np.roll(loop, -1)], axis=1)
+
+
+def _shape_corners(shape: Shape) -> np.ndarray:
+    return shape.to_user(shape.points[shape.corners]) if shape.n_corners else np.zeros((0, 2))
+
+
+def from_layout(lm, *, size: float | None = None, corners: np.ndarray | None = None) -> QuadMesh:
+    """A :class:`~jaxmatch.placement.layout.LayoutMesh` as a :class:`QuadMesh`.
+
+    corners: ``(C, 2)`` the region's corners (default: the layout points marked as corners on
+    the outer boundary)."""
+    lay = lm.layout
+    if corners is None:
+        outer_pts = np.unique(np.concatenate([lm.sides.chains[s] for s in np.flatnonzero(lm.sides.outer)]))
+        corners = lay.points[outer_pts[lay.corner[outer_pts]]]
+    line_sets = {"boundary": _loop_edges(lm.outer)}
+    for name, ids in zip(lm.sides.names, lm.side_vertices):
+        line_sets[f"side {name}"] = np.stack([ids[:-1], ids[1:]], axis=1)
+    return QuadMesh(xy=lm.xy, quads=np.asarray(lm.quads, np.int64), patch=np.asarray(lm.patch, np.int64),
+                    line_sets=line_sets, region_area=float(lm.region_area), corners=np.asarray(corners, np.float64),
+                    size=size, side_lengths=dict(zip(lm.sides.names, map(float, lm.sides.lengths))),
+                    side_counts=dict(zip(lm.sides.names, map(int, lm.counts))), templates=tuple(lm.templates))
+
+
+def from_placement(shape: Shape, pl, mesh_id: str = "") -> QuadMesh:
+    """A placed catalogue template (:class:`~jaxmatch.placement.embed.Placement`)."""
+    quads = np.asarray(pl.mesh.quads, np.int64)
+    return QuadMesh(xy=np.asarray(pl.xy, np.float64), quads=quads, patch=np.zeros(len(quads), np.int64),
+                    line_sets={"boundary": _loop_edges(pl.mesh.boundary)}, region_area=float(pl.region_area),
+                    corners=_shape_corners(shape), templates=(mesh_id,) if mesh_id else ())
+
+
+def from_refined(shape: Shape, rm, *, size: float | None = None) -> QuadMesh:
+    """A refined template (:class:`~jaxmatch.placement.refine.RefinedMesh`) of ``shape``."""
+    from jaxmatch.placement.refine import side_lengths
+
+    quads = np.asarray(rm.quads, np.int64)
+    lengths = side_lengths(shape)
+    names = [f"{i}" for i in range(len(lengths))]
+    line_sets = {"boundary": _loop_edges(rm.boundary)}
+    for name, ids in zip(names, rm.side_vertices):
+        ids = np.asarray(ids, np.int64)
+        line_sets[f"side {name}"] = np.stack([ids[:-1], ids[1:]], axis=1)
+    return QuadMesh(xy=np.asarray(rm.xy, np.float64), quads=quads, patch=np.zeros(len(quads), np.int64),
+                    line_sets=line_sets, region_area=float(rm.region_area), corners=_shape_corners(shape), size=size,
+                    side_lengths=dict(zip(names, map(float, lengths))),
+                    side_counts=dict(zip(names, map(int, rm.counts))), templates=(rm.template.mesh_id,))
+
+
+def as_quadmesh(obj) -> QuadMesh:
+    """Any mesh result of jaxmatch as a :class:`QuadMesh` (for writers and pictures): a
+    QuadMesh as is, a LayoutMesh, a Placement (corners unknown), a RefinedMesh, a
+    RefineChoice or MeshChoice (their mesh). Raises TypeError for anything else."""
+    if isinstance(obj, QuadMesh):
+        return obj
+    for attr in ("placement",):  # MeshChoice
+        if hasattr(obj, attr) and hasattr(obj, "match"):
+            obj = getattr(obj, attr)
+    if hasattr(obj, "template") and hasattr(obj, "mesh") and hasattr(obj, "passed_over"):  # RefineChoice
+        obj = obj.mesh
+    if hasattr(obj, "layout") and hasattr(obj, "sides"):
+        return from_layout(obj)
+    if hasattr(obj, "mesh") and hasattr(obj, "alignment"):
+        quads = np.asarray(obj.mesh.quads, np.int64)
+        return QuadMesh(xy=np.asarray(obj.xy, np.float64), quads=quads, patch=np.zeros(len(quads), np.int64),
+                        line_sets={"boundary": _loop_edges(obj.mesh.boundary)}, region_area=float(obj.region_area),
+                        corners=np.zeros((0, 2)))
+    if hasattr(obj, "side_vertices") and hasattr(obj, "mult"):
+        quads = np.asarray(obj.quads, np.int64)
+        return QuadMesh(xy=np.asarray(obj.xy, np.float64), quads=quads, patch=np.zeros(len(quads), np.int64),
+                        line_sets={"boundary": _loop_edges(obj.boundary)}, region_area=float(obj.region_area),
+                        corners=np.zeros((0, 2)), templates=(obj.template.mesh_id,))
+    raise TypeError(f"not a jaxmatch mesh: {type(obj).__name__}")

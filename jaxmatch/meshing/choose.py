@@ -1,0 +1,71 @@
+"""The one choice rule: which of several meshes of the same region is better.
+
+:func:`mesh_key` orders candidates (smaller is better) by the rules of :data:`RULES`, in order:
+
+1. no fold: no inverted quad;
+2. corners kept: every corner of the region is a mesh vertex;
+3. area kept: ``|mesh area / region area - 1| <= Quality.area_tol``;
+4. quality floor: min scaled Jacobian ``>= Quality.good_sj``;
+5. size conformity: fewer sides whose edge count is off ``length / h`` by more than
+   ``max(1, Quality.size_tol * length / h)`` (with a target size);
+6. irregular vertices: fewer irregular internal vertices beyond Euler's lower bound for the
+   boundary valences used (:func:`jaxmatch.meshing.result.irregular_bound`);
+7. quality: higher min scaled Jacobian, in steps of :data:`SJ_STEP`;
+8. fewer patches;
+9. higher mean scaled Jacobian (2 decimals);
+10. the order tried (single template first).
+
+:func:`choose` names the first rule on which the winner beats the runner-up.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Sequence
+
+from jaxmatch.defaults import QUALITY, Quality
+from jaxmatch.meshing.result import Candidate, QuadMesh
+
+__all__ = ["RULES", "SJ_STEP", "choose", "mesh_key"]
+
+RULES = ("no fold", "corners kept", "area kept", "quality floor", "size conformity", "irregular vertices",
+         "min scaled Jacobian", "fewer patches", "mean scaled Jacobian", "order tried")
+"""The rules of :func:`mesh_key`, in order (the last one: the earlier candidate)."""
+
+SJ_STEP = 0.1
+"""Min scaled Jacobians within one step of this size count as equal (rule 7): a mesh with
+fewer irregular vertices or patches is not given up for a few hundredths of quality."""
+
+
+def mesh_key(m: QuadMesh, order: int = 0, quality: Quality = QUALITY) -> tuple:
+    """The sort key of :data:`RULES` for mesh ``m`` (``order``: its place among the candidates)."""
+    sj = m.min_scaled_jacobian
+    area = m.area_ratio
+    return (
+        m.inverted > 0,
+        m.missed_corners.shape[0] > 0,
+        not (abs(area - 1.0) <= quality.area_tol),
+        not (sj >= quality.good_sj),
+        len(m.sides_off_size(quality.size_tol)),
+        int(m.irregular.size) - m.irregular_bound,
+        -math.floor(sj / SJ_STEP + 1e-9) if math.isfinite(sj) else math.inf,
+        m.n_patches,
+        -round(m.mean_scaled_jacobian, 2),
+        order,
+    )
+
+
+def choose(candidates: Sequence[Candidate], quality: Quality = QUALITY) -> QuadMesh:
+    """The best mesh of ``candidates`` by :func:`mesh_key`, labelled with the rule that decided
+    (the first rule on which it beats the runner-up), the runner-up's name and every candidate.
+    Raises ValueError when no candidate has a mesh."""
+    scored = [(mesh_key(c.mesh, i, quality), c) for i, c in enumerate(candidates) if c.mesh is not None]
+    if not scored:
+        raise ValueError("no candidate has a mesh")
+    scored.sort(key=lambda t: t[0])
+    best_key, best = scored[0]
+    if len(scored) == 1:
+        return best.mesh.with_choice(best.name, "", None, candidates)
+    second_key, second = scored[1]
+    rule = next(RULES[i] for i, (a, b) in enumerate(zip(best_key, second_key)) if a != b)
+    return best.mesh.with_choice(best.name, rule, second.name, candidates)

@@ -1,0 +1,277 @@
+"""The one meshing pipeline: request -> strategies -> one solve each -> one choice rule -> one
+result type.
+
+:func:`mesh` is the front door (``jaxmatch.mesh``; ``jaxmatch mesh`` calls it):
+
+* a **layout** (a :class:`~jaxmatch.placement.layout.Layout` or a layout JSON file) is meshed as
+  that layout;
+* a **shape** with a target edge length ``size`` (default: perimeter / :data:`DEFAULT_DIVISIONS`)
+  is meshed as one template (``"single"``) and as each decomposition of
+  :data:`~jaxmatch.placement.decompose.STRATEGIES`; every candidate is meshed by the same solve
+  (:func:`~jaxmatch.placement.layout.mesh_layout`: templates per patch, one integer program for
+  every side count, refinement, placement, merging, smoothing) and the best is kept by the one
+  rule of :mod:`jaxmatch.meshing.choose`;
+* a shape with ``sides`` (edges per side) is meshed as one template meeting them exactly;
+* ``template=True`` gives the paper's answer: the best-ranked catalogue mesh placed as is
+  (:func:`jaxmatch.placement.choose.choose_mesh`).
+
+Every case returns a :class:`~jaxmatch.meshing.result.QuadMesh`.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import time
+from pathlib import Path
+from typing import Callable, Mapping, Sequence
+
+import numpy as np
+
+from jaxmatch.defaults import DEFAULT_DIVISIONS, DEFAULT_LATTICE, QUALITY, Quality
+from jaxmatch.errors import InputError
+from jaxmatch.meshing.build import from_layout, from_placement, from_refined
+from jaxmatch.meshing.choose import choose
+from jaxmatch.meshing.result import Candidate, QuadMesh
+from jaxmatch.shape import DEFAULT_CORNER_ANGLE, Shape
+
+__all__ = ["SINGLE", "default_size", "load_region", "mesh", "strategy_names"]
+
+SINGLE = "single"
+"""Name of the one-template candidate."""
+
+
+def strategy_names() -> tuple[str, ...]:
+    """Every candidate strategy, in the order tried: ``"single"``, then the decompositions."""
+    from jaxmatch.placement.decompose import STRATEGIES
+
+    return (SINGLE,) + tuple(STRATEGIES)
+
+
+def default_size(region) -> float:
+    """Perimeter of the region's outer boundary / :data:`DEFAULT_DIVISIONS` (user units)."""
+    if isinstance(region, Shape):
+        pts = region.user_points
+    else:  # a Layout: its outer sides
+        from jaxmatch.placement.layout import layout_sides
+
+        sides = layout_sides(region)
+        return float(np.sum(sides.lengths[sides.outer])) / DEFAULT_DIVISIONS
+    return float(np.sum(np.linalg.norm(np.roll(pts, -1, axis=0) - pts, axis=1))) / DEFAULT_DIVISIONS
+
+
+def load_region(path: str | os.PathLike, *, corner_angle: float = DEFAULT_CORNER_ANGLE):
+    """A shape or a layout from a file: a JSON object with ``"patches"`` is a layout
+    (:func:`jaxmatch.placement.layout.parse_layout`), anything else a shape of any format
+    jaxmatch reads (``file#element`` chooses an element). Raises :class:`InputError` naming the
+    file."""
+    from jaxmatch.io.readers import load_shape
+
+    p = Path(path)
+    if p.suffix.lower() == ".json" and p.is_file():
+        from jaxmatch.files import read_limited
+        from jaxmatch.placement.layout import MAX_BYTES, parse_layout
+
+        raw = read_limited(p, MAX_BYTES, "shape file")
+        try:
+            doc = json.loads(raw.decode("utf-8-sig"))
+        except (ValueError, UnicodeDecodeError):
+            doc = None
+        if isinstance(doc, dict) and "patches" in doc:
+            return parse_layout(raw, str(path))
+    return load_shape(path, corner_angle=corner_angle)
+
+
+def _check_size(size) -> float:
+    try:
+        h = float(size)
+    except (TypeError, ValueError):
+        h = math.nan
+    if not (h > 0 and math.isfinite(h)):
+        raise InputError(f"element size must be a positive number, got {size!r}")
+    return h
+
+
+def _side_ids(shape: Shape, layout) -> list[int]:
+    """Layout side id of each user side ``i`` of ``shape`` (corner ``i`` to ``i + 1`` in the
+    file's order) in :func:`~jaxmatch.placement.decompose.single_patch`'s layout."""
+    from jaxmatch.placement.layout import layout_sides
+    from jaxmatch.placement.refine import _side_frame
+
+    sides = layout_sides(layout)
+    ends = {(int(c[0]), int(c[-1])): s for s, c in enumerate(sides.chains)}
+    c = shape.corners
+    out = []
+    for j, _ in _side_frame(shape):
+        a, b = int(c[j]), int(c[(j + 1) % len(c)])
+        s = ends.get((a, b), ends.get((b, a)))
+        if s is None:  # pragma: no cover - single_patch keeps every corner as a node
+            raise ValueError(f"side {a}-{b} is not a layout side")
+        out.append(s)
+    return out
+
+
+def mesh(region, *, size: float | None = None, sides: Sequence[int] | None = None, template: bool = False,
+         catalogue=None, lattice=DEFAULT_LATTICE, strategies: Sequence[str] | None = None,
+         quality: Quality = QUALITY, corner_angle: float = DEFAULT_CORNER_ANGLE, budget_s: float | None = None,
+         progress: Callable[[int, int, str], None] | None = None, template_cache: dict | None = None,
+         **template_options) -> QuadMesh:
+    """Mesh a region: the one front door.
+
+    Args:
+      region: a :class:`~jaxmatch.shape.Shape`, a :class:`~jaxmatch.placement.layout.Layout`,
+        or a path (a shape file of any format, or a layout JSON file).
+      size: target edge length (user units); default perimeter / :data:`DEFAULT_DIVISIONS`.
+      sides: edges per user side (side ``i`` from corner ``i`` to ``i + 1``, file order), met
+        exactly by one template; excludes ``size``.
+      template: the paper's answer instead: the best-ranked catalogue mesh placed as is
+        (``template_options``: ``internal``, ``rank``, ``points``, ``tie_break``,
+        ``require_valid``, ``min_quality``, ``max_edge_ratio``, ``band``, ``walk``).
+      catalogue, lattice: None / a path / the object (default: shipped catalogue, ``"fine"``).
+      strategies: candidate names (default all of :func:`strategy_names`).
+      quality: the policy (:class:`jaxmatch.defaults.Quality`).
+      budget_s: stop trying further candidates after this many seconds once one valid mesh exists.
+      progress: ``progress(done, total, name)`` after each candidate.
+      template_cache: dict shared between calls on the same shape (templates per patch).
+
+    Returns:
+      a :class:`~jaxmatch.meshing.result.QuadMesh`; ``chosen``, ``rule``, ``runner_up`` and
+      ``tried`` say how it was chosen.
+
+    Raises:
+      InputError: a bad request (unreadable file, bad size, counts no template meets: the
+        message names the nearest feasible counts), or no candidate could be meshed.
+    """
+    from jaxmatch.api import _lattice, load_catalogue
+    from jaxmatch.placement.layout import Layout
+
+    if isinstance(region, (str, os.PathLike)):
+        region = load_region(region, corner_angle=corner_angle)
+    if sides is not None and size is not None:
+        raise InputError("give either sides or size, not both")
+    if size is not None:
+        size = _check_size(size)
+    cat, lat = load_catalogue(catalogue), _lattice(lattice)
+    if isinstance(region, Layout):
+        if template:
+            raise InputError("a layout is meshed patch by patch; the single template (template=True) is for shapes")
+        return _mesh_layout_file(region, cat, lat, size, sides)
+    if not isinstance(region, Shape):
+        raise TypeError(f"region must be a Shape, a Layout or a path, got {type(region).__name__}")
+    if template:
+        if size is not None or sides is not None:
+            raise InputError("the single template is placed as is; it takes no size or sides")
+        return _mesh_template(region, cat, lat, template_options)
+    if template_options:
+        raise TypeError(f"unexpected options without template=True: {', '.join(sorted(template_options))}")
+    if sides is not None:
+        return _mesh_sides(region, cat, lat, sides)
+    h = size if size is not None else default_size(region)
+    return _mesh_size(region, cat, lat, h, strategies, quality, budget_s, progress, template_cache)
+
+
+def _mesh_layout_file(layout, cat, lat, size, sides) -> QuadMesh:
+    from jaxmatch.placement.layout import mesh_layout
+
+    if sides is not None:
+        raise InputError("a layout takes edge counts per side in its file (\"sides\") or as counts=; not sides")
+    h = size if size is not None or layout.requested else default_size(layout)
+    lm = mesh_layout(layout, cat, lat, size=h)
+    return from_layout(lm, size=h).with_choice("layout", "", None, ())
+
+
+def _mesh_template(shape, cat, lat, options) -> QuadMesh:
+    from jaxmatch.api import check_sizes
+    from jaxmatch.placement.choose import choose_mesh
+
+    opts = dict(options)
+    if "internal" in opts:
+        opts["internal"] = check_sizes(cat, opts["internal"])
+    choice = choose_mesh(shape, cat, lat, **opts)
+    m = from_placement(shape, choice.placement, choice.match.mesh_id)
+    return m.with_choice("template", "", None, (Candidate("template", m),))
+
+
+def _mesh_sides(shape, cat, lat, sides) -> QuadMesh:
+    from jaxmatch.placement.decompose import single_patch
+    from jaxmatch.placement.layout import LayoutInfeasible, layout_sides, mesh_layout
+    from jaxmatch.placement.refine import InfeasibleRequest, _check_counts, refine_mesh
+
+    n_sides = max(shape.n_corners, 1)
+    counts = _check_counts(sides, n_sides, shape.source)
+    if shape.n_corners < 2:
+        choice = refine_mesh(shape, cat, lat, sides=counts.tolist())
+        m = from_refined(shape, choice.mesh)
+    else:
+        lay = single_patch(shape)
+        ids = _side_ids(shape, lay)
+        try:
+            lm = mesh_layout(lay, cat, lat, counts={s: int(c) for s, c in zip(ids, counts)},
+                             sizes=_all_sizes())
+        except LayoutInfeasible as e:
+            names = layout_sides(lay).names
+            near = ("; nearest feasible " + ",".join(str(e.nearest.get(names[s], "?")) for s in ids)) if e.nearest else ""
+            raise InfeasibleRequest(f"edge counts {','.join(map(str, counts.tolist()))} cannot be met: "
+                                    f"{e.problem}{near}", shape.source) from None
+        m = from_layout(lm, corners=_corners(shape))
+    return m.with_choice(SINGLE, "", None, (Candidate(SINGLE, m),))
+
+
+def _all_sizes():
+    from jaxmatch.placement.layout import ALL_SIZES
+
+    return ALL_SIZES
+
+
+def _corners(shape: Shape) -> np.ndarray:
+    from jaxmatch.placement.decompose import _xy
+
+    return _xy(shape)[shape.corners] if shape.n_corners else np.zeros((0, 2))
+
+
+def _mesh_size(shape, cat, lat, h, strategies, quality, budget_s, progress, template_cache) -> QuadMesh:
+    from jaxmatch.placement.decompose import _same, decompose, single_patch
+    from jaxmatch.placement.layout import ALL_SIZES, TEMPLATE_SIZES, mesh_layout
+    from jaxmatch.placement.refine import refine_mesh
+
+    names = tuple(strategies) if strategies is not None else strategy_names()
+    unknown = [n for n in names if n not in strategy_names()]
+    if unknown:
+        raise InputError(f"unknown strategy {unknown[0]!r} (expected {', '.join(strategy_names())})")
+    if shape.n_corners < 2:  # no layout patch: one template refined to the size
+        choice = refine_mesh(shape, cat, lat, size=h)
+        m = from_refined(shape, choice.mesh, size=h)
+        return m.with_choice(SINGLE, "", None, (Candidate(SINGLE, m),))
+    corners = _corners(shape)
+    cache = template_cache if template_cache is not None else {}
+    tried: list[Candidate] = []
+    seen = []
+    t0 = time.perf_counter()
+    for i, name in enumerate(names):
+        if budget_s is not None and time.perf_counter() - t0 > budget_s and any(
+                c.mesh is not None and c.mesh.valid for c in tried):
+            tried.append(Candidate(name, None, f"not tried: time budget of {budget_s:g} s spent"))
+            continue
+        try:
+            lay = single_patch(shape) if name == SINGLE else decompose(shape, name)
+        except InputError as e:
+            tried.append(Candidate(name, None, e.problem))
+            continue
+        if any(_same(lay, other) for other in seen):
+            tried.append(Candidate(name, None, "same patches as an earlier candidate"))
+            continue
+        seen.append(lay)
+        try:
+            lm = mesh_layout(lay, cat, lat, size=h, smooth_cuts=lay.n_patches > 1,
+                             sizes=ALL_SIZES if name == SINGLE else TEMPLATE_SIZES, template_cache=cache)
+        except InputError as e:
+            tried.append(Candidate(name, None, e.problem))
+        else:
+            tried.append(Candidate(name, from_layout(lm, size=h, corners=corners)))
+        if progress is not None:
+            progress(i + 1, len(names), name)
+    if not any(c.mesh is not None for c in tried):
+        raise InputError("no candidate could be meshed: " + "; ".join(f"{c.name}: {c.note}" for c in tried),
+                         where=shape.source)
+    return choose(tried, quality)

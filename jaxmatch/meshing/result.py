@@ -1,0 +1,222 @@
+"""The one mesh result type: :class:`QuadMesh`, whatever made it (a placed template, a refined
+template, a decomposition, a layout file), like meshio's one ``Mesh`` for every format.
+
+Quality figures are computed from ``xy`` and ``quads`` alone (Verdict scaled Jacobian, signed
+areas, valences), so two meshes made by different strategies are judged by the same measures.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+from typing import Mapping, NamedTuple
+
+import numpy as np
+
+from jaxmatch.catalogue.mesh import valences
+from jaxmatch.placement.embed import edge_ratios, inverted_mask, quad_areas, quality
+
+__all__ = ["Candidate", "QuadMesh", "boundary_loops", "irregular_bound"]
+
+
+class Candidate(NamedTuple):
+    """One candidate the pipeline tried: ``name`` (``"single"``, a decomposition strategy,
+    ``"template"``, ``"layout"``), its ``mesh`` (a :class:`QuadMesh`) or None, and ``note``:
+    why it has no mesh (empty when it has one)."""
+
+    name: str
+    mesh: "QuadMesh | None"
+    note: str = ""
+
+
+def boundary_loops(quads: np.ndarray) -> list[np.ndarray]:
+    """The boundary loops of a quad mesh (edges used by exactly one quad), each ``(B,) int64``
+    in the quads' direction (ccw quads: the outer loop runs ccw, holes cw). Assumes each
+    boundary vertex has one outgoing boundary edge (a manifold mesh)."""
+    q = np.asarray(quads, dtype=np.int64)
+    d = np.stack([q, np.roll(q, -1, axis=1)], axis=-1).reshape(-1, 2)
+    key = np.sort(d, axis=1)
+    _, inv, cnt = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    b = d[cnt[inv.ravel()] == 1]
+    nxt = dict(zip(b[:, 0].tolist(), b[:, 1].tolist()))
+    loops, seen = [], set()
+    for start in b[:, 0].tolist():
+        if start in seen:
+            continue
+        loop, v = [], start
+        while v not in seen:
+            seen.add(v)
+            loop.append(v)
+            v = nxt.get(v, start)
+        loops.append(np.asarray(loop, np.int64))
+    return loops
+
+
+def irregular_bound(quads: np.ndarray, n_vertices: int) -> int:
+    """Fewest irregular internal vertices any quad mesh with these boundary valences can have.
+
+    Euler's formula for a quad mesh of a region with ``H`` holes: ``sum over internal vertices
+    (4 - valence) + sum over boundary vertices (3 - valence) = 4 (1 - H)``. With internal
+    valences 3..5 each irregular vertex contributes +-1, so at least
+    ``|4 (1 - H) - sum_boundary (3 - valence)|`` of them are needed.
+    """
+    quads = np.asarray(quads, dtype=np.int64)
+    val = valences(quads, n_vertices)
+    loops = boundary_loops(quads)
+    bverts = np.concatenate(loops) if loops else np.zeros(0, np.int64)
+    total = 4 * (1 - (len(loops) - 1)) - int(np.sum(3 - val[bverts]))
+    return abs(total)
+
+
+@dataclass(frozen=True, eq=False)
+class QuadMesh:
+    """A quad mesh of a planar region, with where it came from and how it was chosen.
+
+    xy: ``(V, 2) float64`` user coordinates; quads: ``(Q, 4) int64`` counter-clockwise.
+    patch: ``(Q,) int64`` the patch of each quad (all 0 for one template).
+    line_sets: name -> ``(E, 2) int64`` edges: ``"boundary"`` (the outer loop), ``"side i-j"``
+        (each side between corners/layout points ``i`` and ``j``), ``"hole h"``.
+    region_area: area of the region (user units squared); corners: ``(C, 2) float64`` the
+        region's corners, each of which must be a mesh vertex.
+    size: the target edge length (user units) or None; side_lengths / side_counts: name ->
+        length of the region's side and its number of mesh edges (``"i-j"``).
+    chosen: the candidate that won (``"single"``, a decomposition, ``"template"``, ``"layout"``);
+    rule: the rule of :mod:`jaxmatch.meshing.choose` that decided (empty with one candidate);
+    runner_up: the best other candidate's name or None; tried: every :class:`Candidate`;
+    templates: catalogue ids of the templates used, per patch.
+    """
+
+    xy: np.ndarray
+    quads: np.ndarray
+    patch: np.ndarray
+    line_sets: Mapping[str, np.ndarray]
+    region_area: float
+    corners: np.ndarray
+    size: float | None = None
+    side_lengths: Mapping[str, float] = field(default_factory=dict)
+    side_counts: Mapping[str, int] = field(default_factory=dict)
+    templates: tuple[str, ...] = ()
+    chosen: str = ""
+    rule: str = ""
+    runner_up: str | None = None
+    tried: tuple[Candidate, ...] = ()
+
+    def with_choice(self, chosen: str, rule: str, runner_up: str | None, tried) -> "QuadMesh":
+        """This mesh, labelled with how it was chosen."""
+        return replace(self, chosen=chosen, rule=rule, runner_up=runner_up, tried=tuple(tried))
+
+    # -- sets and data, as meshio names them ---------------------------------------------------
+
+    @property
+    def n_patches(self) -> int:
+        return int(self.patch.max()) + 1 if self.patch.size else 0
+
+    @property
+    def cell_sets(self) -> dict[str, np.ndarray]:
+        """``"patch p"`` -> ``(Q_p,) int64`` quad indices."""
+        return {f"patch {p}": np.flatnonzero(self.patch == p) for p in range(self.n_patches)}
+
+    @property
+    def cell_data(self) -> dict[str, np.ndarray]:
+        """``patch (Q,) int64`` and ``scaled_jacobian (Q,) float64``."""
+        return {"patch": self.patch, "scaled_jacobian": self.scaled_jacobian}
+
+    # -- quality, from xy and quads only -------------------------------------------------------
+
+    @property
+    def scaled_jacobian(self) -> np.ndarray:
+        """``(Q,) float64`` Verdict scaled Jacobian per quad, in ``[-1, 1]``."""
+        return quality(self.xy, self.quads)[0]
+
+    @property
+    def min_scaled_jacobian(self) -> float:
+        sj = self.scaled_jacobian
+        return float(sj.min()) if sj.size else math.nan
+
+    @property
+    def mean_scaled_jacobian(self) -> float:
+        sj = self.scaled_jacobian
+        return float(sj.mean()) if sj.size else math.nan
+
+    @property
+    def inverted(self) -> int:
+        """Quads with a corner of signed area <= 0."""
+        return int(inverted_mask(self.xy, self.quads).sum())
+
+    @property
+    def max_edge_ratio(self) -> float:
+        r = edge_ratios(self.xy, self.quads)
+        return float(r.max()) if r.size else math.nan
+
+    @property
+    def area_ratio(self) -> float:
+        """Sum of the quads' signed areas / area of the region."""
+        return float(quad_areas(self.xy, self.quads).sum() / self.region_area) if self.region_area else math.nan
+
+    @property
+    def irregular(self) -> np.ndarray:
+        """``(I,) int64`` internal vertices (on no boundary loop) whose valence is not 4."""
+        n = self.xy.shape[0]
+        val = valences(self.quads, n)
+        internal = np.ones(n, bool)
+        for loop in boundary_loops(self.quads):
+            internal[loop] = False
+        return np.flatnonzero(internal & (val != 4) & (val > 0))
+
+    @property
+    def irregular_bound(self) -> int:
+        """Euler's lower bound on irregular internal vertices for these boundary valences."""
+        return irregular_bound(self.quads, self.xy.shape[0])
+
+    @property
+    def missed_corners(self) -> np.ndarray:
+        """``(c, 2)`` corners of the region with no mesh vertex within 1e-9 of the region's extent."""
+        if not self.corners.size:
+            return np.zeros((0, 2))
+        ext = float(np.ptp(self.xy, axis=0).max()) or 1.0
+        d = np.min(np.linalg.norm(self.corners[:, None, :] - self.xy[None, :, :], axis=2), axis=1)
+        return self.corners[d > 1e-9 * ext]
+
+    @property
+    def size_deviation(self) -> float:
+        """Largest ``|n / (L / h) - 1|`` over the sides (0 without a size)."""
+        if not self.size or not self.side_counts:
+            return 0.0
+        return max(abs(self.side_counts[s] / (self.side_lengths[s] / self.size) - 1.0) for s in self.side_counts)
+
+    def sides_off_size(self, tol: float) -> list[str]:
+        """Sides whose edge count ``n`` is off ``L / h`` by more than ``max(1, tol * L / h)``."""
+        if not self.size:
+            return []
+        out = []
+        for s, n in self.side_counts.items():
+            want = self.side_lengths[s] / self.size
+            if abs(n - want) > max(1.0, tol * want):
+                out.append(s)
+        return out
+
+    @property
+    def mean_edge_length(self) -> float:
+        """Mean length of the mesh's edges, each counted once (user units)."""
+        q = np.asarray(self.quads, np.int64)
+        e = np.unique(np.sort(np.stack([q, np.roll(q, -1, axis=1)], -1).reshape(-1, 2), axis=1), axis=0)
+        return float(np.linalg.norm(self.xy[e[:, 0]] - self.xy[e[:, 1]], axis=1).mean()) if e.size else math.nan
+
+    @property
+    def valid(self) -> bool:
+        """A mesh of the region: no inverted quad and every corner a vertex."""
+        return self.inverted == 0 and self.missed_corners.shape[0] == 0
+
+    def summary(self) -> dict:
+        """JSON-ready figures."""
+        return {
+            "chosen": self.chosen, "rule": self.rule, "runner_up": self.runner_up,
+            "quads": int(self.quads.shape[0]), "vertices": int(self.xy.shape[0]), "patches": self.n_patches,
+            "min_scaled_jacobian": self.min_scaled_jacobian, "mean_scaled_jacobian": self.mean_scaled_jacobian,
+            "inverted": self.inverted, "corners": int(self.corners.shape[0]),
+            "missed_corners": int(self.missed_corners.shape[0]), "area_ratio": self.area_ratio,
+            "irregular": int(self.irregular.size), "irregular_bound": self.irregular_bound,
+            "max_edge_ratio": self.max_edge_ratio, "mean_edge_length": self.mean_edge_length,
+            "size": self.size, "size_deviation": self.size_deviation,
+            "side_counts": {k: int(v) for k, v in self.side_counts.items()}, "templates": list(self.templates),
+        }
