@@ -46,11 +46,10 @@ from typing import Mapping, NamedTuple, Sequence
 
 import numpy as np
 
-from jaxmatch.placement.embed import Placement
 from jaxmatch.errors import InputError
 from jaxmatch.files import atomic_open, atomic_path
 
-__all__ = ["LineGroup", "MESH_FORMATS", "mesh_format", "read_json_mesh", "write_mesh", "write_quads"]
+__all__ = ["LineGroup", "MESH_FORMATS", "mesh_format", "mesh_groups", "read_json_mesh", "write_mesh", "write_quads"]
 
 MESH_FORMATS: dict[str, str] = {
     ".vtk": "vtk",
@@ -168,14 +167,60 @@ def write_quads(path: str | os.PathLike, xy: np.ndarray, quads: np.ndarray, *,
     return final
 
 
-def write_mesh(path: str | os.PathLike, placement: Placement) -> Path:
-    """Write ``placement`` (points, quads, per-quad scaled Jacobian) to ``path`` atomically.
+def _unwrap(mesh):
+    """The mesh inside a choice object (MeshChoice.placement, RefineChoice.mesh, ShapeChoice.mesh)."""
+    for attr in ("placement", "mesh"):
+        inner = getattr(mesh, attr, None)
+        if inner is not None and hasattr(inner, "xy"):
+            return inner
+    return mesh
 
-    The format comes from the suffix (see the module docstring). Raises :class:`InputError`
-    for an unknown suffix, before anything is written. Returns the path written.
+
+def mesh_groups(mesh) -> tuple[np.ndarray | None, list[str], list[LineGroup]]:
+    """``(quad groups (Q,) int64 or None, their names, line groups)`` of any jaxmatch mesh: a
+    :class:`jaxmatch.meshing.result.QuadMesh` (``patch``, ``line_sets``), a layout mesh
+    (``patch``, ``outer``, ``side_vertices``), or a placed/refined template (its boundary loop)."""
+    patch = getattr(mesh, "patch", None)
+    names = [f"patch {p}" for p in range(int(np.max(patch)) + 1)] if patch is not None and len(patch) else []
+    if hasattr(mesh, "line_sets"):
+        return patch, names, [LineGroup(k, np.asarray(v, np.int64)) for k, v in mesh.line_sets.items()]
+    if hasattr(mesh, "side_vertices") and hasattr(mesh, "outer"):  # a layout mesh
+        loop = np.asarray(mesh.outer, np.int64)
+        groups = [LineGroup("boundary", np.stack([loop, np.roll(loop, -1)], axis=1))]
+        for name, ids in zip(mesh.sides.names, mesh.side_vertices):
+            groups.append(LineGroup(f"side {name}", np.stack([ids[:-1], ids[1:]], axis=1)))
+        return patch, names, groups
+    loop = getattr(mesh, "boundary", None)
+    if loop is None and hasattr(mesh, "mesh"):
+        loop = getattr(mesh.mesh, "boundary", None)
+    if loop is None:
+        return patch, names, []
+    loop = np.asarray(loop, np.int64)
+    return patch, names, [LineGroup("boundary", np.stack([loop, np.roll(loop, -1)], axis=1))]
+
+
+def write_mesh(path: str | os.PathLike, mesh) -> Path:
+    """Write any jaxmatch mesh to ``path`` atomically: points, quads, cell data
+    (``scaled_jacobian``, and ``patch`` when it has patches) and named groups (``"patch p"``,
+    ``"boundary"``, ``"side i-j"``; see :func:`mesh_groups`).
+
+    mesh: a :class:`jaxmatch.meshing.result.QuadMesh` (what :func:`jaxmatch.mesh` returns), a
+    layout mesh, a :class:`~jaxmatch.placement.embed.Placement`, a refined mesh, or a choice
+    object holding one. The format comes from the suffix (see the module docstring). Raises
+    :class:`InputError` for an unknown suffix, before anything is written; TypeError for an
+    object that is not a mesh. Returns the path written.
     """
-    sj = {"scaled_jacobian": np.asarray(placement.scaled_jacobian, dtype=np.float64)}
-    return write_quads(path, placement.xy, placement.mesh.quads, cell_data=sj)
+    m = _unwrap(mesh)
+    quads = getattr(m, "quads", None)
+    if quads is None and hasattr(m, "mesh"):
+        quads = getattr(m.mesh, "quads", None)
+    if quads is None or not hasattr(m, "xy"):
+        raise TypeError(f"not a jaxmatch mesh: {type(mesh).__name__}")
+    cell = {"scaled_jacobian": np.asarray(m.scaled_jacobian, dtype=np.float64)}
+    patch, names, lines = mesh_groups(m)
+    if patch is not None:
+        cell["patch"] = np.asarray(patch, np.int64)
+    return write_quads(path, m.xy, quads, cell_data=cell, quad_groups=patch, quad_group_names=names, line_groups=lines)
 
 
 def read_json_mesh(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

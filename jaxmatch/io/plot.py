@@ -224,3 +224,87 @@ def draw_many(items: Iterable[Panel | Sequence | dict], path: str | os.PathLike,
     if title:
         fig.suptitle(title)
     return save_figure(fig, path)
+
+
+# ---------------------------------------------------------------------------------------------
+# meshes of a region (the meshing pipeline's QuadMesh, layouts)
+
+PATCH_PALETTE = np.array([[0.80, 0.88, 0.97], [0.98, 0.88, 0.75], [0.83, 0.94, 0.82], [0.94, 0.84, 0.94],
+                          [0.98, 0.96, 0.76], [0.85, 0.93, 0.93]])
+"""Pale fill colours of the patches (RGB in [0, 1]), repeated."""
+
+
+def mesh_quality_line(xy: np.ndarray, quads: np.ndarray) -> str:
+    """``"240 quads, SJ min 0.812 mean 0.951, 0 inverted"``."""
+    from jaxmatch.placement.embed import quality
+
+    sj = quality(xy, quads)[0]
+    return (f"{quads.shape[0]} quads, SJ min {sj.min():.3f} mean {sj.mean():.3f}, "
+            f"{int(inverted_mask(xy, quads).sum())} inverted")
+
+
+def _boundary_mask(quads: np.ndarray, n: int) -> np.ndarray:
+    e = np.stack([quads, np.roll(quads, -1, axis=1)], -1).reshape(-1, 2)
+    uniq, cnt = np.unique(np.sort(e, axis=1), axis=0, return_counts=True)
+    on_b = np.zeros(n, bool)
+    on_b[uniq[cnt == 1].ravel()] = True
+    return on_b
+
+
+def draw_meshes(path: str | os.PathLike, panels: Sequence[tuple], *, title: str | None = None,
+                ncols: int | None = None, y_down: bool = False) -> Path:
+    """Draw quad meshes side by side and save to ``path`` (.png or .svg, atomically).
+
+    panels: ``(panel title, xy (V, 2), quads (Q, 4), patch (Q,) int or None, lines)``, optionally
+    followed by ``corners (C, 2)``: ``lines`` a list of ``(k, 2)`` polylines drawn a little
+    thicker (e.g. the sides between patches) or None. Edges are thin lines, quads filled pale by
+    patch, inverted quads red; markers only where they mean something: corners (small black
+    squares) and irregular internal vertices (small red dots). Aspect ratio kept. y_down: the
+    input's y axis points down (SVG), so the picture is flipped to show it as drawn.
+    """
+    figure_format(path)
+    fig, axes = new_figure(len(panels), ncols)
+    for ax, panel in zip(axes, panels):
+        head, xy, quads, patch, lines = panel[:5]
+        corners = panel[5] if len(panel) > 5 else None
+        xy = np.asarray(xy, np.float64)
+        quads = np.asarray(quads, np.int64)
+        face = PATCH_PALETTE[np.asarray(patch) % len(PATCH_PALETTE)] if patch is not None \
+            else np.tile(PATCH_PALETTE[0], (quads.shape[0], 1))
+        face = np.where(inverted_mask(xy, quads)[:, None], np.array([0.95, 0.3, 0.3]), face)
+        ax.add_collection(PolyCollection(xy[quads], facecolors=face, edgecolors="0.3", linewidths=0.35))
+        if lines:
+            ax.add_collection(LineCollection([np.asarray(line) for line in lines], colors="0.1", linewidths=0.9))
+        irr = np.flatnonzero(~_boundary_mask(quads, xy.shape[0]) & (valences(quads, xy.shape[0]) != 4)
+                             & np.isin(np.arange(xy.shape[0]), quads))
+        if irr.size:
+            ax.plot(xy[irr, 0], xy[irr, 1], "o", ms=2.5, color="tab:red", zorder=3)
+        if corners is not None and len(corners):
+            c = np.asarray(corners, np.float64)
+            ax.plot(c[:, 0], c[:, 1], "s", ms=2.5, color="k", zorder=3)
+        ax.set_aspect("equal")
+        ax.autoscale_view()
+        if y_down:
+            ax.invert_yaxis()
+        ax.set_xticks([])
+        ax.set_yticks([])
+        for spine in ax.spines.values():
+            spine.set_visible(False)
+        ax.set_title(f"{head}\n{mesh_quality_line(xy, quads)}, {irr.size} irregular", fontsize=9)
+    if title:
+        fig.suptitle(title)
+    return save_figure(fig, path)
+
+
+def draw_quadmesh(path: str | os.PathLike, mesh, *, title: str = "", y_down: bool = False) -> Path:
+    """Draw one :class:`jaxmatch.meshing.result.QuadMesh` (its patches' shared sides drawn a
+    little thicker, its corners marked) to ``path`` (.png or .svg)."""
+    lines = []
+    if mesh.n_patches > 1:
+        for name, e in mesh.line_sets.items():
+            if name.startswith("side "):
+                lines.extend(mesh.xy[np.asarray(e)])
+    head = f"{title}: {mesh.chosen}" if title else mesh.chosen
+    if mesh.n_patches > 1:
+        head += f" ({mesh.n_patches} patches)"
+    return draw_meshes(path, [(head, mesh.xy, mesh.quads, mesh.patch, lines, mesh.corners)], y_down=y_down)

@@ -70,7 +70,6 @@ __all__ = [
     "boundary_edges",
     "draw_meshes",
     "fit_sides",
-    "layout_groups",
     "layout_panel",
     "layout_sides",
     "load_counts",
@@ -964,77 +963,27 @@ def _smooth_all(xy: np.ndarray, quads: np.ndarray, fixed: np.ndarray) -> np.ndar
 # output
 
 
-def layout_groups(mesh: LayoutMesh):
-    """Named line groups for a mesh file: ``"boundary"`` (the outer loop) and ``"side i-j"``
-    for every side of the layout (shared sides included), as
-    :class:`jaxmatch.io.meshfile.LineGroup`."""
-    from jaxmatch.io.meshfile import LineGroup
-
-    loop = mesh.outer
-    groups = [LineGroup("boundary", np.stack([loop, np.roll(loop, -1)], axis=1))]
-    for name, ids in zip(mesh.sides.names, mesh.side_vertices):
-        groups.append(LineGroup(f"side {name}", np.stack([ids[:-1], ids[1:]], axis=1)))
-    return groups
-
-
 def write_layout_mesh(path, mesh: LayoutMesh) -> Path:
-    """Write ``mesh`` atomically (format by suffix, :func:`jaxmatch.io.meshfile.write_quads`):
-    cell data ``patch`` and ``scaled_jacobian``, quad groups ``"patch p"``, line groups from
-    :func:`layout_groups`."""
-    from jaxmatch.io.meshfile import write_quads
+    """Write ``mesh`` atomically: :func:`jaxmatch.io.meshfile.write_mesh` (cell data ``patch``
+    and ``scaled_jacobian``, quad groups ``"patch p"``, line groups ``"boundary"`` and
+    ``"side i-j"``)."""
+    from jaxmatch.io.meshfile import write_mesh
 
-    names = [f"patch {p}" for p in range(mesh.layout.n_patches)]
-    return write_quads(path, mesh.xy, mesh.quads, cell_data={"patch": mesh.patch, "scaled_jacobian": mesh.scaled_jacobian},
-                       quad_groups=mesh.patch, quad_group_names=names, line_groups=layout_groups(mesh))
+    return write_mesh(path, mesh)
 
 
 def mesh_quality_line(xy: np.ndarray, quads: np.ndarray) -> str:
-    """``"240 quads, SJ min 0.812 mean 0.951, 0 inverted"``."""
-    sj = quality(xy, quads)[0]
-    return (f"{quads.shape[0]} quads, SJ min {sj.min():.3f} mean {sj.mean():.3f}, "
-            f"{int(inverted_mask(xy, quads).sum())} inverted")
+    """One line of quality figures (:func:`jaxmatch.io.plot.mesh_quality_line`)."""
+    from jaxmatch.io.plot import mesh_quality_line as line
+
+    return line(xy, quads)
 
 
 def draw_meshes(path, panels: Sequence[tuple], *, title: str | None = None, ncols: int | None = None) -> Path:
-    """Draw quad meshes side by side and save to ``path`` (.png or .svg, atomically).
+    """Draw quad meshes side by side: :func:`jaxmatch.io.plot.draw_meshes`."""
+    from jaxmatch.io.plot import draw_meshes as draw
 
-    panels: ``(panel title, xy (V, 2), quads (Q, 4), patch (Q,) int or None, lines)`` with
-    ``lines`` a list of ``(k, 2)`` polylines drawn thick (e.g. the layout's sides) or None.
-    Quads are filled by patch (pale colours), inverted quads red; internal vertices whose
-    valence is not 4 are marked. Each panel's title ends with its :func:`mesh_quality_line`.
-    """
-    from matplotlib.collections import LineCollection, PolyCollection
-
-    from jaxmatch.io.plot import figure_format, new_figure, save_figure
-
-    figure_format(path)
-    fig, axes = new_figure(len(panels), ncols)
-    for ax, (head, xy, quads, patch, lines) in zip(axes, panels):
-        xy = np.asarray(xy, np.float64)
-        quads = np.asarray(quads, np.int64)
-        pal = np.array([[0.80, 0.88, 0.97], [0.98, 0.88, 0.75], [0.83, 0.94, 0.82], [0.94, 0.84, 0.94],
-                        [0.98, 0.96, 0.76], [0.85, 0.93, 0.93]])
-        face = pal[np.asarray(patch) % len(pal)] if patch is not None else np.tile(pal[0], (quads.shape[0], 1))
-        face = np.where(inverted_mask(xy, quads)[:, None], np.array([0.95, 0.3, 0.3]), face)
-        ax.add_collection(PolyCollection(xy[quads], facecolors=face, edgecolors="0.25", linewidths=0.4))
-        if lines:
-            ax.add_collection(LineCollection([np.asarray(line) for line in lines], colors="k", linewidths=1.4))
-        be = boundary_edges(quads)
-        on_b = np.zeros(xy.shape[0], bool)
-        on_b[be.ravel()] = True
-        irr = np.flatnonzero(~on_b & (valences(quads, xy.shape[0]) != 4))
-        if irr.size:
-            ax.plot(xy[irr, 0], xy[irr, 1], "o", ms=3.5, color="tab:red")
-        ax.set_aspect("equal")
-        ax.autoscale_view()
-        ax.set_xticks([])
-        ax.set_yticks([])
-        for spine in ax.spines.values():
-            spine.set_visible(False)
-        ax.set_title(f"{head}\n{mesh_quality_line(xy, quads)}, {irr.size} irregular", fontsize=9)
-    if title:
-        fig.suptitle(title)
-    return save_figure(fig, path)
+    return draw(path, panels, title=title, ncols=ncols)
 
 
 def layout_panel(mesh: LayoutMesh, head: str) -> tuple:
