@@ -118,8 +118,8 @@ def summary(xs: list[float]) -> dict:
 def load_workload(args):
     from jaxmatch.catalogue import store as cat_mod
     from jaxmatch.scoring.lattice import load_lattice
-    from jaxmatch.shape import annotate
     from jaxmatch.io.readers import load_shape
+    from jaxmatch.shape import annotate
 
     cat = cat_mod.load(args.catalogue) if args.catalogue else cat_mod.default_catalogue()
     internal = cat_mod.parse_range(args.internal)
@@ -507,8 +507,8 @@ from jaxmatch.scoring import bulk
 from jaxmatch.catalogue import store as catalogue
 from jaxmatch.scoring.lattice import load_lattice
 from jaxmatch.scoring.exact import align
-from jaxmatch.shape import annotate, default_points
 from jaxmatch.io.readers import load_shape
+from jaxmatch.shape import annotate, default_points
 enable_compile_cache()
 shape, table, cat = load_shape("examples/lshape.json"), load_lattice("fine").weights(), catalogue.default_catalogue()
 ann = annotate(shape, default_points(shape, max(cat.lengths)))
