@@ -643,7 +643,7 @@ def layout(
     from jaxmatch.placement import decompose as dec
     from jaxmatch.placement import layout as lay
     from jaxmatch.scoring.lattice import load_lattice
-    from jaxmatch.shape import parse_shape
+    from jaxmatch.io.readers import parse_shape
 
     check_outputs(out_path, png)
     if size is not None and not (size > 0 and size < float("inf")):

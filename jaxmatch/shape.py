@@ -3,7 +3,8 @@
 A shape is one closed polyline loop (the first point is not repeated; a repeated first
 point at the end is dropped) split into ``n`` *sides* by its *corners*. The file formats
 (jaxmatch JSON with optional explicit ``corners``, GeoJSON, CSV/TSV/text, SVG, DXF) are read by
-:mod:`jaxmatch.io.readers`; :func:`load_shape` and :func:`parse_shape` here call it.
+:mod:`jaxmatch.io.readers` (:func:`jaxmatch.io.readers.load_shape`, :func:`jaxmatch.io.readers.parse_shape`,
+also public as ``jaxmatch.load_shape`` / ``jaxmatch.parse_shape``), which builds shapes with :func:`make_shape`.
 
 Without explicit corners a point is a corner when its turning angle (180 degrees minus the
 interior angle) exceeds ``corner_angle`` (default 30 degrees; a turn within ``1e-7`` degrees of
@@ -73,9 +74,7 @@ __all__ = [
     "default_points",
     "interior_angles",
     "largest_remainder",
-    "load_shape",
     "make_shape",
-    "parse_shape",
     "point_at",
     "signed_area",
     "turning_angles",
@@ -427,25 +426,6 @@ def _check_corners(corners, n: int, source: str) -> np.ndarray:
 def _short(value, limit: int = 40) -> str:
     r = repr(value)
     return r if len(r) <= limit else r[: limit - 3] + "..."
-
-
-# ---------------------------------------------------------------------------------------------
-# readers (jaxmatch.io.readers has the formats)
-
-
-def load_shape(path, *, corner_angle: float = DEFAULT_CORNER_ANGLE, element: str | None = None) -> Shape:
-    """Read a shape file of any supported format: :func:`jaxmatch.io.readers.load_shape`."""
-    from jaxmatch.io.readers import load_shape as _load
-
-    return _load(path, corner_angle=corner_angle, element=element)
-
-
-def parse_shape(data, source: str = "<input>", *, corner_angle: float = DEFAULT_CORNER_ANGLE, fmt: str | None = None,
-                element: str | None = None) -> Shape:
-    """Parse shape bytes/text: :func:`jaxmatch.io.readers.parse_shape`."""
-    from jaxmatch.io.readers import parse_shape as _parse
-
-    return _parse(data, source, corner_angle=corner_angle, fmt=fmt, element=element)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -118,7 +118,8 @@ def summary(xs: list[float]) -> dict:
 def load_workload(args):
     from jaxmatch.catalogue import store as cat_mod
     from jaxmatch.scoring.lattice import load_lattice
-    from jaxmatch.shape import annotate, load_shape
+    from jaxmatch.io.readers import load_shape
+    from jaxmatch.shape import annotate
 
     cat = cat_mod.load(args.catalogue) if args.catalogue else cat_mod.default_catalogue()
     internal = cat_mod.parse_range(args.internal)
@@ -506,7 +507,8 @@ from jaxmatch.scoring import bulk
 from jaxmatch.catalogue import store as catalogue
 from jaxmatch.scoring.lattice import load_lattice
 from jaxmatch.scoring.exact import align
-from jaxmatch.shape import annotate, default_points, load_shape
+from jaxmatch.io.readers import load_shape
+from jaxmatch.shape import annotate, default_points
 enable_compile_cache()
 shape, table, cat = load_shape("examples/lshape.json"), load_lattice("fine").weights(), catalogue.default_catalogue()
 ann = annotate(shape, default_points(shape, max(cat.lengths)))
@@ -559,7 +561,7 @@ def many_shapes(folder: Path) -> list[Path]:
     (so every file is a different shape; fixed, so runs compare)."""
     import numpy as np
 
-    from jaxmatch.shape import load_shape
+    from jaxmatch.io.readers import load_shape
 
     files = [ROOT / "examples" / n for n in EXAMPLES] + sorted((ROOT / "examples" / "labels" / "shapes").glob("*.json"))
     a = np.deg2rad(37.0)
@@ -585,7 +587,7 @@ def many_and_api(args) -> dict:
     from jaxmatch.placement.choose import place_top
     from jaxmatch.scoring.lattice import load_lattice
     from jaxmatch.scoring.rank import ranking_json
-    from jaxmatch.shape import load_shape
+    from jaxmatch.io.readers import load_shape
 
     folder = Path(tempfile.mkdtemp(prefix="jaxmatch-bench-shapes-"))
     try:
@@ -634,7 +636,7 @@ def many_probe(args) -> dict | None:
     from jaxmatch.scoring.backends import serial_only
     from jaxmatch.scoring.lattice import load_lattice
     from jaxmatch.scoring.rank import ranking_json
-    from jaxmatch.shape import load_shape
+    from jaxmatch.io.readers import load_shape
 
     jobs = available_cpus()
     if jobs < 2 or not can_fork():
@@ -690,7 +692,7 @@ from jaxmatch.catalogue import store
 from jaxmatch.scoring import bulk
 from jaxmatch.scoring.lattice import load_lattice
 from jaxmatch.api import rank
-from jaxmatch.shape import load_shape
+from jaxmatch.io.readers import load_shape
 def hwm():
     for line in open("/proc/self/status"):
         if line.startswith("VmHWM:"):
@@ -760,7 +762,7 @@ def bench_refine(reps: int = 5) -> dict:
     from jaxmatch.cli import enable_compile_cache
     from jaxmatch.placement import refine as R
     from jaxmatch.scoring.lattice import load_lattice
-    from jaxmatch.shape import load_shape
+    from jaxmatch.io.readers import load_shape
 
     enable_compile_cache()
     cat, lat = default_catalogue(), load_lattice("fine")

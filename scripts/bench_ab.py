@@ -26,7 +26,8 @@ import numpy as np  # noqa: E402
 from jaxmatch.catalogue import store as cat_mod  # noqa: E402
 from jaxmatch.scoring.exact import score_bucket  # noqa: E402
 from jaxmatch.scoring.lattice import load_lattice  # noqa: E402
-from jaxmatch.shape import annotate, load_shape  # noqa: E402
+from jaxmatch.io.readers import load_shape  # noqa: E402
+from jaxmatch.shape import annotate  # noqa: E402
 
 EXAMPLES = ["circle.json", "curved.json", "dshape.json", "hexagon.json", "lshape.json", "lshape.txt", "square.json",
             "triangle.json", "tshape.json"]

@@ -105,7 +105,7 @@ def main(sizes: str = typer.Option("0.25,0.125", help="Element sizes (comma sepa
     from jaxmatch.placement.decompose import mesh_shape
     from jaxmatch.placement.layout import draw_meshes, layout_panel
     from jaxmatch.scoring.lattice import load_lattice
-    from jaxmatch.shape import load_shape
+    from jaxmatch.io.readers import load_shape
 
     enable_compile_cache()
     hs = [float(s) for s in sizes.split(",")]

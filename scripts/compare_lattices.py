@@ -34,7 +34,7 @@ from jaxmatch.catalogue import store as cat_mod  # noqa: E402
 from jaxmatch.cli import enable_compile_cache, run_typer  # noqa: E402
 from jaxmatch.files import write_text_atomic  # noqa: E402
 from jaxmatch.scoring.lattice import load_lattice  # noqa: E402
-from jaxmatch.shape import load_shape  # noqa: E402
+from jaxmatch.io.readers import load_shape  # noqa: E402
 
 app = typer.Typer(add_completion=False)
 out = Console(soft_wrap=True)

@@ -45,7 +45,7 @@ def search(shape_path: Path, k: int) -> dict:
     from jaxmatch.catalogue.store import default_catalogue
     from jaxmatch.geometry import point_at
     from jaxmatch.placement.embed import place
-    from jaxmatch.shape import load_shape
+    from jaxmatch.io.readers import load_shape
 
     shp = load_shape(shape_path)
     if shp.n_corners != shp.n_points:

@@ -23,7 +23,7 @@ from jaxmatch.cli import run_typer
 from jaxmatch.errors import InputError
 from jaxmatch.files import write_text_atomic
 from jaxmatch.tuning.labels import design_ranking, dump_labels, example_record, mesh_index, synthetic_examples
-from jaxmatch.shape import load_shape
+from jaxmatch.io.readers import load_shape
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, help=__doc__.split("\n\n")[0])
 err = Console(stderr=True)

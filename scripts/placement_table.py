@@ -96,7 +96,8 @@ def run(out: Path, names: list[str] | None, lattice: str = "fine") -> list[dict]
     from jaxmatch.placement.choose import choose_mesh
     from jaxmatch.scoring.lattice import load_lattice
     from jaxmatch.scoring.rank import selected_lengths
-    from jaxmatch.shape import default_points, load_shape
+    from jaxmatch.io.readers import load_shape
+    from jaxmatch.shape import default_points
 
     cat = default_catalogue()
     lat = load_lattice(lattice)

@@ -34,7 +34,8 @@ from jaxmatch.scoring.exact import (
     score_bucket,
 )
 from jaxmatch.scoring.model import make_weights
-from jaxmatch.shape import annotate, load_shape
+from jaxmatch.io.readers import load_shape
+from jaxmatch.shape import annotate
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = ["circle.json", "lshape.json", "tshape.json", "hexagon.json"]
@@ -313,7 +314,8 @@ SHARDED = textwrap.dedent("""
     from jaxmatch.catalogue.store import default_catalogue
     from jaxmatch.scoring.lattice import load_lattice
     from jaxmatch.scoring.exact import score_bucket
-    from jaxmatch.shape import annotate, load_shape
+    from jaxmatch.io.readers import load_shape
+    from jaxmatch.shape import annotate
     from jaxmatch.scoring.model import make_weights
     table = make_weights(load_lattice("fine").table(), [0, -7, float("-inf")])  # skip weights, must-match corners
     cat = default_catalogue()

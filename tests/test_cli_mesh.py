@@ -23,7 +23,7 @@ from jaxmatch.scoring.lattice import load_lattice
 from jaxmatch.io.meshfile import read_json_mesh
 from jaxmatch.api import rank
 from jaxmatch.placement.choose import acceptable, place_top
-from jaxmatch.shape import load_shape
+from jaxmatch.io.readers import load_shape
 
 ROOT = Path(__file__).resolve().parent.parent
 EXAMPLES = ROOT / "examples"

@@ -9,7 +9,7 @@ import pytest
 
 from jaxmatch.catalogue.store import default_catalogue
 from jaxmatch.scoring.lattice import load_lattice
-from jaxmatch.shape import load_shape
+from jaxmatch.io.readers import load_shape
 from jaxmatch.tuning.corners import corner_fit, corner_report, must_keep_corners
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -23,7 +23,7 @@ from hypothesis import strategies as st
 
 from jaxmatch.placement.decompose import STRATEGIES, choice_key, cut_segments, decompose, mesh_shape, single_patch
 from jaxmatch.scoring.lattice import load_lattice
-from jaxmatch.shape import load_shape
+from jaxmatch.io.readers import load_shape
 
 ROOT = Path(__file__).resolve().parent.parent
 EX, LAB = ROOT / "examples", ROOT / "examples" / "labels" / "shapes"

@@ -33,7 +33,8 @@ from jaxmatch.errors import InputError
 from jaxmatch.scoring.lattice import MAX_BYTES as LATTICE_MAX_BYTES
 from jaxmatch.scoring.lattice import load_lattice, parse_lattice
 from jaxmatch.shape import MAX_BYTES as SHAPE_MAX_BYTES
-from jaxmatch.shape import MAX_POINTS, annotate, load_shape, make_shape, parse_shape
+from jaxmatch.io.readers import load_shape, parse_shape
+from jaxmatch.shape import MAX_POINTS, annotate, make_shape
 
 ROOT = Path(__file__).resolve().parent.parent
 EXAMPLES = ROOT / "examples"

@@ -46,7 +46,8 @@ from jaxmatch.placement.choose import (
 )
 from jaxmatch.scoring.exact import score_bucket, utility_of
 from jaxmatch.scoring.reference import dp_reference as reference_dp
-from jaxmatch.shape import annotate, load_shape, make_shape
+from jaxmatch.io.readers import load_shape
+from jaxmatch.shape import annotate, make_shape
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"

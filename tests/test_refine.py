@@ -31,7 +31,8 @@ from jaxmatch.catalogue.mesh import QuadMesh, edges, from_quads, valences, valid
 from jaxmatch.errors import EXIT_BAD_INPUT, InputError
 from jaxmatch.placement import refine as R
 from jaxmatch.scoring.lattice import load_lattice
-from jaxmatch.shape import load_shape, make_shape
+from jaxmatch.io.readers import load_shape
+from jaxmatch.shape import make_shape
 
 ROOT = Path(__file__).resolve().parent.parent
 EXAMPLES = ROOT / "examples"

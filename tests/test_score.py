@@ -391,7 +391,7 @@ def test_ranked_matches_carry_the_skip_contribution(skip):
     from jaxmatch.catalogue.store import default_catalogue
     from jaxmatch.scoring.lattice import load_lattice
     from jaxmatch.scoring.rank import rank
-    from jaxmatch.shape import load_shape
+    from jaxmatch.io.readers import load_shape
 
     lat = replace(load_lattice("fine"), skip=skip)
     shape = load_shape(Path(__file__).resolve().parents[1] / "examples" / "lshape.json")

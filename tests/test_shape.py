@@ -10,6 +10,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from jaxmatch.errors import InputError, InputWarning
+from jaxmatch.io.readers import load_shape, parse_shape
 from jaxmatch.shape import (
     MAX_POINTS,
     S,
@@ -21,9 +22,7 @@ from jaxmatch.shape import (
     default_points,
     interior_angles,
     largest_remainder,
-    load_shape,
     make_shape,
-    parse_shape,
     point_at,
     signed_area,
 )

@@ -36,6 +36,8 @@ import threading
 
 import numpy as np
 
+from jaxmatch.scoring.problem import UNROLL, DPProblem
+
 __all__ = ["BACKENDS", "LANES", "NUMPY_CELLS", "PARALLEL_CELLS", "NumbaBackend", "default_backend", "jax_on_cpu",
            "numba_values", "numpy_values"]
 
@@ -174,12 +176,12 @@ class NumbaBackend:
             _NUMPY_SPENT[0] += cells
         return True
 
-    def run(self, problem, vals: np.ndarray) -> np.ndarray:
+    def run(self, problem: DPProblem, vals: np.ndarray) -> np.ndarray:
         flat = np.asarray(vals).reshape(-1, problem.n)
         if self._numpy_first(problem, flat.shape[0]):
             return numpy_values(problem.codes, problem.lengths, flat, problem.tab, problem.gate, problem.strict)
         if np.dtype(problem.kind.dtype) != np.int16:  # int32 / float32 models: the XLA kernel
-            from jaxmatch.scoring.exact import CPUBackend
+            from jaxmatch.scoring.xla import CPUBackend  # imports JAX
 
             return CPUBackend(self.threads).run(problem, vals)
         import numba
@@ -231,7 +233,7 @@ def default_backend(threads: int | None = None, unroll: int | None = None):
     ``JAXMATCH_BACKEND`` = ``auto`` (default): :class:`NumbaBackend` when JAX computes on the CPU
     (:func:`jax_on_cpu`) and numba is installed (int16 models; others fall back to the XLA
     kernel), small problems first in numpy (``numpy_cells=NUMPY_CELLS``, module docstring),
-    else the XLA kernel :class:`jaxmatch.scoring.exact.CPUBackend` (GPUs, TPUs); ``numba``
+    else the XLA kernel :class:`jaxmatch.scoring.xla.CPUBackend` (GPUs, TPUs); ``numba``
     (always the numba kernel) or ``xla`` force one. Both give identical utilities (tests/test_backends.py).
     The numba choice does not import JAX. InputError for another value.
     """
@@ -248,6 +250,6 @@ def default_backend(threads: int | None = None, unroll: int | None = None):
         choice = "xla"
     if choice == "numba":
         return NumbaBackend(threads)
-    from jaxmatch.scoring.exact import UNROLL, CPUBackend
+    from jaxmatch.scoring.xla import CPUBackend  # imports JAX
 
     return CPUBackend(threads, UNROLL if unroll is None else int(unroll))

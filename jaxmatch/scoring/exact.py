@@ -69,6 +69,11 @@ several devices). A new backend (e.g. a GPU kernel) implements ``mesh_lanes`` an
 never sees the padding or the chunking. Weights are integers, so all number types give
 identical utilities. Measurements: ``docs/perf.md``.
 
+Layering: the problem contract (:class:`DPProblem`, :class:`DPKind`, :class:`Backend`,
+:func:`run_calls`, ...) lives in :mod:`jaxmatch.scoring.problem` (re-exported here), which the
+kernels (:mod:`jaxmatch.scoring.backends`, :mod:`jaxmatch.scoring.xla`) import; no kernel imports
+this module. This host picks the default backend from :mod:`jaxmatch.scoring.backends`.
+
 This module imports numpy only. The JAX code (:func:`dp_scan`, :func:`final_blocks`,
 :class:`CPUBackend`, :func:`orientation_weights`, ...) lives in :mod:`jaxmatch.scoring.xla` and
 is re-exported here on first access (:data:`XLA_NAMES`), so JAX is loaded only when one of
@@ -77,17 +82,23 @@ those names is used: the default CPU path (numba backend, numpy :func:`align`) n
 
 from __future__ import annotations
 
-import os
-from concurrent.futures import ThreadPoolExecutor
-from typing import NamedTuple, Protocol, Sequence
+from typing import NamedTuple, Sequence
 
 import numpy as np
 
 from jaxmatch.errors import UnmatchableError
+from jaxmatch.scoring.backends import default_backend
 from jaxmatch.scoring.model import NEG, SkipFrame, skip_frame, skip_offset, weights_of  # noqa: F401 (SkipFrame re-exported)
-
-UNROLL = 1
-"""``lax.scan`` unroll factor (1, 2, 4, 8 measured on XLA:CPU: 1 is fastest, and compiles fastest)."""
+from jaxmatch.scoring.problem import (  # noqa: F401 (the problem contract, re-exported)
+    _INVALID,
+    UNROLL,
+    Backend,
+    DPKind,
+    DPProblem,
+    _rotation_index,
+    default_threads,
+    run_calls,
+)
 
 DEFAULT_BATCH = 256
 """Meshes per compiled call of :func:`score_bucket`."""
@@ -136,10 +147,6 @@ def pad_codes(codes, m_pad: int | None = None) -> tuple[np.ndarray, np.ndarray]:
     return out, np.arange(m_pad) < m
 
 
-def _rotation_index(n: int) -> np.ndarray:
-    return (np.arange(n)[:, None] + np.arange(n)[None, :]) % n  # [r, j] -> (r + j) % n
-
-
 def oriented_sequence(vals_one, rotation: int, reflected: bool) -> np.ndarray:
     """The ``(n,)`` valences in matched order: ``np.roll(vals[::-1] if reflected else vals, -rotation)``."""
     s = np.asarray(vals_one, dtype=np.int32).reshape(-1)
@@ -159,17 +166,6 @@ NEG16 = -16384
 
 NEG32 = -(2**30)
 """Sentinel for the int32 DP."""
-
-_INVALID = 3
-"""Code of a padded input point: every weight is the sentinel, so the point is skipped."""
-
-
-class DPKind(NamedTuple):
-    """The exact DP's number type for a model and boundary length (:func:`dp_kind`)."""
-
-    dtype: type
-    neg: float
-
 
 def dp_kind(weights, n: int) -> DPKind:
     """Narrowest exact number type for the DP of a model (or table) with boundary length ``n``.
@@ -232,33 +228,6 @@ def dp_codes(codes, m_pad: int | None = None) -> np.ndarray:
     return np.where(valid, c, _INVALID).astype(np.int32)
 
 
-def default_threads() -> int:
-    """Host threads that dispatch blocks concurrently (the CPUs this process may use)."""
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:  # pragma: no cover - not Linux
-        return max(1, os.cpu_count() or 1)
-
-
-_POOL: dict[int, ThreadPoolExecutor] = {}
-
-
-def _pool(threads: int) -> ThreadPoolExecutor:
-    if threads not in _POOL:
-        _POOL[threads] = ThreadPoolExecutor(threads, thread_name_prefix="jaxmatch-score")
-    return _POOL[threads]
-
-
-def run_calls(fn, items, threads: int | None = None) -> list:
-    """``[fn(x) for x in items]``, on ``threads`` host threads when there are several items
-    (each jitted call releases the GIL, so XLA:CPU runs them on separate cores)."""
-    items = list(items)
-    threads = default_threads() if threads is None else max(1, int(threads))
-    if threads == 1 or len(items) < 2:
-        return [fn(x) for x in items]
-    return list(_pool(threads).map(fn, items))
-
-
 def plan_chunks(big_n: int, n: int, batch: int = DEFAULT_BATCH) -> tuple[int, int]:
     """``(block, blocks per call)`` for ``big_n`` meshes of boundary length ``n``: calls hold
     ``min(batch, next power of two >= big_n)`` meshes (at least 8), as blocks of
@@ -269,25 +238,6 @@ def plan_chunks(big_n: int, n: int, batch: int = DEFAULT_BATCH) -> tuple[int, in
 
 
 # --------------------------------------------------------------------------- the exact host
-
-
-class DPProblem(NamedTuple):
-    """What a backend computes: the shapes and the compiled model in the DP number type.
-
-    codes: ``(S, m_pad) int32`` (3 = padding); lengths: ``(S,)`` true ``m`` of each shape;
-    offset: ``(S,) float64`` the skip weights added back (:func:`skip_frame`); tab: ``(4, 64)``
-    and gate: ``(4,)`` in ``kind.dtype`` (:func:`dp_table`, :func:`dp_gate`); strict: some type
-    must be matched (selects the kernel variant); kind: the number type; n: boundary length.
-    """
-
-    codes: np.ndarray
-    lengths: np.ndarray
-    offset: np.ndarray
-    tab: np.ndarray
-    gate: np.ndarray
-    strict: bool
-    kind: DPKind
-    n: int
 
 
 def dp_problem(codes_list: Sequence, weights, n: int, m_pad: int | None = None, kind: DPKind | None = None) -> DPProblem:
@@ -303,21 +253,6 @@ def dp_problem(codes_list: Sequence, weights, n: int, m_pad: int | None = None, 
     return DPProblem(codes, np.asarray([len(c) for c in shapes], np.int64),
                      np.asarray([skip_offset(c, w) for c in shapes], np.float64),
                      dp_table(w, kind), dp_gate(w, kind), bool(w.must.any()), kind, int(n))
-
-
-class Backend(Protocol):
-    """Runs the exact DP on padded chunks (the seam between :func:`exact_values` and a kernel).
-
-    mesh_lanes: how many devices the meshes of one call are split over (the host makes each
-    call hold ``mesh_lanes * blocks per call`` blocks). run(problem, vals): ``vals (calls,
-    mesh_lanes * per_call, block, n) int32`` (padding meshes are all-2 sequences) ->
-    ``(S, calls * mesh_lanes * per_call * block, 2n)`` raw values in ``problem.kind.dtype``
-    (the shifted-frame ``E[m][n]`` of :func:`final_blocks`, mesh-major).
-    """
-
-    mesh_lanes: int
-
-    def run(self, problem: DPProblem, vals: np.ndarray) -> np.ndarray: ...
 
 
 def exact_values(
@@ -339,8 +274,6 @@ def exact_values(
     ``backend`` (default :func:`jaxmatch.scoring.backends.default_backend`) computes the raw values.
     """
     if backend is None:
-        from jaxmatch.scoring.backends import default_backend
-
         backend = default_backend()
     v = _check_vals(vals)
     big_n, n = v.shape
@@ -375,11 +308,8 @@ def final_values(
     module docstring. :func:`exact_values` for one shape (``threads``, ``unroll``: of the
     default backend, :func:`jaxmatch.scoring.backends.default_backend`)."""
     if backend is None:
-        from jaxmatch.scoring.backends import default_backend
-
         backend = default_backend(threads, unroll)
-    be = backend
-    return exact_values([codes], vals, weights, backend=be, batch=batch, m_pad=m_pad, plan=plan)[0]
+    return exact_values([codes], vals, weights, backend=backend, batch=batch, m_pad=m_pad, plan=plan)[0]
 
 
 def reduce_orientations(values: np.ndarray) -> ScoreResult:

@@ -88,7 +88,8 @@ from jaxmatch.catalogue.store import Catalogue
 from jaxmatch.errors import InputError
 from jaxmatch.files import read_limited
 from jaxmatch.catalogue.mesh import valences
-from jaxmatch.shape import Shape, load_shape, make_shape, parse_shape, turning_angles, cumulative_length
+from jaxmatch.io.readers import load_shape, parse_shape
+from jaxmatch.shape import Shape, make_shape, turning_angles, cumulative_length
 
 __all__ = [
     "Example",
