@@ -9,6 +9,7 @@ A session (the README's "Python API" section runs this, as a test)::
     best = ranking.results[0]                                   # a Match: mesh_id, utility, ...
     placement = jaxmatch.place(shape, ranking)                  # the #1 mesh, user coordinates
     jaxmatch.write_mesh("lshape.vtk", placement)                # .vtk .vtu .obj .msh .json
+    m = jaxmatch.mesh(shape, size=0.25)                         # the meshing pipeline: a QuadMesh
 
 Defaults are those of the ``jaxmatch`` command (``score``, ``score-many`` and ``mesh``), all
 from :mod:`jaxmatch.defaults`: the shipped catalogue (k = 0..5), lattice ``"fine"``, top 5,
@@ -38,6 +39,7 @@ from jaxmatch.shape import DEFAULT_CORNER_ANGLE, Annotation, Shape, annotate, de
 
 if TYPE_CHECKING:  # at run time served by __getattr__ below
     from jaxmatch.io.meshfile import write_mesh
+    from jaxmatch.meshing.pipeline import mesh
     from jaxmatch.placement.choose import MeshChoice
     from jaxmatch.placement.embed import Placement
 
@@ -55,6 +57,7 @@ __all__ = [
     "load_lattice",
     "load_shape",
     "make_shape",
+    "mesh",
     "mesh_concave",
     "mesh_layout",
     "parse_shape",
@@ -65,7 +68,7 @@ __all__ = [
     "write_mesh",
 ]
 
-_LAZY = {"write_mesh": "jaxmatch.io.meshfile", "Placement": "jaxmatch.placement.embed", "MeshChoice": "jaxmatch.placement.choose"}
+_LAZY = {"write_mesh": "jaxmatch.io.meshfile", "mesh": "jaxmatch.meshing.pipeline", "Placement": "jaxmatch.placement.embed", "MeshChoice": "jaxmatch.placement.choose"}
 """Names served on first access: the placement modules (and scipy) load only when a mesh is placed
 or written, so ranking with ``tie_break="id"`` does not pay for them."""
 
@@ -261,22 +264,19 @@ def refine_mesh(shape: Shape, catalogue: str | os.PathLike | Catalogue | None = 
 
 def mesh_layout(layout, catalogue: str | os.PathLike | Catalogue | None = None,
                 lattice: str | os.PathLike | Lattice = DEFAULT_LATTICE, *, size: float | None = None, counts=None):
-    """One conforming quad mesh of a multi-patch layout (``jaxmatch layout``): ``layout`` is a
-    path to a layout JSON file or a :class:`~jaxmatch.placement.layout.Layout`; ``size`` the
-    target edge length (user units) and/or ``counts`` fixed edge counts per side. Returns a
-    :class:`~jaxmatch.placement.layout.LayoutMesh`; write it with
-    :func:`jaxmatch.placement.layout.write_layout_mesh` (``.msh`` with physical groups)."""
-    from jaxmatch.placement.layout import Layout, load_layout, mesh_layout as _mesh_layout
+    """A multi-patch layout (a path or a :class:`~jaxmatch.placement.layout.Layout`) as one
+    conforming mesh: a thin wrapper of :func:`jaxmatch.mesh` (``counts``: ``{side id: edges}``).
+    Returns a :class:`~jaxmatch.meshing.result.QuadMesh`."""
+    from jaxmatch.meshing.pipeline import mesh
 
-    lay = layout if isinstance(layout, Layout) else load_layout(layout)
-    return _mesh_layout(lay, load_catalogue(catalogue), _lattice(lattice), size=size, counts=counts)
+    return mesh(layout, size=size, counts=counts, catalogue=catalogue, lattice=lattice)
 
 
 def mesh_concave(shape: Shape, size: float, catalogue: str | os.PathLike | Catalogue | None = None,
                  lattice: str | os.PathLike | Lattice = DEFAULT_LATTICE):
-    """``shape`` meshed with edges of about ``size`` as one template and as splits at its concave
-    corners; the best is kept (``jaxmatch layout SHAPE``; :func:`jaxmatch.placement.decompose.mesh_shape`).
-    Returns a :class:`~jaxmatch.placement.decompose.ShapeChoice` (``chosen`` names the split)."""
-    from jaxmatch.placement.decompose import mesh_shape
+    """``shape`` meshed with edges of about ``size``, the best of one template and every
+    decomposition: a thin wrapper of :func:`jaxmatch.mesh`. Returns a
+    :class:`~jaxmatch.meshing.result.QuadMesh` (``chosen`` names the candidate)."""
+    from jaxmatch.meshing.pipeline import mesh
 
-    return mesh_shape(shape, load_catalogue(catalogue), _lattice(lattice), size=size)
+    return mesh(shape, size=size, catalogue=catalogue, lattice=lattice)

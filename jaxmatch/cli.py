@@ -11,7 +11,7 @@ import sys
 import time
 import warnings
 from pathlib import Path
-from typing import Optional
+from typing import List, Optional
 
 import typer
 from rich.console import Console
@@ -20,8 +20,8 @@ from rich.table import Table
 
 from jaxmatch import __version__
 from jaxmatch.catalogue import store as cat_mod
-from jaxmatch.errors import EXIT_BAD_INPUT, EXIT_INVERTED, EXIT_UNMATCHABLE, InputError, InputWarning, UnmatchableError
-from jaxmatch.defaults import DEFAULT_BAND, DEFAULT_LATTICE, DEFAULT_TIE_BREAK, DEFAULT_TOP, TIE_BREAKS
+from jaxmatch.errors import EXIT_BAD_INPUT, EXIT_INVERTED, EXIT_UNMATCHABLE, InputError, InputWarning, SolverError, UnmatchableError
+from jaxmatch.defaults import DEFAULT_LATTICE, DEFAULT_TIE_BREAK, DEFAULT_TOP, QUALITY, TIE_BREAKS
 from jaxmatch.shape import DEFAULT_CORNER_ANGLE
 
 try:  # typer >= 0.2x vendors click as typer._click and no longer installs click
@@ -204,6 +204,10 @@ JSON_HELP = "Print one JSON object instead of a table."
 TIE_BREAK_HELP = ("Order among equal utilities: 'geometry' places the tied meshes and prefers the higher min scaled "
                   "Jacobian, then fewer irregular internal vertices (beyond the paper); 'id' keeps the paper's "
                   "combinatorial order (fewer internal vertices, shorter boundary, id).")
+
+
+REGION_HELP = ("Region file(s): a shape (jaxmatch JSON {boundary, corners}, GeoJSON, CSV/TSV/text 'x y' rows, SVG or DXF; "
+               "FILE#ID picks an element) or a layout JSON {points, patches}.")
 
 
 def _tie_break(text: str) -> str:
@@ -396,42 +400,320 @@ def _cluster(coordinator: Optional[str], num_processes: int, process_id: int, de
 
 @app.command()
 def mesh(
-    shape: Path = typer.Argument(..., metavar="SHAPE", help=SHAPE_HELP),
-    catalogue: Optional[Path] = typer.Option(None, help="Catalogue file (default: the shipped k=0..5 catalogue)."),
-    internal: Optional[str] = typer.Option(None, help="Mesh size: K or K1..K2 internal vertices (default: the size is chosen by "
-                                           "the fit of the best mesh of each size; the rule that decided is printed)."),
-    lattice: str = typer.Option(DEFAULT_LATTICE, help="Lattice: fine, coarse, or a TOML path."),
-    points: Optional[int] = typer.Option(None, min=1, help="Number m of annotated shape points (default: 2 x longest boundary)."),
-    rank_: int = typer.Option(1, "--rank", min=1, help="Place the R-th ranked mesh (of the chosen size, without --internal)."),
-    out_path: Optional[Path] = typer.Option(None, "--out", help="Mesh file: .vtk .vtu .obj .msh or .json (written atomically)."),
-    png: Optional[Path] = typer.Option(None, "--png", help="Picture of the placed mesh in the shape (.png)."),
-    svg: Optional[Path] = typer.Option(None, "--svg", help="Picture of the placed mesh in the shape (.svg)."),
-    require_valid: bool = typer.Option(False, "--require-valid", help="Walk down the ranking (up to 50 meshes) and place the first "
-                                       "mesh that keeps every corner, has no inverted quad and passes --min-quality and --max-edge-ratio."),
-    min_quality: float = typer.Option(0.2, "--min-quality", help="Quality floor: smallest acceptable min scaled Jacobian."),
-    max_edge_ratio: float = typer.Option(8.0, "--max-edge-ratio", help="Quality floor: largest acceptable longest/shortest edge of a quad."),
-    band: float = typer.Option(DEFAULT_BAND, "--band", help="Quality band: when the mesh falls short of min scaled Jacobian 0.3, "
-                               "place the first following mesh whose utility is within this fraction of its utility "
-                               "and that reaches 0.3 (0: place the ranked mesh as is)."),
-    tie_break: str = typer.Option(DEFAULT_TIE_BREAK, "--tie-break", help=TIE_BREAK_HELP),
-    corner_angle: float = typer.Option(DEFAULT_CORNER_ANGLE, help="Corner threshold (degrees from straight) when the shape lists no corners."),
-    as_json: bool = typer.Option(False, "--json", help="Print one JSON object."),
+    regions: List[Path] = typer.Argument(..., metavar="REGION...", help=REGION_HELP),
+    size: Optional[float] = typer.Option(None, "--size", metavar="H", help="Target edge length in the region's units "
+                                         "(default: the outer perimeter / 32, printed)."),
     sides: Optional[str] = typer.Option(None, "--sides", help="Edges per side, e.g. 4,2,4,2: side i runs from corner i to "
                                         "corner i+1 in the file's order (see 'jaxmatch annotate'); one total count for a "
-                                        "shape without corners. Refines the best template that can meet it exactly."),
-    size: Optional[float] = typer.Option(None, "--size", help="Target edge length in the shape's units: refines the best "
-                                         "template to edges of about this length."),
+                                        "shape without corners. One template meets them exactly."),
+    sides_file: Optional[Path] = typer.Option(None, "--sides-file", help='Layouts: JSON {"i-j": count, ...}, edges on the '
+                                              "named sides (i, j: the side's end points)."),
+    template: bool = typer.Option(False, "--template", help="The paper's answer instead: the best-ranked catalogue mesh "
+                                  "placed as is (no size; see --internal, --rank, --band)."),
+    out_path: Optional[Path] = typer.Option(None, "--out", help="Mesh file: .msh (physical groups) .vtk .vtu .obj or .json, "
+                                            "written atomically."),
+    out_dir: Optional[Path] = typer.Option(None, "--out-dir", metavar="DIR", help="Many regions: one mesh file per region "
+                                           "in DIR (named after it) and DIR/summary.jsonl."),
+    fmt: str = typer.Option("msh", "--format", metavar="SUFFIX", help="With --out-dir: the mesh files' format "
+                            "(msh, vtk, vtu, obj, json)."),
+    png: Optional[Path] = typer.Option(None, "--png", help="Picture of the mesh (.png)."),
+    svg: Optional[Path] = typer.Option(None, "--svg", help="Picture of the mesh (.svg)."),
+    as_json: bool = typer.Option(False, "--json", help="Print one JSON object."),
+    jobs: Optional[int] = typer.Option(None, "--jobs", min=1, metavar="N", help="With many regions: worker processes "
+                                       "(default: the CPUs)."),
+    skip_bad: bool = typer.Option(False, "--skip-bad", help="With many regions: a bad region becomes a record "
+                                  "{shape, error} in the summary and the rest go on (exit 0)."),
+    strategy: Optional[str] = typer.Option(None, "--strategy", metavar="NAMES", help="Candidates to try, comma-separated: "
+                                           "single, continuations, bisectors, recursive (default: all)."),
+    budget: Optional[float] = typer.Option(None, "--budget", metavar="SECONDS", help="Stop trying candidates after this "
+                                           "long once one valid mesh exists."),
+    catalogue: Optional[Path] = typer.Option(None, metavar="FILE", help=CATALOGUE_HELP),
+    lattice: str = typer.Option(DEFAULT_LATTICE, metavar="NAME|FILE", help=LATTICE_HELP),
+    corner_angle: float = typer.Option(DEFAULT_CORNER_ANGLE, metavar="DEGREES", help=ANGLE_HELP),
+    internal: Optional[str] = typer.Option(None, metavar="K|K1..K2", help="--template: mesh size (default: chosen by the "
+                                           "fit of the best mesh of each size; the rule that decided is printed)."),
+    points: Optional[int] = typer.Option(None, min=1, metavar="M", help="--template: " + POINTS_HELP),
+    rank_: int = typer.Option(1, "--rank", min=1, metavar="R", help="--template: place the R-th ranked mesh."),
+    require_valid: bool = typer.Option(False, "--require-valid", help="--template: walk down the ranking (up to 50 meshes) "
+                                       "to the first mesh that keeps every corner, has no inverted quad and passes "
+                                       "--min-quality and --max-edge-ratio."),
+    min_quality: float = typer.Option(QUALITY.min_sj, "--min-quality", help="--template: smallest acceptable min scaled Jacobian."),
+    max_edge_ratio: float = typer.Option(QUALITY.max_edge_ratio, "--max-edge-ratio", help="--template: largest acceptable "
+                                         "longest/shortest edge of a quad."),
+    band: float = typer.Option(QUALITY.band, "--band", help="--template: when the mesh falls short of min scaled Jacobian "
+                               f"{QUALITY.good_sj:g}, place the first following mesh whose utility is within this fraction "
+                               "of its utility and that reaches it (0: the ranked mesh as is)."),
+    tie_break: str = typer.Option(DEFAULT_TIE_BREAK, "--tie-break", metavar="geometry|id", help="--template: " + TIE_BREAK_HELP),
 ) -> None:
-    """Rank like 'score', place the R-th mesh in SHAPE and write it (and/or a picture).
+    """Mesh a region with quads of about --size: the best of one template and every decomposition.
 
-    With --sides or --size the chosen template is refined to the requested size instead.
-    Exit status 3 when the placed mesh is not a mesh of the shape (a corner without a mesh
-    vertex, or inverted quads); the files are written anyway.
+    Candidates: the region as one catalogue template, and split into patches at its concave
+    corners (continuations, bisectors, recursive); each is meshed with one integer program for
+    all side counts, and the best is kept by one rule (no fold, corners, area, quality floor,
+    size conformity, irregular vertices, quality, fewer patches); the rule that decided and the
+    runner-up are printed. A layout file ({points, patches}) is meshed as that layout. Several
+    regions (or --out-dir) mesh in bulk. Exit status 3 when a mesh folds or misses a corner (the
+    files are written anyway).
     """
-    from jaxmatch.io.meshfile import write_mesh
-    from jaxmatch.placement.choose import DEFAULT_WALK, GOOD_QUALITY, check_outputs, choose_mesh, draw_placements, fit_json, panel_title
+    template_opts = {"--internal": internal is not None, "--points": points is not None, "--rank": rank_ != 1,
+                     "--require-valid": require_valid, "--min-quality": min_quality != QUALITY.min_sj,
+                     "--max-edge-ratio": max_edge_ratio != QUALITY.max_edge_ratio, "--band": band != QUALITY.band,
+                     "--tie-break": tie_break != DEFAULT_TIE_BREAK}
+    from jaxmatch.placement.choose import check_outputs
 
     check_outputs(out_path, png, svg)
+    if size is not None and not (size > 0 and size < float("inf")):
+        raise InputError(f"must be a positive length, got {size:g}", "--size")
+    if sides is not None and size is not None:
+        raise InputError("give either --sides or --size, not both", "--size")
+    if budget is not None and not budget > 0:
+        raise InputError(f"must be a positive number of seconds, got {budget:g}", "--budget")
+    if template:
+        for opt, given in (("--size", size is not None), ("--sides", sides is not None),
+                           ("--sides-file", sides_file is not None), ("--strategy", strategy is not None),
+                           ("--out-dir", out_dir is not None)):
+            if given:
+                raise InputError("does not apply with --template (the template is placed as is)", opt)
+        if len(regions) != 1:
+            raise InputError("--template meshes one region at a time", "REGION")
+        _mesh_template(regions[0], catalogue=catalogue, internal=internal, lattice=lattice, points=points, rank_=rank_,
+                       out_path=out_path, png=png, svg=svg, require_valid=require_valid, min_quality=min_quality,
+                       max_edge_ratio=max_edge_ratio, band=band, tie_break=tie_break, corner_angle=corner_angle,
+                       as_json=as_json)
+        return
+    for opt, given in template_opts.items():
+        if given:
+            raise InputError("applies with --template only", opt)
+    names = None
+    if strategy is not None:
+        from jaxmatch.meshing.pipeline import strategy_names
+
+        names = [n.strip() for n in strategy.split(",") if n.strip()]
+        bad = [n for n in names if n not in strategy_names()]
+        if bad or not names:
+            raise InputError(f"expected names among {', '.join(strategy_names())}, got {strategy!r}", "--strategy")
+    angle = _corner_angle(corner_angle)
+    enable_compile_cache()
+    from jaxmatch.scoring.lattice import load_lattice
+
+    cat, lat = _open_catalogue(catalogue), load_lattice(lattice)
+    options = dict(size=size, catalogue=cat, lattice=lat, strategies=names, budget_s=budget)
+    if len(regions) > 1 or out_dir is not None:
+        for opt, given in (("--out", out_path is not None), ("--png", png is not None), ("--svg", svg is not None),
+                           ("--sides", sides is not None), ("--sides-file", sides_file is not None),
+                           ("--json", as_json)):
+            if given:
+                raise InputError("is for one region; with several use --out-dir", opt)
+        _mesh_many(regions, out_dir, fmt, angle, options, jobs, skip_bad)
+        return
+    _mesh_one(regions[0], angle, options, sides, sides_file, out_path, png, svg, as_json)
+
+
+def _load_region(path: Path, corner_angle: float):
+    """A shape or layout file (warnings shown only when it is good, so that bad input stays one line)."""
+    from jaxmatch.meshing.pipeline import load_region
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", InputWarning)
+        region = load_region(path, corner_angle=corner_angle)
+    for w in caught:
+        warnings.showwarning(w.message, w.category, w.filename, w.lineno)
+    return region
+
+
+def _mesh_record(path: Path, m, seconds: float | None = None) -> dict:
+    rec = {"shape": str(path), **m.summary()}
+    rec["candidates"] = [{"name": c.name, "note": c.note, **({} if c.mesh is None else {
+        "patches": c.mesh.n_patches, "quads": int(c.mesh.quads.shape[0]), "min_scaled_jacobian": c.mesh.min_scaled_jacobian,
+        "mean_scaled_jacobian": c.mesh.mean_scaled_jacobian, "inverted": c.mesh.inverted,
+        "irregular": int(c.mesh.irregular.size), "sides_off_size": len(c.mesh.sides_off_size(QUALITY.size_tol))})}
+        for c in m.tried]
+    if seconds is not None:
+        rec["seconds"] = round(seconds, 4)
+    return rec
+
+
+def _mesh_one(path: Path, angle: float, options: dict, sides, sides_file, out_path, png, svg, as_json) -> None:
+    import jaxmatch
+    from jaxmatch.meshing.pipeline import default_size
+    from jaxmatch.placement.layout import Layout
+
+    region = _load_region(path, angle)
+    is_layout = isinstance(region, Layout)
+    counts = None
+    if sides is not None:
+        if is_layout:
+            raise InputError("a layout takes edge counts per side with --sides-file", "--sides")
+        counts = _parse_sides(sides, max(region.n_corners, 1))
+    named = None
+    if sides_file is not None:
+        if not is_layout:
+            raise InputError("edge counts per named side are for layout files; use --sides for a shape", "--sides-file")
+        from jaxmatch.placement.layout import load_counts, layout_sides
+
+        named = load_counts(sides_file, layout_sides(region))
+    elif is_layout and options["size"] is None and not region.requested:
+        options = {**options, "size": default_size(region)}
+    defaulted = options["size"] is None and counts is None and not is_layout
+    with _progress() as prog:
+        task = prog.add_task("meshing candidates", total=None)
+        try:
+            m = jaxmatch.mesh(region, sides=counts, counts=named,
+                              progress=lambda d, t, name: prog.update(task, completed=d, total=t, description=name),
+                              **options)
+        except InputError as e:
+            if counts is not None:
+                raise InputError(str(e), "--sides") from None
+            raise
+    written = {}
+    if out_path is not None:
+        from jaxmatch.io.meshfile import write_mesh
+
+        written["out"] = str(write_mesh(out_path, m))
+    for key, pic in (("png", png), ("svg", svg)):
+        if pic is not None:
+            from jaxmatch.io.plot import draw_quadmesh
+
+            written[key] = str(draw_quadmesh(pic, m, title=path.name, y_down=_y_down(path)))
+    rec = _mesh_record(path, m)
+    if as_json:
+        if counts is not None:
+            rec["sides"] = counts
+        print(json.dumps({**rec, "default_size": defaulted, "out": written.get("out"), "png": written.get("png"),
+                          "svg": written.get("svg")}))
+    else:
+        _print_mesh(path, m, rec, defaulted)
+        for pic in written.values():
+            out.print(f"wrote {pic}", markup=False, highlight=False)
+    if not m.valid:
+        err.print(f"NOT A MESH OF THE REGION: {m.inverted} inverted quads, {m.missed_corners.shape[0]} corners without a "
+                  "vertex; files were written anyway", markup=False, highlight=False)
+        raise typer.Exit(EXIT_INVERTED)
+
+
+def _y_down(path: Path) -> bool:
+    """SVG coordinates run y down: pictures of SVG input are flipped to show it as drawn."""
+    return str(path).split("#", 1)[0].lower().endswith(".svg")
+
+
+def _patches(n: int) -> str:
+    return f"{n} patch" if n == 1 else f"{n} patches"
+
+
+def _print_mesh(path: Path, m, rec: dict, defaulted: bool) -> None:
+    def say(text: str) -> None:
+        out.print(text, markup=False, highlight=False)
+
+    for c in rec["candidates"]:
+        if "quads" in c:
+            say(f"{c['name']}: {_patches(c['patches'])}, {c['quads']} quads, SJ min {c['min_scaled_jacobian']:.3f} "
+                f"mean {c['mean_scaled_jacobian']:.3f}, {c['inverted']} inverted, {c['irregular']} irregular, "
+                f"{c['sides_off_size']} sides off the size")
+        else:
+            say(f"{c['name']}: not meshed ({c['note']})")
+    decided = f" (rule that decided: {m.rule}; runner-up {m.runner_up})" if m.rule else ""
+    say(f"chosen: {m.chosen}{decided}")
+    if m.size:
+        how = " (default: perimeter / 32)" if defaulted else ""
+        say(f"size {m.size:.4g}{how}: mean edge {m.mean_edge_length:.4g}, worst side {100 * m.size_deviation:.0f}% "
+            "off length / size")
+    say(f"{path}: {_patches(m.n_patches)}, {rec['quads']} quads, {rec['vertices']} vertices, {rec['irregular']} irregular "
+        f"internal (Euler's bound {rec['irregular_bound']}); scaled Jacobian min {rec['min_scaled_jacobian']:.3f} mean "
+        f"{rec['mean_scaled_jacobian']:.3f}; inverted quads: {rec['inverted']}; corners kept: "
+        f"{rec['corners'] - rec['missed_corners']} of {rec['corners']}; mesh area / region area {rec['area_ratio']:.6f}")
+
+
+def _mesh_many(regions: List[Path], out_dir: Optional[Path], fmt: str, angle: float, options: dict, jobs, skip_bad) -> None:
+    """Bulk meshing: every region read and checked first (bad input stops the run before any
+    work, unless --skip-bad), then meshed in worker processes; one mesh file each and a JSONL
+    summary, all written atomically."""
+    import jaxmatch
+    from jaxmatch.io.meshfile import MESH_FORMATS, write_mesh
+    from jaxmatch.parallel import available_cpus, ordered_map
+    from jaxmatch.scoring.bulk import write_jsonl
+
+    suffix = "." + fmt.lower().lstrip(".")
+    if suffix not in MESH_FORMATS:
+        raise InputError(f"expected one of {', '.join(s[1:] for s in MESH_FORMATS)}, got {fmt!r}", "--format")
+    if out_dir is None:
+        raise InputError("several regions need a folder for their meshes", "--out-dir")
+    if out_dir.exists() and not out_dir.is_dir():
+        raise InputError("is not a folder", str(out_dir))
+    loaded, names = [], set()
+    for p in regions:
+        stem = Path(str(p).split("#", 1)[0]).stem + ("-" + str(p).split("#", 1)[1] if "#" in str(p) else "")
+        name, i = stem, 1
+        while name in names:
+            i += 1
+            name = f"{stem}-{i}"
+        names.add(name)
+        try:
+            loaded.append((p, _load_region(p, angle), out_dir / f"{name}{suffix}"))
+        except InputError as e:
+            if not skip_bad:
+                raise
+            loaded.append((p, str(e), None))
+    out_dir.mkdir(parents=True, exist_ok=True)
+
+    def one(i: int) -> dict:
+        p, region, target = loaded[i]
+        if isinstance(region, str):
+            return {"shape": str(p), "error": region}
+        t0 = time.perf_counter()
+        try:
+            m = jaxmatch.mesh(region, **options)
+        except InputError as e:
+            return {"shape": str(p), "error": str(e)}
+        rec = _mesh_record(p, m, time.perf_counter() - t0)
+        rec["out"] = str(write_mesh(target, m))
+        return rec
+
+    workers = available_cpus() if jobs is None else jobs
+    records = []
+    with _progress() as prog:
+        task = prog.add_task("regions", total=len(loaded))
+        for rec in ordered_map(one, list(range(len(loaded))), workers, initializer=_plain_streams, warm_first=True):
+            if "error" in rec and not skip_bad:
+                raise InputError(rec["error"].split(": ", 1)[-1] if rec["error"].startswith(rec["shape"]) else rec["error"],
+                                 rec["shape"])
+            records.append(rec)
+            prog.advance(task)
+    summary = out_dir / "summary.jsonl"
+    write_jsonl(summary, records)
+    failed = sum(1 for r in records if "error" in r)
+    folded = sum(1 for r in records if "error" not in r and (r["inverted"] or r["missed_corners"]))
+    note = f", {failed} failed (records with \"error\")" if failed else ""
+    print(f"wrote {summary}: {len(records)} regions, {len(records) - failed} meshed{note}", file=sys.stderr)
+    if folded:
+        raise typer.Exit(EXIT_INVERTED)
+
+
+def _plain_streams() -> None:
+    """In each worker: plain stdout/stderr (not the progress display's proxies and their lock)."""
+    sys.stdout, sys.stderr = sys.__stdout__, sys.__stderr__
+
+
+def _parse_sides(text: str, n_sides: int) -> list[int]:
+    """``"4,2,4,2"`` -> ``[4, 2, 4, 2]``; InputError naming --sides otherwise."""
+    try:
+        counts = [int(tok) for tok in text.replace(" ", "").split(",")]
+    except ValueError:
+        raise InputError(f"expected comma-separated whole numbers like 4,2,4,2, got {text!r}", "--sides") from None
+    if len(counts) != n_sides:
+        what = "one total count (the shape has no corners)" if n_sides == 1 else f"one count per side ({n_sides} sides)"
+        raise InputError(f"{len(counts)} counts given, expected {what}", "--sides")
+    if any(c < 1 for c in counts):
+        raise InputError(f"every count must be at least 1, got {text!r}", "--sides")
+    return counts
+
+
+def _mesh_template(shape: Path, *, catalogue, internal, lattice, points, rank_, out_path, png, svg, require_valid,
+                   min_quality, max_edge_ratio, band, tie_break, corner_angle, as_json) -> None:
+    """``mesh --template``: the paper's answer, the best-ranked catalogue mesh placed as is, with
+    the ranking's report (rank, utility, the quality band, the next valid mesh)."""
+    from jaxmatch.io.meshfile import write_mesh
+    from jaxmatch.placement.choose import DEFAULT_WALK, GOOD_QUALITY, choose_mesh, draw_placements, fit_json, panel_title
+
     tb = _tie_break(tie_break)
     if not -1.0 <= min_quality <= 1.0:
         raise InputError(f"must lie in [-1, 1] (a scaled Jacobian), got {min_quality:g}", "--min-quality")
@@ -439,10 +721,6 @@ def mesh(
         raise InputError(f"must be at least 1, got {max_edge_ratio:g}", "--max-edge-ratio")
     if not 0.0 <= band <= 1.0:
         raise InputError(f"must lie in [0, 1] (a fraction of the utility), got {band:g}", "--band")
-    if sides is not None or size is not None:
-        _mesh_refined(shape, sides, size, catalogue=catalogue, internal=internal, lattice=lattice, rank_=rank_,
-                      out_path=out_path, png=png, svg=svg, corner_angle=corner_angle, as_json=as_json)
-        return
     enable_compile_cache()
     shp, lat, cat, ks = _inputs(shape, corner_angle, lattice, catalogue, internal)
     with _progress() as prog:
@@ -533,180 +811,6 @@ def mesh(
     if not choice.valid:
         raise typer.Exit(EXIT_INVERTED)
 
-
-def _parse_sides(text: str, n_sides: int) -> list[int]:
-    """``"4,2,4,2"`` -> ``[4, 2, 4, 2]``; InputError naming --sides otherwise."""
-    try:
-        counts = [int(tok) for tok in text.replace(" ", "").split(",")]
-    except ValueError:
-        raise InputError(f"expected comma-separated whole numbers like 4,2,4,2, got {text!r}", "--sides") from None
-    if len(counts) != n_sides:
-        what = "one total count (the shape has no corners)" if n_sides == 1 else f"one count per side ({n_sides} sides)"
-        raise InputError(f"{len(counts)} counts given, expected {what}", "--sides")
-    if any(c < 1 for c in counts):
-        raise InputError(f"every count must be at least 1, got {text!r}", "--sides")
-    return counts
-
-
-def _mesh_refined(shape: Path, sides: Optional[str], size: Optional[float], *, catalogue, internal, lattice, rank_,
-                  out_path, png, svg, corner_angle, as_json) -> None:
-    """``mesh --sides/--size``: refine the best template that meets the request."""
-    import math
-
-    import numpy as np
-
-    from jaxmatch.io.meshfile import write_mesh
-    from jaxmatch.placement.refine import InfeasibleRequest, refine_mesh, refined_json
-    from jaxmatch.shape import V, X
-
-    if sides is not None and size is not None:
-        raise InputError("give either --sides or --size, not both", "--size")
-    if rank_ != 1:
-        raise InputError("--rank does not apply with --sides/--size (the best template that meets the request is taken)", "--rank")
-    if size is not None and not (size > 0 and math.isfinite(size)):
-        raise InputError(f"must be a positive length, got {size!r}", "--size")
-    enable_compile_cache()
-    shp, lat, cat, ks = _inputs(shape, corner_angle, lattice, catalogue, internal)
-    counts = _parse_sides(sides, max(shp.n_corners, 1)) if sides is not None else None
-    try:
-        choice = refine_mesh(shp, cat, lat, sides=counts, size=size, internal=ks)
-    except InfeasibleRequest as e:
-        raise InputError(e.problem, "--sides" if sides is not None else "--size") from None
-    rm, t = choice.mesh, choice.template
-    pl = rm.as_placement()
-    written = {}
-    if out_path is not None:
-        written["out"] = str(write_mesh(out_path, pl))
-    corners = shp.to_user(shp.points[shp.corners]) if shp.n_corners else np.zeros((0, 2))
-    codes = np.where(shp.convex, X, V) if shp.n_corners else np.zeros(0, np.int64)
-    for key, path in (("png", png), ("svg", svg)):
-        if path is not None:
-            from jaxmatch.io.plot import Panel, draw_many
-
-            title = f"{t.mesh_id} refined, {rm.n_quads} quads"
-            written[key] = str(draw_many([Panel(shp.user_points, corners, codes, pl, title)], path, title=shape.name))
-    notes = []
-    if choice.passed_over:
-        first = choice.passed_over[0]
-        notes.append(f"passed over {len(choice.passed_over)} better-ranked template(s), the first #{first[0]} {first[1]}: {first[2]}")
-    if choice.note:
-        notes.append(choice.note)
-    if not rm.valid:
-        notes.append(f"FOLDED: {rm.inverted} of {rm.n_quads} quads are inverted; files were written anyway")
-    if as_json:
-        rec = {"shape": str(shape), "lattice": lat.name}
-        rec.update(refined_json(choice))
-        rec.update({"out": written.get("out"), "png": written.get("png"), "svg": written.get("svg")})
-        print(json.dumps(rec))
-        for note in notes:
-            print(note, file=sys.stderr)
-    else:
-        out.print(f"shape [bold]{shape}[/]: {max(shp.n_corners, 1)} side(s)")
-        out.print(f"template #{t.rank} {t.mesh_id} refined: edges per side {','.join(map(str, rm.counts.tolist()))}; "
-                  f"{rm.n_quads} quads, {rm.xy.shape[0]} vertices; {t.n_chords} chords, multiplicities "
-                  f"{','.join(map(str, rm.mult.tolist()))}", markup=False, highlight=False)
-        out.print(f"scaled Jacobian: min {rm.min_scaled_jacobian:.3f}, mean {rm.mean_scaled_jacobian:.3f}; inverted quads: "
-                  f"{rm.inverted}; mesh area / shape area {rm.area_ratio:.4f}; max edge ratio {rm.max_edge_ratio:.2f}; "
-                  f"mean edge length {rm.mean_edge_length():.4g}", markup=False, highlight=False)
-        for note in notes:
-            out.print(note, markup=False, highlight=False)
-        for path in written.values():
-            out.print(f"wrote {path}", markup=False, highlight=False)
-    if not rm.valid:
-        raise typer.Exit(EXIT_INVERTED)
-
-
-@app.command()
-def layout(
-    file: Path = typer.Argument(..., help="Layout JSON {points, patches, corners?, sides?}, or a shape file "
-                                "(then the shape is meshed whole and split at its concave corners, and the better is kept)."),
-    size: Optional[float] = typer.Option(None, "--size", help="Target edge length (the file's units) for sides without a count."),
-    sides_file: Optional[Path] = typer.Option(None, "--sides-file", help='JSON {"i-j": count, ...}: edges on the named sides '
-                                              "(i, j: the side's corner points; layouts only)."),
-    out_path: Optional[Path] = typer.Option(None, "--out", help="Mesh file: .msh (physical groups) .vtk .vtu .obj or .json, "
-                                            "written atomically."),
-    png: Optional[Path] = typer.Option(None, "--png", help="Picture of the merged mesh (.png)."),
-    catalogue: Optional[Path] = typer.Option(None, help="Catalogue file (default: the shipped k=0..5 catalogue)."),
-    lattice: str = typer.Option("fine", help="Lattice: fine, coarse, or a TOML path."),
-    strategy: str = typer.Option("best", "--strategy", help="Shapes only: single, continuations, bisectors, recursive, "
-                                 "or best (mesh them all, keep the best)."),
-    corner_angle: float = typer.Option(30.0, help="Shapes only: corner threshold when the shape lists no corners."),
-    as_json: bool = typer.Option(False, "--json", help="Print one JSON object."),
-) -> None:
-    """Mesh a multi-patch layout (or a concave shape, split into patches) into one conforming quad mesh.
-
-    Shared sides carry identical vertices; the .msh file has the patch id as cell data and physical
-    groups for every patch, the outer boundary and every side. Exit status 3 when the mesh has inverted quads.
-    """
-    from jaxmatch.files import read_limited
-    from jaxmatch.placement.choose import check_outputs
-    from jaxmatch.placement import decompose as dec
-    from jaxmatch.placement import layout as lay
-    from jaxmatch.scoring.lattice import load_lattice
-    from jaxmatch.io.readers import parse_shape
-
-    check_outputs(out_path, png)
-    if size is not None and not (size > 0 and size < float("inf")):
-        raise InputError(f"must be a positive number, got {size}", "--size")
-    strategies = {"best": (dec.SINGLE,) + dec.STRATEGIES, dec.SINGLE: (dec.SINGLE,)}
-    strategies.update({name: (name,) for name in dec.STRATEGIES})
-    if strategy not in strategies:
-        raise InputError(f"expected one of {', '.join(strategies)}, got {strategy!r}", "--strategy")
-    raw = read_limited(file, lay.MAX_BYTES, "layout file")
-    try:
-        is_layout = file.suffix.lower() == ".json" and isinstance(doc := json.loads(raw.decode("utf-8-sig")), dict) \
-            and "patches" in doc
-    except ValueError:
-        is_layout = False
-    enable_compile_cache()
-    cat, lat = _open_catalogue(catalogue), load_lattice(lattice)
-    chosen = None
-    if is_layout:
-        layout_ = lay.parse_layout(raw, str(file))
-        sides = lay.layout_sides(layout_)
-        counts = lay.load_counts(sides_file, sides) if sides_file is not None else {}
-        if size is None and not counts and not layout_.requested:
-            raise InputError("give a target edge length or edge counts (--sides-file, or \"sides\" in the layout)", "--size")
-        mesh_ = lay.mesh_layout(layout_, cat, lat, size=size, counts=counts)
-    else:
-        if sides_file is not None:
-            raise InputError("edge counts per side are for layout files; use --size for a shape", "--sides-file")
-        if size is None:
-            raise InputError("a shape needs a target edge length", "--size")
-        shp = parse_shape(raw, str(file), corner_angle=corner_angle)
-        choice = dec.mesh_shape(shp, cat, lat, size=size, strategies=strategies[strategy])
-        mesh_, chosen = choice.mesh, choice
-    written = {}
-    if out_path is not None:
-        written["out"] = str(lay.write_layout_mesh(out_path, mesh_))
-    if png is not None:
-        head = file.name if chosen is None else f"{file.name}: {chosen.chosen} ({mesh_.layout.n_patches} patches)"
-        written["png"] = str(lay.draw_meshes(png, [lay.layout_panel(mesh_, head)]))
-    info = mesh_.summary()
-    if chosen is not None:
-        info["chosen"] = chosen.chosen
-        info["candidates"] = [{"name": n, "note": note, **({} if m is None else {
-            "patches": m.layout.n_patches, "quads": int(m.quads.shape[0]), "min_scaled_jacobian": m.min_scaled_jacobian,
-            "mean_scaled_jacobian": m.mean_scaled_jacobian, "inverted": m.inverted, "irregular": int(m.irregular.size)})}
-            for n, m, note in chosen.tried]
-    if as_json:
-        print(json.dumps({"file": str(file), **info, "out": written.get("out"), "png": written.get("png")}))
-    else:
-        if chosen is not None:
-            for c in info["candidates"]:
-                line = (f"{c['name']}: {c['patches']} patches, {c['quads']} quads, SJ min {c['min_scaled_jacobian']:.3f} "
-                        f"mean {c['mean_scaled_jacobian']:.3f}, {c['inverted']} inverted, {c['irregular']} irregular"
-                        if "quads" in c else f"{c['name']}: not meshed ({c['note']})")
-                out.print(line, markup=False, highlight=False)
-            out.print(f"chosen: {chosen.chosen}", markup=False, highlight=False)
-        out.print(f"{file}: {info['patches']} patches, {info['quads']} quads, {info['vertices']} vertices, "
-                  f"{info['irregular']} irregular internal; scaled Jacobian min {info['min_scaled_jacobian']:.3f} "
-                  f"mean {info['mean_scaled_jacobian']:.3f}; inverted quads: {info['inverted']}; "
-                  f"mesh area / region area {info['area_ratio']:.9f}", markup=False, highlight=False)
-        for path in written.values():
-            out.print(f"wrote {path}", markup=False, highlight=False)
-    if mesh_.inverted:
-        raise typer.Exit(EXIT_INVERTED)
 
 
 @app.command()
@@ -921,6 +1025,8 @@ def run_typer(typer_app: typer.Typer) -> None:
         _fail(f"error: {e}", EXIT_BAD_INPUT)
     except UnmatchableError as e:
         _fail(f"no match: {e}{_unmatchable_hint(e)}", EXIT_UNMATCHABLE)
+    except SolverError as e:  # the solver failed, the request may be fine
+        _fail(f"solver error: {e} (the request was not judged infeasible; try another --size)", 1)
     except (typer.Abort, KeyboardInterrupt):
         _fail("aborted", 130)
     except ClickException as e:  # usage errors: unknown option, bad value, missing argument

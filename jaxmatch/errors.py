@@ -40,3 +40,14 @@ class InputWarning(UserWarning):
         self.problem = " ".join(str(problem).split())
         self.where = None if where is None else " ".join(str(where).split())
         super().__init__(self.problem if self.where is None else f"{self.where}: {self.problem}")
+
+
+class SolverError(Exception):
+    """The integer-program solver (HiGHS through :func:`scipy.optimize.milp`) failed for a
+    reason other than infeasibility (``status``: scipy's code, e.g. 4 "other"; 3 unbounded).
+    Not a verdict on the request: the caller retries another way or falls back to another
+    candidate; an infeasible request raises :class:`InputError` instead."""
+
+    def __init__(self, message: str, status: int):
+        self.status = int(status)
+        super().__init__(" ".join(str(message).split()))

@@ -59,7 +59,7 @@ def folded(small_cat):
 
 def test_mesh_writes_vtk_and_pictures_json(cli, small_cat, tmp_path):
     out, png, svg = tmp_path / "m.vtk", tmp_path / "m.png", tmp_path / "m.svg"
-    code, stdout, err = cli("mesh", EXAMPLES / "square.json", "--catalogue", small_cat, "--out", out, "--png", png, "--svg", svg, "--json")
+    code, stdout, err = cli("mesh", EXAMPLES / "square.json", "--template", "--catalogue", small_cat, "--out", out, "--png", png, "--svg", svg, "--json")
     assert code == 0, err
     d = json.loads(stdout)
     for key in ("mesh_id", "utility", "rotation", "reflected", "min_scaled_jacobian", "mean_scaled_jacobian", "inverted", "out"):
@@ -81,7 +81,7 @@ def test_mesh_writes_vtk_and_pictures_json(cli, small_cat, tmp_path):
 @pytest.mark.parametrize("suffix", [".msh", ".obj", ".json", ".vtu"])
 def test_mesh_formats_read_back(cli, small_cat, tmp_path, suffix):
     out = tmp_path / f"m{suffix}"
-    code, stdout, err = cli("mesh", EXAMPLES / "lshape.json", "--catalogue", small_cat, "--require-valid", "--out", out, "--json")
+    code, stdout, err = cli("mesh", EXAMPLES / "lshape.json", "--template", "--catalogue", small_cat, "--require-valid", "--out", out, "--json")
     assert code == 0, err
     d = json.loads(stdout)
     assert d["valid"] and d["missed_corners"] == [] and abs(d["area_ratio"] - 1) <= 1e-9
@@ -90,7 +90,7 @@ def test_mesh_formats_read_back(cli, small_cat, tmp_path, suffix):
     else:
         m = meshio.read(out)
         pts, quads = m.points[:, :2], m.cells_dict["quad"]
-        sj = m.cell_data_dict["scaled_jacobian"]["quad"] if suffix != ".obj" else None
+        sj = m.cell_data_dict["scaled_jacobian"]["quad"] if suffix == ".vtu" else None  # .msh with groups: none
     assert quads.shape == (d["quads"], 4)
     if sj is not None:
         assert sj.min() == pytest.approx(d["min_scaled_jacobian"])
@@ -102,7 +102,7 @@ def test_mesh_formats_read_back(cli, small_cat, tmp_path, suffix):
 
 def test_mesh_text_output_and_picture_only(cli, small_cat, tmp_path):
     png = tmp_path / "only.png"
-    code, stdout, err = cli("mesh", EXAMPLES / "triangle.json", "--catalogue", small_cat, "--png", png)
+    code, stdout, err = cli("mesh", EXAMPLES / "triangle.json", "--template", "--catalogue", small_cat, "--png", png)
     assert code == 0, err
     assert "scaled Jacobian: min" in stdout and "mean" in stdout and "inverted quads: 0" in stdout
     assert f"wrote {png}" in stdout
@@ -111,7 +111,7 @@ def test_mesh_text_output_and_picture_only(cli, small_cat, tmp_path):
 
 def test_mesh_not_good_names_the_next_good_one(cli, small_cat, tmp_path, folded):
     bad, want, want_id = folded
-    code, stdout, err = cli("mesh", U_SHAPE, "--catalogue", small_cat, "--internal", "1..3", "--rank", bad, "--json", "--band", "0")
+    code, stdout, err = cli("mesh", U_SHAPE, "--template", "--catalogue", small_cat, "--internal", "1..3", "--rank", bad, "--json", "--band", "0")
     d = json.loads(stdout)
     assert not d["good"] and d["rank"] == bad
     assert code == (0 if d["valid"] else EXIT_INVERTED)
@@ -121,7 +121,7 @@ def test_mesh_not_good_names_the_next_good_one(cli, small_cat, tmp_path, folded)
 
 def test_mesh_require_valid_walks_down(cli, small_cat, tmp_path, folded):
     bad, want, want_id = folded
-    code, stdout, err = cli("mesh", U_SHAPE, "--catalogue", small_cat, "--internal", "1..3", "--rank", bad, "--require-valid", "--json")
+    code, stdout, err = cli("mesh", U_SHAPE, "--template", "--catalogue", small_cat, "--internal", "1..3", "--rank", bad, "--require-valid", "--json")
     assert code == 0, err
     d = json.loads(stdout)
     assert d["rank"] == want and d["requested_rank"] == bad and d["mesh_id"] == want_id and d["inverted"] == 0
@@ -132,11 +132,11 @@ def test_mesh_folded_exit_3_still_writes(cli, small_cat, tmp_path):
     """The Z shape with one internal vertex: none of its 3 meshes embeds without a fold or a
     degenerate quad."""
     out = tmp_path / "f.json"
-    code, stdout, err = cli("mesh", Z_SHAPE, "--catalogue", small_cat, "--internal", "1", "--out", out)
+    code, stdout, err = cli("mesh", Z_SHAPE, "--template", "--catalogue", small_cat, "--internal", "1", "--out", out)
     assert code == EXIT_INVERTED
     assert "FOLDED" in err or "MISSED CORNERS" in err  # warnings and advice go to stderr
     assert "no mesh ranked #1..#3" in err and out.exists() and read_json_mesh(out)[1].shape[0] > 0
-    code, stdout, err = cli("mesh", Z_SHAPE, "--catalogue", small_cat, "--internal", "1", "--json")
+    code, stdout, err = cli("mesh", Z_SHAPE, "--template", "--catalogue", small_cat, "--internal", "1", "--json")
     assert code == EXIT_INVERTED
     d = json.loads(stdout)
     assert (d["inverted"] > 0 or d["missed_corners"]) and not d["valid"] and not d["good"] and d["next_valid"] is None
@@ -160,7 +160,7 @@ def test_mesh_bad_options_exit_2_one_line_nothing_written(cli, small_cat, tmp_pa
     d = tmp_path / "o"
     d.mkdir()
     args = [a.format(d=d) for a in extra]
-    code, stdout, err = cli("mesh", EXAMPLES / "square.json", "--catalogue", small_cat, *args)
+    code, stdout, err = cli("mesh", EXAMPLES / "square.json", "--template", "--catalogue", small_cat, *args)
     assert code == EXIT_BAD_INPUT
     lines = err.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("error:") and "Traceback" not in err
@@ -194,7 +194,7 @@ def test_score_tie_break_id_keeps_utilities(cli, small_cat):
 
 def test_real_process_exit_3(small_cat, tmp_path):
     out = tmp_path / "p.vtk"
-    r = subprocess.run([sys.executable, "-m", "jaxmatch.cli", "mesh", str(Z_SHAPE), "--catalogue", str(small_cat),
+    r = subprocess.run([sys.executable, "-m", "jaxmatch.cli", "mesh", str(Z_SHAPE), "--template", "--catalogue", str(small_cat),
                         "--internal", "1", "--out", str(out)], capture_output=True, text=True, cwd=ROOT, timeout=300)
     assert r.returncode == EXIT_INVERTED, r.stderr
     assert ("MISSED CORNERS" in r.stderr or "FOLDED" in r.stderr) and out.exists()  # warnings go to stderr
@@ -203,7 +203,7 @@ def test_real_process_exit_3(small_cat, tmp_path):
 
 
 def test_mesh_chooses_the_size_and_says_which_rule_decided(cli, small_cat):
-    code, stdout, err = cli("mesh", EXAMPLES / "square.json", "--catalogue", small_cat, "--json")
+    code, stdout, err = cli("mesh", EXAMPLES / "square.json", "--template", "--catalogue", small_cat, "--json")
     assert code == 0, err
     d = json.loads(stdout)
     sc = d["size_choice"]
@@ -211,11 +211,11 @@ def test_mesh_chooses_the_size_and_says_which_rule_decided(cli, small_cat):
     assert sorted(c["k"] for c in sc["candidates"]) == [0, 1, 2, 3]
     assert f"size k={sc['k']} chosen by rule '{sc['rule']}'" in err
     assert d["corners_kept"] == d["corners"] == 4 and d["missed_corners"] == [] and d["max_edge_ratio"] >= 1
-    code, stdout, err = cli("mesh", EXAMPLES / "square.json", "--catalogue", small_cat, "--internal", "2", "--json")
+    code, stdout, err = cli("mesh", EXAMPLES / "square.json", "--template", "--catalogue", small_cat, "--internal", "2", "--json")
     assert code == 0, err
     d = json.loads(stdout)
     assert d["size_choice"] is None and d["internal_vertices"] == 2
-    code, stdout, err = cli("mesh", EXAMPLES / "square.json", "--catalogue", small_cat)
+    code, stdout, err = cli("mesh", EXAMPLES / "square.json", "--template", "--catalogue", small_cat)
     assert code == 0 and "chosen by rule" in stdout and "corners kept: 4 of 4" in stdout and "max edge ratio" in stdout
 
 
@@ -223,17 +223,17 @@ STAIRS = EXAMPLES / "labels" / "shapes" / "stairs.json"
 
 
 def test_mesh_quality_band_is_reported_and_can_be_turned_off(cli, small_cat):
-    code, stdout, err = cli("mesh", STAIRS, "--catalogue", small_cat, "--internal", "3", "--json")
+    code, stdout, err = cli("mesh", STAIRS, "--template", "--catalogue", small_cat, "--internal", "3", "--json")
     assert code == 0, err
     d = json.loads(stdout)
     assert d["passed_over"]["rank"] == 1 and d["rank"] > 1 and d["min_scaled_jacobian"] >= 0.3 > d["passed_over"]["min_scaled_jacobian"]
     assert d["utility"] >= 0.9 * d["passed_over"]["utility"] and "quality band" in err
-    code, stdout, err = cli("mesh", STAIRS, "--catalogue", small_cat, "--internal", "3", "--json", "--band", "0")
+    code, stdout, err = cli("mesh", STAIRS, "--template", "--catalogue", small_cat, "--internal", "3", "--json", "--band", "0")
     d0 = json.loads(stdout)
     assert code == 0 and d0["rank"] == 1 and d0["passed_over"] is None and d0["mesh_id"] == d["passed_over"]["mesh_id"]
 
 
 @pytest.mark.parametrize("value", ["-0.1", "1.5"])
 def test_mesh_band_out_of_range_is_a_clear_error(cli, small_cat, value):
-    code, stdout, err = cli("mesh", STAIRS, "--catalogue", small_cat, "--internal", "3", "--band", value)
+    code, stdout, err = cli("mesh", STAIRS, "--template", "--catalogue", small_cat, "--internal", "3", "--band", value)
     assert code == EXIT_BAD_INPUT and "--band" in err and "Traceback" not in err

@@ -1,5 +1,5 @@
-"""Decomposition of concave shapes (:mod:`jaxmatch.placement.decompose`) and the choice between
-one template and the pieces.
+"""Decomposition of concave shapes (:mod:`jaxmatch.placement.decompose`); the choice between one
+template and the pieces is specified in tests/test_meshing.py.
 
 Specification (geometry checked with plain numpy, independently of shapely and of the code):
 
@@ -7,9 +7,6 @@ Specification (geometry checked with plain numpy, independently of shapely and o
   of the shape is a corner of the layout;
 * ``continuations`` cuts leave only convex pieces; a rectilinear shape becomes axis-aligned
   rectangles;
-* "Done when" of issue 12: the L, T, U, plus, Z, stairs, cross and notched-rectangle shapes,
-  at two sizes, are meshed with every corner kept, no inverted quad, min scaled Jacobian >= 0.3
-  and area ratio 1 +- 1e-9, and the result says which candidate was chosen.
 """
 
 from __future__ import annotations
@@ -21,8 +18,7 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from jaxmatch.placement.decompose import STRATEGIES, choice_key, cut_segments, decompose, mesh_shape, single_patch
-from jaxmatch.scoring.lattice import load_lattice
+from jaxmatch.placement.decompose import STRATEGIES, cut_segments, decompose, single_patch
 from jaxmatch.io.readers import load_shape
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -90,45 +86,6 @@ def test_convex_shape_is_one_patch():
     shp = load_shape(EX / "hexagon.json")
     lay = decompose(shp)
     assert lay.n_patches == 1 and np.array_equal(lay.points, single_patch(shp).points)
-
-
-@pytest.fixture(scope="module")
-def lat():
-    return load_lattice("fine")
-
-
-def check_done(shp, choice):
-    m = choice.mesh
-    assert m.inverted == 0
-    assert m.min_scaled_jacobian >= 0.3
-    assert m.area_ratio == pytest.approx(1.0, abs=1e-9)
-    q = m.xy[m.quads]
-    areas = 0.5 * np.sum(q[..., 0] * np.roll(q[..., 1], -1, axis=1) - np.roll(q[..., 0], -1, axis=1) * q[..., 1], axis=1)
-    assert areas.sum() / abs(area(shp.input_points)) == pytest.approx(1.0, abs=1e-9)  # independently of the code
-    for c in shp.input_points[shp.corners]:
-        assert np.min(np.linalg.norm(m.xy - c, axis=1)) <= 1e-12  # every corner is a mesh vertex
-    assert choice.chosen in ("single",) + STRATEGIES
-    assert min(choice_key(t[1]) for t in choice.tried if t[1] is not None) == choice_key(m)
-
-
-def test_l_shape_choice_between_decompositions(cat, lat):
-    shp = load_shape(SHAPES["L"])
-    choice = mesh_shape(shp, cat, lat, size=0.25, strategies=STRATEGIES)
-    check_done(shp, choice)
-    assert [t[0] for t in choice.tried] == list(STRATEGIES)
-    # rectangles meshed as grids (every quad a square); the recursive cut needs only 2 of them
-    assert choice.chosen == "recursive" and choice.mesh.layout.n_patches == 2
-    assert choice.mesh.min_scaled_jacobian == pytest.approx(1.0)
-
-
-@pytest.mark.slow
-@pytest.mark.parametrize("name", list(SHAPES))
-def test_done_when_every_shape_two_sizes(cat, lat, name):
-    shp = load_shape(SHAPES[name])
-    cache: dict = {}
-    for size in (0.25, 0.125):
-        check_done(shp, mesh_shape(shp, cat, lat, size=size, template_cache=cache))
-    assert cache  # the second size reused the templates
 
 
 @st.composite

@@ -491,11 +491,11 @@ def test_cli_layout_msh_png_json(cli, tmp_path):
     out, png = tmp_path / "m.msh", tmp_path / "m.png"
     sides = tmp_path / "s.json"
     sides.write_text(json.dumps({"0-1": 2}))
-    code, stdout, err = cli("layout", LAYOUTS / "two-blocks.json", "--size", 0.5, "--sides-file", sides,
+    code, stdout, err = cli("mesh", LAYOUTS / "two-blocks.json", "--size", 0.5, "--sides-file", sides,
                             "--out", out, "--png", png, "--json")
     assert code == 0, err
     d = json.loads(stdout)
-    assert d["patches"] == 2 and d["inverted"] == 0 and d["counts"]["0-1"] == 2 and d["out"] == str(out)
+    assert d["patches"] == 2 and d["inverted"] == 0 and d["side_counts"]["0-1"] == 2 and d["out"] == str(out)
     assert png.read_bytes().startswith(b"\x89PNG")
     import meshio
 
@@ -505,14 +505,14 @@ def test_cli_layout_msh_png_json(cli, tmp_path):
 
 
 def test_cli_shape_one_strategy(cli, tmp_path):
-    code, stdout, err = cli("layout", ROOT / "examples" / "tshape.json", "--size", 0.5, "--strategy", "continuations")
+    code, stdout, err = cli("mesh", ROOT / "examples" / "tshape.json", "--size", 0.5, "--strategy", "continuations")
     assert code == 0, err
     assert "chosen: continuations" in stdout and "4 patches" in stdout and "inverted quads: 0" in stdout
 
 
 @pytest.mark.slow
 def test_cli_shape_is_decomposed(cli, tmp_path):
-    code, stdout, err = cli("layout", ROOT / "examples" / "lshape.json", "--size", 0.5, "--json")
+    code, stdout, err = cli("mesh", ROOT / "examples" / "lshape.json", "--size", 0.5, "--json")
     assert code == 0, err
     d = json.loads(stdout)
     assert d["chosen"] in ("single", "continuations", "bisectors", "recursive")
@@ -523,7 +523,6 @@ def test_cli_shape_is_decomposed(cli, tmp_path):
 @pytest.mark.parametrize("args,words", [
     (["--size", "0.5"], "overlap"),
     (["--size", "-1"], "--size"),
-    ([], "--size"),
     (["--size", "0.5", "--strategy", "zigzag"], "--strategy"),
 ])
 def test_cli_bad_input_one_line_exit_2(cli, tmp_path, args, words):
@@ -531,22 +530,31 @@ def test_cli_bad_input_one_line_exit_2(cli, tmp_path, args, words):
     bad.write_text(json.dumps({"points": SQUARE2, "patches": [[0, 1, 4, 5], [0, 1, 4, 5]]} if words == "overlap"
                               else {"points": SQUARE2, "patches": [[0, 1, 4, 5], [1, 2, 3, 4]]}))
     out = tmp_path / "o.msh"
-    code, stdout, err = cli("layout", bad, *args, "--out", out)
+    code, stdout, err = cli("mesh", bad, *args, "--out", out)
     assert code == EXIT_BAD_INPUT
     lines = err.strip().splitlines()
     assert len(lines) == 1 and words in lines[0] and "Traceback" not in err
     assert not out.exists()
 
 
-def test_cli_shape_without_corners(cli):
-    code, _, err = cli("layout", ROOT / "examples" / "circle.json", "--size", 0.5)
-    assert code == EXIT_BAD_INPUT and "corner" in err and len(err.strip().splitlines()) == 1
+def test_cli_shape_without_corners_is_meshed(cli):
+    code, stdout, err = cli("mesh", ROOT / "examples" / "circle.json", "--size", 0.5, "--json")
+    assert code == 0, err
+    d = json.loads(stdout)
+    assert d["corners"] == 0 and d["inverted"] == 0 and d["min_scaled_jacobian"] >= 0.3
+
+
+def test_cli_layout_without_size_uses_the_default(cli):
+    code, stdout, err = cli("mesh", LAYOUTS / "two-blocks.json", "--json")
+    assert code == 0, err
+    d = json.loads(stdout)
+    assert d["chosen"] == "layout" and d["size"] > 0 and d["inverted"] == 0
 
 
 def test_cli_sides_file_errors(cli, tmp_path):
     sides = tmp_path / "s.json"
     sides.write_text(json.dumps({"0-9": 2}))
-    code, _, err = cli("layout", LAYOUTS / "two-blocks.json", "--sides-file", sides)
+    code, _, err = cli("mesh", LAYOUTS / "two-blocks.json", "--sides-file", sides)
     assert code == EXIT_BAD_INPUT and str(sides) in err and "not a side" in err
-    code, _, err = cli("layout", ROOT / "examples" / "lshape.json", "--sides-file", sides)
+    code, _, err = cli("mesh", ROOT / "examples" / "lshape.json", "--sides-file", sides)
     assert code == EXIT_BAD_INPUT and "--sides-file" in err

@@ -43,10 +43,18 @@ def test_meshio_formats_round_trip(tmp_path, placement, suffix):
     back = meshio.read(path)
     np.testing.assert_array_equal(back.points[:, :2], placement.xy)
     np.testing.assert_array_equal(back.points[:, 2], 0.0)
-    assert [c.type for c in back.cells] == ["quad"]
+    types = [c.type for c in back.cells]
+    assert types == (["quad"] if suffix == ".obj" else ["quad", "line"])  # the boundary loop as a line group
     np.testing.assert_array_equal(back.cells[0].data, placement.mesh.quads)
-    if suffix != ".obj":  # OBJ keeps no cell data
+    if suffix in (".vtk", ".vtu"):  # OBJ keeps no cell data; MSH 2 with line groups none (module docstring)
         np.testing.assert_array_equal(np.ravel(back.cell_data["scaled_jacobian"][0]), placement.scaled_jacobian)
+    if suffix != ".obj":
+        lines = back.cells[1].data
+        assert len(lines) == len(placement.mesh.boundary)
+        assert set(map(tuple, np.sort(lines, axis=1))) == {tuple(sorted(e)) for e in zip(
+            placement.mesh.boundary, np.roll(placement.mesh.boundary, -1))}
+    if suffix == ".msh":
+        assert "boundary" in back.field_data
     assert [p.name for p in tmp_path.iterdir()] == [path.name]  # no temporary left
 
 
@@ -54,7 +62,8 @@ def test_json_round_trip(tmp_path, placement):
     path = tmp_path / "mesh.json"
     write_mesh(path, placement)
     data = json.loads(path.read_text())
-    assert set(data) == {"points", "quads", "scaled_jacobian"}
+    assert set(data) == {"points", "quads", "scaled_jacobian", "groups"}
+    assert len(data["groups"]["boundary"]) == len(placement.mesh.boundary)
     np.testing.assert_array_equal(np.array(data["points"]), placement.xy)
     np.testing.assert_array_equal(np.array(data["quads"]), placement.mesh.quads)
     np.testing.assert_array_equal(np.array(data["scaled_jacobian"]), placement.scaled_jacobian)

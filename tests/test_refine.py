@@ -387,7 +387,7 @@ def test_cli_mesh_sides_json_and_errors(cli, tmp_path):
     assert code == 0, err
     d = json.loads(stdout)
     assert d["sides"] == [4, 2, 4, 2] and d["inverted"] == 0 and out.exists()
-    assert sum(c["multiplicity"] * c["edges_per_side"][0] for c in d["chords"]) == 4
+    assert sorted(d["side_counts"].values()) == [2, 2, 4, 4] and d["quads"] == 8
     for args, words in ((["--sides", "1,2,1,1"], ["--sides", "odd", "nearest feasible counts"]),
                         (["--sides", "4,2"], ["--sides", "one count per side (4 sides)"]),
                         (["--sides", "4,x,4,2"], ["--sides", "comma-separated"]),

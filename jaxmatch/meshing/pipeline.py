@@ -30,7 +30,7 @@ from typing import Callable, Mapping, Sequence
 import numpy as np
 
 from jaxmatch.defaults import DEFAULT_DIVISIONS, DEFAULT_LATTICE, QUALITY, Quality
-from jaxmatch.errors import InputError
+from jaxmatch.errors import InputError, SolverError
 from jaxmatch.meshing.build import from_layout, from_placement, from_refined
 from jaxmatch.meshing.choose import choose
 from jaxmatch.meshing.result import Candidate, QuadMesh
@@ -112,7 +112,8 @@ def _side_ids(shape: Shape, layout) -> list[int]:
     return out
 
 
-def mesh(region, *, size: float | None = None, sides: Sequence[int] | None = None, template: bool = False,
+def mesh(region, *, size: float | None = None, sides: Sequence[int] | None = None,
+         counts: Mapping[int, int] | None = None, template: bool = False,
          catalogue=None, lattice=DEFAULT_LATTICE, strategies: Sequence[str] | None = None,
          quality: Quality = QUALITY, corner_angle: float = DEFAULT_CORNER_ANGLE, budget_s: float | None = None,
          progress: Callable[[int, int, str], None] | None = None, template_cache: dict | None = None,
@@ -125,6 +126,8 @@ def mesh(region, *, size: float | None = None, sides: Sequence[int] | None = Non
       size: target edge length (user units); default perimeter / :data:`DEFAULT_DIVISIONS`.
       sides: edges per user side (side ``i`` from corner ``i`` to ``i + 1``, file order), met
         exactly by one template; excludes ``size``.
+      counts: layouts only: ``{side id: edges}`` (ids of
+        :func:`~jaxmatch.placement.layout.layout_sides`; added to the file's ``"sides"``).
       template: the paper's answer instead: the best-ranked catalogue mesh placed as is
         (``template_options``: ``internal``, ``rank``, ``points``, ``tie_break``,
         ``require_valid``, ``min_quality``, ``max_edge_ratio``, ``band``, ``walk``).
@@ -156,7 +159,9 @@ def mesh(region, *, size: float | None = None, sides: Sequence[int] | None = Non
     if isinstance(region, Layout):
         if template:
             raise InputError("a layout is meshed patch by patch; the single template (template=True) is for shapes")
-        return _mesh_layout_file(region, cat, lat, size, sides)
+        return _mesh_layout_file(region, cat, lat, size, sides, counts)
+    if counts:
+        raise InputError("edge counts per named side are for layouts; give sides (one count per side) for a shape")
     if not isinstance(region, Shape):
         raise TypeError(f"region must be a Shape, a Layout or a path, got {type(region).__name__}")
     if template:
@@ -171,13 +176,13 @@ def mesh(region, *, size: float | None = None, sides: Sequence[int] | None = Non
     return _mesh_size(region, cat, lat, h, strategies, quality, budget_s, progress, template_cache)
 
 
-def _mesh_layout_file(layout, cat, lat, size, sides) -> QuadMesh:
+def _mesh_layout_file(layout, cat, lat, size, sides, counts) -> QuadMesh:
     from jaxmatch.placement.layout import mesh_layout
 
     if sides is not None:
         raise InputError("a layout takes edge counts per side in its file (\"sides\") or as counts=; not sides")
-    h = size if size is not None or layout.requested else default_size(layout)
-    lm = mesh_layout(layout, cat, lat, size=h)
+    h = size if size is not None or layout.requested or counts else default_size(layout)
+    lm = mesh_layout(layout, cat, lat, size=h, counts=counts)
     return from_layout(lm, size=h).with_choice("layout", "", None, ())
 
 
@@ -211,8 +216,10 @@ def _mesh_sides(shape, cat, lat, sides) -> QuadMesh:
                              sizes=_all_sizes())
         except LayoutInfeasible as e:
             names = layout_sides(lay).names
-            near = ("; nearest feasible " + ",".join(str(e.nearest.get(names[s], "?")) for s in ids)) if e.nearest else ""
-            raise InfeasibleRequest(f"edge counts {','.join(map(str, counts.tolist()))} cannot be met: "
+            near = ("; nearest feasible counts " + ",".join(str(e.nearest.get(names[s], "?")) for s in ids)) if e.nearest else ""
+            odd = (f"their total {int(counts.sum())} is odd (every quad mesh has an even number of boundary edges); "
+                   if counts.sum() % 2 else "")
+            raise InfeasibleRequest(f"edge counts {','.join(map(str, counts.tolist()))} cannot be met: {odd}"
                                     f"{e.problem}{near}", shape.source) from None
         m = from_layout(lm, corners=_corners(shape))
     return m.with_choice(SINGLE, "", None, (Candidate(SINGLE, m),))
@@ -243,6 +250,7 @@ def _mesh_size(shape, cat, lat, h, strategies, quality, budget_s, progress, temp
         choice = refine_mesh(shape, cat, lat, size=h)
         m = from_refined(shape, choice.mesh, size=h)
         return m.with_choice(SINGLE, "", None, (Candidate(SINGLE, m),))
+    shape = canonical(shape)
     corners = _corners(shape)
     cache = template_cache if template_cache is not None else {}
     tried: list[Candidate] = []
@@ -267,11 +275,81 @@ def _mesh_size(shape, cat, lat, h, strategies, quality, budget_s, progress, temp
                              sizes=ALL_SIZES if name == SINGLE else TEMPLATE_SIZES, template_cache=cache)
         except InputError as e:
             tried.append(Candidate(name, None, e.problem))
+        except SolverError as e:  # not a verdict on the request: the other candidates go on
+            tried.append(Candidate(name, None, f"solver error: {e}"))
         else:
-            tried.append(Candidate(name, from_layout(lm, size=h, corners=corners)))
+            m = from_layout(lm, size=h, corners=corners)
+            tried.append(Candidate(name, m))
+            if name == SINGLE and m.sides_off_size(quality.size_tol):
+                tried.extend(_conforming_templates(shape, lay, cat, lat, h, corners, m, quality))
         if progress is not None:
             progress(i + 1, len(names), name)
     if not any(c.mesh is not None for c in tried):
         raise InputError("no candidate could be meshed: " + "; ".join(f"{c.name}: {c.note}" for c in tried),
                          where=shape.source)
     return choose(tried, quality)
+
+
+CONFORMING_TRIES = 3
+"""When the single template's side counts cannot follow the size (its chords tie sides of
+different lengths together, e.g. the two parallel sides of a trapezoid), the nearest even
+count vectors to ``length / h`` (at most this many) are asked of every catalogue template."""
+
+
+def _target_counts(lengths: np.ndarray, h: float, tries: int) -> list[np.ndarray]:
+    """Edge counts per side nearest to ``lengths / h`` with an even total (a quad mesh has an
+    even number of boundary edges), best first: ``(S,) int64`` each."""
+    want = np.asarray(lengths, np.float64) / h
+    base = np.maximum(np.rint(want), 1).astype(np.int64)
+    if base.sum() % 2 == 0:
+        return [base]
+    moves = []
+    for i in range(len(base)):
+        for d in (-1, 1):
+            if base[i] + d >= 1:
+                moves.append((abs(base[i] + d - want[i]) - abs(base[i] - want[i]), i, d))
+    out = []
+    for _, i, d in sorted(moves)[:tries]:
+        c = base.copy()
+        c[i] += d
+        out.append(c)
+    return out
+
+
+def _conforming_templates(shape: Shape, lay, cat, lat, h, corners, first: QuadMesh, quality: Quality) -> list[Candidate]:
+    """A single-template candidate whose side counts follow ``h``: the nearest even counts
+    (:func:`_target_counts`), each met exactly by the best template of the catalogue that can
+    (:func:`jaxmatch.placement.refine.refine_mesh`), named ``"single <template id>"``."""
+    from jaxmatch.errors import UnmatchableError
+    from jaxmatch.placement.refine import DEFAULT_LIMIT, InfeasibleRequest, patch_templates, refine_mesh, side_lengths
+
+    try:
+        templates = patch_templates(shape, cat, lat, limit=DEFAULT_LIMIT)
+    except UnmatchableError:
+        return []
+    out, seen = [], {first.templates}
+    for counts in _target_counts(side_lengths(shape), h, CONFORMING_TRIES):
+        try:
+            choice = refine_mesh(shape, cat, lat, sides=counts.tolist(), templates=templates)
+        except (InfeasibleRequest, SolverError):
+            continue
+        m = from_refined(shape, choice.mesh, size=h)
+        if m.templates not in seen and not m.sides_off_size(quality.size_tol):
+            seen.add(m.templates)
+            out.append(Candidate(f"{SINGLE} {m.templates[0]}", m))
+    return out
+
+
+def canonical(shape: Shape) -> Shape:
+    """The same shape with its loop written one way: counter-clockwise from its lexicographically
+    smallest point (x, then y), the same corners. Meshing the canonical shape makes the mesh
+    independent of where the user's loop starts and which way it runs."""
+    from jaxmatch.placement.decompose import _xy
+    from jaxmatch.shape import make_shape
+
+    pts = _xy(shape)
+    start = int(np.lexsort((pts[:, 1], pts[:, 0]))[0])
+    if start == 0 and shape.corner_order is None:
+        return shape
+    corners = sorted(int(c) for c in (np.asarray(shape.corners, np.int64) - start) % len(pts))
+    return make_shape(np.roll(pts, -start, axis=0), corners=corners, source=shape.source)

@@ -17,32 +17,23 @@ every point where three or more pieces' edges meet (cut ends and crossings), so 
 share their sides whole and the merged mesh is conforming. Every point of the outline is kept,
 so the decomposition covers the shape exactly.
 
-:func:`mesh_shape` meshes the shape as one patch and each decomposition, and keeps the best by
-the placement rules (no inverted quad, area kept, then the higher minimum scaled Jacobian, then
-the higher mean, fewer irregular vertices, fewer patches); it says which won.
+The meshing pipeline (:func:`jaxmatch.meshing.pipeline.mesh`) meshes the shape as one patch and
+as each decomposition and keeps the best by its one choice rule (:mod:`jaxmatch.meshing.choose`).
 """
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, NamedTuple
-
 import numpy as np
 
 from jaxmatch.errors import InputError
-from jaxmatch.placement.layout import ALL_SIZES, TEMPLATE_SIZES, Layout, LayoutMesh, make_layout, mesh_layout
+from jaxmatch.placement.layout import Layout, make_layout
 from jaxmatch.shape import Shape
 
-if TYPE_CHECKING:  # pragma: no cover
-    from jaxmatch.catalogue.store import Catalogue
-    from jaxmatch.scoring.lattice import Lattice
 
-__all__ = ["STRATEGIES", "ShapeChoice", "cut_segments", "decompose", "mesh_shape", "single_patch", "choice_key"]
+__all__ = ["STRATEGIES", "cut_segments", "decompose", "single_patch"]
 
 STRATEGIES = ("continuations", "bisectors", "recursive")
 """The ways :func:`decompose` cuts at concave corners."""
-
-SINGLE = "single"
-"""Name of the one-patch candidate in :func:`mesh_shape`."""
 
 
 
@@ -253,63 +244,6 @@ def decompose(shape: Shape, strategy: str = "continuations") -> Layout:
     if not cuts:
         return single_patch(shape)
     return _layout(shape, _faces(pts, cuts, inserts, [False] * len(cuts)), strategy)
-
-
-class ShapeChoice(NamedTuple):
-    """Result of :func:`mesh_shape`.
-
-    chosen: ``"single"`` or a strategy name; mesh: its :class:`LayoutMesh`;
-    tried: ``(name, mesh or None, note)`` for every candidate, in the order tried (note: why a
-    candidate has no mesh, or "").
-    """
-
-    chosen: str
-    mesh: LayoutMesh
-    tried: tuple
-
-
-def choice_key(mesh: LayoutMesh) -> tuple:
-    """Order of candidates (smaller is better): inverted quads, area not kept (|ratio - 1| >
-    1e-6), then higher min scaled Jacobian (2 decimals), higher mean (2 decimals), fewer
-    irregular internal vertices, fewer patches."""
-    return (mesh.inverted > 0, abs(mesh.area_ratio - 1.0) > 1e-6, -round(mesh.min_scaled_jacobian, 2),
-            -round(mesh.mean_scaled_jacobian, 2), int(mesh.irregular.size), mesh.layout.n_patches)
-
-
-def mesh_shape(shape: Shape, catalogue: Catalogue, lattice: Lattice, *, size: float,
-               strategies=(SINGLE,) + STRATEGIES, template_cache: dict | None = None) -> ShapeChoice:
-    """Mesh ``shape`` with target edge length ``size`` (user units) as one patch and as each
-    decomposition in ``strategies`` (``"single"`` and names of :data:`STRATEGIES`), and keep the
-    best by :func:`choice_key`. The one patch may use templates of any size of the catalogue
-    (:data:`~jaxmatch.placement.layout.ALL_SIZES`), the pieces the small ones
-    (:data:`~jaxmatch.placement.layout.TEMPLATE_SIZES`). Decompositions are smoothed across
-    their cuts (``smooth_cuts``). template_cache: see :func:`~jaxmatch.placement.layout.mesh_layout`
-    (pass the same dict to mesh the shape at several sizes). Raises :class:`InputError` when no candidate can be meshed."""
-    tried = []
-    seen_layouts = []
-    for name in strategies:
-        try:
-            lay = single_patch(shape) if name == SINGLE else decompose(shape, name)
-        except InputError as e:
-            tried.append((name, None, str(e)))
-            continue
-        if any(_same(lay, other) for other in seen_layouts):
-            tried.append((name, None, "same patches as an earlier candidate"))
-            continue
-        seen_layouts.append(lay)
-        try:
-            m = mesh_layout(lay, catalogue, lattice, size=size, smooth_cuts=lay.n_patches > 1,
-                            sizes=ALL_SIZES if name == SINGLE else TEMPLATE_SIZES, template_cache=template_cache)
-        except InputError as e:
-            tried.append((name, None, e.problem))
-            continue
-        tried.append((name, m, ""))
-    good = [(choice_key(m), i, n, m) for i, (n, m, _) in enumerate(tried) if m is not None]
-    if not good:
-        raise InputError("no candidate could be meshed: " + "; ".join(f"{n}: {note}" for n, _, note in tried),
-                         where=shape.source)
-    _, _, name, m = min(good, key=lambda g: (g[0], g[1]))
-    return ShapeChoice(name, m, tuple(tried))
 
 
 def _same(a: Layout, b: Layout) -> bool:

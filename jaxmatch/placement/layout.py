@@ -52,6 +52,7 @@ import numpy as np
 from jaxmatch.defaults import QUALITY
 from jaxmatch.errors import InputError
 from jaxmatch.files import read_limited
+from jaxmatch.placement.milp import run_milp
 from jaxmatch.placement.embed import inverted_mask, polygon_area, quad_areas, quality, smooth
 from jaxmatch.catalogue.mesh import valences
 from jaxmatch.shape import Shape, make_shape
@@ -601,7 +602,7 @@ def solve_counts(sides: Sides, matrices: Sequence[np.ndarray], *, counts: Mappin
     counts) when the requested counts cannot be met; :class:`InputError` for a bad size or when
     neither a size nor counts are given.
     """
-    from scipy.optimize import Bounds, LinearConstraint, milp
+    from scipy.optimize import Bounds, LinearConstraint
 
     counts = dict(counts or {})
     S = len(sides.chains)
@@ -659,11 +660,10 @@ def solve_counts(sides: Sides, matrices: Sequence[np.ndarray], *, counts: Mappin
         for s, v in fixed.items():
             lb[M + s] = ub[M + s] = float(v)
         integrality = np.concatenate([np.ones(M + S), np.zeros(T + M)])
-        res = milp(cost, constraints=LinearConstraint(np.array(rows), lo, hi), integrality=integrality,
-                   bounds=Bounds(lb, ub), options={"time_limit": 60.0})
-        if res.status != 0 or res.x is None:
+        x = run_milp(cost, LinearConstraint(np.array(rows), lo, hi), integrality, Bounds(lb, ub))
+        if x is None:
             return None
-        x = np.rint(res.x).astype(np.int64)
+        x = np.rint(x).astype(np.int64)
         return [x[off[p]:off[p + 1]] for p in range(len(matrices))], x[M:M + S]
 
     targets = {s: float(sides.lengths[s]) / h for s in range(S) if s not in counts}
@@ -848,7 +848,7 @@ def _key(refined_mesh) -> tuple:
 def mesh_layout(layout: Layout, catalogue: Catalogue, lattice: Lattice, *, size: float | None = None,
                 counts: Mapping[int, int] | None = None, templates_per_patch: int = TEMPLATES_PER_PATCH,
                 sizes=TEMPLATE_SIZES, smooth_cuts: bool = False, template_cache: dict | None = None,
-                progress=None) -> LayoutMesh:
+                progress=None, first_templates: Sequence[int] | None = None) -> LayoutMesh:
     """Mesh every patch of ``layout`` and merge them into one conforming :class:`LayoutMesh`.
 
     size: target edge length (user units) for sides without a requested count; counts:
@@ -857,6 +857,8 @@ def mesh_layout(layout: Layout, catalogue: Catalogue, lattice: Lattice, *, size:
     template_cache: optional dict, read and filled, of each patch's candidate templates (keyed by
     the patch's points, corners, ``sizes`` and ``templates_per_patch``; valid for one catalogue
     and lattice), so that meshing the same layout at another size does not rank again.
+    first_templates: per patch, the index of the candidate template to start from (default 0,
+    the best-ranked; a patch with fewer candidates raises IndexError).
     smooth_cuts: after merging, untangle/smooth all vertices except the outer boundary
     (:func:`jaxmatch.placement.embed.smooth`; for decompositions, whose inner sides are not
     the user's): it never lowers the minimum scaled Jacobian.
@@ -887,7 +889,10 @@ def mesh_layout(layout: Layout, catalogue: Catalogue, lattice: Lattice, *, size:
         cands.append(t)
         if progress:
             progress(p + 1, len(shapes))
-    choice = [0] * len(shapes)
+    choice = [0] * len(shapes) if first_templates is None else [int(j) for j in first_templates]
+    for p, j in enumerate(choice):
+        if not 0 <= j < len(cands[p]):
+            raise IndexError(f"patch {p} has {len(cands[p])} candidate templates, not {j + 1}")
     cache: dict = {}
     best = None
     for _ in range(ROUNDS):

@@ -42,11 +42,12 @@ import numpy as np
 import scipy.sparse
 import scipy.sparse.csgraph
 import scipy.sparse.linalg
-from scipy.optimize import Bounds, LinearConstraint, milp
+from scipy.optimize import Bounds, LinearConstraint
 
 from jaxmatch.catalogue.mesh import edges
 from jaxmatch.defaults import QUALITY
 from jaxmatch.errors import InputError
+from jaxmatch.placement.milp import run_milp
 from jaxmatch.placement.embed import Placement, inverted_mask, polygon_area, quad_areas, quality, smooth
 from jaxmatch.shape import Shape
 
@@ -494,11 +495,10 @@ def _milp_l1(A: np.ndarray, target: np.ndarray, tau: np.ndarray, ub: np.ndarray,
     lb = np.concatenate([np.ones(C), np.zeros(n + C)])
     ubv = np.concatenate([ub.astype(np.float64), np.full(n + C, np.inf)])
     integ = np.concatenate([np.ones(C), np.zeros(n + C)])
-    res = milp(cost, constraints=cons, bounds=Bounds(lb, ubv), integrality=integ,
-               options={"presolve": True, "time_limit": 30.0})
-    if res.status != 0 or res.x is None:
+    x = run_milp(cost, cons, integ, Bounds(lb, ubv))
+    if x is None:
         return None
-    m = np.rint(res.x[:C]).astype(np.int64)
+    m = np.rint(x[:C]).astype(np.int64)
     if exact and not np.array_equal(A @ m, target):  # pragma: no cover - solver tolerance
         return None
     return m
@@ -550,7 +550,7 @@ def solve_multiplicities(template: PatchTemplate, *, counts=None, size=None) -> 
             tau = _tau(template, h_eff)
             ub = np.maximum(np.ceil(2 * tau + 2 * target.max()), 1).astype(np.int64)
             m = _milp_l1(A, target, tau, ub, exact=False, chord_weight=SIZE_CHORD_WEIGHT)
-            if m is None:  # pragma: no cover - always feasible (m = 1)
+            if m is None:  # pragma: no cover - always feasible (m = 1): a solver failure raises SolverError
                 raise InfeasibleRequest("no multiplicities found", src)
             est = estimated_mean_edge(template, m)
             if best is None or abs(est / h - 1) < abs(best[0] / h - 1):

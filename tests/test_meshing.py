@@ -1,0 +1,304 @@
+"""The meshing pipeline (:mod:`jaxmatch.meshing`): one front door, one result type, one choice rule.
+
+Specification (geometry checked with plain numpy from the mesh's points and quads and the input
+file, independently of the code under test):
+
+* ``jaxmatch.mesh(shape, size=h)`` meshes the shape as one template and as each decomposition
+  and keeps the best by one rule; the result names the candidate, the rule that decided and the
+  runner-up, and lists every candidate tried;
+* every corner is a vertex, no quad folds, the area is kept, min scaled Jacobian >= 0.3, on the
+  concave example shapes at two sizes;
+* squares and rectangles whose sides are multiples of h give the plain grid;
+* every side's edge count follows the size (within ``max(1, size_tol * L / h)``);
+* the same mesh however the loop is written (start point, direction);
+* every result type writes to a file; a solver failure is not reported as infeasibility.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import jaxmatch
+from jaxmatch.defaults import QUALITY
+from jaxmatch.errors import EXIT_BAD_INPUT, InputError, SolverError
+from jaxmatch.meshing.choose import RULES, choose, mesh_key
+from jaxmatch.meshing.pipeline import strategy_names
+from jaxmatch.meshing.result import Candidate, QuadMesh, irregular_bound
+from jaxmatch.placement.decompose import STRATEGIES
+
+ROOT = Path(__file__).resolve().parent.parent
+EX, LAB = ROOT / "examples", ROOT / "examples" / "labels" / "shapes"
+CONCAVE = {"L": EX / "lshape.json", "T": EX / "tshape.json", "U": LAB / "ushape.json", "plus": EX / "plus.json",
+           "Z": LAB / "zshape.json", "stairs": LAB / "stairs.json", "cross": LAB / "cross.json",
+           "notched-rectangle": LAB / "notched-rectangle.json"}
+
+
+def signed_area(p) -> float:
+    p = np.asarray(p, float)
+    return 0.5 * float(np.sum(p[:, 0] * np.roll(p[:, 1], -1) - np.roll(p[:, 0], -1) * p[:, 1]))
+
+
+def sj_plain(xy, quads) -> np.ndarray:
+    """Verdict scaled Jacobian per quad, written out here."""
+    p = xy[np.asarray(quads)]
+    a, b = np.roll(p, -1, axis=1) - p, np.roll(p, 1, axis=1) - p
+    cross = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+    return (cross / (np.linalg.norm(a, axis=2) * np.linalg.norm(b, axis=2))).min(axis=1)
+
+
+def valence_plain(quads, n) -> tuple[np.ndarray, np.ndarray]:
+    """(valence per vertex, on a boundary edge) from the quads alone."""
+    e = np.sort(np.stack([quads, np.roll(quads, -1, axis=1)], -1).reshape(-1, 2), axis=1)
+    uniq, cnt = np.unique(e, axis=0, return_counts=True)
+    on_b = np.zeros(n, bool)
+    on_b[uniq[cnt == 1].ravel()] = True
+    return np.bincount(uniq.ravel(), minlength=n), on_b
+
+
+def check_mesh(shape, m: QuadMesh) -> None:
+    """A mesh of the shape, measured independently."""
+    sj = sj_plain(m.xy, m.quads)
+    assert sj.min() >= 0.3
+    quad_area = sum(signed_area(m.xy[q]) for q in m.quads)
+    assert quad_area / abs(signed_area(shape.input_points)) == pytest.approx(1.0, abs=1e-9)
+    for c in shape.input_points[shape.corners]:
+        assert np.min(np.linalg.norm(m.xy - c, axis=1)) <= 1e-12
+    assert m.chosen.split()[0] in strategy_names()  # "single <template id>": another single template
+    assert min(mesh_key(c.mesh, i) for i, c in enumerate(m.tried) if c.mesh is not None) == \
+        mesh_key(m, [c.name for c in m.tried].index(m.chosen))
+
+
+def test_strategy_names_are_the_single_template_then_every_decomposition():
+    assert strategy_names() == ("single",) + tuple(STRATEGIES)
+
+
+def test_l_shape_names_the_rule_and_the_runner_up(cat):
+    shp = jaxmatch.load_shape(CONCAVE["L"])
+    m = jaxmatch.mesh(shp, size=0.25, catalogue=cat)
+    check_mesh(shp, m)
+    assert [c.name for c in m.tried] == list(strategy_names())
+    # the recursive cut meshes the L as two grids: fewer patches than the continuations' three
+    assert m.chosen == "recursive" and m.n_patches == 2 and m.rule == "fewer patches"
+    assert m.runner_up == "continuations" and len(m.irregular) == 0
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", list(CONCAVE))
+def test_concave_shapes_at_two_sizes(cat, name):
+    shp = jaxmatch.load_shape(CONCAVE[name])
+    cache: dict = {}
+    for size in (0.25, 0.125):
+        check_mesh(shp, jaxmatch.mesh(shp, size=size, catalogue=cat, template_cache=cache))
+    assert cache  # the second size reused the templates
+
+
+def test_tshape_at_a_quarter_meshes(cat):
+    """Once a solver failure of HiGHS (status 4), reported as "no multiplicities found"."""
+    shp = jaxmatch.load_shape(EX / "tshape.json")
+    check_mesh(shp, jaxmatch.mesh(shp, size=0.25, catalogue=cat))
+
+
+@pytest.mark.parametrize("w,h,size", [(10, 10, 1.0), (3, 1, 0.25), (4, 2, 0.5), (5, 3, 1.0)])
+def test_rectangles_with_sides_multiple_of_h_give_the_plain_grid(cat, w, h, size):
+    shp = jaxmatch.make_shape([[0, 0], [w, 0], [w, h], [0, h]])
+    m = jaxmatch.mesh(shp, size=size, catalogue=cat)
+    nx, ny = round(w / size), round(h / size)
+    assert m.quads.shape[0] == nx * ny
+    val, on_b = valence_plain(m.quads, len(m.xy))
+    assert np.all(val[~on_b] == 4)
+    assert sj_plain(m.xy, m.quads).min() == pytest.approx(1.0)
+
+
+@pytest.mark.parametrize("path", [LAB / "trapezoid.json", EX / "hexagon.json", EX / "triangle.json", LAB / "pentagon.json"])
+@pytest.mark.parametrize("div", [16, 32])
+def test_every_side_follows_the_size(cat, path, div):
+    shp = jaxmatch.load_shape(path)
+    per = float(np.sum(np.linalg.norm(np.roll(shp.input_points, -1, 0) - shp.input_points, axis=1)))
+    m = jaxmatch.mesh(shp, size=per / div, catalogue=cat)
+    assert m.sides_off_size(QUALITY.size_tol) == []
+    # independently: count the boundary edges between consecutive corners along the loop
+    loop = m.line_sets["boundary"][:, 0]
+    at = sorted(int(np.flatnonzero(np.linalg.norm(m.xy[loop] - c, axis=1) < 1e-9)[0]) for c in shp.input_points[shp.corners])
+    h = per / div
+    for a, b in zip(at, at[1:] + [at[0] + len(loop)]):
+        n = b - a
+        L = float(np.linalg.norm(m.xy[loop[b % len(loop)]] - m.xy[loop[a]]))  # straight sides
+        assert abs(n - L / h) <= max(1, QUALITY.size_tol * L / h), (n, L / h)
+
+
+@pytest.mark.parametrize("path", [EX / "lshape.json", EX / "hexagon.json", LAB / "notched-rectangle.json"])
+def test_the_same_mesh_however_the_loop_is_written(cat, path):
+    data = json.loads(Path(path).read_text())
+    pts = np.asarray(data["boundary"], float)
+    base = jaxmatch.mesh(jaxmatch.make_shape(pts), size=0.25, catalogue=cat)
+    for variant in (np.roll(pts, 2, axis=0), pts[::-1], np.roll(pts[::-1], 3, axis=0)):
+        m = jaxmatch.mesh(jaxmatch.make_shape(variant), size=0.25, catalogue=cat)
+        assert m.chosen == base.chosen and m.quads.shape == base.quads.shape
+        a = np.unique(np.round(m.xy, 9), axis=0)
+        b = np.unique(np.round(base.xy, 9), axis=0)
+        assert a.shape == b.shape and np.allclose(a, b, atol=1e-7)
+
+
+def grid_mesh(nx, ny, fold: bool = False, patches: int = 1) -> QuadMesh:
+    vid = np.arange((nx + 1) * (ny + 1)).reshape(ny + 1, nx + 1)
+    quads = np.array([[vid[j, i], vid[j, i + 1], vid[j + 1, i + 1], vid[j + 1, i]] for j in range(ny) for i in range(nx)])
+    xy = np.array([[i, j] for j in range(ny + 1) for i in range(nx + 1)], float)
+    if fold:
+        xy[vid[1, 1]] = [2.5, 2.5]
+    corners = xy[[vid[0, 0], vid[0, nx], vid[ny, nx], vid[ny, 0]]]
+    patch = (np.arange(len(quads)) * patches // len(quads)).astype(np.int64)
+    return QuadMesh(xy=xy, quads=quads, patch=patch, line_sets={}, region_area=float(nx * ny), corners=corners)
+
+
+def test_irregular_bound_is_eulers():
+    assert irregular_bound(grid_mesh(3, 2).quads, 12) == 0
+    # one quad: four valence-2 corners, sum of (3 - valence) = 4 = 4 * (1 - 0 holes)
+    assert irregular_bound(np.array([[0, 1, 2, 3]]), 4) == 0
+    # a triangle split into three quads around a valence-3 centre: bound 1
+    tri = np.array([[0, 3, 6, 5], [3, 1, 4, 6], [5, 6, 4, 2]])
+    assert irregular_bound(tri, 7) == 1
+
+
+def test_the_rule_order():
+    good, folded, two = grid_mesh(3, 3), grid_mesh(3, 3, fold=True), grid_mesh(3, 3, patches=2)
+    assert folded.inverted > 0
+    picked = choose([Candidate("a", folded), Candidate("b", good)])
+    assert picked.chosen == "b" and picked.rule == "no fold" and picked.runner_up == "a"
+    picked = choose([Candidate("a", two), Candidate("b", good), Candidate("c", None, "failed")])
+    assert picked.chosen == "b" and picked.rule == "fewer patches" and len(picked.tried) == 3
+    picked = choose([Candidate("a", good), Candidate("b", grid_mesh(3, 3))])
+    assert picked.chosen == "a" and picked.rule == "order tried"
+    assert RULES[0] == "no fold" and RULES[-1] == "order tried"
+    with pytest.raises(ValueError):
+        choose([Candidate("a", None, "failed")])
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.lists(st.tuples(st.booleans(), st.integers(1, 3)), min_size=1, max_size=5))
+def test_choose_takes_the_smallest_key(specs):
+    cands = [Candidate(f"c{i}", grid_mesh(2, 2, fold=f, patches=p)) for i, (f, p) in enumerate(specs)]
+    picked = choose(cands)
+    keys = [mesh_key(c.mesh, i) for i, c in enumerate(cands)]
+    assert picked.chosen == cands[keys.index(min(keys))].name
+
+
+def test_every_result_writes_with_groups(cat, tmp_path):
+    import meshio
+
+    shp = jaxmatch.load_shape(EX / "lshape.json")
+    lat = jaxmatch.load_lattice("fine")
+    results = {
+        "mesh": jaxmatch.mesh(shp, size=0.25, catalogue=cat),
+        "template": jaxmatch.mesh(shp, template=True, catalogue=cat, internal=2),
+        "refine": jaxmatch.refine_mesh(shp, cat, lat, size=0.25),
+        "concave": jaxmatch.mesh_concave(shp, 0.25, cat),
+        "layout": jaxmatch.mesh_layout(EX / "layouts" / "two-blocks.json", cat, size=0.5),
+    }
+    for name, res in results.items():
+        path = jaxmatch.write_mesh(tmp_path / f"{name}.msh", res)
+        back = meshio.read(path)
+        assert "boundary" in back.field_data, name
+        assert back.cells_dict["quad"].shape[0] > 0
+    m = results["mesh"]
+    back = meshio.read(tmp_path / "mesh.msh")
+    assert {"boundary", "patch 0", "patch 1"} <= set(back.field_data)
+    assert back.cells_dict["quad"].shape == m.quads.shape
+    with pytest.raises(TypeError):
+        jaxmatch.write_mesh(tmp_path / "x.msh", object())
+
+
+def test_solver_failure_is_not_infeasible(monkeypatch):
+    import scipy.optimize
+
+    from jaxmatch.placement.milp import run_milp
+
+    class Res:
+        def __init__(self, status):
+            self.status, self.x, self.message = status, None, "stub"
+
+    calls = []
+
+    def fake(*a, status=4, **k):
+        calls.append(k["options"]["presolve"])
+        return Res(status)
+
+    monkeypatch.setattr(scipy.optimize, "milp", fake)
+    with pytest.raises(SolverError) as e:
+        run_milp(np.ones(1), None, np.ones(1), None)
+    assert e.value.status == 4 and calls == [True, False]  # retried without presolve
+    monkeypatch.setattr(scipy.optimize, "milp", lambda *a, **k: Res(2))
+    assert run_milp(np.ones(1), None, np.ones(1), None) is None  # infeasible
+
+
+def test_bad_requests(cat):
+    shp = jaxmatch.load_shape(EX / "square.json")
+    for kwargs in ({"size": 0}, {"size": -1.0}, {"size": float("nan")}, {"size": 1, "sides": [1, 1, 1, 1]},
+                   {"template": True, "size": 1}, {"strategies": ["zigzag"]}):
+        with pytest.raises(InputError):
+            jaxmatch.mesh(shp, catalogue=cat, **kwargs)
+
+
+def test_default_size_is_a_fraction_of_the_perimeter(cat):
+    m = jaxmatch.mesh(EX / "square.json", catalogue=cat)
+    assert m.size == pytest.approx(4.0 / 32) and m.quads.shape[0] == 64
+
+
+# ---------------------------------------------------------------------------------------------
+# the command
+
+
+def test_cli_mesh_reports_the_choice(cli, tmp_path):
+    out, png = tmp_path / "l.msh", tmp_path / "l.png"
+    code, stdout, err = cli("mesh", EX / "lshape.json", "--size", "0.25", "--out", out, "--png", png)
+    assert code == 0, err
+    assert "chosen: recursive (rule that decided: fewer patches; runner-up continuations)" in stdout
+    assert out.exists() and png.read_bytes().startswith(b"\x89PNG")
+
+
+def test_cli_mesh_without_size_prints_the_default(cli):
+    code, stdout, err = cli("mesh", EX / "square.json")
+    assert code == 0, err
+    assert "(default: perimeter / 32)" in stdout and "64 quads" in stdout
+
+
+def test_cli_template_options_need_template(cli):
+    code, _, err = cli("mesh", EX / "square.json", "--rank", "2")
+    assert code == EXIT_BAD_INPUT and "--rank" in err and "--template" in err
+    code, stdout, err = cli("mesh", EX / "square.json", "--template", "--internal", "1", "--json")
+    assert code == 0, err
+    assert json.loads(stdout)["internal_vertices"] == 1
+
+
+@pytest.mark.slow
+def test_cli_many_regions_with_one_bad(cli, tmp_path):
+    """50 regions, one bad: 49 meshes and one error record with --skip-bad, exit 0."""
+    rng = np.random.default_rng(7)
+    paths = []
+    for i in range(50):
+        p = tmp_path / f"r{i:02d}.json"
+        if i == 17:
+            p.write_text('{"boundary": [[0, 0], [1, 0]]}')  # two points: not a region
+        else:
+            w, h = rng.integers(1, 4, size=2)
+            p.write_text(json.dumps({"boundary": [[0, 0], [int(w), 0], [int(w), int(h)], [0, int(h)]]}))
+        paths.append(p)
+    out = tmp_path / "out"
+    code, _, err = cli("mesh", *paths, "--size", "0.5", "--out-dir", out, "--skip-bad", "--jobs", "2")
+    assert code == 0, err
+    recs = [json.loads(line) for line in (out / "summary.jsonl").read_text().splitlines()]
+    assert len(recs) == 50 and [r["shape"] for r in recs] == [str(p) for p in paths]
+    bad = [r for r in recs if "error" in r]
+    assert len(bad) == 1 and bad[0]["shape"] == str(paths[17])
+    assert len(list(out.glob("*.msh"))) == 49
+    assert all(r["inverted"] == 0 and r["min_scaled_jacobian"] == pytest.approx(1.0) for r in recs if "error" not in r)
+    # without --skip-bad the bad region stops the run before any work: one line, exit 2
+    out2 = tmp_path / "out2"
+    code, _, err = cli("mesh", *paths[15:20], "--size", "0.5", "--out-dir", out2)
+    assert code == EXIT_BAD_INPUT and str(paths[17]) in err and len(err.strip().splitlines()) == 1
+    assert not out2.exists()
