@@ -278,16 +278,19 @@ def _mesh_size(shape, cat, lat, h, strategies, quality, budget_s, progress, temp
         except SolverError as e:  # not a verdict on the request: the other candidates go on
             tried.append(Candidate(name, None, f"solver error: {e}"))
         else:
-            m = from_layout(lm, size=h, corners=corners)
-            tried.append(Candidate(name, m))
-            if name == SINGLE and m.sides_off_size(quality.size_tol):
-                tried.extend(_conforming_templates(shape, lay, cat, lat, h, corners, m, quality))
+            tried.append(Candidate(name, from_layout(lm, size=h, corners=corners)))
         if progress is not None:
             progress(i + 1, len(names), name)
     if not any(c.mesh is not None for c in tried):
         raise InputError("no candidate could be meshed: " + "; ".join(f"{c.name}: {c.note}" for c in tried),
                          where=shape.source)
-    return choose(tried, quality)
+    best = choose(tried, quality)
+    single = next((c.mesh for c in tried if c.name == SINGLE and c.mesh is not None), None)
+    if single is not None and best.sides_off_size(quality.size_tol):  # no candidate follows the size yet
+        more = _conforming_templates(shape, cat, lat, h, single, quality)
+        if more:
+            best = choose(tried[:1] + more + tried[1:], quality)
+    return best
 
 
 CONFORMING_TRIES = 3
@@ -316,7 +319,7 @@ def _target_counts(lengths: np.ndarray, h: float, tries: int) -> list[np.ndarray
     return out
 
 
-def _conforming_templates(shape: Shape, lay, cat, lat, h, corners, first: QuadMesh, quality: Quality) -> list[Candidate]:
+def _conforming_templates(shape: Shape, cat, lat, h, first: QuadMesh, quality: Quality) -> list[Candidate]:
     """A single-template candidate whose side counts follow ``h``: the nearest even counts
     (:func:`_target_counts`), each met exactly by the best template of the catalogue that can
     (:func:`jaxmatch.placement.refine.refine_mesh`), named ``"single <template id>"``."""
