@@ -91,11 +91,15 @@ def _outline(shape) -> tuple[np.ndarray, np.ndarray]:
 @app.command()
 def main(divisions: str = typer.Option("16,32", help="h = perimeter / each of these."),
          json_out: Optional[Path] = typer.Option(None, "--json", help="Also write one JSON line per mesh."),
-         compare_old: bool = typer.Option(False, "--compare-old", help="Add the older refine/decompose paths.")) -> None:
+         compare_old: bool = typer.Option(False, "--compare-old", help="Add the older refine/decompose paths."),
+         png: Optional[Path] = typer.Option(None, "--png", help="Also draw the meshes of --picture-shapes at the first "
+                                            "division count (.png)."),
+         picture_shapes: str = typer.Option("L,plus,trapezoid,quarter-disk", help="Shapes drawn with --png.")) -> None:
     import jaxmatch
 
     cat = jaxmatch.load_catalogue()
-    rows = []
+    rows, panels = [], []
+    draw = [n.strip() for n in picture_shapes.split(",")] if png is not None else []
     for name, path in SHAPES.items():
         shp = jaxmatch.load_shape(path)
         outline, corners = _outline(shp)
@@ -116,6 +120,8 @@ def main(divisions: str = typer.Option("16,32", help="h = perimeter / each of th
                 rec = {"shape": name, "div": div, "method": method, "seconds": dt,
                        "chosen": getattr(res, "chosen", ""), **measure(res.xy, res.quads, corners, outline, h)}
                 rows.append(rec)
+                if method == "mesh" and name in draw and div == int(divisions.split(",")[0]):
+                    panels.append((f"{name}, h = P/{div}: {res.chosen}", res.xy, res.quads, res.patch, None, corners))
     print("| shape | P/h | method | chosen | quads | min SJ | mean SJ | irregular (bound) | valid | s |")
     print("|---|---:|---|---|---:|---:|---:|---:|---|---:|")
     for r in rows:
@@ -134,6 +140,10 @@ def main(divisions: str = typer.Option("16,32", help="h = perimeter / each of th
               f"{np.mean([r['min_sj'] for r in ok]):.3f}; worst min SJ {min(r['min_sj'] for r in ok):.3f}; "
               f"irregular per mesh {np.mean([r['irregular'] for r in ok]):.2f}; above the bound "
               f"{np.mean([r['irregular'] - r['irregular_bound'] for r in ok]):.2f}")
+    if png is not None:
+        from jaxmatch.io.plot import draw_meshes
+
+        print(f"wrote {draw_meshes(png, panels, ncols=len(panels))}")
     if json_out is not None:
         from jaxmatch.files import write_text_atomic
 

@@ -286,11 +286,35 @@ def _mesh_size(shape, cat, lat, h, strategies, quality, budget_s, progress, temp
                          where=shape.source)
     best = choose(tried, quality)
     single = next((c.mesh for c in tried if c.name == SINGLE and c.mesh is not None), None)
+    if single is not None and not best.min_scaled_jacobian >= quality.good_sj:  # below the floor: larger templates
+        more = _larger_templates(single_patch(shape), cat, lat, h, corners, single, cache)
+        if more:
+            tried = tried[:1] + more + tried[1:]
+            best = choose(tried, quality)
     if single is not None and best.sides_off_size(quality.size_tol):  # no candidate follows the size yet
         more = _conforming_templates(shape, cat, lat, h, single, quality)
         if more:
             best = choose(tried[:1] + more + tried[1:], quality)
     return best
+
+
+def _larger_templates(lay, cat, lat, h, corners, first: QuadMesh, cache) -> list[Candidate]:
+    """Single-patch candidates from the larger template sizes: the best template of each size
+    group of :data:`~jaxmatch.placement.layout.ALL_SIZES` after the first (the single candidate
+    takes the first group that has one), named ``"single <template id>"``."""
+    from jaxmatch.placement.layout import ALL_SIZES, mesh_layout
+
+    out, seen = [], {first.templates}
+    for group in ALL_SIZES[1:]:
+        try:
+            lm = mesh_layout(lay, cat, lat, size=h, sizes=(group,), template_cache=cache)
+        except (InputError, SolverError, IndexError):
+            continue
+        m = from_layout(lm, size=h, corners=corners)
+        if m.templates not in seen:
+            seen.add(m.templates)
+            out.append(Candidate(f"{SINGLE} {m.templates[0]}", m))
+    return out
 
 
 CONFORMING_TRIES = 3
