@@ -597,6 +597,23 @@ def smooth(
     return best
 
 
+def smooth_in_frame(xy: np.ndarray, quads: np.ndarray, fixed: np.ndarray, *, frame: np.ndarray | None = None,
+                    iters: int = 200) -> np.ndarray:
+    """:func:`smooth` in a normalised frame: centred on ``frame`` (default all of ``xy``), unit
+    RMS radius, so that its tolerances see an O(1) mesh whatever the user's units; the
+    ``fixed`` vertices come back at exactly their input positions (no round-off).
+
+    xy: ``(V, 2) float64`` user coordinates; quads: ``(Q, 4)`` ccw; fixed: vertex ids kept;
+    frame: ``(k, 2)`` points that define the frame. Returns ``(V, 2) float64``.
+    """
+    pts = xy if frame is None else frame
+    c = pts.mean(axis=0)
+    r = float(np.sqrt(np.mean(np.sum((pts - c) ** 2, axis=1)))) or 1.0
+    out = smooth((xy - c) / r, quads, fixed, iters=iters) * r + c
+    out[fixed] = xy[fixed]
+    return out
+
+
 def _key(xy: np.ndarray, quads: np.ndarray) -> tuple[int, float, float]:
     """(inverted count, min scaled Jacobian, mean scaled Jacobian)."""
     sj = quality(xy, quads)[0]

@@ -53,7 +53,7 @@ from jaxmatch.defaults import QUALITY
 from jaxmatch.errors import InputError
 from jaxmatch.files import read_limited
 from jaxmatch.placement.milp import run_milp
-from jaxmatch.placement.embed import inverted_mask, polygon_area, quad_areas, quality, smooth
+from jaxmatch.placement.embed import inverted_mask, polygon_area, quad_areas, quality, smooth_in_frame
 from jaxmatch.catalogue.mesh import valences
 from jaxmatch.shape import Shape, make_shape
 
@@ -780,11 +780,7 @@ def fit_sides(layout: Layout, sides: Sides, p: int, refined, counts: np.ndarray,
     disp = tutte(quads, xy.shape[0], b, target - np.asarray(refined.xy)[b])
     xy = np.asarray(refined.xy) + disp
     xy[b] = target
-    c = target.mean(axis=0)
-    r = float(np.sqrt(np.mean(np.sum((xy[b] - c) ** 2, axis=1)))) or 1.0
-    out = smooth((xy - c) / r, quads, b, iters=smooth_iters) * r + c
-    out[b] = target
-    return out
+    return smooth_in_frame(xy, quads, b, frame=target, iters=smooth_iters)
 
 
 def boundary_edges(quads: np.ndarray) -> np.ndarray:
@@ -926,7 +922,7 @@ def mesh_layout(layout: Layout, catalogue: Catalogue, lattice: Lattice, *, size:
     xy, quads, patch, side_ids, gap = merge_patches(layout, sides, refined, n)
     outer = _outer_loop(layout, sides, side_ids)
     if smooth_cuts:
-        xy = _smooth_all(xy, quads, outer)
+        xy = smooth_in_frame(xy, quads, outer)
     import shapely
 
     region = shapely.union_all([shapely.Polygon(layout.points[lp]) for lp in layout.patches]).area
@@ -953,15 +949,6 @@ def _advance_for_feasibility(sides, cands, choice, want, size, source) -> bool:
             choice[p] = j
             return True
     return False
-
-
-def _smooth_all(xy: np.ndarray, quads: np.ndarray, fixed: np.ndarray) -> np.ndarray:
-    """:func:`jaxmatch.placement.embed.smooth` in a normalised frame (centred, unit RMS radius)."""
-    c = xy.mean(axis=0)
-    r = float(np.sqrt(np.mean(np.sum((xy - c) ** 2, axis=1)))) or 1.0
-    out = smooth((xy - c) / r, quads, fixed) * r + c
-    out[fixed] = xy[fixed]
-    return out
 
 
 # ---------------------------------------------------------------------------------------------

@@ -48,7 +48,7 @@ from jaxmatch.catalogue.mesh import edges
 from jaxmatch.defaults import QUALITY
 from jaxmatch.errors import InputError
 from jaxmatch.placement.milp import run_milp
-from jaxmatch.placement.embed import Placement, inverted_mask, polygon_area, quad_areas, quality, smooth
+from jaxmatch.placement.embed import Placement, inverted_mask, polygon_area, quad_areas, quality, smooth_in_frame
 from jaxmatch.shape import Shape
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -850,11 +850,9 @@ def refine_and_place(template: PatchTemplate, mult, *, smooth_iters: int | None 
         iters = SMOOTH_ITERS
     else:
         iters = SMOOTH_ITERS_LARGE if bad else 0
-    if iters > 0:  # in a normalised frame (centred, unit RMS radius)
-        off = bxy.mean(axis=0)
-        sc = float(np.sqrt(np.mean(np.sum((bxy - off) ** 2, axis=1)))) or 1.0
-        xy = smooth((xy - off) / sc, quads, bverts, iters=iters) * sc + off
+    if iters > 0:
         xy[bverts] = bxy  # exact boundary positions
+        xy = smooth_in_frame(xy, quads, bverts, frame=bxy, iters=iters)
         sj = quality(xy, quads)[0]
     p = xy[quads]
     el = np.linalg.norm(np.roll(p, -1, axis=1) - p, axis=-1)
