@@ -28,7 +28,6 @@ def run_label(shapes, labels: Path, *, internal=None, size=None, top: int = 5, p
         from jaxmatch.label.store import tune_labels
 
         enable_compile_cache()
-        print(f"tuning lattice {lattice} on {labels} ...", file=sys.stderr, flush=True)
         r = tune_labels(labels, out, lattice=lattice, catalogue=catalogue, epochs=epochs,
                         stage=lambda text: print(text, file=sys.stderr, flush=True))
         print(f"{r['examples']} labelled shapes ({r['skipped']} bad lines skipped); {r['lattice']} -> {r['tuned']}")

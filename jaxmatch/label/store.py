@@ -117,7 +117,7 @@ class LabelStore:
         with self._lock:
             try:
                 created = not self.path.exists()
-                fd = os.open(self.path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o666)
+                fd = os.open(self.path, os.O_RDWR | os.O_APPEND | os.O_CREAT, 0o666)
             except OSError as err:
                 raise InputError(f"cannot write labels: {err.strerror or err}", where=str(self.path)) from None
             try:
