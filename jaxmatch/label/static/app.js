@@ -48,7 +48,7 @@ function drawSVG(svg, data, cand) {
   svg.setAttribute("viewBox", `${x0 - pad} ${-y1 - pad} ${x1 - x0 + 2 * pad} ${y1 - y0 + 2 * pad}`);
   svg.setAttribute("preserveAspectRatio", "xMidYMid meet");
   const g = el("g", {transform: "scale(1,-1)"}, svg);
-  const r = 0.022 * ext;
+  const r = (cand ? 0.022 : 0.03) * ext;
   const poly = (p) => p.map(([x, y]) => `${x},${y}`).join(" ");
   if (cand) {
     const xy = cand.xy;
@@ -179,7 +179,7 @@ async function choose(body) {
   await show(nextIndex());
 }
 
-function go(i) { if (state.total) show(Math.max(0, Math.min(state.total - 1, i))); }
+function go(i) { message(""); if (state.total) show(Math.max(0, Math.min(state.total - 1, i))); }
 
 function showPanel(name) {
   $("view").hidden = name !== "view";
