@@ -235,3 +235,14 @@ def test_command_bad_input_is_one_line_exit_2(cli, tmp_path):
         code, out, err = cli(*args)
         assert code == 2, (args, out, err)
         assert len(err.strip().splitlines()) == 1 and words in err, (args, err)
+
+
+def test_size_shows_refined_meshes_labels_the_template(make, tmp_path):
+    client, _ = make(EX / "square.json")
+    plain = client.get("/api/shapes/0").json()["candidates"]
+    client2, _ = make(EX / "square.json", labels=tmp_path / "sized.jsonl", size=0.2)
+    sized = client2.get("/api/shapes/0").json()["candidates"]
+    assert [c["mesh_id"] for c in sized] == [c["mesh_id"] for c in plain]
+    assert all(len(s["quads"]) > len(p["quads"]) for s, p in zip(sized, plain) if not s["note"])
+    assert client2.post("/api/shapes/0/choose", json={"mesh_id": sized[0]["mesh_id"]}).status_code == 200
+    assert _lines(tmp_path / "sized.jsonl")[0]["preferred"] == sized[0]["mesh_id"]

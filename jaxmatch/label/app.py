@@ -281,17 +281,25 @@ class LabelSession:
                 "candidates": cands}
 
     def _refined(self, shape, ann, match, r, pl):
-        """The placement ``pl`` refined to edges of about ``self.size`` (the template stays the
-        label), or ``pl`` with a note when that template cannot be refined."""
+        """The placement ``pl`` refined to edges of about ``self.size`` (what ``jaxmatch mesh
+        --size`` does, for this template; the template stays the label), or ``pl`` with a note
+        when this template cannot be refined (a corner without a mesh vertex, a fold)."""
         try:
+            from jaxmatch.placement.choose import place_match
             from jaxmatch.placement.refine import _fit, refine_and_place, solve_multiplicities
 
             template = _fit(shape, ann, match, self.catalogue, r)
             if template is None:
-                return pl, "not refined: the template keeps no corner or folds"
+                return pl, "not refined: a corner has no mesh vertex"
+            placed = place_match(shape, ann, self.catalogue, match)  # the ranked orientation, as refine_mesh places it
+            if placed.inverted:
+                return pl, "not refined: the template folds"
+            template = template._replace(placement=placed)
             return refine_and_place(template, solve_multiplicities(template, size=self.size)).as_placement(), ""
         except InputError as e:
             return pl, f"not refined: {e.problem}"
+        except Exception as e:  # noqa: BLE001 - the unrefined template is still worth showing
+            return pl, f"not refined: {type(e).__name__}"
 
     def choose(self, i, body) -> dict:
         """Record the choice for shape ``i``: ``{"mesh_id": ID}`` or ``{"none": true}``."""

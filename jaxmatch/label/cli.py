@@ -15,7 +15,7 @@ def _pct(x) -> str:
 
 
 def run_label(shapes, labels: Path, *, internal=None, size=None, top: int = 5, port: int = 8765, host: str = "127.0.0.1",
-              lattice: str = "fine", catalogue=None, tune: bool = False, out=None, epochs: int = 10) -> None:
+              lattice: str = "fine", catalogue=None, corner_angle=None, tune: bool = False, out=None, epochs: int = 10) -> None:
     """Serve the labelling page (prints ``http://HOST:PORT/``) or, with ``tune``, tune the lattice
     on ``labels`` and write it to ``out``. Bad input: :class:`InputError` naming the option."""
     from jaxmatch.cli import enable_compile_cache
@@ -44,7 +44,7 @@ def run_label(shapes, labels: Path, *, internal=None, size=None, top: int = 5, p
 
     enable_compile_cache()
     session = LabelSession(shapes, labels, internal=internal, top=top, size=size, out=out, lattice=lattice,
-                           catalogue=catalogue, epochs=epochs)
+                           catalogue=catalogue, corner_angle=corner_angle, epochs=epochs)
     if host not in ("127.0.0.1", "localhost", "::1"):
         print(f"warning: listening on {host}: anyone who can reach it can read the shapes and add labels", file=sys.stderr)
     st = session.state()
