@@ -195,6 +195,29 @@ def test_store_append_is_whole_lines(tmp_path):
         LabelStore(tmp_path / "folder.jsonl").append("{}")
 
 
+def test_store_separate_writers_never_interleave(tmp_path):
+    """Separate stores (as two servers on one file): long lines stay whole (flock + O_APPEND)."""
+    from jaxmatch.label.store import LabelStore
+
+    path = tmp_path / "l.jsonl"
+
+    def writer(t):
+        store = LabelStore(path)
+        for j in range(40):
+            store.append(json.dumps({"shape": "s.json", "preferred": f"k2-{t:02d}{j:02d}", "note": str(t) * 20000}))
+
+    threads = [threading.Thread(target=writer, args=(t,)) for t in range(4)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    lines = path.read_text().splitlines()
+    assert len(lines) == 160
+    for line in lines:
+        rec = json.loads(line)
+        assert rec["note"] == rec["preferred"][4] * 20000  # whole, and its own writer's
+
+
 def test_tune_action_and_command(make, tmp_path, cli):
     client, session = make(EX / "lshape.json", EX / "square.json", EX / "tshape.json", EX / "plus.json", epochs=1)
     r = client.post("/api/tune")
@@ -231,10 +254,20 @@ def test_command_bad_input_is_one_line_exit_2(cli, tmp_path):
         (["label", "--labels", labels, "--tune"], "--out"),
         (["label", "--labels", labels, "--tune", "--out", tmp_path / "t.toml"], "no labels yet"),
     ]
-    for args, words in cases:
-        code, out, err = cli(*args)
-        assert code == 2, (args, out, err)
-        assert len(err.strip().splitlines()) == 1 and words in err, (args, err)
+    import socket
+
+    busy = socket.socket()
+    busy.bind(("127.0.0.1", 0))
+    busy.listen(1)
+    cases += [(["label", EX / "square.json", "--labels", labels, "--port", busy.getsockname()[1]], "cannot listen"),
+              (["label", EX / "square.json", "--labels", labels, "--host", "a b"], "--host")]
+    try:
+        for args, words in cases:
+            code, out, err = cli(*args)
+            assert code == 2, (args, out, err)
+            assert len(err.strip().splitlines()) == 1 and words in err, (args, err)
+    finally:
+        busy.close()
 
 
 def test_size_shows_refined_meshes_labels_the_template(make, tmp_path):

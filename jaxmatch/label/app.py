@@ -449,7 +449,7 @@ def serve(session: LabelSession, host: str = "127.0.0.1", port: int = 0, *, anno
         sock.bind((host, port))
     except OSError as err:
         sock.close()
-        raise InputError(f"cannot listen on {host}:{port}: {err.strerror or err}", where="--port") from None
+        raise InputError(f"cannot listen on {host}:{port}: {err.strerror or err}", where="--host/--port") from None
     sock.listen(128)
     real = sock.getsockname()[1]
     shown = f"[{host}]" if ":" in host else host

@@ -48,5 +48,9 @@ def run_label(shapes, labels: Path, *, internal=None, size=None, top: int = 5, p
     if host not in ("127.0.0.1", "localhost", "::1"):
         print(f"warning: listening on {host}: anyone who can reach it can read the shapes and add labels", file=sys.stderr)
     st = session.state()
-    print(f"{st['total']} shapes, {st['labelled']} labelled in {labels}; Ctrl-C stops", file=sys.stderr, flush=True)
-    serve(session, host, port, announce=lambda url: print(url, flush=True))
+
+    def announce(url: str) -> None:  # once the port is bound (a busy port stays a one-line error)
+        print(f"{st['total']} shapes, {st['labelled']} labelled in {labels}; Ctrl-C stops", file=sys.stderr, flush=True)
+        print(url, flush=True)
+
+    serve(session, host, port, announce=announce)
