@@ -225,11 +225,12 @@ def test_tune_action_and_command(make, tmp_path, cli):
     for i in range(4):
         c = client.get(f"/api/shapes/{i}").json()["candidates"]
         assert client.post(f"/api/shapes/{i}/choose", json={"mesh_id": c[i % len(c)]["mesh_id"]}).status_code == 200
+    assert client.post("/api/shapes/3/choose", json={"none": True}).status_code == 200  # the last line decides
     r = client.post("/api/tune")
     assert r.status_code == 200, r.text
     res = r.json()
-    assert res["examples"] == 4 and res["out"] == str(tmp_path / "labels.tuned.toml")
-    assert res["train"]["examples"] + res["heldout"]["examples"] == 4
+    assert res["examples"] == 3 and res["out"] == str(tmp_path / "labels.tuned.toml")
+    assert res["train"]["examples"] + res["heldout"]["examples"] == 3
     for key in ("train", "heldout"):
         for m in ("top1", "top5"):
             assert set(res[key][m]) == {"before", "after"}

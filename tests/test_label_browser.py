@@ -35,7 +35,7 @@ def server(tmp_path):
     env = dict(os.environ, JAXMATCH_CACHE=str(tmp_path / "cache"), JAX_PLATFORMS="cpu", JAXMATCH_PROGRESS="0")
     proc = subprocess.Popen(
         [sys.executable, "-m", "jaxmatch", "label", str(ROOT / "examples" / "lshape.json"), str(ROOT / "examples" / "tshape.json"),
-         "--labels", str(labels), "--internal", "2", "--top", "3", "--port", "0"],
+         "--labels", str(labels), "--internal", "2", "--top", "3", "--port", "0", "--epochs", "1"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path, env=env)
     lines: queue.Queue = queue.Queue()
     threading.Thread(target=lambda: [lines.put(x) for x in proc.stdout], daemon=True).start()
@@ -134,6 +134,12 @@ def test_label_page_in_chromium(server):
             expect(page.locator("#shape-mark")).to_contain_text(chosen)
             SCREENSHOT.parent.mkdir(exist_ok=True)
             page.screenshot(path=str(SCREENSHOT), full_page=True)
+
+            # tune on the three labels: before/after shown, the lattice written beside the labels
+            page.click("#tune")
+            expect(page.locator("#tune-result table")).to_contain_text("held out", timeout=180_000)
+            expect(page.locator("#tune-download")).to_have_attribute("download", "tuned.toml")
+            assert labels.with_suffix(".tuned.toml").is_file()
             assert not errors, errors
         finally:
             browser.close()

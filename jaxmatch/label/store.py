@@ -17,7 +17,7 @@ reads), one choice per line::
 * "none of these" is written as a comment line (``# none of these: {...}``), which the tuner
   skips; "skip" writes nothing.
 * A shape chosen again gets a new line: the page and :func:`tune_labels` use the last line of
-  each shape; ``scripts/tune_lattice.py`` reads every line.
+  each shape; ``scripts/tune_lattice.py`` reads every label line.
 
 Safety
 ------
@@ -175,8 +175,8 @@ def tune_labels(labels: str | os.PathLike, out: str | os.PathLike, *, lattice: s
     """Tune ``lattice`` on the labels of ``labels`` (as ``scripts/tune_lattice.py`` does, with its
     defaults) and write the tuned lattice TOML to ``out`` atomically.
 
-    The last line of each shape is used (a shape relabelled counts once); bad lines are skipped
-    and counted. Returns a summary: ``examples``, ``skipped``, ``out``, ``seconds`` and, for
+    The last line of each shape decides (a shape relabelled counts once, a shape whose last line
+    is "none of these" not at all); bad lines are skipped and counted. Returns a summary: ``examples``, ``skipped``, ``out``, ``seconds`` and, for
     ``train`` and ``heldout``, ``examples`` and ``top1``/``top5`` ``before``/``after`` (fractions
     in [0, 1], None without examples). Raises :class:`InputError` when there are fewer than 2
     labels.
@@ -192,10 +192,9 @@ def tune_labels(labels: str | os.PathLike, out: str | os.PathLike, *, lattice: s
     if not Path(labels).exists():
         raise InputError("no labels yet: choose a preferred mesh for some shapes first", where=str(labels))
     loaded = load_labels(labels, index, skip_bad=True)
-    last = {}
-    for ex in loaded.examples:
-        last[shape_key(ex.record["shape"])] = ex
-    examples = list(last.values())
+    marks = LabelStore(labels).marks()  # the last line of each shape decides ("none of these" included)
+    examples = [ex for ex in loaded.examples
+                if (m := marks.get(shape_key(ex.record["shape"]))) is not None and f"{Path(labels)}:{m.line}" == ex.where]
     if len(examples) < 2:
         raise InputError(f"tuning needs at least 2 labelled shapes, the file has {len(examples)}", where=str(labels))
     tuned, rep = run_tuning(lat, examples, cat, heldout=heldout, seed=seed, epochs=epochs, max_candidates=max_candidates,
