@@ -927,6 +927,27 @@ def catalogue_export(path: Path = typer.Argument(..., metavar="FILE", help="Cata
     print(json.dumps(cat_mod.export(cat_mod.load(path), mesh_id)))
 
 
+@app.command()
+def label(shapes: Optional[list[Path]] = typer.Argument(None, help="Shape files to label (more can be drawn or dropped on the page)."),
+          labels: Path = typer.Option(..., "--labels", metavar="FILE", help="Labels file (JSON lines, appended; the format scripts/tune_lattice.py reads)."),
+          internal: Optional[str] = typer.Option(None, metavar="K|K1..K2", help=INTERNAL_HELP),
+          size: Optional[float] = typer.Option(None, "--size", help="Show the meshes refined to edges of about this length (shape units)."),
+          top: int = typer.Option(DEFAULT_TOP, min=1, max=9, help="Meshes shown per shape (1..9)."),
+          port: int = typer.Option(8765, min=0, max=65535, help="Port (0: a free one, printed)."),
+          host: str = typer.Option("127.0.0.1", help="Address to listen on (default: loopback only)."),
+          lattice: str = typer.Option(DEFAULT_LATTICE, metavar="NAME|FILE", help=LATTICE_HELP),
+          catalogue: Optional[Path] = typer.Option(None, help=CATALOGUE_HELP),
+          corner_angle: float = typer.Option(DEFAULT_CORNER_ANGLE, metavar="DEGREES", help=ANGLE_HELP),
+          tune: bool = typer.Option(False, "--tune", help="Tune the lattice on the labels file instead of serving; needs --out."),
+          out_path: Optional[Path] = typer.Option(None, "--out", metavar="FILE", help="Tuned lattice TOML (default: <labels>.tuned.toml)."),
+          epochs: int = typer.Option(10, min=0, help="Tuning passes over the labels.")) -> None:
+    """A local web page to pick the preferred mesh for shapes; appends labels, tunes the lattice."""
+    from jaxmatch.label.cli import run_label
+
+    run_label(shapes or [], labels, internal=internal, size=size, top=top, port=port, host=host, lattice=lattice,
+              catalogue=catalogue, corner_angle=_corner_angle(corner_angle), tune=tune, out=out_path, epochs=epochs)
+
+
 def _fail(line: str, code: int) -> None:
     """One unwrapped line on stderr, then exit."""
     print(" ".join(line.split()), file=sys.stderr)
