@@ -21,7 +21,7 @@ from rich.table import Table
 from jaxmatch import __version__
 from jaxmatch.catalogue import store as cat_mod
 from jaxmatch.errors import EXIT_BAD_INPUT, EXIT_INVERTED, EXIT_UNMATCHABLE, InputError, InputWarning, SolverError, UnmatchableError
-from jaxmatch.defaults import DEFAULT_LATTICE, DEFAULT_TIE_BREAK, DEFAULT_TOP, QUALITY, TIE_BREAKS
+from jaxmatch.defaults import DEFAULT_BUDGET_S, DEFAULT_LATTICE, DEFAULT_TIE_BREAK, DEFAULT_TOP, QUALITY, TIE_BREAKS
 from jaxmatch.shape import DEFAULT_CORNER_ANGLE
 
 try:  # typer >= 0.2x vendors click as typer._click and no longer installs click
@@ -425,8 +425,8 @@ def mesh(
                                   "{shape, error} in the summary and the rest go on (exit 0)."),
     strategy: Optional[str] = typer.Option(None, "--strategy", metavar="NAMES", help="Candidates to try, comma-separated: "
                                            "single, continuations, bisectors, recursive (default: all)."),
-    budget: Optional[float] = typer.Option(None, "--budget", metavar="SECONDS", help="Stop trying candidates after this "
-                                           "long once one valid mesh exists."),
+    budget: float = typer.Option(DEFAULT_BUDGET_S, "--budget", metavar="SECONDS", help="Stop trying candidates after "
+                                 "this long once one valid mesh exists (the best so far is kept)."),
     catalogue: Optional[Path] = typer.Option(None, metavar="FILE", help=CATALOGUE_HELP),
     lattice: str = typer.Option(DEFAULT_LATTICE, metavar="NAME|FILE", help=LATTICE_HELP),
     corner_angle: float = typer.Option(DEFAULT_CORNER_ANGLE, metavar="DEGREES", help=ANGLE_HELP),
@@ -466,7 +466,7 @@ def mesh(
         raise InputError(f"must be a positive length, got {size:g}", "--size")
     if sides is not None and size is not None:
         raise InputError("give either --sides or --size, not both", "--size")
-    if budget is not None and not budget > 0:
+    if not budget > 0:
         raise InputError(f"must be a positive number of seconds, got {budget:g}", "--budget")
     if template:
         for opt, given in (("--size", size is not None), ("--sides", sides is not None),

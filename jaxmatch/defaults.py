@@ -25,6 +25,10 @@ DEFAULT_PRUNE = True
 DEFAULT_DIVISIONS = 32
 """``jaxmatch mesh`` without ``--size``: the target edge length is the outer perimeter / this."""
 
+DEFAULT_BUDGET_S = 60.0
+"""``jaxmatch mesh``: after this many seconds no further candidate is tried once one valid mesh
+exists (``--budget``; the Python API has no budget unless given ``budget_s``)."""
+
 DEFAULT_BAND = 0.1
 """The quality band of ``jaxmatch mesh`` (``--band``): a mesh whose utility is within this
 fraction of the ranked mesh's and that places with min scaled Jacobian >= 0.3 is placed

@@ -302,3 +302,10 @@ def test_cli_many_regions_with_one_bad(cli, tmp_path):
     code, _, err = cli("mesh", *paths[15:20], "--size", "0.5", "--out-dir", out2)
     assert code == EXIT_BAD_INPUT and str(paths[17]) in err and len(err.strip().splitlines()) == 1
     assert not out2.exists()
+
+
+def test_time_budget_keeps_the_best_valid_mesh_so_far(cat):
+    m = jaxmatch.mesh(EX / "lshape.json", size=0.25, catalogue=cat, budget_s=1e-9)
+    notes = {c.name: c.note for c in m.tried}
+    assert m.chosen == "single" and m.valid
+    assert all("time budget" in notes[n] for n in ("continuations", "bisectors", "recursive"))
