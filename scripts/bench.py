@@ -32,6 +32,10 @@ Printed, from one run:
   k <= 5 (streaming: memory follows the batch size, not the catalogue);
 * machine load (``os.getloadavg``) before and after, CPUs, versions.
 
+``--mesh`` runs only the meshing benchmark (:func:`bench_mesh`): ``jaxmatch.mesh`` against gmsh's
+quasi-structured quad mesher on every shape of ``scripts/mesh_table.py`` at h = perimeter / 16 and
+/ 32, times and qualities of both.
+
 ``--json`` prints one JSON object on the last line. ``--cli`` also times a cold and a warm
 ``jaxmatch score examples/lshape.json`` (fresh persistent compilation cache), and the same job
 scored through ``jaxmatch.scoring.bulk.top_k`` (pruned and exhaustive) for comparison. Run from the
@@ -92,6 +96,11 @@ def parse_args(argv=None):
     ap.add_argument("--rss-probe", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--many-probe", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--refine", action="store_true", help="only the refinement benchmark (bench_refine): a 10,000-quad mesh")
+    ap.add_argument("--mesh", action="store_true",
+                    help="only the meshing benchmark (bench_mesh): jaxmatch.mesh against gmsh's quasi-structured quads")
+    ap.add_argument("--mesh-reps", type=int, default=3, help="--mesh: timed repetitions after one untimed run (default 3)")
+    ap.add_argument("--mesh-shapes", default="", help="--mesh: shapes of mesh_table.SHAPES, comma-separated (default all)")
+    ap.add_argument("--mesh-divisions", default="16,32", help="--mesh: h = perimeter / each of these (default 16,32)")
     return ap.parse_args(argv)
 
 
@@ -794,8 +803,125 @@ def bench_refine(reps: int = 5) -> dict:
     }
 
 
+MESH_DIVISIONS = (16, 32)
+"""Meshing benchmark sizes: h = perimeter / each of these."""
+
+MESH_GMSH = "gmsh-qs"
+"""The gmsh mesher the meshing benchmark times (``compare_gmsh.GMSH_METHODS``): quasi-structured
+quads, ``Mesh.Algorithm = 11``."""
+
+
+def _script(name: str):
+    """A module of scripts/ (mesh_table, compare_gmsh), imported from beside this file."""
+    import importlib
+
+    here = str(Path(__file__).resolve().parent)
+    if here not in sys.path:
+        sys.path.insert(0, here)
+    return importlib.import_module(name)
+
+
+def _best_of(fn, reps: int):
+    """One untimed (warming) call of ``fn``, then ``reps`` timed: ``(seconds list, last result)``."""
+    out = fn()
+    ts = []
+    for _ in range(max(int(reps), 1)):
+        t = time.perf_counter()
+        out = fn()
+        ts.append(time.perf_counter() - t)
+    return ts, out
+
+
+def mesh_case(name: str, div: int, reps: int = 3) -> dict:
+    """One case of the meshing benchmark: shape ``name`` of ``mesh_table.SHAPES`` at
+    h = perimeter / ``div``.
+
+    ``jaxmatch``: ``jaxmatch.mesh(shape, size=h)`` (the shape loaded once, outside the timing);
+    ``gmsh``: ``compare_gmsh.gmsh_quads`` with :data:`MESH_GMSH`'s options (gmsh initialised,
+    the polygon as a plane surface, meshed, read back, finalised) at the characteristic length
+    ``compare_gmsh.gmsh_calibrated`` found (untimed) to bring gmsh's mean edge length nearest h.
+    Each warm (one untimed call), then best of ``reps``. Both meshes measured by
+    ``mesh_table.measure`` (quads, min / mean scaled Jacobian, irregular internal vertices, mean
+    edge / h, valid). ``ratio``: jaxmatch's best time / gmsh's."""
+    import jaxmatch
+
+    cg = _script("compare_gmsh")
+    mt = cg.mesh_table
+    shp, outline, corners, _, h = cg.shape_case(mt.SHAPES[name], div)
+    opts = cg.GMSH_METHODS[MESH_GMSH]
+    jt, jm = _best_of(lambda: jaxmatch.mesh(shp, size=h), reps)
+    cal = cg.gmsh_calibrated(outline, h, **opts)
+    gt, (gxy, gq, tris) = _best_of(lambda: cg.gmsh_quads(outline, cal["lc"], **opts), reps)
+    j = {"seconds": min(jt), "seconds_all": jt, "chosen": jm.chosen,
+         **mt.measure(jm.xy, jm.quads, corners, outline, h)}
+    g = {"seconds": min(gt), "seconds_all": gt, "method": MESH_GMSH, "lc_over_h": cal["lc"] / h,
+         "calibration": cal["tries"], "triangles": tris, **mt.measure(gxy, gq, corners, outline, h)}
+    return {"shape": name, "div": div, "h": h, "jaxmatch": j, "gmsh": g, "ratio": j["seconds"] / g["seconds"]}
+
+
+def mesh_quality(cases: list[dict], who: str) -> dict:
+    """Summary of ``who``'s ("jaxmatch" or "gmsh") meshes over the cases."""
+    ms = [c[who] for c in cases]
+    return {"mean_min_sj": statistics.fmean(m["min_sj"] for m in ms), "worst_min_sj": min(m["min_sj"] for m in ms),
+            "mean_mean_sj": statistics.fmean(m["mean_sj"] for m in ms),
+            "irregular_per_mesh": statistics.fmean(m["irregular"] for m in ms),
+            "mean_edge_over_h": statistics.fmean(m["mean_edge_over_h"] for m in ms),
+            "valid": sum(bool(m["valid"]) for m in ms), "meshes": len(ms),
+            "total_s": sum(m["seconds"] for m in ms)}
+
+
+def bench_mesh(shapes=None, divisions=MESH_DIVISIONS, reps: int = 3, say=None) -> dict:
+    """Meshing benchmark, in this one process: :func:`mesh_case` for every shape of
+    ``scripts/mesh_table.py``'s ``SHAPES`` (or ``shapes``) and every division.
+
+    Returns ``{"cases": [...], "mesh_vs_gmsh": median over cases of the time ratio
+    jaxmatch / gmsh, "quality": {"jaxmatch": ..., "gmsh": ...} (:func:`mesh_quality`: mean and
+    worst min scaled Jacobian, irregular internal vertices per mesh, ...), "peak_rss_mb":
+    ``ru_maxrss`` of this process, "load", "versions", "reps", "divisions"}``."""
+    import jaxmatch
+
+    mt = _script("mesh_table")
+    names = list(shapes) if shapes else list(mt.SHAPES)
+    load0 = os.getloadavg()
+    cases = []
+    for name in names:
+        for div in divisions:
+            c = mesh_case(name, int(div), reps)
+            cases.append(c)
+            if say is not None:
+                j, g = c["jaxmatch"], c["gmsh"]
+                say(f"{name:>13} P/{div:<3d} jaxmatch {j['seconds']:7.4f} s edge/h {j['mean_edge_over_h']:.2f} "
+                    f"SJ {j['min_sj']:.3f}/{j['mean_sj']:.3f} irr {j['irregular']:2d} ({j['chosen']}) | "
+                    f"gmsh {g['seconds']:7.4f} s edge/h {g['mean_edge_over_h']:.2f} SJ {g['min_sj']:.3f}/"
+                    f"{g['mean_sj']:.3f} irr {g['irregular']:2d} | ratio {c['ratio']:.1f}")
+    import gmsh
+
+    return {"cases": cases, "mesh_vs_gmsh": statistics.median(c["ratio"] for c in cases),
+            "quality": {"jaxmatch": mesh_quality(cases, "jaxmatch"), "gmsh": mesh_quality(cases, "gmsh")},
+            "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+            "load": {"before": list(load0), "after": list(os.getloadavg())}, "reps": reps,
+            "divisions": [int(d) for d in divisions], "gmsh_method": MESH_GMSH,
+            "versions": {"jaxmatch": jaxmatch.__version__, "gmsh": gmsh.__version__,
+                         "python": platform.python_version()}, "cpus": len(os.sched_getaffinity(0))}
+
+
 def main(argv=None) -> int:
     args = parse_args(argv)
+    if args.mesh:
+        say = (lambda *a: print(*a, file=sys.stderr, flush=True)) if args.json else (lambda *a: print(*a, flush=True))
+        shapes = [s for s in args.mesh_shapes.split(",") if s] or None
+        r = bench_mesh(shapes, [int(d) for d in args.mesh_divisions.split(",")], args.mesh_reps, say)
+        for who in ("jaxmatch", "gmsh"):
+            q = r["quality"][who]
+            say(f"{who}: {q['valid']}/{q['meshes']} valid; mean of min SJ {q['mean_min_sj']:.3f}; worst min SJ "
+                f"{q['worst_min_sj']:.3f}; mean SJ {q['mean_mean_sj']:.3f}; irregular per mesh "
+                f"{q['irregular_per_mesh']:.2f}; mean edge/h {q['mean_edge_over_h']:.2f}; total {q['total_s']:.3f} s")
+        say(f"mesh_vs_gmsh (median of jaxmatch / gmsh time per case, best of {r['reps']} warm): "
+            f"{r['mesh_vs_gmsh']:.1f}; peak RSS {r['peak_rss_mb']:.0f} MB; load {r['load']['before'][0]:.2f} -> "
+            f"{r['load']['after'][0]:.2f}")
+        if args.json:
+            print(json.dumps(r))
+        return 0
     if args.refine:
         r = bench_refine(max(args.reps, 1))
         print(f"refine: {r['quads']} quads ({r['template']}, min SJ {r['min_scaled_jacobian']:.3f}, {r['inverted']} inverted); "
