@@ -832,30 +832,50 @@ def _best_of(fn, reps: int):
     return ts, out
 
 
-def mesh_case(name: str, div: int, reps: int = 3) -> dict:
+def _rss_now_mb() -> float:
+    """Current resident set size of this process (MB; /proc/self/statm), NaN where unknown."""
+    try:
+        with open("/proc/self/statm") as fh:
+            return int(fh.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
+    except (OSError, ValueError, IndexError):
+        return float("nan")
+
+
+def mesh_case(name: str, div: int, reps: int = 3, catalogue=None) -> dict:
     """One case of the meshing benchmark: shape ``name`` of ``mesh_table.SHAPES`` at
     h = perimeter / ``div``.
 
-    ``jaxmatch``: ``jaxmatch.mesh(shape, size=h)`` (the shape loaded once, outside the timing);
+    ``jaxmatch``: ``jaxmatch.mesh(shape, size=h)`` (the shape loaded once, outside the timing;
+    the call loads the default catalogue itself, as a user's call does); with ``catalogue``
+    (loaded once by the caller) also ``seconds_catalogue``: the same call given it
+    (``catalogue=``), which keeps the catalogue's verified arrays and groupings between calls.
     ``gmsh``: ``compare_gmsh.gmsh_quads`` with :data:`MESH_GMSH`'s options (gmsh initialised,
     the polygon as a plane surface, meshed, read back, finalised) at the characteristic length
     ``compare_gmsh.gmsh_calibrated`` found (untimed) to bring gmsh's mean edge length nearest h.
     Each warm (one untimed call), then best of ``reps``. Both meshes measured by
     ``mesh_table.measure`` (quads, min / mean scaled Jacobian, irregular internal vertices, mean
-    edge / h, valid). ``ratio``: jaxmatch's best time / gmsh's."""
+    edge / h, valid). ``ratio``: jaxmatch's best time / gmsh's. ``rss_growth_mb``: growth of
+    the resident set over each mesher's calls (calibration included for gmsh)."""
     import jaxmatch
 
     cg = _script("compare_gmsh")
     mt = cg.mesh_table
     shp, outline, corners, _, h = cg.shape_case(mt.SHAPES[name], div)
     opts = cg.GMSH_METHODS[MESH_GMSH]
+    r0 = _rss_now_mb()
     jt, jm = _best_of(lambda: jaxmatch.mesh(shp, size=h), reps)
+    jc = _best_of(lambda: jaxmatch.mesh(shp, size=h, catalogue=catalogue), reps)[0] if catalogue is not None else None
+    r1 = _rss_now_mb()
     cal = cg.gmsh_calibrated(outline, h, **opts)
     gt, (gxy, gq, tris) = _best_of(lambda: cg.gmsh_quads(outline, cal["lc"], **opts), reps)
-    j = {"seconds": min(jt), "seconds_all": jt, "chosen": jm.chosen,
+    r2 = _rss_now_mb()
+    j = {"seconds": min(jt), "seconds_all": jt, "chosen": jm.chosen, "rss_growth_mb": r1 - r0,
          **mt.measure(jm.xy, jm.quads, corners, outline, h)}
+    if jc is not None:
+        j["seconds_catalogue"] = min(jc)
     g = {"seconds": min(gt), "seconds_all": gt, "method": MESH_GMSH, "lc_over_h": cal["lc"] / h,
-         "calibration": cal["tries"], "triangles": tris, **mt.measure(gxy, gq, corners, outline, h)}
+         "calibration": cal["tries"], "triangles": tris, "rss_growth_mb": r2 - r1,
+         **mt.measure(gxy, gq, corners, outline, h)}
     return {"shape": name, "div": div, "h": h, "jaxmatch": j, "gmsh": g, "ratio": j["seconds"] / g["seconds"]}
 
 
@@ -867,36 +887,46 @@ def mesh_quality(cases: list[dict], who: str) -> dict:
             "irregular_per_mesh": statistics.fmean(m["irregular"] for m in ms),
             "mean_edge_over_h": statistics.fmean(m["mean_edge_over_h"] for m in ms),
             "valid": sum(bool(m["valid"]) for m in ms), "meshes": len(ms),
-            "total_s": sum(m["seconds"] for m in ms)}
+            "total_s": sum(m["seconds"] for m in ms), "rss_growth_mb": sum(m["rss_growth_mb"] for m in ms)}
 
 
-def bench_mesh(shapes=None, divisions=MESH_DIVISIONS, reps: int = 3, say=None) -> dict:
+def bench_mesh(shapes=None, divisions=MESH_DIVISIONS, reps: int = 3, say=None, with_catalogue: bool = True) -> dict:
     """Meshing benchmark, in this one process: :func:`mesh_case` for every shape of
     ``scripts/mesh_table.py``'s ``SHAPES`` (or ``shapes``) and every division.
 
     Returns ``{"cases": [...], "mesh_vs_gmsh": median over cases of the time ratio
     jaxmatch / gmsh, "quality": {"jaxmatch": ..., "gmsh": ...} (:func:`mesh_quality`: mean and
     worst min scaled Jacobian, irregular internal vertices per mesh, ...), "peak_rss_mb":
-    ``ru_maxrss`` of this process, "load", "versions", "reps", "divisions"}``."""
+    ``ru_maxrss`` of this process, "load", "versions", "reps", "divisions"}``; with
+    ``with_catalogue`` also ``"mesh_vs_gmsh_catalogue"``: the same median with jaxmatch given the
+    catalogue loaded once (``seconds_catalogue`` of :func:`mesh_case`). gmsh's quasi-structured
+    mesher leaks a few MB per run (also with one gmsh session), so the peak RSS grows with the
+    number of gmsh runs; each mesher's ``rss_growth_mb`` says whose memory it is."""
     import jaxmatch
 
     mt = _script("mesh_table")
+    cat = jaxmatch.load_catalogue() if with_catalogue else None
     names = list(shapes) if shapes else list(mt.SHAPES)
     load0 = os.getloadavg()
     cases = []
     for name in names:
         for div in divisions:
-            c = mesh_case(name, int(div), reps)
+            c = mesh_case(name, int(div), reps, cat)
             cases.append(c)
             if say is not None:
                 j, g = c["jaxmatch"], c["gmsh"]
-                say(f"{name:>13} P/{div:<3d} jaxmatch {j['seconds']:7.4f} s edge/h {j['mean_edge_over_h']:.2f} "
+                cat_s = f" (catalogue passed {j['seconds_catalogue']:.4f} s)" if "seconds_catalogue" in j else ""
+                say(f"{name:>13} P/{div:<3d} jaxmatch {j['seconds']:7.4f} s{cat_s} edge/h {j['mean_edge_over_h']:.2f} "
                     f"SJ {j['min_sj']:.3f}/{j['mean_sj']:.3f} irr {j['irregular']:2d} ({j['chosen']}) | "
                     f"gmsh {g['seconds']:7.4f} s edge/h {g['mean_edge_over_h']:.2f} SJ {g['min_sj']:.3f}/"
                     f"{g['mean_sj']:.3f} irr {g['irregular']:2d} | ratio {c['ratio']:.1f}")
     import gmsh
 
-    return {"cases": cases, "mesh_vs_gmsh": statistics.median(c["ratio"] for c in cases),
+    extra = {}
+    if with_catalogue:
+        extra["mesh_vs_gmsh_catalogue"] = statistics.median(c["jaxmatch"]["seconds_catalogue"] / c["gmsh"]["seconds"]
+                                                            for c in cases)
+    return {"cases": cases, "mesh_vs_gmsh": statistics.median(c["ratio"] for c in cases), **extra,
             "quality": {"jaxmatch": mesh_quality(cases, "jaxmatch"), "gmsh": mesh_quality(cases, "gmsh")},
             "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
             "load": {"before": list(load0), "after": list(os.getloadavg())}, "reps": reps,
@@ -915,9 +945,10 @@ def main(argv=None) -> int:
             q = r["quality"][who]
             say(f"{who}: {q['valid']}/{q['meshes']} valid; mean of min SJ {q['mean_min_sj']:.3f}; worst min SJ "
                 f"{q['worst_min_sj']:.3f}; mean SJ {q['mean_mean_sj']:.3f}; irregular per mesh "
-                f"{q['irregular_per_mesh']:.2f}; mean edge/h {q['mean_edge_over_h']:.2f}; total {q['total_s']:.3f} s")
+                f"{q['irregular_per_mesh']:.2f}; mean edge/h {q['mean_edge_over_h']:.2f}; total {q['total_s']:.3f} s; "
+                f"RSS growth over its calls {q['rss_growth_mb']:.0f} MB")
         say(f"mesh_vs_gmsh (median of jaxmatch / gmsh time per case, best of {r['reps']} warm): "
-            f"{r['mesh_vs_gmsh']:.1f}; peak RSS {r['peak_rss_mb']:.0f} MB; load {r['load']['before'][0]:.2f} -> "
+            f"{r['mesh_vs_gmsh']:.1f} (catalogue loaded once and passed: {r.get('mesh_vs_gmsh_catalogue', float('nan')):.1f}); peak RSS {r['peak_rss_mb']:.0f} MB; load {r['load']['before'][0]:.2f} -> "
             f"{r['load']['after'][0]:.2f}")
         if args.json:
             print(json.dumps(r))

@@ -30,10 +30,10 @@ def square(bench):
 
 def test_the_result_is_one_json_object_with_the_summary_keys(square):
     r = json.loads(json.dumps(square))
-    assert {"cases", "mesh_vs_gmsh", "quality", "peak_rss_mb"} <= set(r)
+    assert {"cases", "mesh_vs_gmsh", "mesh_vs_gmsh_catalogue", "quality", "peak_rss_mb"} <= set(r)
     assert set(r["quality"]) == {"jaxmatch", "gmsh"}
     for q in r["quality"].values():
-        assert {"mean_min_sj", "worst_min_sj", "irregular_per_mesh", "mean_edge_over_h"} <= set(q)
+        assert {"mean_min_sj", "worst_min_sj", "irregular_per_mesh", "mean_edge_over_h", "rss_growth_mb"} <= set(q)
     assert r["mesh_vs_gmsh"] > 0 and r["peak_rss_mb"] > 0
     assert len(r["cases"]) == 1
 
