@@ -26,7 +26,7 @@ input outline only, independently of either mesher): quads, min / mean Verdict s
 irregular internal vertices, mean edge / h, valid (no inverted quad, every corner a vertex, area
 within 1 %; triangles left by gmsh make the area short). Prints a Markdown table and a summary
 line per method (``--json``: JSON lines instead); ``--png`` draws jaxmatch beside both gmsh
-meshes for ``--picture-shapes`` at the first division. gmsh is a dev dependency
+meshes for ``--picture-shapes`` at ``--picture-division`` (default the last division). gmsh is a dev dependency
 (``pip install -e .[dev]``).
 """
 
@@ -173,6 +173,8 @@ def shape_case(path: Path, div: int) -> tuple:
 def main(divisions: str = typer.Option("16,32", help="h = perimeter / each of these."),
          png: Optional[Path] = typer.Option(None, "--png", help="Also draw jaxmatch beside both gmsh meshes (.png)."),
          picture_shapes: str = typer.Option("T,quarter-disk,stairs", help="Shapes drawn in the picture."),
+         picture_division: Optional[int] = typer.Option(None, "--picture-division",
+                                                        help="P/h of the picture (default: the last of --divisions)."),
          shapes: str = typer.Option("", help="Only these shapes of mesh_table.SHAPES (comma separated; default all)."),
          as_json: bool = typer.Option(False, "--json", help="JSON lines instead of a table.")) -> None:
     """Table: jaxmatch.mesh beside gmsh quasi-structured and Frontal-Delaunay + blossom, same shapes and sizes."""
@@ -186,6 +188,7 @@ def main(divisions: str = typer.Option("16,32", help="h = perimeter / each of th
     if unknown:
         raise typer.BadParameter(f"unknown shape {unknown[0]!r} (expected {', '.join(mesh_table.SHAPES)})")
     drawn = [s for s in picture_shapes.split(",") if s]
+    pic_div = picture_division if picture_division is not None else divs[-1]
     rows, panels = [], []
     for name in names:
         for div in divs:
@@ -218,7 +221,7 @@ def main(divisions: str = typer.Option("16,32", help="h = perimeter / each of th
                 rows.append(row)
                 if as_json:
                     print(json.dumps(row), flush=True)
-            if png is not None and name in drawn and div == divs[0]:
+            if png is not None and name in drawn and div == pic_div:
                 for method in METHODS:
                     res = meshes[method]
                     if isinstance(res, Exception):
@@ -236,7 +239,20 @@ def main(divisions: str = typer.Option("16,32", help="h = perimeter / each of th
     if png is not None and panels:
         from jaxmatch.io.plot import draw_meshes
 
-        print(f"wrote {draw_meshes(png, panels, ncols=len(METHODS))}")
+        out = draw_meshes(png, panels, ncols=len(METHODS))
+        if out.suffix.lower() == ".png":
+            _palette(out)
+        print(f"wrote {out} ({out.stat().st_size / 1024:.0f} KB)")
+
+
+def _palette(path: Path, colours: int = 128) -> None:
+    """Rewrite a PNG with a ``colours``-colour palette (about a third of the bytes for these flat
+    drawings; Pillow comes with matplotlib)."""
+    from PIL import Image
+
+    with Image.open(path) as im:
+        small = im.convert("RGB").quantize(colours, method=Image.Quantize.FASTOCTREE)
+    small.save(path, optimize=True)
 
 
 def table(rows: list[dict]) -> str:
