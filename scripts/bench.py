@@ -101,6 +101,8 @@ def parse_args(argv=None):
     ap.add_argument("--mesh-reps", type=int, default=3, help="--mesh: timed repetitions after one untimed run (default 3)")
     ap.add_argument("--mesh-shapes", default="", help="--mesh: shapes of mesh_table.SHAPES, comma-separated (default all)")
     ap.add_argument("--mesh-divisions", default="16,32", help="--mesh: h = perimeter / each of these (default 16,32)")
+    ap.add_argument("--mesh-profile", default="", metavar="SHAPE:DIV",
+                    help="--mesh: only profile one warm jaxmatch.mesh call (cProfile, top 10 cumulative), e.g. T:32")
     return ap.parse_args(argv)
 
 
@@ -935,8 +937,49 @@ def bench_mesh(shapes=None, divisions=MESH_DIVISIONS, reps: int = 3, say=None, w
                          "python": platform.python_version()}, "cpus": len(os.sched_getaffinity(0))}
 
 
+def profile_mesh(name: str, div: int, top: int = 10) -> dict:
+    """cProfile of one warm ``jaxmatch.mesh(shape, size=h)`` call (after one untimed call): the
+    wall time, the ``top`` entries by cumulative time (``"top"``) and by own time (``"top_own"``),
+    each ``[function, calls, tottime, cumtime]``."""
+    import cProfile
+    import pstats
+
+    import jaxmatch
+
+    cg = _script("compare_gmsh")
+    shp, _, _, _, h = cg.shape_case(cg.mesh_table.SHAPES[name], div)
+    jaxmatch.mesh(shp, size=h)
+    t = time.perf_counter()
+    jaxmatch.mesh(shp, size=h)
+    wall = time.perf_counter() - t
+    prof = cProfile.Profile()
+    prof.enable()
+    jaxmatch.mesh(shp, size=h)
+    prof.disable()
+    st = pstats.Stats(prof)
+
+    def entries(col):
+        rows = sorted(st.stats.items(), key=lambda kv: -kv[1][col])[:top]
+        return [[f"{Path(f).name}:{line}({fn})" if f != "~" else fn, nc, tt, ct] for (f, line, fn), (_, nc, tt, ct, _) in rows]
+
+    return {"shape": name, "div": div, "wall_s": wall, "profiled_s": st.total_tt, "top": entries(3), "top_own": entries(2)}
+
+
 def main(argv=None) -> int:
     args = parse_args(argv)
+    if args.mesh and args.mesh_profile:
+        name, _, div = args.mesh_profile.partition(":")
+        r = profile_mesh(name, int(div or 32))
+        print(f"jaxmatch.mesh({name}, size=P/{r['div']}): warm {r['wall_s']:.3f} s; under cProfile {r['profiled_s']:.3f} s; "
+              f"top {len(r['top'])} by cumulative time:", file=sys.stderr if args.json else sys.stdout)
+        for fn, nc, tt, ct in r["top"]:
+            print(f"  {ct:7.3f} s cumulative {tt:7.3f} s own {nc:6d} calls  {fn}", file=sys.stderr if args.json else sys.stdout)
+        print(f"top {len(r['top_own'])} by own time:", file=sys.stderr if args.json else sys.stdout)
+        for fn, nc, tt, ct in r["top_own"]:
+            print(f"  {ct:7.3f} s cumulative {tt:7.3f} s own {nc:6d} calls  {fn}", file=sys.stderr if args.json else sys.stdout)
+        if args.json:
+            print(json.dumps({"profile": r}))
+        return 0
     if args.mesh:
         say = (lambda *a: print(*a, file=sys.stderr, flush=True)) if args.json else (lambda *a: print(*a, flush=True))
         shapes = [s for s in args.mesh_shapes.split(",") if s] or None
