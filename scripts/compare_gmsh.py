@@ -116,8 +116,11 @@ def mean_edge(xy: np.ndarray, quads: np.ndarray) -> float:
 def gmsh_calibrated(points: np.ndarray, h: float, algorithm: int = 11, recombine: int | None = None,
                     tries: int = 10) -> dict:
     """gmsh's mesh whose mean edge length is nearest ``h`` over at most ``tries`` runs: first
-    ``lc = h``, then ``lc *= h / mean edge`` while that gives a new ``lc``, then geometric
-    bisection between the largest ``lc`` that came out too fine and the smallest too coarse.
+    ``lc = h``, then ``lc *= h / mean edge`` while that gives a new ``lc`` (and the last four
+    tries did not all give the same mean edge), then geometric bisection between the largest
+    ``lc`` that came out too fine and the smallest too coarse (none: stop; e.g. the
+    quasi-structured mesher puts at least two edges on every polygon segment, so a finely
+    sampled arc caps the edge length).
     A run gmsh refuses is retried with ``lc`` nudged (7 % larger, then 13 % smaller, alternately:
     full-quad blossom needs an even number of boundary edges). Returns ``{"lc", "xy", "quads",
     "triangles", "edge_over_h", "tries": [(lc / h, edge / h or None), ...]}``; raises
@@ -143,7 +146,8 @@ def gmsh_calibrated(points: np.ndarray, h: float, algorithm: int = 11, recombine
             break
         ok = [(s, e) for s, e in log if e is not None and math.isfinite(e)]
         nxt = lc / r if stepping and math.isfinite(r) else None
-        if nxt is None or any(abs(nxt / h / s - 1) < 0.02 for s, _ in log):
+        saturated = len(ok) >= 4 and all(abs(e / ok[-1][1] - 1) < 0.005 for _, e in ok[-4:])  # the size is stuck
+        if nxt is None or saturated or any(abs(nxt / h / s - 1) < 0.02 for s, _ in log):
             stepping = False
             fine = [s for s, e in ok if e < 1]
             coarse = [s for s, e in ok if e > 1]
