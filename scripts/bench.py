@@ -102,7 +102,7 @@ def parse_args(argv=None):
     ap.add_argument("--mesh-shapes", default="", help="--mesh: shapes of mesh_table.SHAPES, comma-separated (default all)")
     ap.add_argument("--mesh-divisions", default="16,32", help="--mesh: h = perimeter / each of these (default 16,32)")
     ap.add_argument("--mesh-profile", default="", metavar="SHAPE:DIV",
-                    help="--mesh: only profile one warm jaxmatch.mesh call (cProfile, top 10 cumulative), e.g. T:32")
+                    help="--mesh: only profile one warm jaxmatch.mesh call (cProfile: top 10 by cumulative and by own time), e.g. T:32")
     return ap.parse_args(argv)
 
 
