@@ -32,6 +32,10 @@ Printed, from one run:
   k <= 5 (streaming: memory follows the batch size, not the catalogue);
 * machine load (``os.getloadavg``) before and after, CPUs, versions.
 
+``--mesh`` runs only the meshing benchmark (:func:`bench_mesh`): ``jaxmatch.mesh`` against gmsh's
+quasi-structured quad mesher on every shape of ``scripts/mesh_table.py`` at h = perimeter / 16 and
+/ 32, times and qualities of both.
+
 ``--json`` prints one JSON object on the last line. ``--cli`` also times a cold and a warm
 ``jaxmatch score examples/lshape.json`` (fresh persistent compilation cache), and the same job
 scored through ``jaxmatch.scoring.bulk.top_k`` (pruned and exhaustive) for comparison. Run from the
@@ -92,6 +96,13 @@ def parse_args(argv=None):
     ap.add_argument("--rss-probe", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--many-probe", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--refine", action="store_true", help="only the refinement benchmark (bench_refine): a 10,000-quad mesh")
+    ap.add_argument("--mesh", action="store_true",
+                    help="only the meshing benchmark (bench_mesh): jaxmatch.mesh against gmsh's quasi-structured quads")
+    ap.add_argument("--mesh-reps", type=int, default=3, help="--mesh: timed repetitions after one untimed run (default 3)")
+    ap.add_argument("--mesh-shapes", default="", help="--mesh: shapes of mesh_table.SHAPES, comma-separated (default all)")
+    ap.add_argument("--mesh-divisions", default="16,32", help="--mesh: h = perimeter / each of these (default 16,32)")
+    ap.add_argument("--mesh-profile", default="", metavar="SHAPE:DIV",
+                    help="--mesh: only profile one warm jaxmatch.mesh call (cProfile: top 10 by cumulative and by own time), e.g. T:32")
     return ap.parse_args(argv)
 
 
@@ -794,8 +805,197 @@ def bench_refine(reps: int = 5) -> dict:
     }
 
 
+MESH_DIVISIONS = (16, 32)
+"""Meshing benchmark sizes: h = perimeter / each of these."""
+
+MESH_GMSH = "gmsh-qs"
+"""The gmsh mesher the meshing benchmark times (``compare_gmsh.GMSH_METHODS``): quasi-structured
+quads, ``Mesh.Algorithm = 11``."""
+
+
+def _script(name: str):
+    """A module of scripts/ (mesh_table, compare_gmsh), imported from beside this file."""
+    import importlib
+
+    here = str(Path(__file__).resolve().parent)
+    if here not in sys.path:
+        sys.path.insert(0, here)
+    return importlib.import_module(name)
+
+
+def _best_of(fn, reps: int):
+    """One untimed (warming) call of ``fn``, then ``reps`` timed: ``(seconds list, last result)``."""
+    out = fn()
+    ts = []
+    for _ in range(max(int(reps), 1)):
+        t = time.perf_counter()
+        out = fn()
+        ts.append(time.perf_counter() - t)
+    return ts, out
+
+
+def _rss_now_mb() -> float:
+    """Current resident set size of this process (MB; /proc/self/statm), NaN where unknown."""
+    try:
+        with open("/proc/self/statm") as fh:
+            return int(fh.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
+    except (OSError, ValueError, IndexError):
+        return float("nan")
+
+
+def mesh_case(name: str, div: int, reps: int = 3, catalogue=None) -> dict:
+    """One case of the meshing benchmark: shape ``name`` of ``mesh_table.SHAPES`` at
+    h = perimeter / ``div``.
+
+    ``jaxmatch``: ``jaxmatch.mesh(shape, size=h)`` (the shape loaded once, outside the timing;
+    the call loads the default catalogue itself, as a user's call does); with ``catalogue``
+    (loaded once by the caller) also ``seconds_catalogue``: the same call given it
+    (``catalogue=``), which keeps the catalogue's verified arrays and groupings between calls.
+    ``gmsh``: ``compare_gmsh.gmsh_quads`` with :data:`MESH_GMSH`'s options (gmsh initialised,
+    the polygon as a plane surface, meshed, read back, finalised) at the characteristic length
+    ``compare_gmsh.gmsh_calibrated`` found (untimed) to bring gmsh's mean edge length nearest h.
+    Each warm (one untimed call), then best of ``reps``. Both meshes measured by
+    ``mesh_table.measure`` (quads, min / mean scaled Jacobian, irregular internal vertices, mean
+    edge / h, valid). ``ratio``: jaxmatch's best time / gmsh's. ``rss_growth_mb``: growth of
+    the resident set over each mesher's calls (calibration included for gmsh)."""
+    import jaxmatch
+
+    cg = _script("compare_gmsh")
+    mt = cg.mesh_table
+    shp, outline, corners, _, h = cg.shape_case(mt.SHAPES[name], div)
+    opts = cg.GMSH_METHODS[MESH_GMSH]
+    r0 = _rss_now_mb()
+    jt, jm = _best_of(lambda: jaxmatch.mesh(shp, size=h), reps)
+    jc = _best_of(lambda: jaxmatch.mesh(shp, size=h, catalogue=catalogue), reps)[0] if catalogue is not None else None
+    r1 = _rss_now_mb()
+    cal = cg.gmsh_calibrated(outline, h, **opts)
+    gt, (gxy, gq, tris) = _best_of(lambda: cg.gmsh_quads(outline, cal["lc"], **opts), reps)
+    r2 = _rss_now_mb()
+    j = {"seconds": min(jt), "seconds_all": jt, "chosen": jm.chosen, "rss_growth_mb": r1 - r0,
+         **mt.measure(jm.xy, jm.quads, corners, outline, h)}
+    if jc is not None:
+        j["seconds_catalogue"] = min(jc)
+    g = {"seconds": min(gt), "seconds_all": gt, "method": MESH_GMSH, "lc_over_h": cal["lc"] / h,
+         "calibration": cal["tries"], "triangles": tris, "rss_growth_mb": r2 - r1,
+         **mt.measure(gxy, gq, corners, outline, h)}
+    return {"shape": name, "div": div, "h": h, "jaxmatch": j, "gmsh": g, "ratio": j["seconds"] / g["seconds"]}
+
+
+def mesh_quality(cases: list[dict], who: str) -> dict:
+    """Summary of ``who``'s ("jaxmatch" or "gmsh") meshes over the cases."""
+    ms = [c[who] for c in cases]
+    return {"mean_min_sj": statistics.fmean(m["min_sj"] for m in ms), "worst_min_sj": min(m["min_sj"] for m in ms),
+            "mean_mean_sj": statistics.fmean(m["mean_sj"] for m in ms),
+            "irregular_per_mesh": statistics.fmean(m["irregular"] for m in ms),
+            "mean_edge_over_h": statistics.fmean(m["mean_edge_over_h"] for m in ms),
+            "valid": sum(bool(m["valid"]) for m in ms), "meshes": len(ms),
+            "total_s": sum(m["seconds"] for m in ms), "rss_growth_mb": sum(m["rss_growth_mb"] for m in ms)}
+
+
+def bench_mesh(shapes=None, divisions=MESH_DIVISIONS, reps: int = 3, say=None, with_catalogue: bool = True) -> dict:
+    """Meshing benchmark, in this one process: :func:`mesh_case` for every shape of
+    ``scripts/mesh_table.py``'s ``SHAPES`` (or ``shapes``) and every division.
+
+    Returns ``{"cases": [...], "mesh_vs_gmsh": median over cases of the time ratio
+    jaxmatch / gmsh, "quality": {"jaxmatch": ..., "gmsh": ...} (:func:`mesh_quality`: mean and
+    worst min scaled Jacobian, irregular internal vertices per mesh, ...), "peak_rss_mb":
+    ``ru_maxrss`` of this process, "load", "versions", "reps", "divisions"}``; with
+    ``with_catalogue`` also ``"mesh_vs_gmsh_catalogue"``: the same median with jaxmatch given the
+    catalogue loaded once (``seconds_catalogue`` of :func:`mesh_case`). gmsh's quasi-structured
+    mesher leaks a few MB per run (also with one gmsh session), so the peak RSS grows with the
+    number of gmsh runs; each mesher's ``rss_growth_mb`` says whose memory it is."""
+    import jaxmatch
+
+    mt = _script("mesh_table")
+    cat = jaxmatch.load_catalogue() if with_catalogue else None
+    names = list(shapes) if shapes else list(mt.SHAPES)
+    load0 = os.getloadavg()
+    cases = []
+    for name in names:
+        for div in divisions:
+            c = mesh_case(name, int(div), reps, cat)
+            cases.append(c)
+            if say is not None:
+                j, g = c["jaxmatch"], c["gmsh"]
+                cat_s = f" (catalogue passed {j['seconds_catalogue']:.4f} s)" if "seconds_catalogue" in j else ""
+                say(f"{name:>13} P/{div:<3d} jaxmatch {j['seconds']:7.4f} s{cat_s} edge/h {j['mean_edge_over_h']:.2f} "
+                    f"SJ {j['min_sj']:.3f}/{j['mean_sj']:.3f} irr {j['irregular']:2d} ({j['chosen']}) | "
+                    f"gmsh {g['seconds']:7.4f} s edge/h {g['mean_edge_over_h']:.2f} SJ {g['min_sj']:.3f}/"
+                    f"{g['mean_sj']:.3f} irr {g['irregular']:2d} | ratio {c['ratio']:.1f}")
+    import gmsh
+
+    extra = {}
+    if with_catalogue:
+        extra["mesh_vs_gmsh_catalogue"] = statistics.median(c["jaxmatch"]["seconds_catalogue"] / c["gmsh"]["seconds"]
+                                                            for c in cases)
+    return {"cases": cases, "mesh_vs_gmsh": statistics.median(c["ratio"] for c in cases), **extra,
+            "quality": {"jaxmatch": mesh_quality(cases, "jaxmatch"), "gmsh": mesh_quality(cases, "gmsh")},
+            "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+            "load": {"before": list(load0), "after": list(os.getloadavg())}, "reps": reps,
+            "divisions": [int(d) for d in divisions], "gmsh_method": MESH_GMSH,
+            "versions": {"jaxmatch": jaxmatch.__version__, "gmsh": gmsh.__version__,
+                         "python": platform.python_version()}, "cpus": len(os.sched_getaffinity(0))}
+
+
+def profile_mesh(name: str, div: int, top: int = 10) -> dict:
+    """cProfile of one warm ``jaxmatch.mesh(shape, size=h)`` call (after one untimed call): the
+    wall time, the ``top`` entries by cumulative time (``"top"``) and by own time (``"top_own"``),
+    each ``[function, calls, tottime, cumtime]``."""
+    import cProfile
+    import pstats
+
+    import jaxmatch
+
+    cg = _script("compare_gmsh")
+    shp, _, _, _, h = cg.shape_case(cg.mesh_table.SHAPES[name], div)
+    jaxmatch.mesh(shp, size=h)
+    t = time.perf_counter()
+    jaxmatch.mesh(shp, size=h)
+    wall = time.perf_counter() - t
+    prof = cProfile.Profile()
+    prof.enable()
+    jaxmatch.mesh(shp, size=h)
+    prof.disable()
+    st = pstats.Stats(prof)
+
+    def entries(col):
+        rows = sorted(st.stats.items(), key=lambda kv: -kv[1][col])[:top]
+        return [[f"{Path(f).name}:{line}({fn})" if f != "~" else fn, nc, tt, ct] for (f, line, fn), (_, nc, tt, ct, _) in rows]
+
+    return {"shape": name, "div": div, "wall_s": wall, "profiled_s": st.total_tt, "top": entries(3), "top_own": entries(2)}
+
+
 def main(argv=None) -> int:
     args = parse_args(argv)
+    if args.mesh and args.mesh_profile:
+        name, _, div = args.mesh_profile.partition(":")
+        r = profile_mesh(name, int(div or 32))
+        print(f"jaxmatch.mesh({name}, size=P/{r['div']}): warm {r['wall_s']:.3f} s; under cProfile {r['profiled_s']:.3f} s; "
+              f"top {len(r['top'])} by cumulative time:", file=sys.stderr if args.json else sys.stdout)
+        for fn, nc, tt, ct in r["top"]:
+            print(f"  {ct:7.3f} s cumulative {tt:7.3f} s own {nc:6d} calls  {fn}", file=sys.stderr if args.json else sys.stdout)
+        print(f"top {len(r['top_own'])} by own time:", file=sys.stderr if args.json else sys.stdout)
+        for fn, nc, tt, ct in r["top_own"]:
+            print(f"  {ct:7.3f} s cumulative {tt:7.3f} s own {nc:6d} calls  {fn}", file=sys.stderr if args.json else sys.stdout)
+        if args.json:
+            print(json.dumps({"profile": r}))
+        return 0
+    if args.mesh:
+        say = (lambda *a: print(*a, file=sys.stderr, flush=True)) if args.json else (lambda *a: print(*a, flush=True))
+        shapes = [s for s in args.mesh_shapes.split(",") if s] or None
+        r = bench_mesh(shapes, [int(d) for d in args.mesh_divisions.split(",")], args.mesh_reps, say)
+        for who in ("jaxmatch", "gmsh"):
+            q = r["quality"][who]
+            say(f"{who}: {q['valid']}/{q['meshes']} valid; mean of min SJ {q['mean_min_sj']:.3f}; worst min SJ "
+                f"{q['worst_min_sj']:.3f}; mean SJ {q['mean_mean_sj']:.3f}; irregular per mesh "
+                f"{q['irregular_per_mesh']:.2f}; mean edge/h {q['mean_edge_over_h']:.2f}; total {q['total_s']:.3f} s; "
+                f"RSS growth over its calls {q['rss_growth_mb']:.0f} MB")
+        say(f"mesh_vs_gmsh (median of jaxmatch / gmsh time per case, best of {r['reps']} warm): "
+            f"{r['mesh_vs_gmsh']:.1f} (catalogue loaded once and passed: {r.get('mesh_vs_gmsh_catalogue', float('nan')):.1f}); peak RSS {r['peak_rss_mb']:.0f} MB; load {r['load']['before'][0]:.2f} -> "
+            f"{r['load']['after'][0]:.2f}")
+        if args.json:
+            print(json.dumps(r))
+        return 0
     if args.refine:
         r = bench_refine(max(args.reps, 1))
         print(f"refine: {r['quads']} quads ({r['template']}, min SJ {r['min_scaled_jacobian']:.3f}, {r['inverted']} inverted); "

@@ -1,0 +1,61 @@
+"""scripts/bench.py --mesh: the meshing benchmark's measuring function (jaxmatch.mesh against gmsh's
+quasi-structured quads) on one tiny case; figures only, no timing assertions."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import math
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+
+pytest.importorskip("gmsh")
+
+
+@pytest.fixture(scope="module")
+def bench():
+    spec = importlib.util.spec_from_file_location("bench", ROOT / "scripts" / "bench.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+@pytest.fixture(scope="module")
+def square(bench):
+    return bench.bench_mesh(["square"], [16], reps=1)
+
+
+def test_the_result_is_one_json_object_with_the_summary_keys(square):
+    r = json.loads(json.dumps(square))
+    assert {"cases", "mesh_vs_gmsh", "mesh_vs_gmsh_catalogue", "quality", "peak_rss_mb"} <= set(r)
+    assert set(r["quality"]) == {"jaxmatch", "gmsh"}
+    for q in r["quality"].values():
+        assert {"mean_min_sj", "worst_min_sj", "irregular_per_mesh", "mean_edge_over_h", "rss_growth_mb"} <= set(q)
+    assert r["mesh_vs_gmsh"] > 0 and r["peak_rss_mb"] > 0
+    assert len(r["cases"]) == 1
+
+
+def test_each_mesher_is_timed_and_measured(square):
+    c = square["cases"][0]
+    assert (c["shape"], c["div"]) == ("square", 16)
+    assert c["h"] == pytest.approx(0.25)  # the unit square's perimeter / 16
+    for who in ("jaxmatch", "gmsh"):
+        m = c[who]
+        assert {"seconds", "quads", "min_sj", "mean_sj", "irregular", "mean_edge_over_h", "valid"} <= set(m)
+        assert m["seconds"] > 0 and m["quads"] > 0 and m["valid"]
+        for key in ("min_sj", "mean_sj"):
+            assert isinstance(m[key], float) and math.isfinite(m[key]) and -1.0 <= m[key] <= 1.0
+        assert m["min_sj"] <= m["mean_sj"]
+        assert isinstance(m["irregular"], int) and m["irregular"] >= 0
+    for q in square["quality"].values():
+        assert -1.0 <= q["worst_min_sj"] <= q["mean_min_sj"] <= 1.0
+    assert c["ratio"] == pytest.approx(c["jaxmatch"]["seconds"] / c["gmsh"]["seconds"])
+
+
+def test_gmsh_is_calibrated_towards_h(square):
+    g = square["cases"][0]["gmsh"]
+    assert g["lc_over_h"] > 0 and g["calibration"]  # tried at least once
+    assert 0.5 <= g["mean_edge_over_h"] <= 2.0
