@@ -672,7 +672,11 @@ def _mesh_many(regions: List[Path], out_dir: Optional[Path], fmt: str, angle: fl
     records = []
     with _progress() as prog:
         task = prog.add_task("regions", total=len(loaded))
-        for rec in ordered_map(one, list(range(len(loaded))), workers, initializer=_plain_streams, warm_first=True):
+        def worker_start() -> None:  # in each worker process
+            _plain_streams()
+            options["catalogue"].reopen()
+
+        for rec in ordered_map(one, list(range(len(loaded))), workers, initializer=worker_start, warm_first=True):
             if "error" in rec and not skip_bad:
                 raise InputError(rec["error"].split(": ", 1)[-1] if rec["error"].startswith(rec["shape"]) else rec["error"],
                                  rec["shape"])
