@@ -48,6 +48,8 @@ class Quality:
         templates are passed over (refinement, layouts) and the quality band looks further.
     max_edge_ratio: largest acceptable longest/shortest edge of a quad (``--max-edge-ratio``).
     band: the utility band of ``mesh --template`` (``--band``, a fraction of the utility).
+    high_sj: the choice rule's quality band: a mesh reaching this min scaled Jacobian is preferred
+        to one that does not before irregular vertices are counted.
     area_tol: a mesh keeps the region's area when ``|mesh area / region area - 1| <= area_tol``.
     size_tol: a side conforms to the size ``h`` when its edge count ``n`` and length ``L`` satisfy
         ``|n - L / h| <= max(1, size_tol * L / h)`` (one edge of rounding, or this fraction).
@@ -55,6 +57,7 @@ class Quality:
 
     min_sj: float = 0.2
     good_sj: float = 0.3
+    high_sj: float = 0.6
     max_edge_ratio: float = 8.0
     band: float = DEFAULT_BAND
     area_tol: float = 0.01

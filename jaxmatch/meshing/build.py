@@ -29,18 +29,20 @@ def from_layout(lm, *, size: float | None = None, corners: np.ndarray | None = N
     """A :class:`~jaxmatch.placement.layout.LayoutMesh` as a :class:`QuadMesh`.
 
     corners: ``(C, 2)`` the region's corners (default: the layout points marked as corners on
-    the outer boundary)."""
+    the outer boundary). Side lengths and counts are kept for the sides on the region's boundary
+    (the sizes of cuts between patches are the pipeline's own choice, not the user's)."""
     lay = lm.layout
     if corners is None:
         outer_pts = np.unique(np.concatenate([lm.sides.chains[s] for s in np.flatnonzero(lm.sides.outer)]))
         corners = lay.points[outer_pts[lay.corner[outer_pts]]]
     line_sets = {"boundary": _loop_edges(lm.outer)}
+    names, outer = lm.sides.names, lm.sides.outer
     for name, ids in zip(lm.sides.names, lm.side_vertices):
         line_sets[f"side {name}"] = np.stack([ids[:-1], ids[1:]], axis=1)
     return QuadMesh(xy=lm.xy, quads=np.asarray(lm.quads, np.int64), patch=np.asarray(lm.patch, np.int64),
                     line_sets=line_sets, region_area=float(lm.region_area), corners=np.asarray(corners, np.float64),
-                    size=size, side_lengths=dict(zip(lm.sides.names, map(float, lm.sides.lengths))),
-                    side_counts=dict(zip(lm.sides.names, map(int, lm.counts))), templates=tuple(lm.templates))
+                    size=size, side_lengths={n: float(v) for n, v, o in zip(names, lm.sides.lengths, outer) if o},
+                    side_counts={n: int(c) for n, c, o in zip(names, lm.counts, outer) if o}, templates=tuple(lm.templates))
 
 
 def from_placement(shape: Shape, pl, mesh_id: str = "") -> QuadMesh:

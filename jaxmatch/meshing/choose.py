@@ -8,12 +8,13 @@
 4. quality floor: min scaled Jacobian ``>= Quality.good_sj``;
 5. size conformity: fewer sides whose edge count is off ``length / h`` by more than
    ``max(1, Quality.size_tol * length / h)`` (with a target size);
-6. irregular vertices: fewer irregular internal vertices beyond Euler's lower bound for the
+6. quality band: min scaled Jacobian ``>= Quality.high_sj``;
+7. irregular vertices: fewer irregular internal vertices beyond Euler's lower bound for the
    boundary valences used (:func:`jaxmatch.meshing.result.irregular_bound`);
-7. quality: higher min scaled Jacobian, in steps of :data:`SJ_STEP`;
-8. fewer patches;
-9. higher mean scaled Jacobian (2 decimals);
-10. the order tried (single template first).
+8. quality: higher min scaled Jacobian, in steps of :data:`SJ_STEP`;
+9. fewer patches;
+10. higher mean scaled Jacobian (2 decimals);
+11. the order tried (single template first).
 
 :func:`choose` names the first rule on which the winner beats the runner-up.
 """
@@ -28,12 +29,12 @@ from jaxmatch.meshing.result import Candidate, QuadMesh
 
 __all__ = ["RULES", "SJ_STEP", "choose", "mesh_key"]
 
-RULES = ("no fold", "corners kept", "area kept", "quality floor", "size conformity", "irregular vertices",
+RULES = ("no fold", "corners kept", "area kept", "quality floor", "size conformity", "quality band", "irregular vertices",
          "min scaled Jacobian", "fewer patches", "mean scaled Jacobian", "order tried")
 """The rules of :func:`mesh_key`, in order (the last one: the earlier candidate)."""
 
 SJ_STEP = 0.1
-"""Min scaled Jacobians within one step of this size count as equal (rule 7): a mesh with
+"""Min scaled Jacobians within one step of this size count as equal (rule 8): a mesh with
 fewer irregular vertices or patches is not given up for a few hundredths of quality."""
 
 
@@ -47,6 +48,7 @@ def mesh_key(m: QuadMesh, order: int = 0, quality: Quality = QUALITY) -> tuple:
         not (abs(area - 1.0) <= quality.area_tol),
         not (sj >= quality.good_sj),
         len(m.sides_off_size(quality.size_tol)),
+        not (sj >= quality.high_sj),
         int(m.irregular.size) - m.irregular_bound,
         -math.floor(sj / SJ_STEP + 1e-9) if math.isfinite(sj) else math.inf,
         m.n_patches,

@@ -79,7 +79,7 @@ class QuadMesh:
     region_area: area of the region (user units squared); corners: ``(C, 2) float64`` the
         region's corners, each of which must be a mesh vertex.
     size: the target edge length (user units) or None; side_lengths / side_counts: name ->
-        length of the region's side and its number of mesh edges (``"i-j"``).
+        length of a side on the region's boundary and its number of mesh edges (``"i-j"``).
     chosen: the candidate that won (``"single"``, a decomposition, ``"template"``, ``"layout"``);
     rule: the rule of :mod:`jaxmatch.meshing.choose` that decided (empty with one candidate);
     runner_up: the best other candidate's name or None; tried: every :class:`Candidate`;
@@ -191,7 +191,7 @@ class QuadMesh:
         out = []
         for s, n in self.side_counts.items():
             want = self.side_lengths[s] / self.size
-            if abs(n - want) > max(1.0, tol * want):
+            if abs(n - want) > max(1.0, tol * want) + 1e-9:  # round-off: L / h = 0.99999... is one edge
                 out.append(s)
         return out
 
