@@ -132,6 +132,11 @@ class Shape:
     corner_order: ``(c,) int64`` or None, the user's corner ``i`` is ``corners[corner_order[i]]``:
         the order of an explicit ``corners`` list, else the order of the input file.
     input_clockwise: the input loop was clockwise (``points`` is reversed from it).
+    holes: the region's holes, each ``(H_k, 2) float64`` in user coordinates exactly as given,
+        clockwise (the region on the left, as for the outer loop), starting at its first corner
+        (or its lowest point); empty for a simply connected region. Scoring and template
+        placement use the outer loop only; the meshing pipeline cuts holes into patches.
+    hole_corners: per hole, ``(c_k,) int64`` sorted indices into ``holes[k]``: its corners.
     """
 
     points: np.ndarray
@@ -143,6 +148,8 @@ class Shape:
     input_points: np.ndarray | None = None
     corner_order: np.ndarray | None = None
     input_clockwise: bool = False
+    holes: tuple = ()
+    hole_corners: tuple = ()
 
     @property
     def n_points(self) -> int:
@@ -270,7 +277,8 @@ def check_corner_angle(corner_angle) -> float:
     return a
 
 
-def make_shape(points, corners=None, *, corner_angle: float = DEFAULT_CORNER_ANGLE, source: str = "<shape>") -> Shape:
+def make_shape(points, corners=None, *, corner_angle: float = DEFAULT_CORNER_ANGLE, source: str = "<shape>",
+               holes=None, hole_corners=None) -> Shape:
     """Validate and normalise a loop into a :class:`Shape` (see the module docstring).
 
     points: ``(P, 2)`` numbers in user coordinates, a loop in either orientation; a closed
@@ -278,11 +286,56 @@ def make_shape(points, corners=None, *, corner_angle: float = DEFAULT_CORNER_ANG
         dropped (a corner index naming it means the first point).
     corners: optional sequence of int indices into ``points`` (any order); ``None`` detects
         corners from interior angles (``|angle - 180| > corner_angle`` degrees).
+    holes: optional list of loops ``(H_k, 2)`` (either orientation, closed rings allowed), each
+        checked like the outer loop and against it: inside it, not touching it or another hole.
+    hole_corners: optional list (one entry per hole, each None or indices into that hole).
     Raises :class:`InputError` (``where=source``) for any problem; indices in messages refer
     to the input order.
     """
+    angle = check_corner_angle(corner_angle)
     with np.errstate(over="ignore", invalid="ignore", divide="ignore", under="ignore"):
-        return _make_shape(points, corners, check_corner_angle(corner_angle), str(source))
+        shape = _make_shape(points, corners, angle, str(source))
+        if holes is None or len(holes) == 0:
+            return shape
+        return _with_holes(shape, holes, hole_corners, angle, str(source))
+
+
+def _with_holes(shape: Shape, holes, hole_corners, angle: float, source: str) -> Shape:
+    """``shape`` with its holes validated (each a loop checked like the outer one, then inside
+    the outer loop without touching it or another hole: shapely predicates)."""
+    import shapely
+
+    if hole_corners is None:
+        hole_corners = [None] * len(holes)
+    if len(hole_corners) != len(holes):
+        raise InputError(f"hole_corners has {len(hole_corners)} entries for {len(holes)} holes", where=source)
+    outer = shapely.Polygon(shape.input_points)
+    rings, corner_lists, polys = [], [], []
+    for k, (h, hc) in enumerate(zip(holes, hole_corners)):
+        try:
+            hs = _make_shape(h, hc, angle, source)
+        except InputError as e:
+            raise InputError(f"hole {k + 1}: {e.problem.replace('boundary', 'hole')}", where=source) from None
+        ring = hs.input_points[::-1]  # clockwise, from its first corner (or lowest point)
+        ring = np.roll(ring, 1, axis=0)
+        corners_k = np.sort((hs.n_points - np.asarray(hs.corners, np.int64)) % hs.n_points)
+        poly = shapely.Polygon(ring)
+        if not outer.contains(poly):
+            what = "lies outside the outer boundary" if not outer.intersects(poly) else \
+                "crosses or touches the outer boundary"
+            raise InputError(f"hole {k + 1} {what}", where=source)
+        if outer.exterior.distance(poly) <= 0.0:
+            raise InputError(f"hole {k + 1} touches the outer boundary", where=source)
+        for j, other in enumerate(polys):
+            if poly.distance(other) <= 0.0:
+                what = "overlap" if poly.intersection(other).area > 0 else "touch"
+                raise InputError(f"holes {j + 1} and {k + 1} {what}", where=source)
+        rings.append(np.ascontiguousarray(ring))
+        corner_lists.append(corners_k.astype(np.int64))
+        polys.append(poly)
+    from dataclasses import replace
+
+    return replace(shape, holes=tuple(rings), hole_corners=tuple(corner_lists))
 
 
 def _make_shape(points, corners, angle: float, source: str) -> Shape:

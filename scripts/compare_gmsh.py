@@ -61,21 +61,25 @@ METHODS = ("jaxmatch",) + tuple(GMSH_METHODS)
 app = typer.Typer(add_completion=False, pretty_exceptions_enable=False)
 
 
-def gmsh_quads(points: np.ndarray, lc: float, algorithm: int = 11, recombine: int | None = None
-               ) -> tuple[np.ndarray, np.ndarray, int]:
+def gmsh_quads(points: np.ndarray, lc: float, algorithm: int = 11, recombine: int | None = None,
+               holes=()) -> tuple[np.ndarray, np.ndarray, int]:
     """gmsh's quad mesh of the polygon ``points (P, 2)``, characteristic length ``lc`` at every
     point, ``Mesh.Algorithm = algorithm`` (``recombine``: ``Mesh.RecombineAll = 1`` with that
     ``Mesh.RecombinationAlgorithm``). Returns ``(xy, quads (ccw), triangles left)``; raises
-    gmsh's exception when it cannot mesh (e.g. blossom with an odd number of boundary edges)."""
+    gmsh's exception when it cannot mesh (e.g. blossom with an odd number of boundary edges).
+    holes: loops ``(H_k, 2)`` cut out of the surface (more curve loops of the plane surface)."""
     import gmsh
 
     gmsh.initialize(readConfigFiles=False, interruptible=False)
     try:
         gmsh.option.setNumber("General.Terminal", 0)
         gmsh.model.add("shape")
-        tags = [gmsh.model.geo.addPoint(float(x), float(y), 0.0, float(lc)) for x, y in points]
-        lines = [gmsh.model.geo.addLine(tags[i], tags[(i + 1) % len(tags)]) for i in range(len(tags))]
-        gmsh.model.geo.addPlaneSurface([gmsh.model.geo.addCurveLoop(lines)])
+        loops = []
+        for ring in [points, *holes]:
+            tags = [gmsh.model.geo.addPoint(float(x), float(y), 0.0, float(lc)) for x, y in ring]
+            lines = [gmsh.model.geo.addLine(tags[i], tags[(i + 1) % len(tags)]) for i in range(len(tags))]
+            loops.append(gmsh.model.geo.addCurveLoop(lines))
+        gmsh.model.geo.addPlaneSurface(loops)
         gmsh.model.geo.synchronize()
         gmsh.option.setNumber("Mesh.Algorithm", algorithm)
         if recombine is not None:
@@ -114,7 +118,7 @@ def mean_edge(xy: np.ndarray, quads: np.ndarray) -> float:
 
 
 def gmsh_calibrated(points: np.ndarray, h: float, algorithm: int = 11, recombine: int | None = None,
-                    tries: int = 10) -> dict:
+                    tries: int = 10, holes=()) -> dict:
     """gmsh's mesh whose mean edge length is nearest ``h`` over at most ``tries`` runs: first
     ``lc = h``, then ``lc *= h / mean edge`` while that gives a new ``lc`` (and the last four
     tries did not all give the same mean edge), then geometric bisection between the largest
@@ -132,7 +136,7 @@ def gmsh_calibrated(points: np.ndarray, h: float, algorithm: int = 11, recombine
     nudges = 0
     for _ in range(tries):
         try:
-            xy, q, tris = gmsh_quads(points, lc, algorithm, recombine)
+            xy, q, tris = gmsh_quads(points, lc, algorithm, recombine, holes=holes)
             r = mean_edge(xy, q) / h if len(q) else math.nan
         except Exception:  # gmsh refuses this lc (blossom: odd boundary edges): nudge it
             log.append((lc / h, None))

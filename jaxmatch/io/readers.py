@@ -2,13 +2,14 @@
 
 Formats (detected by the file's suffix, else by its content; see :func:`detect_format`):
 
-* ``json``: ``{"boundary": [[x, y], ...], "corners": [i, ...]}`` (``corners`` optional).
+* ``json``: ``{"boundary": [[x, y], ...], "corners": [i, ...], "holes": [[[x, y], ...], ...],
+  "hole_corners": [[i, ...] or null, ...]}`` (all but ``boundary`` optional).
   Other keys (``"name"``, ``"units"``, ...) are ignored with one :class:`InputWarning` naming
   them.
 * ``geojson`` (``.geojson``, or JSON with a ``"type"`` key): a ``Polygon``, a ``Feature`` of
   one, a ``MultiPolygon`` / ``FeatureCollection`` holding exactly one polygon (or the one
   chosen by ``element``: a feature's ``id`` or ``properties.name``). The outer ring is the
-  boundary; polygons with holes are refused.
+  boundary, interior rings are holes.
 * ``text`` (``.txt .csv .tsv .xy .dat``): one point per row, ``x y``, ``x,y``, ``x;y`` or
   tab-separated; ``#`` starts a comment; blank lines are skipped. An optional first row of
   column names (a header) is allowed: the columns named ``x`` and ``y`` are read (any other
@@ -44,6 +45,7 @@ import os
 import re
 import warnings
 from pathlib import Path
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -72,7 +74,7 @@ SUFFIXES: dict[str, str] = {
 }
 """File suffix (lower case) -> format."""
 
-JSON_KEYS = ("boundary", "corners")
+JSON_KEYS = ("boundary", "corners", "holes", "hole_corners")
 """Keys of the jaxmatch JSON shape format."""
 
 SVG_SAMPLES = 200
@@ -118,8 +120,9 @@ def parse_shape(data, source: str = "<input>", *, corner_angle: float = DEFAULT_
     Raises :class:`~jaxmatch.errors.InputError` with ``source`` for any problem.
     """
     check_corner_angle(corner_angle)
-    points, corners = read_outline(data, source, fmt=fmt, element=element, _file=_file)
-    return make_shape(points, corners, corner_angle=corner_angle, source=source)
+    region = read_outline(data, source, fmt=fmt, element=element, _file=_file)
+    return make_shape(region.points, region.corners, corner_angle=corner_angle, source=source, holes=region.holes,
+                      hole_corners=region.hole_corners)
 
 
 def detect_format(source: str, data: bytes | str) -> str:
@@ -144,9 +147,20 @@ def detect_format(source: str, data: bytes | str) -> str:
     return "text"
 
 
-def read_outline(data, source: str, *, fmt: str | None = None, element: str | None = None, _file: str | None = None):
-    """``(points, corners)``: the loop ``(P, 2)`` as read (user coordinates, possibly closed)
-    and the explicit corner indices or None. No validation beyond the format's own."""
+class Outline(NamedTuple):
+    """A region as read, before validation: ``points`` the outer loop ``(P, 2)`` (user
+    coordinates, possibly closed), ``corners`` explicit corner indices or None, ``holes`` the
+    holes' loops, ``hole_corners`` per hole explicit corner indices or None (or None for all)."""
+
+    points: Any
+    corners: Any = None
+    holes: tuple = ()
+    hole_corners: Any = None
+
+
+def read_outline(data, source: str, *, fmt: str | None = None, element: str | None = None,
+                 _file: str | None = None) -> Outline:
+    """The region of a shape file as an :class:`Outline`. No validation beyond the format's own."""
     if not isinstance(data, str) and len(data) > MAX_BYTES:
         raise InputError(f"file is larger than {MAX_BYTES} bytes", where=source)
     fmt = detect_format(_file or source, data) if fmt is None else fmt
@@ -155,15 +169,15 @@ def read_outline(data, source: str, *, fmt: str | None = None, element: str | No
     if element is not None and fmt in ("json", "text"):
         raise InputError(f"a {fmt} shape file has one loop; there is no element {element!r} to choose", where=source)
     if fmt == "dxf":
-        return _read_dxf(data, source, element), None
+        return Outline(_read_dxf(data, source, element))
     if fmt == "svg":
-        return _read_svg(data, source, element), None
+        return Outline(_read_svg(data, source, element))
     text = _text(data, source)
     if fmt == "text":
-        return _read_text(text, source), None
+        return Outline(_read_text(text, source))
     doc = _load_json(text, source)
     if fmt == "geojson" or (isinstance(doc, dict) and "type" in doc and "boundary" not in doc):
-        return _read_geojson(doc, source, element), None
+        return _read_geojson(doc, source, element)
     return _read_json(doc, source)
 
 
@@ -262,10 +276,18 @@ def _read_json(doc, source: str):
     corners = doc.get("corners")
     if "corners" in doc and not isinstance(corners, list):
         raise InputError('"corners" must be a list of integer point indices', where=source)
+    holes = doc.get("holes", [])
+    if not isinstance(holes, list):
+        raise InputError('"holes" must be a list of loops [[[x, y], ...], ...]', where=source)
+    holes = [_number_pairs(h, source, f"holes[{k}]") for k, h in enumerate(holes)]
+    hole_corners = doc.get("hole_corners")
+    if hole_corners is not None and (not isinstance(hole_corners, list) or len(hole_corners) != len(holes)
+                                     or not all(c is None or isinstance(c, list) for c in hole_corners)):
+        raise InputError('"hole_corners" must be a list with one list of point indices (or null) per hole', where=source)
     if unknown:  # warned once the file is known to be good (a bad file gets its one error line only)
         warnings.warn(InputWarning(f"ignored key{'s' if len(unknown) > 1 else ''} {names} (known keys: {', '.join(JSON_KEYS)})",
                                    where=source), stacklevel=2)
-    return points, corners
+    return Outline(points, corners, tuple(holes), hole_corners)
 
 
 def _read_geojson(doc, source: str, element: str | None):
@@ -314,10 +336,8 @@ def _feature_names(feature: dict) -> set[str]:
 def _rings(rings, source: str):
     if not isinstance(rings, list) or not rings:
         raise InputError('GeoJSON Polygon needs "coordinates": a list of rings', where=source)
-    if len(rings) > 1:
-        raise InputError(f"GeoJSON polygon has {len(rings) - 1} hole{'s' if len(rings) > 2 else ''}; jaxmatch meshes "
-                         "regions without holes (one outer ring)", where=source)
-    return _number_pairs(rings[0], source, "outer ring")
+    holes = tuple(_number_pairs(r, source, f"interior ring {k + 1}") for k, r in enumerate(rings[1:]))
+    return Outline(_number_pairs(rings[0], source, "outer ring"), None, holes)
 
 
 # ---------------------------------------------------------------------------------------------

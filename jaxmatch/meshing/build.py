@@ -36,6 +36,8 @@ def from_layout(lm, *, size: float | None = None, corners: np.ndarray | None = N
         outer_pts = np.unique(np.concatenate([lm.sides.chains[s] for s in np.flatnonzero(lm.sides.outer)]))
         corners = lay.points[outer_pts[lay.corner[outer_pts]]]
     line_sets = {"boundary": _loop_edges(lm.outer)}
+    for h, loop in enumerate(getattr(lm, "holes", ()), start=1):
+        line_sets[f"hole {h}"] = _loop_edges(loop)
     names, outer = lm.sides.names, lm.sides.outer
     for name, ids in zip(lm.sides.names, lm.side_vertices):
         line_sets[f"side {name}"] = np.stack([ids[:-1], ids[1:]], axis=1)

@@ -232,9 +232,10 @@ def _all_sizes():
 
 
 def _corners(shape: Shape) -> np.ndarray:
-    from jaxmatch.placement.decompose import _xy
+    """``(C, 2)`` every corner of the region (outer loop and holes), user coordinates."""
+    from jaxmatch.placement.decompose import _corner_points
 
-    return _xy(shape)[shape.corners] if shape.n_corners else np.zeros((0, 2))
+    return _corner_points(shape)
 
 
 def _mesh_size(shape, cat, lat, h, strategies, quality, budget_s, progress, template_cache) -> QuadMesh:
@@ -246,7 +247,7 @@ def _mesh_size(shape, cat, lat, h, strategies, quality, budget_s, progress, temp
     unknown = [n for n in names if n not in strategy_names()]
     if unknown:
         raise InputError(f"unknown strategy {unknown[0]!r} (expected {', '.join(strategy_names())})")
-    if shape.n_corners < 2:  # no layout patch: one template refined to the size
+    if shape.n_corners < 2 and not shape.holes:  # no layout patch: one template refined to the size
         choice = refine_mesh(shape, cat, lat, size=h)
         m = from_refined(shape, choice.mesh, size=h)
         return m.with_choice(SINGLE, "", None, (Candidate(SINGLE, m),))
@@ -368,15 +369,25 @@ def _conforming_templates(shape: Shape, cat, lat, h, first: QuadMesh, quality: Q
 
 
 def canonical(shape: Shape) -> Shape:
-    """The same shape with its loop written one way: counter-clockwise from its lexicographically
-    smallest point (x, then y), the same corners. Meshing the canonical shape makes the mesh
+    """The same shape with its loops written one way: the outer loop counter-clockwise and each
+    hole clockwise from its lexicographically smallest point (x, then y), holes in the order of
+    those points, the same corners. Meshing the canonical shape makes the mesh
     independent of where the user's loop starts and which way it runs."""
     from jaxmatch.placement.decompose import _xy
     from jaxmatch.shape import make_shape
 
+    def first(ring: np.ndarray) -> int:
+        return int(np.lexsort((ring[:, 1], ring[:, 0]))[0])
+
     pts = _xy(shape)
-    start = int(np.lexsort((pts[:, 1], pts[:, 0]))[0])
-    if start == 0 and shape.corner_order is None:
+    start = first(pts)
+    holes, hole_corners = [], []
+    for ring, hc in sorted(zip(shape.holes, shape.hole_corners), key=lambda rc: tuple(rc[0][first(rc[0])])):
+        k = first(ring)
+        holes.append(np.roll(ring, -k, axis=0))
+        hole_corners.append(sorted(int(c) for c in (np.asarray(hc, np.int64) - k) % len(ring)))
+    if start == 0 and shape.corner_order is None and not holes:
         return shape
     corners = sorted(int(c) for c in (np.asarray(shape.corners, np.int64) - start) % len(pts))
-    return make_shape(np.roll(pts, -start, axis=0), corners=corners, source=shape.source)
+    return make_shape(np.roll(pts, -start, axis=0), corners=corners, source=shape.source, holes=holes or None,
+                      hole_corners=hole_corners or None)

@@ -32,8 +32,9 @@ from jaxmatch.shape import Shape
 
 __all__ = ["STRATEGIES", "cut_segments", "decompose", "single_patch"]
 
-STRATEGIES = ("continuations", "bisectors", "recursive")
-"""The ways :func:`decompose` cuts at concave corners."""
+STRATEGIES = ("continuations", "bisectors", "recursive", "radial")
+"""The ways :func:`decompose` cuts at concave corners (and, for regions with holes, from the
+holes: ``radial`` cuts each hole to the outer loop's convex corners and to its nearest hole)."""
 
 
 
@@ -42,16 +43,44 @@ def _xy(shape: Shape) -> np.ndarray:
     return shape.input_points if shape.input_points is not None else shape.user_points
 
 
+def _rings(shape: Shape) -> list[np.ndarray]:
+    """The region's boundary loops, user coordinates: the outer loop (ccw) then each hole (cw);
+    the region lies on the left of every loop."""
+    return [_xy(shape)] + [np.asarray(h, np.float64) for h in shape.holes]
+
+
+def _reflex_corners(shape: Shape) -> list[tuple[np.ndarray, int]]:
+    """``(ring points, index)`` of every corner where the region's angle exceeds 180 degrees:
+    the outer loop's concave corners and the holes' corners where the hole is convex."""
+    out = [(_xy(shape), int(c)) for c, convex in zip(shape.corners.tolist(), shape.convex.tolist()) if not convex]
+    for ring, corners in zip(shape.holes, shape.hole_corners):
+        ring = np.asarray(ring, np.float64)
+        e_in = ring - np.roll(ring, 1, axis=0)
+        e_out = np.roll(ring, -1, axis=0) - ring
+        cross = e_in[:, 0] * e_out[:, 1] - e_in[:, 1] * e_out[:, 0]
+        out += [(ring, int(c)) for c in corners if cross[c] < 0]  # a right turn with the region on the left
+    return out
+
+
+def _axis_rays(ring: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Four cuts from a hole without corners: from its leftmost, rightmost, lowest and highest
+    points, outwards along the axes (a round hole in a square becomes four patches)."""
+    out = []
+    for axis, sign in ((0, -1.0), (0, 1.0), (1, -1.0), (1, 1.0)):
+        i = int(np.argmax(sign * ring[:, axis]))
+        d = np.zeros(2)
+        d[axis] = sign
+        out.append((ring[i], d))
+    return out
+
+
 def _rays(shape: Shape, strategy: str) -> list[tuple[np.ndarray, np.ndarray]]:
     """(start (2,), unit direction (2,)) of every cut, user coordinates."""
     if strategy not in ("continuations", "bisectors"):
         raise ValueError(f"strategy must be 'continuations' or 'bisectors', got {strategy!r}")
-    pts = _xy(shape)
-    P = pts.shape[0]
     out = []
-    for c, convex in zip(shape.corners.tolist(), shape.convex.tolist()):
-        if convex:
-            continue
+    for pts, c in _reflex_corners(shape):
+        P = pts.shape[0]
         v, prev, nxt = pts[c], pts[(c - 1) % P], pts[(c + 1) % P]
         u1 = (prev - v) / np.linalg.norm(prev - v)
         u2 = (nxt - v) / np.linalg.norm(nxt - v)
@@ -61,45 +90,161 @@ def _rays(shape: Shape, strategy: str) -> list[tuple[np.ndarray, np.ndarray]]:
             b = -(u1 + u2)
             dirs = [b / np.linalg.norm(b)] if np.linalg.norm(b) > 1e-12 else [np.array([u1[1], -u1[0]])]
         out += [(v, d) for d in dirs]
+    for ring, corners in zip(shape.holes, shape.hole_corners):
+        if len(corners) == 0:
+            out += _axis_rays(np.asarray(ring, np.float64))
     return out
 
 
-def _hits(shape: Shape, strategy: str) -> tuple[list[np.ndarray], list[tuple[int, float, np.ndarray]]]:
-    """Cuts (``(2, 2)`` segments) and where they end on the outline: ``(segment index, fraction
-    along it, point)`` for ends inside an outline segment (ends within ``1e-9`` of the extent of
-    an outline point are moved onto that point)."""
+def _snap(rings: list[np.ndarray], end: np.ndarray, tol: float, inserts: list) -> np.ndarray:
+    """``end`` on a boundary loop: moved onto a loop point within ``tol``, else recorded in
+    ``inserts`` as ``(ring, segment index, fraction along it, point)`` of the nearest segment."""
+    best = None
+    for r, pts in enumerate(rings):
+        near = np.linalg.norm(pts - end, axis=1)
+        j = int(np.argmin(near))
+        if near[j] <= tol:
+            return pts[j]
+        a, b = pts, np.roll(pts, -1, axis=0)
+        ab = b - a
+        f = np.clip(np.sum((end - a) * ab, axis=1) / np.sum(ab * ab, axis=1), 0.0, 1.0)
+        d = np.linalg.norm(a + f[:, None] * ab - end, axis=1)
+        k = int(np.argmin(d))
+        if best is None or d[k] < best[0]:
+            best = (float(d[k]), r, k, float(f[k]))
+    _, r, k, f = best
+    inserts.append((r, k, f, end))
+    return end
+
+
+def _hits(shape: Shape, strategy: str) -> tuple[list[np.ndarray], list[tuple[int, int, float, np.ndarray]]]:
+    """Cuts (``(2, 2)`` segments) and where they end on a boundary loop: ``(ring, segment index,
+    fraction along it, point)`` for ends inside a loop segment (ends within ``1e-9`` of the
+    extent of a loop point are moved onto that point)."""
     import shapely
 
-    pts = _xy(shape)
-    ring = shapely.LinearRing(pts)
+    rings = _rings(shape)
+    boundary = shapely.MultiLineString([np.vstack([r, r[:1]]) for r in rings])
+    pts = rings[0]
     extent = float(np.max(pts.max(axis=0) - pts.min(axis=0)))
     tol = 1e-9 * extent
     far = 4.0 * extent
     cuts: list[np.ndarray] = []
-    inserts: list[tuple[int, float, np.ndarray]] = []
+    inserts: list[tuple[int, int, float, np.ndarray]] = []
     for v, d in _rays(shape, strategy):
-        hit = ring.intersection(shapely.LineString([v, v + far * d]))
+        hit = boundary.intersection(shapely.LineString([v, v + far * d]))
         coords = shapely.get_coordinates(hit)
         dist = (coords - v) @ d
         ok = dist > tol
         if not ok.any():
             continue
-        end = coords[ok][np.argmin(dist[ok])]
-        near = np.linalg.norm(pts - end, axis=1)
-        j = int(np.argmin(near))
-        if near[j] <= tol:
-            end = pts[j]
-        else:  # inside an outline segment: the nearest one
-            a, b = pts, np.roll(pts, -1, axis=0)
-            ab = b - a
-            f = np.clip(np.sum((end - a) * ab, axis=1) / np.sum(ab * ab, axis=1), 0.0, 1.0)
-            k = int(np.argmin(np.linalg.norm(a + f[:, None] * ab - end, axis=1)))
-            inserts.append((k, float(f[k]), end))
+        end = _snap(rings, coords[ok][np.argmin(dist[ok])], tol, inserts)
         seg = np.array([v, end])
         if any(np.allclose(seg, c[::-1], atol=tol) or np.allclose(seg, c, atol=tol) for c in cuts):
             continue
         cuts.append(seg)
     return cuts, inserts
+
+
+def _toward(ring: np.ndarray, corners: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """The point of a hole ``ring`` that faces ``target``: the hole corner seen from the hole's
+    centroid in the direction closest to ``target``'s, or, for a hole without corners, where
+    the ray from the centroid towards ``target`` leaves the ring."""
+    import shapely
+
+    c = np.asarray(shapely.Polygon(ring).centroid.coords[0])
+    d = target - c
+    d = d / (np.linalg.norm(d) or 1.0)
+    if len(corners):
+        u = ring[corners] - c
+        cos = (u @ d) / np.maximum(np.linalg.norm(u, axis=1), 1e-300)
+        return ring[corners[int(np.argmax(cos))]]
+    far = 4.0 * float(np.max(np.ptp(ring, axis=0)))
+    hit = shapely.get_coordinates(shapely.LinearRing(ring).intersection(shapely.LineString([c, c + far * d])))
+    if not len(hit):  # pragma: no cover - a centroid outside its (non-star) hole
+        return ring[int(np.argmax((ring - c) @ d))]
+    return hit[int(np.argmax((hit - c) @ d))]
+
+
+def _radial_hits(shape: Shape) -> tuple[list[np.ndarray], list]:
+    """The ``radial`` cuts: the concave corners' continuations (as ``continuations``), then
+    from each hole to every convex corner of the outer loop for which that hole is the nearest
+    one seen without crossing another loop, and between each hole and its nearest hole (along
+    the line of their centroids) when the segment stays inside the region."""
+    import shapely
+
+    rings = _rings(shape)
+    extent = float(np.max(np.ptp(rings[0], axis=0)))
+    tol = 1e-9 * extent
+    region = shapely.Polygon(rings[0], holes=rings[1:])
+    cuts, inserts = [], []
+    for v, d in [(v, d) for v, d in _rays_continuations(shape)]:
+        end = _first_hit(rings, v, d, tol)
+        if end is not None:
+            cuts.append(np.array([v, _snap(rings, end, tol, inserts)]))
+    holes = [np.asarray(h, np.float64) for h in shape.holes]
+
+    def inside(a, b) -> bool:
+        d = b - a
+        n = float(np.linalg.norm(d))
+        if n <= 10 * tol:
+            return False
+        shrink = 1e-7 * extent / n
+        return bool(region.contains(shapely.LineString([a + shrink * d, b - shrink * d])))
+
+    outer = rings[0]
+    for c, convex in zip(shape.corners.tolist(), shape.convex.tolist()):
+        if not convex:
+            continue
+        corner = outer[c]
+        best = None
+        for k, (ring, hc) in enumerate(zip(holes, shape.hole_corners)):
+            p = _toward(ring, np.asarray(hc, np.int64), corner)
+            dist = float(np.linalg.norm(corner - p))
+            if inside(p, corner) and (best is None or dist < best[0]):
+                best = (dist, p)
+        if best is not None:
+            cuts.append(np.array([_snap(rings, best[1], tol, inserts), corner]))
+    cents = [np.asarray(shapely.Polygon(h).centroid.coords[0]) for h in holes]
+    pairs = set()
+    for k in range(len(holes)):
+        others = [j for j in range(len(holes)) if j != k]
+        if not others:
+            break
+        j = min(others, key=lambda j: float(np.linalg.norm(cents[j] - cents[k])))
+        if (min(j, k), max(j, k)) in pairs:
+            continue
+        pairs.add((min(j, k), max(j, k)))
+        a = _toward(holes[k], np.asarray(shape.hole_corners[k], np.int64), cents[j])
+        b = _toward(holes[j], np.asarray(shape.hole_corners[j], np.int64), cents[k])
+        if inside(a, b):
+            cuts.append(np.array([_snap(rings, a, tol, inserts), _snap(rings, b, tol, inserts)]))
+    return cuts, inserts
+
+
+def _rays_continuations(shape: Shape) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The continuation rays of the outer loop's concave corners only."""
+    pts = _xy(shape)
+    P = pts.shape[0]
+    out = []
+    for c, convex in zip(shape.corners.tolist(), shape.convex.tolist()):
+        if convex:
+            continue
+        v, prev, nxt = pts[c], pts[(c - 1) % P], pts[(c + 1) % P]
+        out += [(v, -(prev - v) / np.linalg.norm(prev - v)), (v, -(nxt - v) / np.linalg.norm(nxt - v))]
+    return out
+
+
+def _first_hit(rings: list[np.ndarray], v: np.ndarray, d: np.ndarray, tol: float) -> np.ndarray | None:
+    """Where the ray from ``v`` along ``d`` first meets a boundary loop (beyond ``tol``), or None."""
+    import shapely
+
+    boundary = shapely.MultiLineString([np.vstack([r, r[:1]]) for r in rings])
+    far = 4.0 * float(np.max(np.ptp(rings[0], axis=0)))
+    coords = shapely.get_coordinates(boundary.intersection(shapely.LineString([v, v + far * d])))
+    dist = (coords - v) @ d
+    ok = dist > tol
+    return coords[ok][np.argmin(dist[ok])] if ok.any() else None
 
 
 def cut_segments(shape: Shape, strategy: str = "continuations") -> list[np.ndarray]:
@@ -114,6 +259,9 @@ def single_patch(shape: Shape) -> Layout:
     """The shape as a layout of one patch (its corners as given). Raises :class:`InputError`
     for a shape with fewer than 2 corners (a layout patch needs 2; such a shape has no concave
     corner either: mesh it whole with :func:`jaxmatch.placement.refine.refine_mesh`)."""
+    if shape.holes:
+        raise InputError(f"a region with {len(shape.holes)} hole(s) is not one patch: it is cut into patches",
+                         where=shape.source)
     if shape.n_corners < 2:
         raise InputError(f"the shape has {shape.n_corners} corner(s); a patch needs at least 2 (a shape without "
                          "concave corners is meshed whole by 'jaxmatch mesh --size')", where=shape.source)
@@ -121,39 +269,50 @@ def single_patch(shape: Shape) -> Layout:
     return make_layout(pts.tolist(), [list(range(pts.shape[0]))], shape.corners.tolist(), source=shape.source)
 
 
-def _faces(pts: np.ndarray, cuts: list[np.ndarray], inserts: list, overshoot: list[bool]) -> list:
-    """The pieces (shapely Polygons) of the outline ``pts`` cut by ``cuts``: cut ends listed in
-    ``inserts`` become outline points exactly; cuts flagged in ``overshoot`` (ending on an
-    earlier cut) are extended by ``1e-7`` of the extent so that noding finds the crossing (the
-    stub outside is a dangle that polygonize drops)."""
+def _faces(rings: list[np.ndarray], cuts: list[np.ndarray], inserts: list, overshoot: list[bool]) -> list:
+    """The pieces (shapely Polygons) of the region bounded by ``rings`` (the outer loop, then the
+    holes) cut by ``cuts``: cut ends listed in ``inserts`` (``(ring, segment, fraction, point)``)
+    become loop points exactly; cuts flagged in ``overshoot`` (ending on an earlier cut) are
+    extended by ``1e-7`` of the extent so that noding finds the crossing (the stub outside is a
+    dangle that polygonize drops). A piece may keep a hole that no cut reaches."""
     import shapely
     from shapely.ops import polygonize
 
+    pts = rings[0]
     extent = float(np.max(pts.max(axis=0) - pts.min(axis=0)))
-    ring_pts = []
-    for k in range(pts.shape[0]):  # the outline with the cut ends inserted (exact end points)
-        ring_pts.append(pts[k])
-        ring_pts += [e for _, _, e in sorted((i for i in inserts if i[0] == k), key=lambda i: i[1])]
-    ring_pts = np.array(ring_pts)
-    lines = [shapely.LineString(np.vstack([ring_pts, ring_pts[:1]]))]
+    lines = []
+    for r, ring in enumerate(rings):  # each loop with the cut ends inserted (exact end points)
+        ring_pts = []
+        for k in range(ring.shape[0]):
+            ring_pts.append(ring[k])
+            ring_pts += [e for _, _, _, e in sorted((i for i in inserts if i[0] == r and i[1] == k), key=lambda i: i[2])]
+        ring_pts = np.array(ring_pts)
+        lines.append(shapely.LineString(np.vstack([ring_pts, ring_pts[:1]])))
     for (a, b), over in zip(cuts, overshoot):
         if over:
             b = b + 1e-7 * extent * (b - a) / np.linalg.norm(b - a)
         lines.append(shapely.LineString([a, b]))
     noded = shapely.union_all(lines)
-    outline = shapely.Polygon(pts)
-    return [f for f in polygonize(shapely.get_parts(noded)) if outline.contains(f.representative_point())]
+    region = shapely.Polygon(rings[0], holes=rings[1:])
+    return [f for f in polygonize(shapely.get_parts(noded)) if region.contains(f.representative_point())]
+
+
+def _corner_points(shape: Shape) -> np.ndarray:
+    """``(C, 2)`` the region's corners in user coordinates: the outer loop's, then the holes'."""
+    parts = [_xy(shape)[shape.corners]] + [np.asarray(h, np.float64)[c] for h, c in zip(shape.holes, shape.hole_corners)]
+    return np.concatenate(parts) if parts else np.zeros((0, 2))
 
 
 def _layout(shape: Shape, faces: list, name: str) -> Layout:
     """A :class:`Layout` of the pieces: corners are the shape's corners and every point where
     three or more piece edges meet."""
-    pts = _xy(shape)
     index: dict[tuple[float, float], int] = {}
     points: list[tuple[float, float]] = []
     loops: list[list[int]] = []
     edges: set[frozenset] = set()
     for f in faces:
+        if len(f.interiors):
+            raise InputError(f"a hole is not reached by any {name} cut (a piece would keep it)", where=shape.source)
         loop = []
         for x, y in np.asarray(f.exterior.coords)[:-1].tolist():
             if (x, y) not in index:
@@ -166,7 +325,7 @@ def _layout(shape: Shape, faces: list, name: str) -> Layout:
     for e in edges:
         for v in e:
             nbrs[v] += 1
-    shape_corners = {tuple(p) for p in pts[shape.corners].tolist()}
+    shape_corners = {tuple(p) for p in _corner_points(shape).tolist()}
     corners = [i for i, p in enumerate(points) if p in shape_corners or nbrs[i] >= 3]
     return make_layout([list(p) for p in points], loops, corners, source=f"{shape.source} ({name} cuts)")
 
@@ -185,7 +344,7 @@ def _recursive(shape: Shape) -> Layout:
     inserts: list = []
     over: list[bool] = []
     for _ in range(int((~shape.convex).sum()) + 1):
-        faces = _faces(pts, cuts, inserts, over)
+        faces = _faces([pts], cuts, inserts, over)
         found = None
         for f in faces:
             f = shapely.orient_polygons(f) if hasattr(shapely, "orient_polygons") else shapely.geometry.polygon.orient(f)
@@ -220,13 +379,13 @@ def _recursive(shape: Shape) -> Layout:
             ab = b - a
             fr = np.clip(np.sum((end - a) * ab, axis=1) / np.sum(ab * ab, axis=1), 0.0, 1.0)
             k = int(np.argmin(np.linalg.norm(a + fr[:, None] * ab - end, axis=1)))
-            inserts.append((k, float(fr[k]), end))
+            inserts.append((0, k, float(fr[k]), end))
             on_cut = False
         else:
             on_cut = True
         cuts.append(np.array([v, end]))
         over.append(on_cut)
-    return _layout(shape, _faces(pts, cuts, inserts, over), "recursive")
+    return _layout(shape, _faces([pts], cuts, inserts, over), "recursive")
 
 
 def decompose(shape: Shape, strategy: str = "continuations") -> Layout:
@@ -236,14 +395,15 @@ def decompose(shape: Shape, strategy: str = "continuations") -> Layout:
     T-junctions). A shape without concave corners gives one patch. Raises
     :class:`InputError` when the pieces do not make a valid layout."""
     if strategy == "recursive":
+        if shape.holes:
+            raise InputError("recursive cuts are for regions without holes", where=shape.source)
         if not (~shape.convex).any():
             return single_patch(shape)
         return _recursive(shape)
-    pts = _xy(shape)
-    cuts, inserts = _hits(shape, strategy)
+    cuts, inserts = _radial_hits(shape) if strategy == "radial" else _hits(shape, strategy)
     if not cuts:
         return single_patch(shape)
-    return _layout(shape, _faces(pts, cuts, inserts, [False] * len(cuts)), strategy)
+    return _layout(shape, _faces(_rings(shape), cuts, inserts, [False] * len(cuts)), strategy)
 
 
 def _same(a: Layout, b: Layout) -> bool:

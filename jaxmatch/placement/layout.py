@@ -194,7 +194,7 @@ class LayoutMesh:
     xy: ``(V, 2) float64`` user coordinates; quads: ``(Q, 4) int64`` ccw; patch: ``(Q,) int64``
     the patch of each quad; side_vertices: side ``s``: ``(counts[s] + 1,) int64`` vertex ids
     along the side's direction; counts: ``(S,) int64`` edges per side; outer: ``(B,) int64``
-    outer boundary loop (ccw); templates: catalogue id per patch; multiplicities: per patch
+    outer boundary loop (ccw); holes: each hole's boundary loop (cw); templates: catalogue id per patch; multiplicities: per patch
     ``(n_chords,) int64``; shared_gap: largest distance between the two patches' own positions
     of a shared side vertex before merging (0.0 when bit-identical); region_area: area of the
     union of the patches.
@@ -212,6 +212,7 @@ class LayoutMesh:
     multiplicities: tuple[np.ndarray, ...]
     shared_gap: float
     region_area: float
+    holes: tuple[np.ndarray, ...] = ()
 
     @property
     def scaled_jacobian(self) -> np.ndarray:
@@ -236,6 +237,8 @@ class LayoutMesh:
         val = valences(self.quads, self.xy.shape[0])
         internal = np.ones(self.xy.shape[0], bool)
         internal[self.outer] = False
+        for loop in self.holes:
+            internal[loop] = False
         return np.flatnonzero(internal & (val != 4))
 
     @property
@@ -421,8 +424,9 @@ def _check_segments(loops: Sequence[np.ndarray], source: str) -> None:
 
 
 def _check_cover(pts, loops, polys, tol: float, source: str):
-    """Patches do not overlap, form one region without holes, and every segment used by one
-    patch lies on the region's outer boundary. Returns the union (a shapely Polygon)."""
+    """Patches do not overlap, form one connected region (holes allowed: a frame of patches
+    around a window), and every segment used by one patch lies on the region's boundary (its
+    outer ring or a hole's). Returns the union (a shapely Polygon)."""
     import shapely
 
     tree = shapely.STRtree(polys)
@@ -436,9 +440,6 @@ def _check_cover(pts, loops, polys, tol: float, source: str):
     if union.geom_type != "Polygon":
         raise InputError("the patches do not form one connected region (some patch touches the others only at a point, "
                          "or not at all)", where=source)
-    if len(union.interiors):
-        hx, hy = union.interiors[0].coords[0]
-        raise InputError(f"the patches leave a gap (a hole in the region near ({hx:.6g}, {hy:.6g}))", where=source)
     count: dict[tuple[int, int], int] = {}
     owner: dict[tuple[int, int], int] = {}
     for p, loop in enumerate(loops):
@@ -446,7 +447,7 @@ def _check_cover(pts, loops, polys, tol: float, source: str):
             key = (min(a, b), max(a, b))
             count[key] = count.get(key, 0) + 1
             owner[key] = p
-    ring = union.exterior
+    ring = union.boundary  # the outer ring and the holes' rings
     for (a, b), c in count.items():
         if c != 1:
             continue
@@ -793,23 +794,29 @@ def boundary_edges(quads: np.ndarray) -> np.ndarray:
     return d[cnt[inv.ravel()] == 1]
 
 
-def _outer_loop(layout: Layout, sides: Sides, side_ids) -> np.ndarray:
-    """Vertex ids of the outer boundary, ccw, from the outer sides."""
+def _boundary_loops(layout: Layout, sides: Sides, side_ids, xy: np.ndarray) -> list[np.ndarray]:
+    """Vertex ids of every boundary loop (in the patches' direction: the outer loop ccw, holes
+    cw), from the sides one patch uses; the outer loop (largest signed area) first."""
     nxt: dict[int, np.ndarray] = {}
     for p in range(layout.n_patches):
         for s, rev in zip(np.concatenate(sides.patch_sides[p]), np.concatenate(sides.patch_reversed[p])):
             if sides.users[s, 1] < 0:
                 ids = side_ids[s][::-1] if rev else side_ids[s]
                 nxt[int(ids[0])] = ids
-    start = min(nxt)
-    out, v = [], start
-    for _ in range(len(nxt)):
-        ids = nxt[v]
-        out.append(ids[:-1])
-        v = int(ids[-1])
-        if v == start:
-            break
-    return np.concatenate(out)
+    loops, seen = [], set()
+    for start in sorted(nxt):
+        if start in seen:
+            continue
+        out, v = [], start
+        while v not in seen:
+            seen.add(v)
+            ids = nxt[v]
+            out.append(ids[:-1])
+            seen.update(int(i) for i in ids[1:-1])
+            v = int(ids[-1])
+        loops.append(np.concatenate(out))
+    loops.sort(key=lambda lp: -polygon_area(xy[lp]))
+    return loops
 
 
 # ---------------------------------------------------------------------------------------------
@@ -920,14 +927,15 @@ def mesh_layout(layout: Layout, catalogue: Catalogue, lattice: Lattice, *, size:
             choice[p] += 1
     _, tmpl, mults, n, refined = best
     xy, quads, patch, side_ids, gap = merge_patches(layout, sides, refined, n)
-    outer = _outer_loop(layout, sides, side_ids)
+    loops = _boundary_loops(layout, sides, side_ids, xy)
+    outer, holes = loops[0], tuple(loops[1:])
     if smooth_cuts:
-        xy = smooth_in_frame(xy, quads, outer)
+        xy = smooth_in_frame(xy, quads, np.concatenate(loops))
     import shapely
 
     region = shapely.union_all([shapely.Polygon(layout.points[lp]) for lp in layout.patches]).area
     return LayoutMesh(layout=layout, sides=sides, xy=xy, quads=quads, patch=patch, side_vertices=side_ids,
-                      counts=n, outer=outer, templates=tuple(t.mesh_id for t in tmpl),
+                      counts=n, outer=outer, holes=holes, templates=tuple(t.mesh_id for t in tmpl),
                       multiplicities=tuple(mults), shared_gap=gap, region_area=float(region))
 
 
