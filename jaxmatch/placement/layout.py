@@ -581,15 +581,77 @@ CHORD_WEIGHT = 0.01
 about the size too) against the primary one (edges per side close to ``length / size``)."""
 
 
+def chord_area_error(polyline: np.ndarray, n: int) -> float:
+    """Area between ``polyline (k, 2)`` and the chords through its ``n + 1`` points evenly spaced
+    by arc length (:func:`jaxmatch.placement.refine.side_points`, where the mesh puts its
+    vertices): the sum over the ``n`` pieces of the absolute area each piece encloses with its
+    chord (user units squared; 0 for a straight side)."""
+    from jaxmatch.placement.refine import side_points
+
+    p = np.asarray(polyline, np.float64)
+    if p.shape[0] <= 2:
+        return 0.0
+    seg = np.linalg.norm(np.diff(p, axis=0), axis=1)
+    cum = np.concatenate([[0.0], np.cumsum(seg)])
+    q = side_points(p, n)
+    t = np.linspace(0.0, cum[-1], n + 1)
+    cut = np.searchsorted(cum, t, side="right")  # vertices strictly after each piece start
+    total = 0.0
+    for i in range(n):
+        inner = p[cut[i]:np.searchsorted(cum, t[i + 1], side="left")]
+        if not len(inner):
+            continue
+        ring = np.vstack([q[i], inner, q[i + 1]])
+        x, y = ring[:, 0], ring[:, 1]
+        total += abs(0.5 * float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y)))
+    return total
+
+
+CURVE_SHARE = 0.8
+"""The part of the area tolerance (``Quality.area_tol``) that the chords of curved sides may
+use, shared among the boundary sides by length (:func:`curve_floors`)."""
+
+
+def curve_floors(layout: Layout, sides: Sides, area_tol: float) -> np.ndarray:
+    """``(S,) int64`` the fewest edges each side may have so that its chords keep the region's
+    area: a boundary side whose points do not lie on one line gets at least the edges that keep
+    the area between it and its chords within its share (its length over the boundary's) of
+    :data:`CURVE_SHARE` ``* area_tol`` of the region's area; every other side 1."""
+    floors = np.ones(len(sides.chains), np.int64)
+    bound = np.flatnonzero(sides.outer)
+    if not bound.size:
+        return floors
+    import shapely
+
+    region = shapely.union_all([shapely.Polygon(layout.points[lp]) for lp in layout.patches]).area
+    total = float(np.sum(sides.lengths[bound]))
+    for s in bound:
+        poly = layout.points[sides.chains[s]]
+        if poly.shape[0] <= 2:
+            continue
+        budget = CURVE_SHARE * area_tol * region * float(sides.lengths[s]) / total
+        if chord_area_error(poly, 1) <= budget:
+            continue
+        lo, hi = 1, 2
+        while chord_area_error(poly, hi) > budget and hi < poly.shape[0] * 4:
+            lo, hi = hi, hi * 2
+        while hi - lo > 1:  # the error falls as pieces are added: the fewest that keep the budget
+            mid = (lo + hi) // 2
+            lo, hi = (lo, mid) if chord_area_error(poly, mid) <= budget else (mid, hi)
+        floors[s] = hi
+    return floors
+
+
 def solve_counts(sides: Sides, matrices: Sequence[np.ndarray], *, counts: Mapping[int, int] | None = None,
                  size: float | None = None, widths: Sequence[np.ndarray] | None = None,
-                 source: str = "<layout>") -> tuple[list[np.ndarray], np.ndarray]:
+                 source: str = "<layout>", floors: np.ndarray | None = None) -> tuple[list[np.ndarray], np.ndarray]:
     """Chord multiplicities of every patch from ONE integer program (``scipy.optimize.milp``).
 
     matrices: per patch ``(n_p, c_p) int64`` side matrix (edges of chord ``c`` on the patch's
     side ``i``); counts: ``{side id: count}`` required exactly; size: target edge length (user
     units; default: the requested sides' total length over their total count); widths: per
-    patch ``(c_p,)`` chord widths (user units, :meth:`PatchTemplate.chord_widths`).
+    patch ``(c_p,)`` chord widths (user units, :meth:`PatchTemplate.chord_widths`); floors:
+    ``(S,)`` the fewest edges of each side not requested (:func:`curve_floors`).
 
     Variables: ``m_p >= 1`` integer per patch and chord, ``n_s >= 1`` integer per side.
     Constraints: ``A_p[i] @ m_p = sum of n_s over the layout sides along patch side i`` for
@@ -656,7 +718,7 @@ def solve_counts(sides: Sides, matrices: Sequence[np.ndarray], *, counts: Mappin
                 lo.append(-sign * tau_m[c])
                 hi.append(np.inf)
         cost = np.concatenate([np.zeros(M + S), np.ones(T), np.full(M, CHORD_WEIGHT)])
-        lb = np.concatenate([np.ones(M + S), np.zeros(T + M)])
+        lb = np.concatenate([np.ones(M), np.ones(S) if floors is None else np.maximum(floors, 1), np.zeros(T + M)])
         ub = np.full(nv, np.inf)
         for s, v in fixed.items():
             lb[M + s] = ub[M + s] = float(v)
@@ -892,6 +954,7 @@ def mesh_layout(layout: Layout, catalogue: Catalogue, lattice: Lattice, *, size:
         cands.append(t)
         if progress:
             progress(p + 1, len(shapes))
+    floors = curve_floors(layout, sides, QUALITY.area_tol) if size is not None else None
     choice = [0] * len(shapes) if first_templates is None else [int(j) for j in first_templates]
     for p, j in enumerate(choice):
         if not 0 <= j < len(cands[p]):
@@ -902,7 +965,7 @@ def mesh_layout(layout: Layout, catalogue: Catalogue, lattice: Lattice, *, size:
         tmpl = [cands[p][choice[p]] for p in range(len(shapes))]
         try:
             mults, n = solve_counts(sides, [t.side_matrix() for t in tmpl], counts=want, size=size,
-                                    widths=[t.chord_widths() for t in tmpl], source=layout.source)
+                                    widths=[t.chord_widths() for t in tmpl], source=layout.source, floors=floors)
         except LayoutInfeasible:
             if not _advance_for_feasibility(sides, cands, choice, want, size, layout.source):
                 raise
