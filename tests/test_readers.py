@@ -192,11 +192,24 @@ def test_svg_cubic_sampled_by_arc_length():
     assert step.max() / step.min() < 1.05
 
 
+@pytest.mark.parametrize("body, holes", [
+    ('<path fill-rule="evenodd" d="M 0 0 H 10 V 10 H 0 Z M 2 2 H 4 V 4 H 2 Z"/>', 1),      # evenodd: a hole
+    ('<path d="M 0 0 H 10 V 10 H 0 Z M 2 2 V 4 H 4 V 2 Z"/>', 1),                          # nonzero, the other way: a hole
+    ('<path d="M 0 0 H 10 V 10 H 0 Z M 2 2 H 4 V 4 H 2 Z"/>', 0),                          # nonzero, the same way: filled
+    ('<rect width="10" height="10"/><circle cx="5" cy="5" r="2"/>', 1),                     # nested elements
+])
+def test_svg_regions_with_holes(body, holes):
+    shape = parse_shape(svg(body), "d.svg")
+    assert len(shape.holes) == holes and shape.n_corners == 4
+
+
 @pytest.mark.parametrize("body, fragment", [
     ('<path d="M 0 0 L 10 0 L 10 10"/>', "open"),
-    ('<path d="M 0 0 H 10 V 10 Z M 2 2 H 4 V 4 Z"/>', "2 subpaths"),
+    ('<path fill-rule="evenodd" d="M 0 0 H 10 V 10 H 0 Z M 2 2 H 8 V 8 H 2 Z M 4 4 H 6 V 6 H 4 Z"/>', "island"),
+    ('<path d="M 0 0 H 10 V 10 H 0 Z M 20 2 H 24 V 4 H 20 Z"/>', "not one region"),
     ('<text x="0" y="0">hi</text>', "no path or shape element"),
-    ('<rect id="a" width="1" height="1"/><rect id="b" width="2" height="1"/>', "2 shape elements; choose one with FILE#ID; ids: a, b"),
+    ('<rect id="a" width="1" height="1"/><rect id="b" width="2" height="1"/>', "2 shape elements that are not one region "
+     "with holes; choose one with FILE#ID; ids: a, b"),
 ])
 def test_svg_refusals(body, fragment):
     with pytest.raises(InputError, match=fragment) as info:
@@ -240,14 +253,27 @@ def test_dxf_bulge_is_flattened_onto_the_arc():
     assert (np.hypot(top[:, 0] - 5, top[:, 1] - 10) <= 5 * (1 + 1e-9)).all()
 
 
+def test_dxf_nested_polylines_are_a_region_with_holes():
+    def build(m):
+        m.add_lwpolyline([(0, 0), (10, 0), (10, 6), (0, 6)], close=True)
+        m.add_lwpolyline([(2, 2), (4, 2), (4, 4), (2, 4)], close=True)
+        m.add_lwpolyline([(6, 2, 0), (8, 2, -1.0), (8, 4, 0), (6, 4, 0)], format="xyb", close=True)  # an arc
+
+    shape = parse_shape(dxf(build), "plate.dxf")
+    assert shape.n_corners == 4 and len(shape.holes) == 2
+    arc = max(shape.holes, key=len)
+    on_arc = arc[np.abs(arc[:, 0] - 6) > 1e-9]
+    assert len(arc) > 10 and np.allclose(np.hypot(on_arc[:, 0] - 8, on_arc[:, 1] - 3)[1:-1], 1.0)  # sampled on the arc
+
+
 def test_dxf_several_polylines_choose_by_handle_or_layer():
     def build(m):
         m.add_lwpolyline(L_SHAPE, close=True, dxfattribs={"layer": "outline"})
         m.add_lwpolyline([(0, 0), (1, 0), (1, 1), (0, 1)], close=True, dxfattribs={"layer": "hole"})
 
     data = dxf(build)
-    with pytest.raises(InputError, match="2 polylines; choose one with FILE#HANDLE or FILE#LAYER"):
-        parse_shape(data, "two.dxf")
+    with pytest.raises(InputError, match="2 polylines that are not one region with holes; choose one with FILE#HANDLE"):
+        parse_shape(data, "two.dxf")  # the square touches the L's corner: not a hole
     same_shape(parse_shape(data, "two.dxf", element="outline"), make_shape(L_SHAPE))
     import ezdxf
 

@@ -169,9 +169,9 @@ def read_outline(data, source: str, *, fmt: str | None = None, element: str | No
     if element is not None and fmt in ("json", "text"):
         raise InputError(f"a {fmt} shape file has one loop; there is no element {element!r} to choose", where=source)
     if fmt == "dxf":
-        return Outline(_read_dxf(data, source, element))
+        return _read_dxf(data, source, element)
     if fmt == "svg":
-        return Outline(_read_svg(data, source, element))
+        return _read_svg(data, source, element)
     text = _text(data, source)
     if fmt == "text":
         return Outline(_read_text(text, source))
@@ -405,7 +405,7 @@ def _read_text(text: str, source: str) -> list[list[float]]:
 # SVG
 
 
-def _read_svg(data, source: str, element: str | None) -> np.ndarray:
+def _read_svg(data, source: str, element: str | None) -> Outline:
     import svgelements as se
 
     raw = data.encode("utf-8") if isinstance(data, str) else bytes(data)
@@ -425,28 +425,85 @@ def _read_svg(data, source: str, element: str | None) -> np.ndarray:
     shapes = [e for e in shapes if len(list(se.Path(e).segments())) > 1]
     if not shapes:
         raise InputError("no path or shape element in the SVG", where=source)
-    if len(shapes) > 1:
-        ids = [str(e.id) for e in shapes if e.id is not None]
-        listing = f"; ids: {', '.join(ids[:10])}" if ids else " (none has an id)"
-        raise InputError(f"the SVG has {len(shapes)} shape elements; choose one with FILE#ID{listing}", where=source)
-    path = se.Path(shapes[0])
-    if doc.viewbox_transform:  # back from the viewport (px) to the drawing's own units (the viewBox)
-        path = path * ~se.Matrix(doc.viewbox_transform)
-        path.reify()
-    return _svg_loop(path, source)
+    def loops_of(shape) -> list[np.ndarray]:
+        path = se.Path(shape)
+        if doc.viewbox_transform:  # back from the viewport (px) to the drawing's own units (the viewBox)
+            path = path * ~se.Matrix(doc.viewbox_transform)
+            path.reify()
+        return _svg_loops(path, source)
+
+    if len(shapes) > 1:  # several shapes: one region only when one of them holds all the others
+        try:
+            return _nested([lp for e in shapes for lp in loops_of(e)], "evenodd", source, strict=True)
+        except InputError:
+            ids = [str(e.id) for e in shapes if e.id is not None]
+            listing = f"; ids: {', '.join(ids[:10])}" if ids else " (none has an id)"
+            raise InputError(f"the SVG has {len(shapes)} shape elements that are not one region with holes; choose one "
+                             f"with FILE#ID{listing}", where=source) from None
+    values = getattr(shapes[0], "values", None) or {}
+    rule = str(values.get("fill-rule", "nonzero")).strip().lower()
+    return _nested(loops_of(shapes[0]), rule, source)
 
 
-def _svg_loop(path, source: str) -> np.ndarray:
-    """Vertices of one closed SVG path: line end points, curves sampled by arc length."""
+def _nested(loops: list[np.ndarray], rule: str, source: str, strict: bool = False) -> Outline:
+    """One region from closed loops: the loop of largest area is the outer one, the loops inside
+    it are holes (``rule`` ``"nonzero"``: only those that run the other way round, as the SVG
+    fill rule says; one that runs the same way is filled and adds nothing). Raises
+    :class:`InputError` for a loop outside the outer one or inside a hole (an island); with
+    ``strict`` (separate drawing elements) also for a loop that is not wholly inside the outer
+    one, clear of its boundary."""
+    if len(loops) == 1:
+        return Outline(loops[0])
+    import shapely
+
+    def signed(p):
+        return 0.5 * float(np.sum(p[:, 0] * np.roll(p[:, 1], -1) - np.roll(p[:, 0], -1) * p[:, 1]))
+
+    areas = [signed(p) for p in loops]
+    order = sorted(range(len(loops)), key=lambda i: -abs(areas[i]))
+    outer = loops[order[0]]
+    outer_poly = shapely.Polygon(outer)
+    if not outer_poly.is_valid:
+        raise InputError("the outer loop crosses itself", where=source)
+    holes = []
+    for i in order[1:]:
+        poly = shapely.Polygon(loops[i])
+        if strict and not (outer_poly.contains(poly) and outer_poly.exterior.distance(poly) > 0):
+            raise InputError(f"loop {i + 1} is not inside the largest loop", where=source)
+        if not outer_poly.contains(poly.representative_point()):
+            raise InputError(f"{len(loops)} loops that are not one region (loop {i + 1} lies outside the largest)",
+                             where=source)
+        if rule == "nonzero" and np.sign(areas[i]) == np.sign(areas[order[0]]):
+            continue  # filled by the nonzero rule: part of the region
+        if any(shapely.Polygon(h).contains(poly.representative_point()) for h in holes):
+            raise InputError(f"loop {i + 1} lies inside a hole (an island): mesh it as a region of its own", where=source)
+        holes.append(loops[i])
+    return Outline(outer, None, tuple(holes))
+
+
+def _svg_loops(path, source: str) -> list[np.ndarray]:
+    """The closed loops of an SVG path, one per subpath (``M`` command)."""
     import svgelements as se
 
-    segs = list(path.segments())
-    moves = sum(isinstance(s, se.Move) for s in segs)
-    if moves > 1:
-        raise InputError(f"the SVG path has {moves} subpaths (M commands); jaxmatch reads one loop without holes", where=source)
-    drawn = [s for s in segs if not isinstance(s, se.Move) and s.start is not None]
-    if not drawn:
+    groups: list[list] = []
+    for seg in path.segments():
+        if isinstance(seg, se.Move):
+            groups.append([])
+        elif seg.start is not None:
+            if not groups:
+                groups.append([])
+            groups[-1].append(seg)
+    loops = [_svg_loop(g, source) for g in groups if g]
+    if not loops:
         raise InputError("the SVG path draws nothing", where=source)
+    return loops
+
+
+def _svg_loop(drawn: list, source: str) -> np.ndarray:
+    """Vertices of one closed SVG subpath (its drawn segments): line end points, curves sampled
+    by arc length."""
+    import svgelements as se
+
     lengths = np.array([float(s.length()) for s in drawn])
     total = float(lengths.sum())
     if not (math.isfinite(total) and total > 0):
@@ -486,7 +543,7 @@ def _by_arc_length(segment, k: int) -> np.ndarray:
 # DXF
 
 
-def _read_dxf(data, source: str, element: str | None) -> np.ndarray:
+def _read_dxf(data, source: str, element: str | None) -> Outline:
     import ezdxf
 
     text = _text(data, source) if not isinstance(data, str) else data
@@ -508,10 +565,18 @@ def _read_dxf(data, source: str, element: str | None) -> np.ndarray:
     if not lines:
         other = "" if not found else f" ({len(found)} 3D polylines or polygon meshes, which are not read)"
         raise InputError(f"no LWPOLYLINE or 2D POLYLINE in the model space{other}", where=source)
-    if len(lines) > 1:
-        raise InputError(f"the DXF has {len(lines)} polylines; choose one with FILE#HANDLE or FILE#LAYER: "
-                         f"{', '.join(f'{e.dxf.handle} (layer {e.dxf.layer})' for e in lines[:10])}", where=source)
-    e = lines[0]
+    if len(lines) > 1:  # several: one region only when one polyline holds all the others
+        try:
+            return _nested([_dxf_loop(e, source) for e in lines], "evenodd", source, strict=True)
+        except InputError:
+            raise InputError(f"the DXF has {len(lines)} polylines that are not one region with holes; choose one with "
+                             f"FILE#HANDLE or FILE#LAYER: {', '.join(f'{e.dxf.handle} (layer {e.dxf.layer})' for e in lines[:10])}",
+                             where=source) from None
+    return Outline(_dxf_loop(lines[0], source))
+
+
+def _dxf_loop(e, source: str) -> np.ndarray:
+    """The closed loop of one DXF polyline, arcs sampled."""
     try:
         if e.dxftype() == "LWPOLYLINE":
             xyb = np.array([(x, y, b) for x, y, b in e.get_points("xyb")], dtype=np.float64).reshape(-1, 3)
