@@ -56,6 +56,7 @@ from jaxmatch.errors import InputError
 from jaxmatch.geometry import cumulative_length, first_crossing, point_at, signed_area, turning_angles
 
 __all__ = [
+    "scale_corners",
     "Annotation",
     "DEFAULT_CORNER_ANGLE",
     "MAX_ANNOTATED",
@@ -137,6 +138,8 @@ class Shape:
         (or its lowest point); empty for a simply connected region. Scoring and template
         placement use the outer loop only; the meshing pipeline cuts holes into patches.
     hole_corners: per hole, ``(c_k,) int64`` sorted indices into ``holes[k]``: its corners.
+    explicit_corners: the corners were given (the JSON ``corners`` key or ``corners=``), not
+        detected from angles; the meshing pipeline re-judges detected corners at its size.
     """
 
     points: np.ndarray
@@ -150,6 +153,7 @@ class Shape:
     input_clockwise: bool = False
     holes: tuple = ()
     hole_corners: tuple = ()
+    explicit_corners: bool = False
 
     @property
     def n_points(self) -> int:
@@ -259,6 +263,57 @@ def corner_turns(points) -> np.ndarray:
     if 3 <= bent.size < turn.size:
         turn[bent] = turning_angles(np.asarray(points, dtype=np.float64)[bent])
     return turn
+
+
+# ---------------------------------------------------------------------------------------------
+# corners at the scale of the mesh
+
+CORNER_WINDOW = 0.5
+"""Corners at a target edge length ``h`` (:func:`scale_corners`): the turn at a point is
+measured between the outline this many ``h`` before and after it, so that wiggles shorter than
+about ``h`` neither become corners nor split sides."""
+
+STRAIGHT_RUN = 2.0
+"""A turn between two straight runs of the outline each at least this many ``h`` long is a
+corner however small the turn (above :data:`MIN_STRAIGHT_TURN`)."""
+
+MIN_STRAIGHT_TURN = 2.0
+"""Degrees: the smallest turn between two long straight runs that is a corner."""
+
+
+def scale_corners(points, h: float, corner_angle: float = DEFAULT_CORNER_ANGLE) -> np.ndarray:
+    """Corner indices of the closed loop ``points (P, 2)`` judged at target edge length ``h``
+    (same units), sorted ``(c,) int64``.
+
+    A point is a corner when the outline turns there by more than ``corner_angle`` degrees
+    measured over the stretch :data:`CORNER_WINDOW` ``* h`` before and after it (the chords
+    from the point ``w`` back to it and from it to the point ``w`` ahead), keeping only the
+    point of the sharpest turn of its own vertex among the points within ``w`` of each other; or
+    when it joins two straight runs each at least :data:`STRAIGHT_RUN` ``* h`` long with a turn
+    above :data:`MIN_STRAIGHT_TURN` degrees. With ``h`` small against every feature this finds
+    the corners of :func:`make_shape`'s angle rule.
+    """
+    p = np.asarray(points, np.float64)
+    cum = cumulative_length(p)
+    per = float(cum[-1])
+    w = min(CORNER_WINDOW * float(h), per / 8)
+    s = cum[:-1]
+    back, ahead = point_at(p, s - w, cum), point_at(p, s + w, cum)
+    a, b = p - back, ahead - p
+    cross = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+    wide = np.degrees(np.abs(np.arctan2(cross, np.sum(a * b, axis=1))))
+    local = np.degrees(np.abs(corner_turns(p)))
+    cand = np.flatnonzero((wide > corner_angle + _ANGLE_TIE) & (local > 0))
+    keep = []
+    for i in cand[np.argsort(-local[cand], kind="stable")]:  # sharpest first; its neighbours within w drop out
+        d = np.abs(s[keep] - s[i]) if keep else np.zeros(0)
+        if not np.any(np.minimum(d, per - d) < w):
+            keep.append(int(i))
+    run = STRAIGHT_RUN * float(h)
+    e_in = np.linalg.norm(p - np.roll(p, 1, axis=0), axis=1)  # the edge arriving at each point
+    e_out = np.roll(e_in, -1)
+    straight = np.flatnonzero((np.minimum(e_in, e_out) >= run) & (local > MIN_STRAIGHT_TURN))
+    return np.unique(np.concatenate([np.asarray(keep, np.int64), straight.astype(np.int64)]))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -436,6 +491,7 @@ def _make_shape(points, corners, angle: float, source: str) -> Shape:
         input_points=np.ascontiguousarray(p[index]),
         corner_order=corner_of_point[position[np.asarray(user_list, np.int64)]],
         input_clockwise=bool(area < 0),
+        explicit_corners=corner_idx is not None,
     )
 
 

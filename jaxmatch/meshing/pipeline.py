@@ -173,7 +173,7 @@ def mesh(region, *, size: float | None = None, sides: Sequence[int] | None = Non
     if sides is not None:
         return _mesh_sides(region, cat, lat, sides)
     h = size if size is not None else default_size(region)
-    return _mesh_size(region, cat, lat, h, strategies, quality, budget_s, progress, template_cache)
+    return _mesh_size(region, cat, lat, h, strategies, quality, budget_s, progress, template_cache, corner_angle)
 
 
 def _mesh_layout_file(layout, cat, lat, size, sides, counts) -> QuadMesh:
@@ -238,20 +238,17 @@ def _corners(shape: Shape) -> np.ndarray:
     return _corner_points(shape)
 
 
-def _mesh_size(shape, cat, lat, h, strategies, quality, budget_s, progress, template_cache) -> QuadMesh:
+def _mesh_size(shape, cat, lat, h, strategies, quality, budget_s, progress, template_cache, corner_angle) -> QuadMesh:
     from jaxmatch.placement.decompose import _same, decompose, single_patch
     from jaxmatch.placement.layout import ALL_SIZES, TEMPLATE_SIZES, mesh_layout
-    from jaxmatch.placement.refine import refine_mesh
 
     names = tuple(strategies) if strategies is not None else strategy_names()
     unknown = [n for n in names if n not in strategy_names()]
     if unknown:
         raise InputError(f"unknown strategy {unknown[0]!r} (expected {', '.join(strategy_names())})")
-    if shape.n_corners < 2 and not shape.holes:  # no layout patch: one template refined to the size
-        choice = refine_mesh(shape, cat, lat, size=h)
-        m = from_refined(shape, choice.mesh, size=h)
-        return m.with_choice(SINGLE, "", None, (Candidate(SINGLE, m),))
-    shape = canonical(shape)
+    shape = canonical(shape, h, corner_angle)
+    if shape.n_corners < 2 and not shape.holes:
+        return _mesh_smooth(shape, cat, lat, h, quality, template_cache)
     corners = _corners(shape)
     cache = template_cache if template_cache is not None else {}
     tried: list[Candidate] = []
@@ -318,6 +315,35 @@ def _larger_templates(lay, cat, lat, h, corners, first: QuadMesh, cache) -> list
     return out
 
 
+DISK = "disk"
+"""Name of the central-block candidate of a region with fewer than two corners."""
+
+
+def _mesh_smooth(shape: Shape, cat, lat, h: float, quality: Quality, cache) -> QuadMesh:
+    """A region with fewer than two corners (a disk, an ellipse, a teardrop): one template
+    refined to the size (``"single"``), and a central block with four patches around it
+    (``"disk"``, :func:`jaxmatch.placement.decompose.disk_layout`); the better by the rule."""
+    from jaxmatch.placement.decompose import disk_layout
+    from jaxmatch.placement.layout import mesh_layout
+    from jaxmatch.placement.refine import refine_mesh
+
+    corners = _corners(shape)
+    tried = []
+    try:
+        tried.append(Candidate(SINGLE, from_refined(shape, refine_mesh(shape, cat, lat, size=h).mesh, size=h)))
+    except (InputError, SolverError) as e:
+        tried.append(Candidate(SINGLE, None, str(getattr(e, "problem", e))))
+    try:
+        lm = mesh_layout(disk_layout(shape), cat, lat, size=h, smooth_cuts=True, template_cache=cache)
+        tried.append(Candidate(DISK, from_layout(lm, size=h, corners=corners)))
+    except (InputError, SolverError) as e:
+        tried.append(Candidate(DISK, None, str(getattr(e, "problem", e))))
+    if not any(c.mesh is not None for c in tried):
+        raise InputError("no candidate could be meshed: " + "; ".join(f"{c.name}: {c.note}" for c in tried),
+                         where=shape.source)
+    return choose(tried, quality)
+
+
 CONFORMING_TRIES = 3
 """When the single template's side counts cannot follow the size (its chords tie sides of
 different lengths together, e.g. the two parallel sides of a trapezoid), the nearest even
@@ -368,10 +394,12 @@ def _conforming_templates(shape: Shape, cat, lat, h, first: QuadMesh, quality: Q
     return out
 
 
-def canonical(shape: Shape) -> Shape:
+def canonical(shape: Shape, size: float | None = None, corner_angle: float = DEFAULT_CORNER_ANGLE) -> Shape:
     """The same shape with its loops written one way: the outer loop counter-clockwise and each
     hole clockwise from its lexicographically smallest point (x, then y), holes in the order of
-    those points, the same corners. Meshing the canonical shape makes the mesh
+    those points. Corners detected from angles are judged again at ``size`` when it is given
+    (:func:`jaxmatch.shape.scale_corners`: wiggles shorter than about ``size`` are no corners);
+    explicit corners are kept. Meshing the canonical shape makes the mesh
     independent of where the user's loop starts and which way it runs."""
     from jaxmatch.placement.decompose import _xy
     from jaxmatch.shape import make_shape
@@ -379,15 +407,23 @@ def canonical(shape: Shape) -> Shape:
     def first(ring: np.ndarray) -> int:
         return int(np.lexsort((ring[:, 1], ring[:, 0]))[0])
 
+    from jaxmatch.shape import scale_corners
+
+    rejudge = size is not None and not shape.explicit_corners
+
+    def corners_of(ring: np.ndarray, given) -> np.ndarray:
+        return scale_corners(ring, size, corner_angle) if rejudge else np.asarray(given, np.int64)
+
     pts = _xy(shape)
     start = first(pts)
     holes, hole_corners = [], []
     for ring, hc in sorted(zip(shape.holes, shape.hole_corners), key=lambda rc: tuple(rc[0][first(rc[0])])):
         k = first(ring)
         holes.append(np.roll(ring, -k, axis=0))
-        hole_corners.append(sorted(int(c) for c in (np.asarray(hc, np.int64) - k) % len(ring)))
-    if start == 0 and shape.corner_order is None and not holes:
+        hole_corners.append(sorted(int(c) for c in (corners_of(ring, hc) - k) % len(ring)))
+    outer = corners_of(pts, shape.corners)
+    if start == 0 and shape.corner_order is None and not holes and np.array_equal(outer, shape.corners):
         return shape
-    corners = sorted(int(c) for c in (np.asarray(shape.corners, np.int64) - start) % len(pts))
+    corners = sorted(int(c) for c in (outer - start) % len(pts))
     return make_shape(np.roll(pts, -start, axis=0), corners=corners, source=shape.source, holes=holes or None,
                       hole_corners=hole_corners or None)

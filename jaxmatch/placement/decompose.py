@@ -23,6 +23,8 @@ as each decomposition and keeps the best by its one choice rule (:mod:`jaxmatch.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from jaxmatch.errors import InputError
@@ -404,6 +406,71 @@ def decompose(shape: Shape, strategy: str = "continuations") -> Layout:
     if not cuts:
         return single_patch(shape)
     return _layout(shape, _faces(_rings(shape), cuts, inserts, [False] * len(cuts)), strategy)
+
+
+DISK_BLOCK = 0.5
+"""The central block of :func:`disk_layout` reaches this fraction of the way from the centre
+to the outline."""
+
+
+def disk_layout(shape: Shape) -> Layout:
+    """A region with fewer than two corners (a disk, an ellipse, a teardrop) as five patches: a
+    central block and four patches between it and the outline (an O-grid), so that a quad mesh
+    of it needs no irregular vertex but the block's corners' neighbours.
+
+    The outline is split at four points, the directions from its centroid along its principal
+    axes turned by 45 degrees (a single corner, if any, is one of them); the block's corners lie
+    :data:`DISK_BLOCK` of the way from the centroid to those points. Split points that are not
+    outline points are inserted exactly on the outline."""
+    import shapely
+
+    pts = _xy(shape)
+    poly = shapely.Polygon(pts)
+    c = np.asarray(poly.centroid.coords[0])
+    d = pts - c
+    cov = d.T @ d
+    _, vec = np.linalg.eigh(cov)
+    major = vec[:, -1]
+    base = math.atan2(major[1], major[0]) + math.pi / 4
+    if shape.n_corners == 1:
+        v = pts[shape.corners[0]] - c
+        base = math.atan2(v[1], v[0])
+    far = 4.0 * float(np.max(np.ptp(pts, axis=0)))
+    ring = shapely.LinearRing(pts)
+    ext = float(np.max(np.ptp(pts, axis=0)))
+    tol = 1e-9 * ext
+    inserts, splits = [], []
+    for k in range(4):
+        a = base + k * math.pi / 2
+        u = np.array([math.cos(a), math.sin(a)])
+        hit = shapely.get_coordinates(ring.intersection(shapely.LineString([c, c + far * u])))
+        if not len(hit):
+            raise InputError("the outline is not star-shaped around its centroid", where=shape.source)
+        end = hit[int(np.argmax((hit - c) @ u))]
+        if k == 0 and shape.n_corners == 1:
+            end = pts[shape.corners[0]]
+        splits.append(_snap([pts], end, tol, inserts))
+    ring_pts = []
+    for k in range(pts.shape[0]):
+        ring_pts.append(pts[k])
+        ring_pts += [e for _, kk, _, e in sorted((i for i in inserts if i[1] == k), key=lambda i: i[2])]
+    ring_pts = np.array(ring_pts)
+    idx = [int(np.argmin(np.linalg.norm(ring_pts - b, axis=1))) for b in splits]
+    if len(set(idx)) < 4:
+        raise InputError("the outline's split points coincide", where=shape.source)
+    order = sorted(range(4), key=lambda k: (idx[k] - idx[0]) % len(ring_pts))
+    idx = [idx[k] for k in order]
+    block = [c + DISK_BLOCK * (ring_pts[i] - c) for i in idx]
+    n = len(ring_pts)
+    points = ring_pts.tolist() + [b.tolist() for b in block]
+    q = list(range(n, n + 4))
+    patches = [q]
+    for k in range(4):
+        i, j = idx[k], idx[(k + 1) % 4]
+        arc = [(i + t) % n for t in range(((j - i) % n) + 1)]
+        patches.append(arc + [q[(k + 1) % 4], q[k]])
+    corners = idx + q + [int(np.argmin(np.linalg.norm(ring_pts - pts[c0], axis=1))) for c0 in shape.corners]
+    return make_layout(points, patches, sorted(set(corners)), source=f"{shape.source} (disk)")
 
 
 def _same(a: Layout, b: Layout) -> bool:
