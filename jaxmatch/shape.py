@@ -268,7 +268,7 @@ def corner_turns(points) -> np.ndarray:
 # ---------------------------------------------------------------------------------------------
 # corners at the scale of the mesh
 
-CORNER_WINDOW = 0.5
+CORNER_WINDOW = 1.0
 """Corners at a target edge length ``h`` (:func:`scale_corners`): the turn at a point is
 measured between the outline this many ``h`` before and after it, so that wiggles shorter than
 about ``h`` neither become corners nor split sides."""
@@ -276,6 +276,14 @@ about ``h`` neither become corners nor split sides."""
 STRAIGHT_RUN = 2.0
 """A turn between two straight runs of the outline each at least this many ``h`` long is a
 corner however small the turn (above :data:`MIN_STRAIGHT_TURN`)."""
+
+PEAK_BAND = 15.0
+"""Degrees: the points of a turn over the window within this much of its peak compete for the
+corner, the sharpest of them wins (noise moves the peak, not the vertex where the sides meet)."""
+
+SHARP_RUN = 0.5
+"""A polygon vertex whose straight runs on both sides are at least this many ``w`` long is a
+corner when it turns by more than the corner angle, however close the next corner is."""
 
 MIN_STRAIGHT_TURN = 2.0
 """Degrees: the smallest turn between two long straight runs that is a corner."""
@@ -286,9 +294,11 @@ def scale_corners(points, h: float, corner_angle: float = DEFAULT_CORNER_ANGLE) 
     (same units), sorted ``(c,) int64``.
 
     A point is a corner when the outline turns there by more than ``corner_angle`` degrees
-    measured over the stretch :data:`CORNER_WINDOW` ``* h`` before and after it (the chords
-    from the point ``w`` back to it and from it to the point ``w`` ahead), keeping only the
-    point of the sharpest turn of its own vertex among the points within ``w`` of each other; or
+    measured over the stretch ``w =`` :data:`CORNER_WINDOW` ``* h`` before and after it (the
+    chords from the point ``w`` back to it and from it to the point ``w`` ahead) and either at
+    the point itself between straight runs at least :data:`SHARP_RUN` ``* w`` long (a polygon's
+    vertex), or once per turn over the window: at the sharpest point among those within ``w`` of
+    its peak and within :data:`PEAK_BAND` of its peak turn (a rounded or noisy corner); or
     when it joins two straight runs each at least :data:`STRAIGHT_RUN` ``* h`` long with a turn
     above :data:`MIN_STRAIGHT_TURN` degrees. With ``h`` small against every feature this finds
     the corners of :func:`make_shape`'s angle rule.
@@ -303,12 +313,28 @@ def scale_corners(points, h: float, corner_angle: float = DEFAULT_CORNER_ANGLE) 
     cross = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
     wide = np.degrees(np.abs(np.arctan2(cross, np.sum(a * b, axis=1))))
     local = np.degrees(np.abs(corner_turns(p)))
-    cand = np.flatnonzero((wide > corner_angle + _ANGLE_TIE) & (local > 0))
-    keep = []
-    for i in cand[np.argsort(-local[cand], kind="stable")]:  # sharpest first; its neighbours within w drop out
-        d = np.abs(s[keep] - s[i]) if keep else np.zeros(0)
-        if not np.any(np.minimum(d, per - d) < w):
-            keep.append(int(i))
+    held = wide > corner_angle + _ANGLE_TIE
+    bent = np.flatnonzero(local > 0)
+    if bent.size:  # the straight run on each side of every point: to the previous / next bent point
+        k = np.searchsorted(bent, np.arange(p.shape[0]))
+        prev_b = bent[(k - 1) % bent.size]
+        next_b = bent[np.searchsorted(bent, np.arange(p.shape[0]), side="right") % bent.size]
+        run_in, run_out = (s - s[prev_b]) % per, (s[next_b] - s) % per
+    else:
+        run_in = run_out = np.full(p.shape[0], per)
+    sharp_runs = np.minimum(run_in, run_out) >= SHARP_RUN * w
+    sharp = [int(i) for i in np.flatnonzero(held & (local > corner_angle + _ANGLE_TIE) & sharp_runs)]
+    keep = list(sharp)  # a polygon's vertex between straight runs: a corner however close to the next
+    rest = np.flatnonzero(held & (local > 0))
+    def near(i, others, r) -> np.ndarray:
+        d = np.abs(s[others] - s[i])
+        return np.minimum(d, per - d) < r
+
+    for i in rest[np.argsort(-wide[rest], kind="stable")]:  # a turn over the window: once, at its sharpest point
+        if keep and np.any(near(i, np.asarray(keep), w)):
+            continue
+        peer = rest[near(i, rest, w) & (wide[rest] >= wide[i] - PEAK_BAND)]
+        keep.append(int(peer[np.argmax(local[peer])]))
     run = STRAIGHT_RUN * float(h)
     e_in = np.linalg.norm(p - np.roll(p, 1, axis=0), axis=1)  # the edge arriving at each point
     e_out = np.roll(e_in, -1)
