@@ -277,7 +277,7 @@ STRAIGHT_RUN = 2.0
 """A turn between two straight runs of the outline each at least this many ``h`` long is a
 corner however small the turn (above :data:`MIN_STRAIGHT_TURN`)."""
 
-PEAK_BAND = 15.0
+PEAK_BAND = 5.0
 """Degrees: the points of a turn over the window within this much of its peak compete for the
 corner, the sharpest of them wins (noise moves the peak, not the vertex where the sides meet)."""
 
