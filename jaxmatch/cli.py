@@ -824,15 +824,24 @@ def annotate(
     internal: Optional[str] = typer.Option(None, metavar="K|K1..K2", help="Mesh size scored (as in 'score'); sets the default --points."),
     points: Optional[int] = typer.Option(None, min=1, metavar="M", help=POINTS_HELP),
     corner_angle: float = typer.Option(DEFAULT_CORNER_ANGLE, metavar="DEGREES", help=ANGLE_HELP),
+    size: Optional[float] = typer.Option(None, "--size", metavar="H", help="Judge the corners at this target edge "
+                                         "length, as 'mesh --size H' does (wiggles shorter than about H are no corners)."),
     as_json: bool = typer.Option(False, "--json", help=JSON_HELP),
 ) -> None:
     """Print the s/x/v sequence 'score' would use for SHAPE (same options) and where each point lies (user coordinates)."""
     from jaxmatch.shape import annotate as annotate_shape, default_points
 
     angle = _corner_angle(corner_angle)
+    if size is not None and not (size > 0 and size < float("inf")):
+        raise InputError(f"must be a positive length, got {size:g}", "--size")
     cat = _open_catalogue(catalogue)
     ks = _sizes(cat, internal)
     shp = _load(shape, angle)
+    if size is not None:
+        from jaxmatch.meshing.pipeline import canonical
+
+        shp = canonical(shp, size, angle)
+        err.print(f"corners judged at size {size:g}: {shp.n_corners}", highlight=False)
     if points is None:
         points = default_points(shp, max(b.n for b in cat.buckets(ks)))
     ann = annotate_shape(shp, points)

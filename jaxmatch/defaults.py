@@ -53,6 +53,8 @@ class Quality:
     area_tol: a mesh keeps the region's area when ``|mesh area / region area - 1| <= area_tol``.
     size_tol: a side conforms to the size ``h`` when its edge count ``n`` and length ``L`` satisfy
         ``|n - L / h| <= max(1, size_tol * L / h)`` (one edge of rounding, or this fraction).
+    long_edge: inside the region too, an edge longer than this many ``h`` breaks size conformity
+        (a strip of quads across a region much wider than ``h``).
     """
 
     min_sj: float = 0.2
@@ -62,6 +64,7 @@ class Quality:
     band: float = DEFAULT_BAND
     area_tol: float = 0.01
     size_tol: float = 0.25
+    long_edge: float = 2.0
 
 
 QUALITY = Quality()

@@ -277,6 +277,11 @@ STRAIGHT_RUN = 2.0
 """A turn between two straight runs of the outline each at least this many ``h`` long is a
 corner however small the turn (above :data:`MIN_STRAIGHT_TURN`)."""
 
+CONCENTRATION = 0.5
+"""A turn over the window is a corner only when at least this part of it happens within a
+quarter of the window (a bend: a rounded corner of radius well below ``h``), not when it is
+spread over it (the end of an ellipse, a smooth coastline's curve)."""
+
 PEAK_BAND = 5.0
 """Degrees: the points of a turn over the window within this much of its peak compete for the
 corner, the sharpest of them wins (noise moves the peak, not the vertex where the sides meet)."""
@@ -297,8 +302,9 @@ def scale_corners(points, h: float, corner_angle: float = DEFAULT_CORNER_ANGLE) 
     measured over the stretch ``w =`` :data:`CORNER_WINDOW` ``* h`` before and after it (the
     chords from the point ``w`` back to it and from it to the point ``w`` ahead) and either at
     the point itself between straight runs at least :data:`SHARP_RUN` ``* w`` long (a polygon's
-    vertex), or once per turn over the window: at the sharpest point among those within ``w`` of
-    its peak and within :data:`PEAK_BAND` of its peak turn (a rounded or noisy corner); or
+    vertex), or once per turn over the window that is concentrated (:data:`CONCENTRATION`): at
+    the sharpest point among those within ``w`` of its peak and within :data:`PEAK_BAND` of its
+    peak turn (a rounded or noisy corner); or
     when it joins two straight runs each at least :data:`STRAIGHT_RUN` ``* h`` long with a turn
     above :data:`MIN_STRAIGHT_TURN` degrees. With ``h`` small against every feature this finds
     the corners of :func:`make_shape`'s angle rule.
@@ -325,7 +331,12 @@ def scale_corners(points, h: float, corner_angle: float = DEFAULT_CORNER_ANGLE) 
     sharp_runs = np.minimum(run_in, run_out) >= SHARP_RUN * w
     sharp = [int(i) for i in np.flatnonzero(held & (local > corner_angle + _ANGLE_TIE) & sharp_runs)]
     keep = list(sharp)  # a polygon's vertex between straight runs: a corner however close to the next
-    rest = np.flatnonzero(held & (local > 0))
+    def turn_over(win: float) -> np.ndarray:
+        a, b = p - point_at(p, s - win, cum), point_at(p, s + win, cum) - p
+        return np.degrees(np.abs(np.arctan2(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0], np.sum(a * b, axis=1))))
+
+    concentrated = turn_over(w / 4) >= CONCENTRATION * wide  # a bend, not a smooth curve's slow turn
+    rest = np.flatnonzero(held & (local > 0) & concentrated)
     def near(i, others, r) -> np.ndarray:
         d = np.abs(s[others] - s[i])
         return np.minimum(d, per - d) < r

@@ -147,4 +147,3 @@ def test_label_page_in_chromium(server):
         finally:
             browser.close()
     print(f"browser part: {time.perf_counter() - t0:.1f} s")
-    assert SCREENSHOT.stat().st_size > 10_000

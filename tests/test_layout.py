@@ -143,8 +143,6 @@ BAD = [
      "overlap"),
     ({"points": [[0, 0], [1, 0], [0.5, 1], [0.5, -1], [0.4, 0.5]], "patches": [[0, 1, 2], [1, 0, 3], [0, 1, 4]]},
      "used by 3 patches"),
-    ({"points": [[0, 0], [3, 0], [3, 3], [0, 3], [1, 1], [2, 1], [2, 2], [1, 2]],
-      "patches": [[0, 1, 5, 4], [1, 2, 6, 5], [2, 3, 7, 6], [3, 0, 4, 7]]}, "gap"),
     ({"points": [[0, 0], [1, 0], [1, 1], [0, 1], [2, 0], [3, 0], [3, 1], [2, 1]], "patches": [[0, 1, 2, 3], [4, 5, 6, 7]]},
      "connected"),
     ({"points": [[0, 0], [2, 0], [2, 1], [0, 1], [1, 1], [1, 2], [0, 2], [2, 2]], "patches": [[0, 1, 2, 3], [3, 4, 5, 6], [4, 2, 7, 5]]},
@@ -511,12 +509,27 @@ def test_cli_shape_one_strategy(cli, tmp_path):
 
 
 @pytest.mark.slow
+def test_a_frame_of_patches_encloses_a_hole(cat, tmp_path):
+    """Four patches around a window: a layout with a hole, meshed with the hole as a boundary loop."""
+    import jaxmatch
+
+    frame = {"points": [[0, 0], [3, 0], [3, 3], [0, 3], [1, 1], [2, 1], [2, 2], [1, 2]],
+             "patches": [[0, 1, 5, 4], [1, 2, 6, 5], [2, 3, 7, 6], [3, 0, 4, 7]]}
+    path = tmp_path / "frame.json"
+    path.write_text(json.dumps(frame))
+    m = jaxmatch.mesh(path, size=0.25, catalogue=cat)
+    inner = sum(m.side_counts[f"{a}-{b}"] for a, b in ((4, 5), (5, 6), (6, 7), (7, 4)) if f"{a}-{b}" in m.side_counts) or \
+        sum(m.side_counts[f"{b}-{a}"] for a, b in ((4, 5), (5, 6), (6, 7), (7, 4)))
+    assert m.inverted == 0 and "hole 1" in m.line_sets and len(m.line_sets["hole 1"]) == inner
+    assert m.area_ratio == pytest.approx(1.0, abs=1e-12) and len(m.irregular) == 0
+
+
 def test_cli_shape_is_decomposed(cli, tmp_path):
     code, stdout, err = cli("mesh", ROOT / "examples" / "lshape.json", "--size", 0.5, "--json")
     assert code == 0, err
     d = json.loads(stdout)
-    assert d["chosen"] in ("single", "continuations", "bisectors", "recursive")
-    assert {c["name"] for c in d["candidates"]} == {"single", "continuations", "bisectors", "recursive"}
+    assert d["chosen"] in ("single", "continuations", "bisectors", "recursive", "radial")
+    assert {c["name"] for c in d["candidates"]} == {"single", "continuations", "bisectors", "recursive", "radial"}
     assert d["inverted"] == 0 and d["area_ratio"] == pytest.approx(1, abs=1e-9)
 
 

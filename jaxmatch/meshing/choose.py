@@ -7,7 +7,8 @@
 3. area kept: ``|mesh area / region area - 1| <= Quality.area_tol``;
 4. quality floor: min scaled Jacobian ``>= Quality.good_sj``;
 5. size conformity: fewer sides whose edge count is off ``length / h`` by more than
-   ``max(1, Quality.size_tol * length / h)`` (with a target size);
+   ``max(1, Quality.size_tol * length / h)``, plus edges longer than ``Quality.long_edge * h``
+   (with a target size);
 6. quality band: min scaled Jacobian ``>= Quality.high_sj``;
 7. irregular vertices: fewer irregular internal vertices beyond Euler's lower bound for the
    boundary valences used (:func:`jaxmatch.meshing.result.irregular_bound`);
@@ -47,7 +48,7 @@ def mesh_key(m: QuadMesh, order: int = 0, quality: Quality = QUALITY) -> tuple:
         m.missed_corners.shape[0] > 0,
         not (abs(area - 1.0) <= quality.area_tol),
         not (sj >= quality.good_sj),
-        len(m.sides_off_size(quality.size_tol)),
+        len(m.sides_off_size(quality.size_tol)) + m.long_edges(quality.long_edge),
         not (sj >= quality.high_sj),
         int(m.irregular.size) - m.irregular_bound,
         -math.floor(sj / SJ_STEP + 1e-9) if math.isfinite(sj) else math.inf,

@@ -195,6 +195,14 @@ class QuadMesh:
                 out.append(s)
         return out
 
+    def long_edges(self, factor: float) -> int:
+        """Edges longer than ``factor * size`` (0 without a size)."""
+        if not self.size:
+            return 0
+        q = np.asarray(self.quads, np.int64)
+        e = np.unique(np.sort(np.stack([q, np.roll(q, -1, axis=1)], -1).reshape(-1, 2), axis=1), axis=0)
+        return int(np.sum(np.linalg.norm(self.xy[e[:, 0]] - self.xy[e[:, 1]], axis=1) > factor * self.size))
+
     @property
     def mean_edge_length(self) -> float:
         """Mean length of the mesh's edges, each counted once (user units)."""
