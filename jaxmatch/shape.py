@@ -277,6 +277,11 @@ STRAIGHT_RUN = 2.0
 """A turn between two straight runs of the outline each at least this many ``h`` long is a
 corner however small the turn (above :data:`MIN_STRAIGHT_TURN`)."""
 
+HELD_ANGLE = 60.0
+"""Degrees: a turn of a curved or noisy stretch (not a polygon's vertex between straight runs)
+is a corner only above this (or the corner angle, if larger): the sharp corners of a traced
+outline, not its bends."""
+
 CONCENTRATION = 0.5
 """A turn over the window is a corner only when at least this part of it happens within a
 quarter of the window (a bend: a rounded corner of radius well below ``h``), not when it is
@@ -294,7 +299,8 @@ MIN_STRAIGHT_TURN = 2.0
 """Degrees: the smallest turn between two long straight runs that is a corner."""
 
 
-def scale_corners(points, h: float, corner_angle: float = DEFAULT_CORNER_ANGLE) -> np.ndarray:
+def scale_corners(points, h: float, corner_angle: float = DEFAULT_CORNER_ANGLE, *,
+                  held_angle: float | None = None) -> np.ndarray:
     """Corner indices of the closed loop ``points (P, 2)`` judged at target edge length ``h``
     (same units), sorted ``(c,) int64``.
 
@@ -307,7 +313,8 @@ def scale_corners(points, h: float, corner_angle: float = DEFAULT_CORNER_ANGLE) 
     peak turn (a rounded or noisy corner); or
     when it joins two straight runs each at least :data:`STRAIGHT_RUN` ``* h`` long with a turn
     above :data:`MIN_STRAIGHT_TURN` degrees. With ``h`` small against every feature this finds
-    the corners of :func:`make_shape`'s angle rule.
+    the corners of :func:`make_shape`'s angle rule. held_angle: the threshold of a turn of a
+    curved stretch (default :data:`HELD_ANGLE` or ``corner_angle``, the larger).
     """
     p = np.asarray(points, np.float64)
     cum = cumulative_length(p)
@@ -336,7 +343,8 @@ def scale_corners(points, h: float, corner_angle: float = DEFAULT_CORNER_ANGLE) 
         return np.degrees(np.abs(np.arctan2(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0], np.sum(a * b, axis=1))))
 
     concentrated = turn_over(w / 4) >= CONCENTRATION * wide  # a bend, not a smooth curve's slow turn
-    rest = np.flatnonzero(held & (local > 0) & concentrated)
+    bend = max(corner_angle, HELD_ANGLE) if held_angle is None else held_angle
+    rest = np.flatnonzero((wide > bend + _ANGLE_TIE) & (local > 0) & concentrated)
     def near(i, others, r) -> np.ndarray:
         d = np.abs(s[others] - s[i])
         return np.minimum(d, per - d) < r

@@ -239,61 +239,84 @@ def _corners(shape: Shape) -> np.ndarray:
 
 
 def _mesh_size(shape, cat, lat, h, strategies, quality, budget_s, progress, template_cache, corner_angle) -> QuadMesh:
-    from jaxmatch.placement.decompose import _same, decompose, single_patch
-    from jaxmatch.placement.layout import ALL_SIZES, TEMPLATE_SIZES, mesh_layout
+    from jaxmatch.placement.decompose import single_patch
 
     names = tuple(strategies) if strategies is not None else strategy_names()
     unknown = [n for n in names if n not in strategy_names()]
     if unknown:
         raise InputError(f"unknown strategy {unknown[0]!r} (expected {', '.join(strategy_names())})")
-    shape = canonical(shape, h, corner_angle)
-    if shape.n_corners < 2 and not shape.holes:
-        return _mesh_smooth(shape, cat, lat, h, quality, template_cache)
-    corners = _corners(shape)
+    region = canonical(shape, h, corner_angle)
+    if region.n_corners < 2 and not region.holes:
+        return _mesh_smooth(region, cat, lat, h, quality, template_cache)
+    corners = _corners(region)
     cache = template_cache if template_cache is not None else {}
-    tried: list[Candidate] = []
-    seen = []
     t0 = time.perf_counter()
-    for i, name in enumerate(names):
-        if budget_s is not None and time.perf_counter() - t0 > budget_s and any(
-                c.mesh is not None and c.mesh.valid for c in tried):
-            tried.append(Candidate(name, None, f"not tried: time budget of {budget_s:g} s spent"))
-            continue
-        try:
-            lay = single_patch(shape) if name == SINGLE else decompose(shape, name)
-        except InputError as e:
-            tried.append(Candidate(name, None, e.problem))
-            continue
-        if any(_same(lay, other) for other in seen):
-            tried.append(Candidate(name, None, "same patches as an earlier candidate"))
-            continue
-        seen.append(lay)
-        try:
-            lm = mesh_layout(lay, cat, lat, size=h, smooth_cuts=lay.n_patches > 1,
-                             sizes=ALL_SIZES if name == SINGLE else TEMPLATE_SIZES, template_cache=cache)
-        except InputError as e:
-            tried.append(Candidate(name, None, e.problem))
-        except SolverError as e:  # not a verdict on the request: the other candidates go on
-            tried.append(Candidate(name, None, f"solver error: {e}"))
-        else:
-            tried.append(Candidate(name, from_layout(lm, size=h, corners=corners)))
-        if progress is not None:
-            progress(i + 1, len(names), name)
+    tried = _try_strategies(region, names, cat, lat, h, corners, cache, budget_s, t0, progress)
     if not any(c.mesh is not None for c in tried):
         raise InputError("no candidate could be meshed: " + "; ".join(f"{c.name}: {c.note}" for c in tried),
-                         where=shape.source)
+                         where=region.source)
     best = choose(tried, quality)
     single = next((c.mesh for c in tried if c.name == SINGLE and c.mesh is not None), None)
     if single is not None and not best.min_scaled_jacobian >= quality.good_sj:  # below the floor: larger templates
-        more = _larger_templates(single_patch(shape), cat, lat, h, corners, single, cache)
+        more = _larger_templates(single_patch(region), cat, lat, h, corners, single, cache)
         if more:
             tried = tried[:1] + more + tried[1:]
             best = choose(tried, quality)
     if single is not None and best.sides_off_size(quality.size_tol):  # no candidate follows the size yet
-        more = _conforming_templates(shape, cat, lat, h, single, quality)
+        more = _conforming_templates(region, cat, lat, h, single, quality)
         if more:
-            best = choose(tried[:1] + more + tried[1:], quality)
+            tried = tried[:1] + more + tried[1:]
+            best = choose(tried, quality)
+    if not best.valid and not shape.explicit_corners:  # every candidate folds: the bends become corners too
+        finer = canonical(shape, h, corner_angle, held_angle=corner_angle)
+        if not np.array_equal(finer.corners, region.corners):
+            more = _try_strategies(finer, names, cat, lat, h, _corners(finer), cache, budget_s, t0, progress,
+                                   suffix=FINER)
+            if any(c.mesh is not None for c in more):
+                best = choose(tried + more, quality)
     return best
+
+
+FINER = " +bends"
+"""Suffix of the candidates meshed with the bends of a curved outline as corners too (when every
+other candidate folds; :data:`jaxmatch.shape.HELD_ANGLE`)."""
+
+
+def _try_strategies(shape: Shape, names, cat, lat, h: float, corners: np.ndarray, cache: dict, budget_s, t0: float,
+                    progress, suffix: str = "") -> list[Candidate]:
+    """Each strategy of ``names`` meshed (one :class:`Candidate` each, with its mesh or the reason
+    it has none): the same solve for every one (:func:`~jaxmatch.placement.layout.mesh_layout`).
+    A strategy whose cuts or solve fail for any reason is skipped with that reason."""
+    from jaxmatch.placement.decompose import _same, decompose, single_patch
+    from jaxmatch.placement.layout import ALL_SIZES, TEMPLATE_SIZES, mesh_layout
+
+    tried: list[Candidate] = []
+    seen = []
+    for i, name in enumerate(names):
+        label = name + suffix
+        if budget_s is not None and time.perf_counter() - t0 > budget_s and any(
+                c.mesh is not None and c.mesh.valid for c in tried):
+            tried.append(Candidate(label, None, f"not tried: time budget of {budget_s:g} s spent"))
+            continue
+        try:
+            lay = single_patch(shape) if name == SINGLE else decompose(shape, name)
+            if any(_same(lay, other) for other in seen):
+                tried.append(Candidate(label, None, "same patches as an earlier candidate"))
+                continue
+            seen.append(lay)
+            lm = mesh_layout(lay, cat, lat, size=h, smooth_cuts=lay.n_patches > 1,
+                             sizes=ALL_SIZES if name == SINGLE else TEMPLATE_SIZES, template_cache=cache)
+        except InputError as e:
+            tried.append(Candidate(label, None, e.problem))
+        except SolverError as e:  # not a verdict on the request: the other candidates go on
+            tried.append(Candidate(label, None, f"solver error: {e}"))
+        except (ValueError, ArithmeticError, IndexError) as e:  # degenerate cuts (near-duplicate points, slivers)
+            tried.append(Candidate(label, None, f"skipped: {type(e).__name__}: {e}"))
+        else:
+            tried.append(Candidate(label, from_layout(lm, size=h, corners=corners)))
+        if progress is not None:
+            progress(i + 1, len(names), label)
+    return tried
 
 
 def _larger_templates(lay, cat, lat, h, corners, first: QuadMesh, cache) -> list[Candidate]:
@@ -394,7 +417,8 @@ def _conforming_templates(shape: Shape, cat, lat, h, first: QuadMesh, quality: Q
     return out
 
 
-def canonical(shape: Shape, size: float | None = None, corner_angle: float = DEFAULT_CORNER_ANGLE) -> Shape:
+def canonical(shape: Shape, size: float | None = None, corner_angle: float = DEFAULT_CORNER_ANGLE,
+              held_angle: float | None = None) -> Shape:
     """The same shape with its loops written one way: the outer loop counter-clockwise and each
     hole clockwise from its lexicographically smallest point (x, then y), holes in the order of
     those points. Corners detected from angles are judged again at ``size`` when it is given
@@ -412,7 +436,9 @@ def canonical(shape: Shape, size: float | None = None, corner_angle: float = DEF
     rejudge = size is not None and not shape.explicit_corners
 
     def corners_of(ring: np.ndarray, given) -> np.ndarray:
-        return scale_corners(ring, size, corner_angle) if rejudge else np.asarray(given, np.int64)
+        if not rejudge:
+            return np.asarray(given, np.int64)
+        return scale_corners(ring, size, corner_angle, held_angle=held_angle)
 
     pts = _xy(shape)
     start = first(pts)
