@@ -417,11 +417,34 @@ def _conforming_templates(shape: Shape, cat, lat, h, first: QuadMesh, quality: Q
     return out
 
 
+DEDUPE = 1e-8
+"""Points of a loop closer than this fraction of its extent to the previous one are merged
+before meshing (a corner among them stays, at the first point): layouts need distinct points."""
+
+
+def _dedupe(ring: np.ndarray, corners: np.ndarray, tol: float) -> tuple[np.ndarray, np.ndarray]:
+    """``ring (P, 2)`` without points within ``tol`` of the previous kept point, and ``corners``
+    (indices) mapped onto the kept points."""
+    keep = [0]
+    owner = np.zeros(len(ring), np.int64)
+    for i in range(1, len(ring)):
+        if np.linalg.norm(ring[i] - ring[keep[-1]]) > tol:
+            keep.append(i)
+        owner[i] = len(keep) - 1
+    if len(keep) > 1 and np.linalg.norm(ring[keep[-1]] - ring[0]) <= tol:  # the last one wraps onto the first
+        owner[owner == len(keep) - 1] = 0
+        keep.pop()
+    if len(keep) == len(ring):
+        return ring, np.asarray(corners, np.int64)
+    return ring[keep], np.unique(owner[np.asarray(corners, np.int64)])
+
+
 def canonical(shape: Shape, size: float | None = None, corner_angle: float = DEFAULT_CORNER_ANGLE,
               held_angle: float | None = None) -> Shape:
     """The same shape with its loops written one way: the outer loop counter-clockwise and each
     hole clockwise from its lexicographically smallest point (x, then y), holes in the order of
-    those points. Corners detected from angles are judged again at ``size`` when it is given
+    those points, points closer than :data:`DEDUPE` of the extent merged. Corners detected from
+    angles are judged again at ``size`` when it is given
     (:func:`jaxmatch.shape.scale_corners`: wiggles shorter than about ``size`` are no corners);
     explicit corners are kept. Meshing the canonical shape makes the mesh
     independent of where the user's loop starts and which way it runs."""
@@ -441,15 +464,19 @@ def canonical(shape: Shape, size: float | None = None, corner_angle: float = DEF
         return scale_corners(ring, size, corner_angle, held_angle=held_angle)
 
     pts = _xy(shape)
-    start = first(pts)
+    tol = DEDUPE * float(np.ptp(pts, axis=0).max())
     holes, hole_corners = [], []
     for ring, hc in sorted(zip(shape.holes, shape.hole_corners), key=lambda rc: tuple(rc[0][first(rc[0])])):
+        ring, hc = _dedupe(ring, corners_of(ring, hc), tol)
         k = first(ring)
         holes.append(np.roll(ring, -k, axis=0))
-        hole_corners.append(sorted(int(c) for c in (corners_of(ring, hc) - k) % len(ring)))
-    outer = corners_of(pts, shape.corners)
-    if start == 0 and shape.corner_order is None and not holes and np.array_equal(outer, shape.corners):
+        hole_corners.append(sorted(int(c) for c in (hc - k) % len(ring)))
+    pts2, outer = _dedupe(pts, corners_of(pts, shape.corners), tol)
+    start = first(pts2)
+    if start == 0 and shape.corner_order is None and not holes and len(pts2) == len(pts) \
+            and np.array_equal(outer, shape.corners):
         return shape
+    pts = pts2
     corners = sorted(int(c) for c in (outer - start) % len(pts))
     return make_shape(np.roll(pts, -start, axis=0), corners=corners, source=shape.source, holes=holes or None,
                       hole_corners=hole_corners or None)
