@@ -957,6 +957,7 @@ def label(shapes: Optional[list[Path]] = typer.Argument(None, help="Shape files 
     """A local web page to pick the preferred mesh for shapes; appends labels, tunes the lattice."""
     from jaxmatch.label.cli import run_label
 
+    enable_compile_cache()
     run_label(shapes or [], labels, internal=internal, size=size, top=top, port=port, host=host, lattice=lattice,
               catalogue=catalogue, corner_angle=_corner_angle(corner_angle), tune=tune, out=out_path, epochs=epochs)
 

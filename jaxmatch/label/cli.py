@@ -17,9 +17,8 @@ def _pct(x) -> str:
 def run_label(shapes, labels: Path, *, internal=None, size=None, top: int = 5, port: int = 8765, host: str = "127.0.0.1",
               lattice: str = "fine", catalogue=None, corner_angle=None, tune: bool = False, out=None, epochs: int = 10) -> None:
     """Serve the labelling page (prints ``http://HOST:PORT/``) or, with ``tune``, tune the lattice
-    on ``labels`` and write it to ``out``. Bad input: :class:`InputError` naming the option."""
-    from jaxmatch.cli import enable_compile_cache
-
+    on ``labels`` and write it to ``out``. Bad input: :class:`InputError` naming the option.
+    (The command enables the compiled-code cache before calling this.)"""
     if tune:
         if out is None:
             raise InputError("--tune needs --out FILE (where the tuned lattice is written)", where="--out")
@@ -27,7 +26,6 @@ def run_label(shapes, labels: Path, *, internal=None, size=None, top: int = 5, p
             raise InputError("--tune reads the labels file; give no shapes", where="--tune")
         from jaxmatch.label.store import tune_labels
 
-        enable_compile_cache()
         r = tune_labels(labels, out, lattice=lattice, catalogue=catalogue, epochs=epochs,
                         stage=lambda text: print(text, file=sys.stderr, flush=True))
         print(f"{r['examples']} labelled shapes ({r['skipped']} bad lines skipped); {r['lattice']} -> {r['tuned']}")
@@ -42,7 +40,6 @@ def run_label(shapes, labels: Path, *, internal=None, size=None, top: int = 5, p
         raise InputError(f"expected a host name or address, got {host!r}", where="--host")
     from jaxmatch.label.app import LabelSession, serve
 
-    enable_compile_cache()
     session = LabelSession(shapes, labels, internal=internal, top=top, size=size, out=out, lattice=lattice,
                            catalogue=catalogue, corner_angle=corner_angle, epochs=epochs)
     if host not in ("127.0.0.1", "localhost", "::1"):

@@ -146,7 +146,7 @@ def mesh(region, *, size: float | None = None, sides: Sequence[int] | None = Non
       InputError: a bad request (unreadable file, bad size, counts no template meets: the
         message names the nearest feasible counts), or no candidate could be meshed.
     """
-    from jaxmatch.api import _lattice, load_catalogue
+    from jaxmatch.inputs import _lattice, load_catalogue
     from jaxmatch.placement.layout import Layout
 
     if isinstance(region, (str, os.PathLike)):
@@ -187,7 +187,7 @@ def _mesh_layout_file(layout, cat, lat, size, sides, counts) -> QuadMesh:
 
 
 def _mesh_template(shape, cat, lat, options) -> QuadMesh:
-    from jaxmatch.api import check_sizes
+    from jaxmatch.inputs import check_sizes
     from jaxmatch.placement.choose import choose_mesh
 
     opts = dict(options)
