@@ -163,17 +163,22 @@ def _sizes(cat, internal: Optional[str]):
         raise InputError(e.problem, "--internal") from None
 
 
-def _load(shape: Path, corner_angle: float):
-    """The shape file, read; its warnings (ignored keys) are shown only when it is good, so
+def _quietly(read, *args, **kwargs):
+    """``read(*args, **kwargs)`` with its warnings (ignored keys) shown only when it succeeds, so
     that bad input stays one line."""
-    from jaxmatch.io.readers import load_shape
-
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", InputWarning)
-        shp = load_shape(shape, corner_angle=corner_angle)
+        value = read(*args, **kwargs)
     for w in caught:
         warnings.showwarning(w.message, w.category, w.filename, w.lineno)
-    return shp
+    return value
+
+
+def _load(shape: Path, corner_angle: float):
+    """The shape file, read (:func:`_quietly`)."""
+    from jaxmatch.io.readers import load_shape
+
+    return _quietly(load_shape, shape, corner_angle=corner_angle)
 
 
 def _inputs(shape: Optional[Path], corner_angle: float, lattice: str, catalogue: Optional[Path], internal: Optional[str]):
@@ -510,15 +515,10 @@ def mesh(
 
 
 def _load_region(path: Path, corner_angle: float):
-    """A shape or layout file (warnings shown only when it is good, so that bad input stays one line)."""
+    """A shape or layout file, read (:func:`_quietly`)."""
     from jaxmatch.meshing.pipeline import load_region
 
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always", InputWarning)
-        region = load_region(path, corner_angle=corner_angle)
-    for w in caught:
-        warnings.showwarning(w.message, w.category, w.filename, w.lineno)
-    return region
+    return _quietly(load_region, path, corner_angle=corner_angle)
 
 
 def _mesh_record(path: Path, m, seconds: float | None = None) -> dict:

@@ -16,7 +16,6 @@ of a glyph's stroke, are one feature at this scale, and noise moves the exact po
 
 from __future__ import annotations
 
-import json
 import sys
 import time
 from pathlib import Path
@@ -29,6 +28,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from jaxmatch.cli import run_typer  # noqa: E402
 from holes_table import check  # noqa: E402
+from mesh_table import write_outputs  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 DENSE = ROOT / "examples" / "dense"
@@ -106,14 +106,7 @@ def main(divisions: str = typer.Option("40,80", help="h = perimeter / each of th
     ok = [r for r in rows if "error" not in r]
     print(f"valid {sum(r['valid'] for r in rows)}/{len(rows)}; worst min SJ {min(r['min_sj'] for r in ok):.3f}; "
           f"largest time {max(r['seconds'] for r in ok):.1f} s")
-    if png is not None and panels:
-        from jaxmatch.io.plot import draw_meshes
-
-        print(f"wrote {draw_meshes(png, panels, ncols=2)}")
-    if json_out is not None:
-        from jaxmatch.files import write_text_atomic
-
-        write_text_atomic(json_out, "".join(json.dumps(r) + "\n" for r in rows))
+    write_outputs(rows, panels, png, json_out)
 
 
 if __name__ == "__main__":

@@ -14,7 +14,6 @@ vertices, Euler's lower bound ``|4 (1 - holes) - sum over boundary vertices (3 -
 
 from __future__ import annotations
 
-import json
 import sys
 import time
 from pathlib import Path
@@ -26,7 +25,7 @@ import typer
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from jaxmatch.cli import run_typer  # noqa: E402
-from mesh_table import scaled_jacobian  # noqa: E402
+from mesh_table import scaled_jacobian, write_outputs  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 HOLES = ROOT / "examples" / "holes"
@@ -157,14 +156,7 @@ def main(divisions: str = typer.Option("40,80", help="h = outer perimeter / each
               f"{np.mean([r['min_sj'] for r in ok]):.3f}; worst {min(r['min_sj'] for r in ok):.3f}; irregular per mesh "
               f"{np.mean([r['irregular'] for r in ok]):.2f} (above the bound {np.mean([r['irregular'] - r['irregular_bound'] for r in ok]):.2f}); "
               f"median time {np.median([r['seconds'] for r in ok]) * 1000:.0f} ms")
-    if png is not None and panels:
-        from jaxmatch.io.plot import draw_meshes
-
-        print(f"wrote {draw_meshes(png, panels, ncols=2)}")
-    if json_out is not None:
-        from jaxmatch.files import write_text_atomic
-
-        write_text_atomic(json_out, "".join(json.dumps(r) + "\n" for r in rows))
+    write_outputs(rows, panels, png, json_out)
 
 
 if __name__ == "__main__":

@@ -140,10 +140,16 @@ def main(divisions: str = typer.Option("16,32", help="h = perimeter / each of th
               f"{np.mean([r['min_sj'] for r in ok]):.3f}; worst min SJ {min(r['min_sj'] for r in ok):.3f}; "
               f"irregular per mesh {np.mean([r['irregular'] for r in ok]):.2f}; above the bound "
               f"{np.mean([r['irregular'] - r['irregular_bound'] for r in ok]):.2f}")
-    if png is not None:
+    write_outputs(rows, panels, png, json_out, ncols=len(panels))
+
+
+def write_outputs(rows: list[dict], panels: list, png: Optional[Path], json_out: Optional[Path], ncols: int = 2) -> None:
+    """The picture of ``panels`` (:func:`jaxmatch.io.plot.draw_meshes`) and the rows as JSON
+    lines, each when asked for (the table scripts share this)."""
+    if png is not None and panels:
         from jaxmatch.io.plot import draw_meshes
 
-        print(f"wrote {draw_meshes(png, panels, ncols=len(panels))}")
+        print(f"wrote {draw_meshes(png, panels, ncols=ncols)}")
     if json_out is not None:
         from jaxmatch.files import write_text_atomic
 
