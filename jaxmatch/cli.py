@@ -429,7 +429,7 @@ def mesh(
     skip_bad: bool = typer.Option(False, "--skip-bad", help="With many regions: a bad region becomes a record "
                                   "{shape, error} in the summary and the rest go on (exit 0)."),
     strategy: Optional[str] = typer.Option(None, "--strategy", metavar="NAMES", help="Candidates to try, comma-separated: "
-                                           "single, continuations, bisectors, recursive (default: all)."),
+                                           "single, continuations, bisectors, recursive, radial (default: all)."),
     budget: float = typer.Option(DEFAULT_BUDGET_S, "--budget", metavar="SECONDS", help="Stop trying candidates after "
                                  "this long once one valid mesh exists (the best so far is kept)."),
     catalogue: Optional[Path] = typer.Option(None, metavar="FILE", help=CATALOGUE_HELP),
@@ -453,10 +453,11 @@ def mesh(
     """Mesh a region with quads of about --size: the best of one template and every decomposition.
 
     Candidates: the region as one catalogue template, and split into patches at its concave
-    corners (continuations, bisectors, recursive); each is meshed with one integer program for
-    all side counts, and the best is kept by one rule (no fold, corners, area, quality floor,
-    size conformity, irregular vertices, quality, fewer patches); the rule that decided and the
-    runner-up are printed. A layout file ({points, patches}) is meshed as that layout. Several
+    corners and around its holes (continuations, bisectors, recursive, radial); each is meshed
+    with one integer program for all side counts, and the best is kept by one rule (no fold,
+    corners, area, quality floor, size conformity, quality band, irregular vertices, quality,
+    fewer patches); the rule that decided and the runner-up are printed. Corners are judged at
+    the size (wiggles shorter than about it are no corners). A layout file ({points, patches}) is meshed as that layout. Several
     regions (or --out-dir) mesh in bulk. Exit status 3 when a mesh folds or misses a corner (the
     files are written anyway).
     """

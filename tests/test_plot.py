@@ -147,9 +147,9 @@ def test_draw_many_needs_items(tmp_path):
 @pytest.mark.parametrize("name", ["match.pdf", "match", "match.jpeg"])
 def test_bad_suffix_is_input_error(tmp_path, panels, name):
     fig, _ = draw_one(panels["star"])
-    with pytest.raises(InputError, match="unknown picture format"):
+    with pytest.raises(InputError, match="unknown picture file format"):
         save_figure(fig, tmp_path / name)
-    with pytest.raises(InputError, match="unknown picture format"):
+    with pytest.raises(InputError, match="unknown picture file format"):
         draw_many([panels["star"]], tmp_path / name)
     assert list(tmp_path.iterdir()) == []
 

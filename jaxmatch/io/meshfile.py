@@ -48,27 +48,20 @@ import numpy as np
 
 from jaxmatch.errors import InputError
 from jaxmatch.files import atomic_open, atomic_path
+from jaxmatch.io import registry
 
 __all__ = ["LineGroup", "MESH_FORMATS", "mesh_format", "mesh_groups", "read_json_mesh", "write_mesh", "write_quads"]
 
-MESH_FORMATS: dict[str, str] = {
-    ".vtk": "vtk",
-    ".vtu": "vtu",
-    ".obj": "obj",
-    ".msh": "gmsh22",
-    ".json": "json",
-}
-"""File suffix -> format name (meshio's name, or ``"json"``)."""
+for _name in ("vtk", "vtu", "obj", "gmsh22", "json"):
+    registry.register_format(_name, "mesh", ("." + {"gmsh22": "msh"}.get(_name, _name),), writer=_name)
+
+MESH_FORMATS: dict[str, str] = registry.suffixes("mesh")
+"""File suffix -> format name (meshio's name, or ``"json"``), from :mod:`jaxmatch.io.registry`."""
 
 
 def mesh_format(path: str | os.PathLike) -> str:
     """The format name for ``path``'s suffix; :class:`InputError` when it is not supported."""
-    suffix = Path(path).suffix.lower()
-    try:
-        return MESH_FORMATS[suffix]
-    except KeyError:
-        known = ", ".join(MESH_FORMATS)
-        raise InputError(f"unknown mesh file format {suffix or '(no suffix)'!r}; use one of {known}", where=str(path)) from None
+    return registry.find("mesh", path=path).name
 
 
 def _points3d(xy: np.ndarray) -> np.ndarray:

@@ -20,8 +20,8 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 
 from jaxmatch.placement.embed import Placement, inverted_mask
-from jaxmatch.errors import InputError
 from jaxmatch.files import atomic_path
+from jaxmatch.io import registry
 from jaxmatch.catalogue.mesh import edges, valences
 
 __all__ = [
@@ -50,7 +50,9 @@ CODE_STYLE: dict[int, tuple[str, str, str]] = {
 IRREGULAR_MARKERS: dict[int, str] = {3: "^", 5: "p"}
 """Internal vertex valence -> marker (triangle for 3, pentagon for 5; others a diamond)."""
 
-FIGURE_FORMATS: dict[str, str] = {".png": "png", ".svg": "svg"}
+for _name in ("png", "svg"):
+    registry.register_format(_name, "picture", ("." + _name,), writer=_name)
+FIGURE_FORMATS: dict[str, str] = registry.suffixes("picture")
 """Picture suffix -> matplotlib format."""
 
 INVERTED_COLOUR = "#d62728"
@@ -180,11 +182,7 @@ def new_figure(n_panels: int = 1, ncols: int | None = None, panel_size: float = 
 
 def figure_format(path: str | os.PathLike) -> str:
     """The picture format for ``path``'s suffix; :class:`InputError` when not .png/.svg."""
-    suffix = Path(path).suffix.lower()
-    try:
-        return FIGURE_FORMATS[suffix]
-    except KeyError:
-        raise InputError(f"unknown picture format {suffix or '(no suffix)'!r}; use .png or .svg", where=str(path)) from None
+    return registry.find("picture", path=path).name
 
 
 def save_figure(fig: Figure, path: str | os.PathLike, *, dpi: int = 120) -> Path:

@@ -51,6 +51,7 @@ import numpy as np
 
 from jaxmatch.errors import InputError, InputWarning
 from jaxmatch.files import read_limited
+from jaxmatch.io import registry
 from jaxmatch.shape import DEFAULT_CORNER_ANGLE, MAX_BYTES, MAX_POINTS, Shape, check_corner_angle, make_shape
 
 __all__ = [
@@ -65,13 +66,21 @@ __all__ = [
     "split_element",
 ]
 
-FORMATS = ("json", "geojson", "text", "svg", "dxf")
-"""Shape file formats, as accepted by ``fmt``."""
+def _formats():
+    """Register the shape formats (:mod:`jaxmatch.io.registry`); return their names and suffixes."""
+    for name, sfx, reader in (("json", (".json",), lambda d, src, el: _read_json_or_geojson(d, src, el, False)),
+                              ("geojson", (".geojson",), lambda d, src, el: _read_json_or_geojson(d, src, el, True)),
+                              ("text", (".txt", ".csv", ".tsv", ".xy", ".dat"), lambda d, src, el: Outline(_read_text(_text(d, src), src))),
+                              ("svg", (".svg",), lambda d, src, el: _read_svg(d, src, el)),
+                              ("dxf", (".dxf",), lambda d, src, el: _read_dxf(d, src, el))):
+        registry.register_format(name, "shape", sfx, reader=reader)
+    return tuple(f.name for f in registry.formats("shape")), registry.suffixes("shape")
 
-SUFFIXES: dict[str, str] = {
-    ".json": "json", ".geojson": "geojson", ".txt": "text", ".csv": "text", ".tsv": "text", ".xy": "text",
-    ".dat": "text", ".svg": "svg", ".dxf": "dxf",
-}
+
+FORMATS: tuple[str, ...]
+"""Shape file formats, as accepted by ``fmt`` (registered in :mod:`jaxmatch.io.registry`)."""
+
+SUFFIXES: dict[str, str]
 """File suffix (lower case) -> format."""
 
 JSON_KEYS = ("boundary", "corners", "holes", "hole_corners")
@@ -168,15 +177,12 @@ def read_outline(data, source: str, *, fmt: str | None = None, element: str | No
         raise InputError(f"unknown shape format {fmt!r} (known: {', '.join(FORMATS)})", where=source)
     if element is not None and fmt in ("json", "text"):
         raise InputError(f"a {fmt} shape file has one loop; there is no element {element!r} to choose", where=source)
-    if fmt == "dxf":
-        return _read_dxf(data, source, element)
-    if fmt == "svg":
-        return _read_svg(data, source, element)
-    text = _text(data, source)
-    if fmt == "text":
-        return Outline(_read_text(text, source))
-    doc = _load_json(text, source)
-    if fmt == "geojson" or (isinstance(doc, dict) and "type" in doc and "boundary" not in doc):
+    return registry.find("shape", name=fmt).reader(data, source, element)
+
+
+def _read_json_or_geojson(data, source: str, element: str | None, geojson: bool) -> Outline:
+    doc = _load_json(_text(data, source), source)
+    if geojson or (isinstance(doc, dict) and "type" in doc and "boundary" not in doc):
         return _read_geojson(doc, source, element)
     return _read_json(doc, source)
 
@@ -631,3 +637,6 @@ def _flatten_bulges(xyb: np.ndarray) -> np.ndarray:
         a = a0 + sweep[i] * np.arange(1, k) / k
         out.extend(centre + radius[i] * np.c_[np.cos(a), np.sin(a)])
     return np.array(out, dtype=np.float64).reshape(-1, 2)
+
+
+FORMATS, SUFFIXES = _formats()
