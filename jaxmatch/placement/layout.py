@@ -52,7 +52,7 @@ import numpy as np
 from jaxmatch.defaults import QUALITY
 from jaxmatch.errors import InputError
 from jaxmatch.files import read_limited
-from jaxmatch.placement.milp import run_milp
+from jaxmatch.placement.milp import CHORD_WEIGHT, LayoutInfeasible, solve_counts  # noqa: F401 (public here)
 from jaxmatch.placement.embed import inverted_mask, polygon_area, quad_areas, quality, smooth_in_frame
 from jaxmatch.catalogue.mesh import valences
 from jaxmatch.shape import Shape, make_shape
@@ -173,18 +173,6 @@ class Sides(NamedTuple):
     def outer(self) -> np.ndarray:
         """``(S,) bool``: the side is on the outer boundary (one patch uses it)."""
         return self.users[:, 1] < 0
-
-
-class LayoutInfeasible(InputError):
-    """No choice of chord multiplicities meets the requested side counts.
-
-    nearest: ``{side name: count}`` the closest feasible counts for the requested sides
-    (least total absolute difference), or None when even those do not exist.
-    """
-
-    def __init__(self, problem: str, where: str | None = None, nearest: dict[str, int] | None = None):
-        super().__init__(problem, where)
-        self.nearest = nearest
 
 
 @dataclass(frozen=True, eq=False)
@@ -575,12 +563,6 @@ def patch_shapes(layout: Layout) -> list[Shape]:
 # the integer program
 
 
-CHORD_WEIGHT = 0.01
-"""Weight of the secondary objective of :func:`solve_counts` (multiplicities close to
-``chord width / size``, so that strips without boundary sides, and wide strips, are split to
-about the size too) against the primary one (edges per side close to ``length / size``)."""
-
-
 def chord_area_error(polyline: np.ndarray, n: int) -> float:
     """Area between ``polyline (k, 2)`` and the chords through its ``n + 1`` points evenly spaced
     by arc length (:func:`jaxmatch.placement.refine.side_points`, where the mesh puts its
@@ -640,109 +622,6 @@ def curve_floors(layout: Layout, sides: Sides, area_tol: float) -> np.ndarray:
             lo, hi = (lo, mid) if chord_area_error(poly, mid) <= budget else (mid, hi)
         floors[s] = hi
     return floors
-
-
-def solve_counts(sides: Sides, matrices: Sequence[np.ndarray], *, counts: Mapping[int, int] | None = None,
-                 size: float | None = None, widths: Sequence[np.ndarray] | None = None,
-                 source: str = "<layout>", floors: np.ndarray | None = None) -> tuple[list[np.ndarray], np.ndarray]:
-    """Chord multiplicities of every patch from ONE integer program (``scipy.optimize.milp``).
-
-    matrices: per patch ``(n_p, c_p) int64`` side matrix (edges of chord ``c`` on the patch's
-    side ``i``); counts: ``{side id: count}`` required exactly; size: target edge length (user
-    units; default: the requested sides' total length over their total count); widths: per
-    patch ``(c_p,)`` chord widths (user units, :meth:`PatchTemplate.chord_widths`); floors:
-    ``(S,)`` the fewest edges of each side not requested (:func:`curve_floors`).
-
-    Variables: ``m_p >= 1`` integer per patch and chord, ``n_s >= 1`` integer per side.
-    Constraints: ``A_p[i] @ m_p = sum of n_s over the layout sides along patch side i`` for
-    every patch side (so a shared side has one count in both patches, a side along which two
-    neighbours meet is split between them, and each patch's total is even), ``n_s = counts[s]``
-    when requested. Objective: ``sum_s |n_s - length_s / size|`` over the sides not requested, plus
-    :data:`CHORD_WEIGHT` ``* sum_c |m_c - max(width_c / size, 1)|``.
-
-    Returns ``(multiplicities per patch ((c_p,) int64), counts per side ((S,) int64))``.
-    Raises :class:`LayoutInfeasible` (naming the requested sides and the nearest feasible
-    counts) when the requested counts cannot be met; :class:`InputError` for a bad size or when
-    neither a size nor counts are given.
-    """
-    from scipy.optimize import Bounds, LinearConstraint
-
-    counts = dict(counts or {})
-    S = len(sides.chains)
-    nc = [int(np.asarray(A).shape[1]) for A in matrices]
-    off = np.concatenate([[0], np.cumsum(nc)]).astype(int)
-    M = int(off[-1])
-    if size is None:
-        if not counts:
-            raise InputError("give an element size or edge counts for some sides", where=source)
-        size = float(sum(sides.lengths[s] for s in counts) / sum(counts.values()))
-    h = float(size)
-    if not (h > 0 and math.isfinite(h)):
-        raise InputError(f"element size must be a positive number, got {size!r}", where=source)
-    if float(np.sum(sides.lengths)) / h > 1_000_000:
-        raise InputError(f"element size {h:g} gives more than 1000000 side edges", where=source)
-    tau_m = np.concatenate([np.maximum(np.asarray(w, np.float64) / h, 1.0) for w in widths]) if widths is not None \
-        else np.ones(M)
-
-    def program(fixed: Mapping[int, int], targets: Mapping[int, float]):
-        """Variables: m (M), n (S), t (T side deviations), u (M chord deviations)."""
-        T = len(targets)
-        nv = M + S + T + M
-        rows, lo, hi = [], [], []
-
-        def row():
-            r = np.zeros(nv)
-            rows.append(r)
-            return r
-
-        for p, A in enumerate(matrices):
-            A = np.asarray(A, dtype=np.float64)
-            for i, parts in enumerate(sides.patch_sides[p]):
-                r = row()
-                r[off[p]:off[p + 1]] = A[i]
-                r[M + parts] = -1.0
-                lo.append(0.0)
-                hi.append(0.0)
-        for j, (s, tau) in enumerate(targets.items()):
-            for sign in (1.0, -1.0):  # t_j >= sign * (n_s - tau)
-                r = row()
-                r[M + s] = -sign
-                r[M + S + j] = 1.0
-                lo.append(-sign * tau)
-                hi.append(np.inf)
-        for c in range(M):
-            for sign in (1.0, -1.0):  # u_c >= sign * (m_c - tau_c)
-                r = row()
-                r[c] = -sign
-                r[M + S + T + c] = 1.0
-                lo.append(-sign * tau_m[c])
-                hi.append(np.inf)
-        cost = np.concatenate([np.zeros(M + S), np.ones(T), np.full(M, CHORD_WEIGHT)])
-        lb = np.concatenate([np.ones(M), np.ones(S) if floors is None else np.maximum(floors, 1), np.zeros(T + M)])
-        ub = np.full(nv, np.inf)
-        for s, v in fixed.items():
-            lb[M + s] = ub[M + s] = float(v)
-        integrality = np.concatenate([np.ones(M + S), np.zeros(T + M)])
-        x = run_milp(cost, LinearConstraint(np.array(rows), lo, hi), integrality, Bounds(lb, ub))
-        if x is None:
-            return None
-        x = np.rint(x).astype(np.int64)
-        return [x[off[p]:off[p + 1]] for p in range(len(matrices))], x[M:M + S]
-
-    targets = {s: float(sides.lengths[s]) / h for s in range(S) if s not in counts}
-    sol = program(counts, targets)
-    if sol is not None:
-        return sol
-    names = sides.names
-    near = program({}, {**targets, **{s: float(v) for s, v in counts.items()}}) if counts else None
-    if near is None:  # the templates' chords tie shared sides together in contradictory ways
-        raise LayoutInfeasible("no chord multiplicities give shared sides equal counts", where=source)
-    nearest = {names[s]: int(near[1][s]) for s in counts}
-    wrong = [s for s in counts if near[1][s] != counts[s]] or list(counts)
-    detail = ", ".join(f"side {names[s]}: {counts[s]} asked, nearest feasible {nearest[names[s]]}" for s in wrong)
-    raise LayoutInfeasible(f"the requested edge counts cannot be met together ({detail}; every patch needs an even "
-                           "number of boundary edges, and both ends of a strip of quads get the same count)",
-                           where=source, nearest=nearest)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -42,12 +42,11 @@ import numpy as np
 import scipy.sparse
 import scipy.sparse.csgraph
 import scipy.sparse.linalg
-from scipy.optimize import Bounds, LinearConstraint
 
 from jaxmatch.catalogue.mesh import edges
 from jaxmatch.defaults import QUALITY
 from jaxmatch.errors import InputError
-from jaxmatch.placement.milp import run_milp
+from jaxmatch.placement.milp import LayoutInfeasible, one_patch_sides, solve_counts
 from jaxmatch.placement.embed import Placement, inverted_mask, polygon_area, quad_areas, quality, smooth_in_frame
 from jaxmatch.shape import Shape
 
@@ -125,9 +124,6 @@ SIZE_CHORD_WEIGHT = 0.5
 """Weight, for a ``size`` request, of each chord's deviation from ``width / size`` (interior
 edges of about the size) against each side's deviation from ``length / size`` (in edges)."""
 
-_CHORD_WEIGHT = 0.01
-"""Weight of the secondary objective (multiplicities proportional to the chords' widths)
-against the primary one (edges per side) in the integer programs."""
 
 
 # ---------------------------------------------------------------------------------------------
@@ -461,49 +457,6 @@ def _check_counts(counts, n_sides: int, where: str) -> np.ndarray:
     return c
 
 
-def _milp_l1(A: np.ndarray, target: np.ndarray, tau: np.ndarray, ub: np.ndarray, *, exact: bool,
-             chord_weight: float = _CHORD_WEIGHT) -> np.ndarray | None:
-    """Integer ``m (C,)``, ``1 <= m <= ub``: with ``exact``, ``A m == target`` minimising
-    ``sum |m - tau|``; else minimising ``sum_i |A_i m - target_i| + chord_weight * sum_c |m_c - tau_c|``.
-    Returns None when infeasible."""
-    n, C = A.shape
-    # variables: m (C), r (n) side deviations, s (C) chord deviations
-    nv = C + n + C
-    cost = np.concatenate([np.zeros(C), np.full(n, 0.0 if exact else 1.0),
-                           np.full(C, 1.0 if exact else chord_weight)])
-    rows, lo, hi = [], [], []
-    Z = np.zeros
-    if exact:
-        rows.append(np.hstack([A, Z((n, n)), Z((n, C))]))
-        lo.append(target)
-        hi.append(target)
-    else:  # r >= |A m - t|
-        rows.append(np.hstack([A, -np.eye(n), Z((n, C))]))
-        lo.append(np.full(n, -np.inf))
-        hi.append(target)
-        rows.append(np.hstack([A, np.eye(n), Z((n, C))]))
-        lo.append(target)
-        hi.append(np.full(n, np.inf))
-    I = np.eye(C)
-    rows.append(np.hstack([I, Z((C, n)), -I]))  # s >= |m - tau|
-    lo.append(np.full(C, -np.inf))
-    hi.append(tau)
-    rows.append(np.hstack([I, Z((C, n)), I]))
-    lo.append(tau)
-    hi.append(np.full(C, np.inf))
-    cons = LinearConstraint(np.vstack(rows), np.concatenate(lo), np.concatenate(hi))
-    lb = np.concatenate([np.ones(C), np.zeros(n + C)])
-    ubv = np.concatenate([ub.astype(np.float64), np.full(n + C, np.inf)])
-    integ = np.concatenate([np.ones(C), np.zeros(n + C)])
-    x = run_milp(cost, cons, integ, Bounds(lb, ubv))
-    if x is None:
-        return None
-    m = np.rint(x[:C]).astype(np.int64)
-    if exact and not np.array_equal(A @ m, target):  # pragma: no cover - solver tolerance
-        return None
-    return m
-
-
 def _tau(template: PatchTemplate, h: float) -> np.ndarray:
     """Preferred (fractional) multiplicities for edges of length ``h``: chord width / h, >= 1."""
     return np.maximum(template.chord_widths() / h, 1.0)
@@ -546,12 +499,8 @@ def solve_multiplicities(template: PatchTemplate, *, counts=None, size=None) -> 
         best = None
         h_eff = h
         for _ in range(SIZE_ROUNDS):  # calibrate: interior edges differ from boundary ones
-            target = lengths / h_eff
-            tau = _tau(template, h_eff)
-            ub = np.maximum(np.ceil(2 * tau + 2 * target.max()), 1).astype(np.int64)
-            m = _milp_l1(A, target, tau, ub, exact=False, chord_weight=SIZE_CHORD_WEIGHT)
-            if m is None:  # pragma: no cover - always feasible (m = 1): a solver failure raises SolverError
-                raise InfeasibleRequest("no multiplicities found", src)
+            (m,), _ = solve_counts(one_patch_sides(lengths), [A], size=h_eff, widths=[template.chord_widths()],
+                                   source=src, chord_weight=SIZE_CHORD_WEIGHT)
             est = estimated_mean_edge(template, m)
             if best is None or abs(est / h - 1) < abs(best[0] / h - 1):
                 best = (est, m)
@@ -562,8 +511,7 @@ def solve_multiplicities(template: PatchTemplate, *, counts=None, size=None) -> 
     c = _check_counts(counts, n, src)
     h = float(lengths.sum() / c.sum())
     tau = _tau(template, h)
-    ub = np.where(has_end, c.max(), 1).astype(np.int64)
-    m = None if c.sum() % 2 else _milp_l1(A, c.astype(np.float64), tau, ub, exact=True)
+    m = None if c.sum() % 2 else _exact(template, c, h)
     if m is not None:
         return np.where(has_end, m, np.maximum(np.rint(tau), 1).astype(np.int64))
     near = nearest_counts(template, c)
@@ -587,25 +535,37 @@ def estimated_mean_edge(template: PatchTemplate, mult) -> float:
     return float(total / count)
 
 
+def _exact(template: PatchTemplate, counts: np.ndarray, h: float, widths: np.ndarray | None = None) -> np.ndarray | None:
+    """``(n_chords,)`` multiplicities giving exactly ``counts`` edges per side, closest (L1) to
+    ``widths / h`` (default: the chords' placed widths); None when there are none
+    (:func:`jaxmatch.placement.milp.solve_counts`)."""
+    A = template.side_matrix()
+    w = template.chord_widths() if widths is None else widths
+    try:
+        (m,), _ = solve_counts(one_patch_sides(side_lengths(template.shape)), [A], size=h,
+                               counts={i: int(c) for i, c in enumerate(counts)}, widths=[w],
+                               source=template.shape.source)
+    except LayoutInfeasible:
+        return None
+    return m
+
+
 def feasible(template: PatchTemplate, counts) -> bool:
     """Whether some multiplicities give exactly ``counts`` ``(n_sides,)`` edges per side."""
-    A = template.side_matrix()
     c = np.asarray(counts, np.int64)
     if c.sum() % 2:
         return False
-    has_end = A.sum(axis=0) > 0
-    ub = np.where(has_end, max(int(c.max()), 1), 1).astype(np.int64)
-    return _milp_l1(A, c.astype(np.float64), np.ones(A.shape[1]), ub, exact=True) is not None
+    return _exact(template, c, 1.0, widths=np.ones(template.side_matrix().shape[1])) is not None
 
 
 def nearest_counts(template: PatchTemplate, counts) -> np.ndarray:
-    """``(n_sides,) int64``: feasible counts closest (L1) to ``counts`` for ``template``."""
+    """``(n_sides,) int64``: feasible counts closest (L1) to ``counts`` for ``template``: the one
+    integer program with the counts as targets (lengths ``counts``, size 1)."""
     A = template.side_matrix()
-    c = np.asarray(counts, np.int64)
-    C = A.shape[1]
-    ub = np.full(C, max(int(c.max()), 1) + 2, np.int64)
-    m = _milp_l1(A, c.astype(np.float64), np.ones(C), ub, exact=False, chord_weight=1e-4)
-    return A @ m
+    c = np.asarray(counts, np.float64)
+    _, n = solve_counts(one_patch_sides(c), [A], size=1.0, widths=[np.ones(A.shape[1])], chord_weight=1e-4,
+                        source=template.shape.source)
+    return n
 
 
 def _fmt(counts) -> str:
