@@ -931,12 +931,11 @@ def mesh_layout(layout: Layout, catalogue: Catalogue, lattice: Lattice, *, size:
     Raises :class:`InputError` when a patch has no template that keeps its corners, and
     :class:`LayoutInfeasible` when the requested counts cannot be met.
     """
-    from jaxmatch.placement.refine import refine_and_place
-
-    sides = layout_sides(layout)
+    lkey = _layout_key(layout)
+    sides = _lru_get(_SIDES, lkey, lambda: layout_sides(layout))
     want = {s: c for s, c in parse_counts(dict(layout.requested), sides, layout.source).items()}
     want.update(counts or {})
-    shapes = patch_shapes(layout)
+    shapes = _lru_get(_SHAPES, lkey, lambda: patch_shapes(layout))
     cands = []
     for p, shp in enumerate(shapes):
         key = (layout.points[layout.patches[p]].tobytes(), layout.corner[layout.patches[p]].tobytes(), sizes,
@@ -964,8 +963,8 @@ def mesh_layout(layout: Layout, catalogue: Catalogue, lattice: Lattice, *, size:
     for _ in range(ROUNDS):
         tmpl = [cands[p][choice[p]] for p in range(len(shapes))]
         try:
-            mults, n = solve_counts(sides, [t.side_matrix() for t in tmpl], counts=want, size=size,
-                                    widths=[t.chord_widths() for t in tmpl], source=layout.source, floors=floors)
+            mults, n = _solve_counts_cached(layout, sides, [t.side_matrix() for t in tmpl], want, size,
+                                            [t.chord_widths() for t in tmpl], floors)
         except LayoutInfeasible:
             if not _advance_for_feasibility(sides, cands, choice, want, size, layout.source):
                 raise
@@ -974,7 +973,7 @@ def mesh_layout(layout: Layout, catalogue: Catalogue, lattice: Lattice, *, size:
         for p, (t, m) in enumerate(zip(tmpl, mults)):
             key = (p, choice[p], tuple(m.tolist()))
             if key not in cache:
-                cache[key] = refine_and_place(t, m)
+                cache[key] = _refine_cached(t, m)
             rm = cache[key]
             if any(len(parts) > 1 for parts in sides.patch_sides[p]):  # neighbours meet along a side
                 rm = rm._replace(xy=fit_sides(layout, sides, p, rm, n))
@@ -1053,3 +1052,79 @@ def layout_panel(mesh: LayoutMesh, head: str) -> tuple:
     """A :func:`draw_meshes` panel for a layout mesh (sides drawn thick)."""
     lines = [mesh.xy[ids] for ids in mesh.side_vertices]
     return (head, mesh.xy, mesh.quads, mesh.patch, lines)
+
+
+# ---------------------------------------------------------------------------------------------
+# caches of the meshing path (issue 22): pure functions of their inputs, kept between calls
+
+
+SOLVE_CACHE_SIZE = 1024
+"""Integer programs (:func:`solve_counts`) and refined patches (:func:`refine_and_place`) kept
+between :func:`mesh_layout` calls, each (least recently used dropped): the pipeline meshes the
+same patches with the same templates again for its size groups, for ``+bends`` and on every call
+at the same size (a slider, a batch of the same part)."""
+
+_SOLVES: dict = {}
+_REFINED: dict = {}
+_SIDES: dict = {}
+_SHAPES: dict = {}
+
+
+def clear_caches() -> None:
+    """Forget the programs, refined patches, sides and patch shapes kept between calls (for
+    timings of a first call)."""
+    for c in (_SOLVES, _REFINED, _SIDES, _SHAPES):
+        c.clear()
+
+
+def _lru_get(cache: dict, key, make):
+    """``cache[key]``, made by ``make()`` when missing (an exception it raises is kept and raised
+    again); the least recently used entry dropped beyond :data:`SOLVE_CACHE_SIZE`."""
+    hit = cache.pop(key, None)
+    if hit is None:
+        try:
+            hit = (True, make())
+        except (InputError, LayoutInfeasible) as e:
+            hit = (False, e)
+        while len(cache) >= SOLVE_CACHE_SIZE:
+            cache.pop(next(iter(cache)))
+    cache[key] = hit
+    ok, value = hit
+    if not ok:
+        raise value
+    return value
+
+
+def _arr(a) -> tuple | None:
+    if a is None:
+        return None
+    a = np.ascontiguousarray(a)
+    return a.dtype.str, a.shape, a.tobytes()
+
+
+def _layout_key(layout: Layout) -> tuple:
+    return (_arr(layout.points), tuple(_arr(p) for p in layout.patches), _arr(layout.corner),
+            tuple(_arr(p) for p in layout.patch_corner), tuple(sorted(dict(layout.requested).items())), layout.source)
+
+
+def _solve_counts_cached(layout: Layout, sides: Sides, matrices, want, size, widths, floors):
+    """:func:`solve_counts` of ``layout`` (whose ``sides`` these are), from the cache when the
+    same program was solved before; fresh copies of the arrays either way."""
+    key = (_layout_key(layout), tuple(_arr(A) for A in matrices), tuple(sorted((int(k), int(v)) for k, v in want.items())),
+           None if size is None else float(size), tuple(_arr(w) for w in widths), _arr(floors))
+    mults, n = _lru_get(_SOLVES, key, lambda: solve_counts(sides, matrices, counts=want, size=size, widths=widths,
+                                                           source=layout.source, floors=floors))
+    return [np.array(m) for m in mults], np.array(n)
+
+
+def _refine_cached(template, mult):
+    """:func:`jaxmatch.placement.refine.refine_and_place` of ``template`` at ``mult``, from the
+    cache when the same template (same shape, match and placement) was refined at the same
+    multiplicities before; the result names the given template."""
+    from jaxmatch.placement.refine import _shape_key, refine_and_place
+
+    m = template.match
+    key = (_shape_key(template.shape), template.shape.source, template.mesh_id, int(m.rotation), bool(m.reflected),
+           _arr(m.alignment), _arr(template.placement.xy), _arr(np.asarray(mult, np.int64)))
+    rm = _lru_get(_REFINED, key, lambda: refine_and_place(template, mult))
+    return rm._replace(template=template)

@@ -46,7 +46,7 @@ from scipy.optimize import Bounds, LinearConstraint
 
 from jaxmatch.catalogue.mesh import edges
 from jaxmatch.defaults import QUALITY
-from jaxmatch.errors import InputError
+from jaxmatch.errors import InputError, UnmatchableError
 from jaxmatch.placement.milp import run_milp
 from jaxmatch.placement.embed import Placement, inverted_mask, polygon_area, quad_areas, quality, smooth_in_frame
 from jaxmatch.shape import Shape
@@ -427,7 +427,61 @@ def patch_templates(shape: Shape, catalogue: "Catalogue", lattice: "Lattice", *,
     a mesh vertex and no quad is inverted or degenerate; at most ``limit`` are kept per size. Sizes are mixed
     because a request for few edges needs a small template and raw utilities favour large ones.
     """
-    return list(_iter_templates(shape, catalogue, lattice, limit=limit, internal=internal))
+    key = (_shape_key(shape), lattice, int(limit), None if internal is None else tuple(sorted(int(k) for k in internal)))
+    cache = _template_cache(catalogue)
+    hit = cache.get(key)
+    if hit is None:
+        try:
+            hit = (True, tuple(_iter_templates(shape, catalogue, lattice, limit=limit, internal=internal)))
+        except UnmatchableError as e:
+            hit = (False, e)
+        cache[key] = hit
+        while len(cache) > TEMPLATE_CACHE_SIZE:
+            cache.pop(next(iter(cache)))
+    else:
+        cache[key] = cache.pop(key)  # most recently used last
+    ok, found = hit
+    if not ok:
+        raise found
+    return [t._replace(shape=shape) for t in found]
+
+
+TEMPLATE_CACHE_SIZE = 512
+"""Shapes whose :func:`patch_templates` are kept per catalogue (least recently used dropped):
+ranking and placing candidates is most of a meshing call, and the same patch recurs across the
+pipeline's strategies, its size groups and across calls (a size slider, a batch of parts)."""
+
+
+def _array_key(a) -> tuple | None:
+    if a is None:
+        return None
+    a = np.ascontiguousarray(a)
+    return a.dtype.str, a.shape, a.tobytes()
+
+
+def _shape_key(shape: Shape) -> tuple:
+    """Everything of ``shape`` its templates depend on (all but ``source``: the cached templates
+    are given the caller's shape)."""
+    return (_array_key(shape.points), _array_key(shape.corners), _array_key(shape.convex), float(shape.scale),
+            _array_key(shape.offset), _array_key(shape.input_points), _array_key(shape.corner_order),
+            bool(shape.input_clockwise), tuple(_array_key(h) for h in shape.holes),
+            tuple(_array_key(c) for c in shape.hole_corners), bool(shape.explicit_corners))
+
+
+def _template_cache(catalogue: "Catalogue") -> dict:
+    """The catalogue's cache of :func:`patch_templates` (held by the catalogue object, so it
+    lives as long as the catalogue; the shipped catalogue is opened once per process)."""
+    cache = catalogue.__dict__.get("_patch_template_cache")
+    if cache is None:
+        cache = {}
+        catalogue.__dict__["_patch_template_cache"] = cache
+    return cache
+
+
+def clear_template_cache(catalogue: "Catalogue") -> None:
+    """Forget the templates :func:`patch_templates` cached for ``catalogue`` (for timings of a
+    first call on a shape)."""
+    catalogue.__dict__.pop("_patch_template_cache", None)
 
 
 # ---------------------------------------------------------------------------------------------
