@@ -1059,13 +1059,13 @@ def layout_panel(mesh: LayoutMesh, head: str) -> tuple:
 
 
 SOLVE_CACHE_SIZE = 1024
-"""Integer programs (:func:`solve_counts`) and refined patches (:func:`refine_and_place`) kept
-between :func:`mesh_layout` calls, each (least recently used dropped): the pipeline meshes the
+"""Integer programs (:func:`solve_counts`), sides and patch shapes kept between
+:func:`mesh_layout` calls, each (least recently used dropped; refined patches are kept by
+:func:`jaxmatch.placement.refine.refine_and_place`): the pipeline meshes the
 same patches with the same templates again for its size groups, for ``+bends`` and on every call
 at the same size (a slider, a batch of the same part)."""
 
 _SOLVES: dict = {}
-_REFINED: dict = {}
 _SIDES: dict = {}
 _SHAPES: dict = {}
 
@@ -1073,7 +1073,7 @@ _SHAPES: dict = {}
 def clear_caches() -> None:
     """Forget the programs, refined patches, sides and patch shapes kept between calls (for
     timings of a first call)."""
-    for c in (_SOLVES, _REFINED, _SIDES, _SHAPES):
+    for c in (_SOLVES, _SIDES, _SHAPES):
         c.clear()
 
 
@@ -1118,13 +1118,8 @@ def _solve_counts_cached(layout: Layout, sides: Sides, matrices, want, size, wid
 
 
 def _refine_cached(template, mult):
-    """:func:`jaxmatch.placement.refine.refine_and_place` of ``template`` at ``mult``, from the
-    cache when the same template (same shape, match and placement) was refined at the same
-    multiplicities before; the result names the given template."""
-    from jaxmatch.placement.refine import _shape_key, refine_and_place
+    """:func:`jaxmatch.placement.refine.refine_and_place` (which keeps its refined meshes
+    between calls)."""
+    from jaxmatch.placement.refine import refine_and_place
 
-    m = template.match
-    key = (_shape_key(template.shape), template.shape.source, template.mesh_id, int(m.rotation), bool(m.reflected),
-           _arr(m.alignment), _arr(template.placement.xy), _arr(np.asarray(mult, np.int64)))
-    rm = _lru_get(_REFINED, key, lambda: refine_and_place(template, mult))
-    return rm._replace(template=template)
+    return refine_and_place(template, mult)

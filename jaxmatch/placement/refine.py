@@ -479,9 +479,11 @@ def _template_cache(catalogue: "Catalogue") -> dict:
 
 
 def clear_template_cache(catalogue: "Catalogue") -> None:
-    """Forget the templates :func:`patch_templates` cached for ``catalogue`` (for timings of a
-    first call on a shape)."""
+    """Forget the templates :func:`patch_templates` cached for ``catalogue`` and the integer
+    programs of :func:`_milp_l1` (for timings of a first call on a shape)."""
     catalogue.__dict__.pop("_patch_template_cache", None)
+    _MILP_CACHE.clear()
+    _REFINED.clear()
 
 
 # ---------------------------------------------------------------------------------------------
@@ -515,11 +517,33 @@ def _check_counts(counts, n_sides: int, where: str) -> np.ndarray:
     return c
 
 
+_MILP_CACHE: dict = {}
+MILP_CACHE_SIZE = 4096
+"""Integer programs of :func:`_milp_l1` kept (by their exact data; least recently used dropped):
+:func:`refine_mesh` asks every candidate template whether it can meet the counts, the same
+programs on every call at the same size."""
+
+
 def _milp_l1(A: np.ndarray, target: np.ndarray, tau: np.ndarray, ub: np.ndarray, *, exact: bool,
              chord_weight: float = _CHORD_WEIGHT) -> np.ndarray | None:
     """Integer ``m (C,)``, ``1 <= m <= ub``: with ``exact``, ``A m == target`` minimising
     ``sum |m - tau|``; else minimising ``sum_i |A_i m - target_i| + chord_weight * sum_c |m_c - tau_c|``.
-    Returns None when infeasible."""
+    Returns None when infeasible. The same program solved again is answered from a cache."""
+    args = [np.asarray(A, np.float64), np.asarray(target, np.float64), np.asarray(tau, np.float64),
+            np.asarray(ub, np.float64)]
+    key = (tuple(_array_key(a) for a in args), bool(exact), float(chord_weight))
+    if key in _MILP_CACHE:
+        m = _MILP_CACHE.pop(key)
+    else:
+        m = _milp_l1_solve(A, target, tau, ub, exact=exact, chord_weight=chord_weight)
+        while len(_MILP_CACHE) >= MILP_CACHE_SIZE:
+            _MILP_CACHE.pop(next(iter(_MILP_CACHE)))
+    _MILP_CACHE[key] = m
+    return None if m is None else m.copy()
+
+
+def _milp_l1_solve(A: np.ndarray, target: np.ndarray, tau: np.ndarray, ub: np.ndarray, *, exact: bool,
+                   chord_weight: float) -> np.ndarray | None:
     n, C = A.shape
     # variables: m (C), r (n) side deviations, s (C) chord deviations
     nv = C + n + C
@@ -834,7 +858,35 @@ def _laplacian(quads: np.ndarray, nv: int) -> scipy.sparse.csr_matrix:
     return (scipy.sparse.diags(deg) - A).tocsr()
 
 
+REFINED_CACHE_SIZE = 512
+"""Refined meshes of :func:`refine_and_place` kept between calls (least recently used dropped)."""
+
+REFINED_CACHE_QUADS = 20_000
+"""Only refined meshes of at most this many quads are kept (a large mesh is not asked twice)."""
+
+_REFINED: dict = {}
+
+
 def refine_and_place(template: PatchTemplate, mult, *, smooth_iters: int | None = None) -> RefinedMesh:
+    """:func:`_refine_and_place`, answered from a cache when the same template (same shape,
+    match and placement) was refined at the same multiplicities before (the result names the
+    given template; its arrays are shared, not to be written to)."""
+    m = template.match
+    key = (_shape_key(template.shape), template.mesh_id, int(m.rotation), bool(m.reflected),
+           _array_key(m.alignment), _array_key(template.placement.xy), _array_key(np.asarray(mult, np.int64)),
+           None if smooth_iters is None else int(smooth_iters))
+    rm = _REFINED.pop(key, None)
+    if rm is None:
+        rm = _refine_and_place(template, mult, smooth_iters=smooth_iters)
+        if rm.quads.shape[0] > REFINED_CACHE_QUADS:
+            return rm
+        while len(_REFINED) >= REFINED_CACHE_SIZE:
+            _REFINED.pop(next(iter(_REFINED)))
+    _REFINED[key] = rm
+    return rm._replace(template=template)
+
+
+def _refine_and_place(template: PatchTemplate, mult, *, smooth_iters: int | None = None) -> RefinedMesh:
     """Split every quad by the multiplicities of its two chords, put the refined boundary
     vertices on the user's boundary by arc length, place and smooth the interior.
 
