@@ -107,3 +107,21 @@ def test_jaxmatch_mesh_twice_gives_the_same_mesh(cat):
 
 def test_a_lattice_is_parsed_once_per_content():
     assert load_lattice("fine") is load_lattice("fine")
+
+
+def test_a_large_decomposition_is_smoothed_near_its_cuts_only(cat):
+    from jaxmatch.placement import layout as L
+    from jaxmatch.placement.embed import inverted_mask, quality
+    from jaxmatch.placement.refine import SMOOTH_ALWAYS
+
+    lat = load_lattice("fine")
+    lay = L.load_layout(ROOT / "examples" / "layouts" / "two-blocks.json")
+    ext = float(np.ptp(lay.points, axis=0).max())
+    plain = L.mesh_layout(lay, cat, lat, size=ext / 70)
+    smoothed = L.mesh_layout(lay, cat, lat, size=ext / 70, smooth_cuts=True)
+    assert smoothed.quads.shape[0] > SMOOTH_ALWAYS
+    np.testing.assert_array_equal(plain.quads, smoothed.quads)
+    assert not inverted_mask(smoothed.xy, smoothed.quads).any()
+    assert quality(smoothed.xy, smoothed.quads)[0].min() >= quality(plain.xy, plain.quads)[0].min() - 1e-9
+    moved = np.any(plain.xy != smoothed.xy, axis=1)
+    assert moved.sum() < 0.5 * plain.xy.shape[0]  # the band around the cut, not every vertex

@@ -992,7 +992,7 @@ def mesh_layout(layout: Layout, catalogue: Catalogue, lattice: Lattice, *, size:
     loops = _boundary_loops(layout, sides, side_ids, xy)
     outer, holes = loops[0], tuple(loops[1:])
     if smooth_cuts:
-        xy = smooth_in_frame(xy, quads, np.concatenate(loops))
+        xy = _smooth_cuts(xy, quads, np.concatenate(loops), sides, side_ids)
     import shapely
 
     region = shapely.union_all([shapely.Polygon(layout.points[lp]) for lp in layout.patches]).area
@@ -1123,3 +1123,40 @@ def _refine_cached(template, mult):
     from jaxmatch.placement.refine import refine_and_place
 
     return refine_and_place(template, mult)
+
+
+CUT_RINGS = 6
+"""Above :data:`jaxmatch.placement.refine.SMOOTH_ALWAYS` quads, the whole-mesh smoothing of a
+decomposition moves only the vertices within this many rings of quads of an inner side (the
+cuts): the patches come smoothed already, and smoothing every vertex was ~80% of the time of a
+25,000-quad L-shape."""
+
+
+def _smooth_cuts(xy: np.ndarray, quads: np.ndarray, fixed: np.ndarray, sides: Sides, side_ids) -> np.ndarray:
+    """The merged mesh smoothed with the outer loops ``fixed``
+    (:func:`jaxmatch.placement.embed.smooth_in_frame`): every other vertex up to
+    :data:`~jaxmatch.placement.refine.SMOOTH_ALWAYS` quads; above, with
+    :data:`~jaxmatch.placement.refine.SMOOTH_ITERS_LARGE` iterations, only the vertices within
+    :data:`CUT_RINGS` rings of the inner sides (the quads around them smoothed as a submesh
+    whose other vertices stay)."""
+    from jaxmatch.placement.refine import SMOOTH_ALWAYS, SMOOTH_ITERS_LARGE
+
+    if quads.shape[0] <= SMOOTH_ALWAYS:
+        return smooth_in_frame(xy, quads, fixed)
+    inner = [np.asarray(side_ids[s], np.int64) for s in range(len(side_ids)) if sides.users[s, 1] >= 0]
+    if not inner:
+        return xy
+    near = np.zeros(xy.shape[0], bool)
+    near[np.concatenate(inner)] = True
+    for _ in range(CUT_RINGS):
+        near[quads[near[quads].any(axis=1)].ravel()] = True
+    free = near.copy()
+    free[fixed] = False
+    sub = quads[free[quads].any(axis=1)]
+    verts = np.unique(sub)
+    local = np.full(xy.shape[0], -1, np.int64)
+    local[verts] = np.arange(verts.shape[0])
+    keep = np.flatnonzero(~free[verts])
+    out = xy.copy()
+    out[verts] = smooth_in_frame(xy[verts], local[sub], keep, frame=xy[fixed], iters=SMOOTH_ITERS_LARGE)
+    return out
