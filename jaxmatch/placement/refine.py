@@ -657,7 +657,7 @@ def estimated_mean_edge(template: PatchTemplate, mult) -> float:
     xy = pl.xy
     q = np.asarray(pl.mesh.quads, np.int64)
     p = xy[q]
-    ln = np.linalg.norm(np.roll(p, -1, axis=1) - p, axis=-1)  # (F, 4) edge k: q[k] -> q[k+1]
+    ln = np.linalg.norm(p[:, [1, 2, 3, 0]] - p, axis=-1)  # (F, 4) edge k: q[k] -> q[k+1]
     el = np.linalg.norm(xy[template.edge_list[:, 0]] - xy[template.edge_list[:, 1]], axis=1)
     ma, mb = m[template.quad_chords[:, 0]], m[template.quad_chords[:, 1]]
     total = el.sum() + np.sum((mb - 1) * (ln[:, 0] + ln[:, 2]) / 2 + (ma - 1) * (ln[:, 1] + ln[:, 3]) / 2)
@@ -961,7 +961,7 @@ def _refine_and_place(template: PatchTemplate, mult, *, smooth_iters: int | None
         xy = smooth_in_frame(xy, quads, bverts, frame=bxy, iters=iters)
         sj = quality(xy, quads)[0]
     p = xy[quads]
-    el = np.linalg.norm(np.roll(p, -1, axis=1) - p, axis=-1)
+    el = np.linalg.norm(p[:, [1, 2, 3, 0]] - p, axis=-1)
     ratio = el.max(axis=1) / np.maximum(el.min(axis=1), np.finfo(float).tiny)
     return RefinedMesh(
         xy=xy, quads=quads, side_vertices=tuple(side_vertices), counts=counts.astype(np.int64), mult=m,
