@@ -101,6 +101,9 @@ def parse_args(argv=None):
     ap.add_argument("--mesh-reps", type=int, default=3, help="--mesh: timed repetitions after one untimed run (default 3)")
     ap.add_argument("--mesh-shapes", default="", help="--mesh: shapes of mesh_table.SHAPES, comma-separated (default all)")
     ap.add_argument("--mesh-divisions", default="16,32", help="--mesh: h = perimeter / each of these (default 16,32)")
+    ap.add_argument("--mesh-large", default="", metavar="FILE:H",
+                    help="--mesh: only time one large jaxmatch.mesh (FILE at size H, after one call at 20 H) and its "
+                         "peak RSS, e.g. examples/lshape.json:0.00548 (~100,000 quads)")
     ap.add_argument("--mesh-profile", default="", metavar="SHAPE:DIV",
                     help="--mesh: only profile one warm jaxmatch.mesh call (cProfile: top 10 by cumulative and by own time), e.g. T:32")
     return ap.parse_args(argv)
@@ -959,6 +962,23 @@ def bench_mesh(shapes=None, divisions=MESH_DIVISIONS, reps: int = 3, say=None, w
                          "python": platform.python_version()}, "cpus": len(os.sched_getaffinity(0))}
 
 
+def mesh_large(path: str, size) -> dict:
+    """One large ``jaxmatch.mesh(load_shape(path), size=size)``, after one call at 20 x the size
+    (the code paths warm): seconds, quads, peak RSS of this process (``ru_maxrss``) and before."""
+    import jaxmatch
+
+    h = float(size)
+    shp = jaxmatch.load_shape(path)
+    jaxmatch.mesh(shp, size=20 * h)
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    t = time.perf_counter()
+    m = jaxmatch.mesh(shp, size=h)
+    dt = time.perf_counter() - t
+    return {"file": path, "size": h, "quads": int(len(m.quads)), "chosen": m.chosen, "seconds": dt,
+            "min_sj": float(m.min_scaled_jacobian), "valid": bool(m.valid), "rss_before_mb": before,
+            "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, "load": list(os.getloadavg())}
+
+
 def profile_mesh(name: str, div: int, top: int = 10) -> dict:
     """cProfile of one warm ``jaxmatch.mesh(shape, size=h)`` call (after one untimed call): the
     wall time, the ``top`` entries by cumulative time (``"top"``) and by own time (``"top_own"``),
@@ -989,6 +1009,15 @@ def profile_mesh(name: str, div: int, top: int = 10) -> dict:
 
 def main(argv=None) -> int:
     args = parse_args(argv)
+    if args.mesh and args.mesh_large:
+        r = mesh_large(*args.mesh_large.rsplit(":", 1))
+        print(f"{r['file']} at size {r['size']:g}: {r['quads']} quads ({r['chosen']}, min SJ {r['min_sj']:.3f}, "
+              f"valid {r['valid']}) in {r['seconds']:.2f} s; peak RSS {r['peak_rss_mb']:.0f} MB "
+              f"({r['rss_before_mb']:.0f} MB before the call); load {r['load'][0]:.2f}",
+              file=sys.stderr if args.json else sys.stdout)
+        if args.json:
+            print(json.dumps(r))
+        return 0
     if args.mesh and args.mesh_profile:
         name, _, div = args.mesh_profile.partition(":")
         r = profile_mesh(name, int(div or 32))
