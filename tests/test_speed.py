@@ -125,3 +125,16 @@ def test_a_large_decomposition_is_smoothed_near_its_cuts_only(cat):
     assert quality(smoothed.xy, smoothed.quads)[0].min() >= quality(plain.xy, plain.quads)[0].min() - 1e-9
     moved = np.any(plain.xy != smoothed.xy, axis=1)
     assert moved.sum() < 0.5 * plain.xy.shape[0]  # the band around the cut, not every vertex
+
+
+def test_the_refined_meshes_kept_stay_within_their_quad_budget(cat, monkeypatch):
+    from jaxmatch.placement import layout as L
+
+    monkeypatch.setattr(R, "REFINED_CACHE_TOTAL_QUADS", 300)
+    R._REFINED.clear()
+    lat = load_lattice("fine")
+    lay = L.load_layout(ROOT / "examples" / "layouts" / "house.json")
+    for size in (0.6, 0.5, 0.4, 0.3, 0.25):
+        L.mesh_layout(lay, cat, lat, size=size)
+        assert sum(r.quads.shape[0] for r in R._REFINED.values()) <= 300
+    R._REFINED.clear()

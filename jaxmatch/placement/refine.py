@@ -864,6 +864,9 @@ REFINED_CACHE_SIZE = 512
 REFINED_CACHE_QUADS = 20_000
 """Only refined meshes of at most this many quads are kept (a large mesh is not asked twice)."""
 
+REFINED_CACHE_TOTAL_QUADS = 200_000
+"""At most this many quads in all the refined meshes kept (tens of MB), whatever their number."""
+
 _REFINED: dict = {}
 
 
@@ -880,8 +883,9 @@ def refine_and_place(template: PatchTemplate, mult, *, smooth_iters: int | None 
         rm = _refine_and_place(template, mult, smooth_iters=smooth_iters)
         if rm.quads.shape[0] > REFINED_CACHE_QUADS:
             return rm
-        while len(_REFINED) >= REFINED_CACHE_SIZE:
-            _REFINED.pop(next(iter(_REFINED)))
+        total = sum(r.quads.shape[0] for r in _REFINED.values()) + rm.quads.shape[0]
+        while _REFINED and (len(_REFINED) >= REFINED_CACHE_SIZE or total > REFINED_CACHE_TOTAL_QUADS):
+            total -= _REFINED.pop(next(iter(_REFINED))).quads.shape[0]
     _REFINED[key] = rm
     return rm._replace(template=template)
 
