@@ -138,3 +138,21 @@ def test_the_refined_meshes_kept_stay_within_their_quad_budget(cat, monkeypatch)
         L.mesh_layout(lay, cat, lat, size=size)
         assert sum(r.quads.shape[0] for r in R._REFINED.values()) <= 300
     R._REFINED.clear()
+
+
+def test_a_meshed_layout_from_the_cache_is_a_copy_for_the_callers_layout(cat):
+    from jaxmatch.placement import layout as L
+
+    lat = load_lattice("fine")
+    R.clear_template_cache(cat)
+    lay = L.load_layout(ROOT / "examples" / "layouts" / "house.json")
+    a = L.mesh_layout(lay, cat, lat, size=0.5)
+    a.xy[:] = 0.0  # a caller writing to its answer does not change the next one
+    other = L.load_layout(ROOT / "examples" / "layouts" / "house.json")  # another object, the same layout
+    seen = []
+    b = L.mesh_layout(other, cat, lat, size=0.5, progress=lambda i, n: seen.append((i, n)))
+    assert b.layout is other and np.ptp(b.xy) > 0
+    assert seen == [(p + 1, lay.n_patches) for p in range(lay.n_patches)]
+    R.clear_template_cache(cat)
+    L.clear_caches()
+    _same_mesh(b, L.mesh_layout(other, cat, lat, size=0.5))

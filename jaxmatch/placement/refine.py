@@ -479,9 +479,11 @@ def _template_cache(catalogue: "Catalogue") -> dict:
 
 
 def clear_template_cache(catalogue: "Catalogue") -> None:
-    """Forget the templates :func:`patch_templates` cached for ``catalogue`` and the integer
-    programs of :func:`_milp_l1` (for timings of a first call on a shape)."""
+    """Forget the templates :func:`patch_templates` cached for ``catalogue``, the layouts
+    :func:`jaxmatch.placement.layout.mesh_layout` meshed with it, the integer programs of
+    :func:`_milp_l1` and the refined meshes (for timings of a first call on a shape)."""
     catalogue.__dict__.pop("_patch_template_cache", None)
+    catalogue.__dict__.pop("_mesh_layout_cache", None)
     _MILP_CACHE.clear()
     _REFINED.clear()
 
