@@ -807,78 +807,15 @@ def mesh_layout(layout: Layout, catalogue: Catalogue, lattice: Lattice, *, size:
     (:func:`jaxmatch.placement.embed.smooth`; for decompositions, whose inner sides are not
     the user's): it never lowers the minimum scaled Jacobian.
 
+    The answer is kept per catalogue (:func:`_mesh_layout_cached`): the same layout meshed again
+    with the same options is not solved again.
+
     Raises :class:`InputError` when a patch has no template that keeps its corners, and
     :class:`LayoutInfeasible` when the requested counts cannot be met.
     """
-    from jaxmatch.placement.refine import refine_and_place
-
-    sides = layout_sides(layout)
-    want = {s: c for s, c in parse_counts(dict(layout.requested), sides, layout.source).items()}
-    want.update(counts or {})
-    shapes = patch_shapes(layout)
-    cands = []
-    for p, shp in enumerate(shapes):
-        key = (layout.points[layout.patches[p]].tobytes(), layout.corner[layout.patches[p]].tobytes(), sizes,
-               templates_per_patch)
-        if template_cache is not None and key in template_cache:
-            t = template_cache[key]
-        else:
-            t = _templates(shp, catalogue, lattice, templates_per_patch, sizes)
-            if template_cache is not None:
-                template_cache[key] = t
-        if not t:
-            ks = sorted({k for g in sizes for k in g if k in catalogue.internal})
-            raise InputError(f"patch {p}: no catalogue template with {ks[0]}..{ks[-1]} internal vertices keeps its "
-                             f"{shp.n_corners} corners without folding (split the patch)", where=layout.source)
-        cands.append(t)
-        if progress:
-            progress(p + 1, len(shapes))
-    floors = curve_floors(layout, sides, QUALITY.area_tol) if size is not None else None
-    choice = [0] * len(shapes) if first_templates is None else [int(j) for j in first_templates]
-    for p, j in enumerate(choice):
-        if not 0 <= j < len(cands[p]):
-            raise IndexError(f"patch {p} has {len(cands[p])} candidate templates, not {j + 1}")
-    cache: dict = {}
-    best = None
-    for _ in range(ROUNDS):
-        tmpl = [cands[p][choice[p]] for p in range(len(shapes))]
-        try:
-            mults, n = solve_counts(sides, [t.side_matrix() for t in tmpl], counts=want, size=size,
-                                    widths=[t.chord_widths() for t in tmpl], source=layout.source, floors=floors)
-        except LayoutInfeasible:
-            if not _advance_for_feasibility(sides, cands, choice, want, size, layout.source):
-                raise
-            continue
-        refined = []
-        for p, (t, m) in enumerate(zip(tmpl, mults)):
-            key = (p, choice[p], tuple(m.tolist()))
-            if key not in cache:
-                cache[key] = refine_and_place(t, m)
-            rm = cache[key]
-            if any(len(parts) > 1 for parts in sides.patch_sides[p]):  # neighbours meet along a side
-                rm = rm._replace(xy=fit_sides(layout, sides, p, rm, n))
-            refined.append(rm)
-        keys = [_key(r) for r in refined]
-        total = (sum(k[0] for k in keys), max(k[1] for k in keys))  # inverted quads, then the worst patch
-        if best is None or total < best[0]:
-            best = (total, list(tmpl), mults, n, refined)
-        bad = [p for p, k in enumerate(keys) if (k[0] > 0 or -k[1] < MIN_SJ) and choice[p] + 1 < len(cands[p])]
-        if not bad:
-            break
-        for p in bad:
-            choice[p] += 1
-    _, tmpl, mults, n, refined = best
-    xy, quads, patch, side_ids, gap = merge_patches(layout, sides, refined, n)
-    loops = _boundary_loops(layout, sides, side_ids, xy)
-    outer, holes = loops[0], tuple(loops[1:])
-    if smooth_cuts:
-        xy = smooth_in_frame(xy, quads, np.concatenate(loops))
-    import shapely
-
-    region = shapely.union_all([shapely.Polygon(layout.points[lp]) for lp in layout.patches]).area
-    return LayoutMesh(layout=layout, sides=sides, xy=xy, quads=quads, patch=patch, side_vertices=side_ids,
-                      counts=n, outer=outer, holes=holes, templates=tuple(t.mesh_id for t in tmpl),
-                      multiplicities=tuple(mults), shared_gap=gap, region_area=float(region))
+    return _mesh_layout_cached(layout, catalogue, lattice, size=size, counts=counts,
+                               templates_per_patch=templates_per_patch, sizes=sizes, smooth_cuts=smooth_cuts,
+                               template_cache=template_cache, progress=progress, first_templates=first_templates)
 
 
 def _advance_for_feasibility(sides, cands, choice, want, size, source) -> bool:
@@ -932,3 +869,244 @@ def layout_panel(mesh: LayoutMesh, head: str) -> tuple:
     """A :func:`draw_meshes` panel for a layout mesh (sides drawn thick)."""
     lines = [mesh.xy[ids] for ids in mesh.side_vertices]
     return (head, mesh.xy, mesh.quads, mesh.patch, lines)
+
+
+# ---------------------------------------------------------------------------------------------
+# caches of the meshing path (issue 22): pure functions of their inputs, kept between calls
+
+
+SOLVE_CACHE_SIZE = 1024
+"""Integer programs (:func:`solve_counts`), sides and patch shapes kept between
+:func:`mesh_layout` calls, each (least recently used dropped; refined patches are kept by
+:func:`jaxmatch.placement.refine.refine_and_place`): the pipeline meshes the
+same patches with the same templates again for its size groups, for ``+bends`` and on every call
+at the same size (a slider, a batch of the same part)."""
+
+_SOLVES: dict = {}
+_SIDES: dict = {}
+_SHAPES: dict = {}
+
+
+def clear_caches() -> None:
+    """Forget the programs, refined patches, sides and patch shapes kept between calls (for
+    timings of a first call)."""
+    for c in (_SOLVES, _SIDES, _SHAPES):
+        c.clear()
+
+
+def _lru_get(cache: dict, key, make):
+    """``cache[key]``, made by ``make()`` when missing (an exception it raises is kept and raised
+    again); the least recently used entry dropped beyond :data:`SOLVE_CACHE_SIZE`."""
+    hit = cache.pop(key, None)
+    if hit is None:
+        try:
+            hit = (True, make())
+        except (InputError, LayoutInfeasible) as e:
+            hit = (False, e)
+        while len(cache) >= SOLVE_CACHE_SIZE:
+            cache.pop(next(iter(cache)))
+    cache[key] = hit
+    ok, value = hit
+    if not ok:
+        raise value
+    return value
+
+
+def _arr(a) -> tuple | None:
+    if a is None:
+        return None
+    a = np.ascontiguousarray(a)
+    return a.dtype.str, a.shape, a.tobytes()
+
+
+def _layout_key(layout: Layout) -> tuple:
+    return (_arr(layout.points), tuple(_arr(p) for p in layout.patches), _arr(layout.corner),
+            tuple(_arr(p) for p in layout.patch_corner), tuple(sorted(dict(layout.requested).items())), layout.source)
+
+
+def _solve_counts_cached(layout: Layout, sides: Sides, matrices, want, size, widths, floors):
+    """:func:`solve_counts` of ``layout`` (whose ``sides`` these are), from the cache when the
+    same program was solved before; fresh copies of the arrays either way."""
+    key = (_layout_key(layout), tuple(_arr(A) for A in matrices), tuple(sorted((int(k), int(v)) for k, v in want.items())),
+           None if size is None else float(size), tuple(_arr(w) for w in widths), _arr(floors))
+    mults, n = _lru_get(_SOLVES, key, lambda: solve_counts(sides, matrices, counts=want, size=size, widths=widths,
+                                                           source=layout.source, floors=floors))
+    return [np.array(m) for m in mults], np.array(n)
+
+
+def _refine_cached(template, mult):
+    """:func:`jaxmatch.placement.refine.refine_and_place` (which keeps its refined meshes
+    between calls)."""
+    from jaxmatch.placement.refine import refine_and_place
+
+    return refine_and_place(template, mult)
+
+
+CUT_RINGS = 6
+"""Above :data:`jaxmatch.placement.refine.SMOOTH_ALWAYS` quads, the whole-mesh smoothing of a
+decomposition moves only the vertices within this many rings of quads of an inner side (the
+cuts): the patches come smoothed already, and smoothing every vertex was ~80% of the time of a
+25,000-quad L-shape."""
+
+
+def _smooth_cuts(xy: np.ndarray, quads: np.ndarray, fixed: np.ndarray, sides: Sides, side_ids) -> np.ndarray:
+    """The merged mesh smoothed with the outer loops ``fixed``
+    (:func:`jaxmatch.placement.embed.smooth_in_frame`): every other vertex up to
+    :data:`~jaxmatch.placement.refine.SMOOTH_ALWAYS` quads; above, with
+    :data:`~jaxmatch.placement.refine.SMOOTH_ITERS_LARGE` iterations, only the vertices within
+    :data:`CUT_RINGS` rings of the inner sides (the quads around them smoothed as a submesh
+    whose other vertices stay)."""
+    from jaxmatch.placement.refine import SMOOTH_ALWAYS, SMOOTH_ITERS_LARGE
+
+    if quads.shape[0] <= SMOOTH_ALWAYS:
+        return smooth_in_frame(xy, quads, fixed)
+    inner = [np.asarray(side_ids[s], np.int64) for s in range(len(side_ids)) if sides.users[s, 1] >= 0]
+    if not inner:
+        return xy
+    near = np.zeros(xy.shape[0], bool)
+    near[np.concatenate(inner)] = True
+    for _ in range(CUT_RINGS):
+        near[quads[near[quads].any(axis=1)].ravel()] = True
+    free = near.copy()
+    free[fixed] = False
+    sub = quads[free[quads].any(axis=1)]
+    verts = np.unique(sub)
+    local = np.full(xy.shape[0], -1, np.int64)
+    local[verts] = np.arange(verts.shape[0])
+    keep = np.flatnonzero(~free[verts])
+    out = xy.copy()
+    out[verts] = smooth_in_frame(xy[verts], local[sub], keep, frame=xy[fixed], iters=SMOOTH_ITERS_LARGE)
+    return out
+
+
+MESH_CACHE_SIZE = 256
+"""Meshed layouts kept per catalogue between :func:`mesh_layout` calls (least recently used
+dropped; only meshes of at most :data:`jaxmatch.placement.refine.REFINED_CACHE_QUADS` quads)."""
+
+
+def _mesh_layout_cached(layout: Layout, catalogue, lattice, *, size, counts, templates_per_patch, sizes, smooth_cuts,
+                        template_cache, progress, first_templates) -> LayoutMesh:
+    """:func:`_mesh_layout` from the catalogue's cache when the same layout was meshed with the
+    same options (the answer names the given layout; its arrays are copies)."""
+    from jaxmatch.placement.refine import REFINED_CACHE_QUADS
+
+    key = (_layout_key(layout), lattice, None if size is None else float(size),
+           None if counts is None else tuple(sorted((int(a), int(b)) for a, b in dict(counts).items())),
+           int(templates_per_patch), tuple(tuple(int(k) for k in g) for g in sizes), bool(smooth_cuts),
+           None if first_templates is None else tuple(int(j) for j in first_templates))
+    cache = catalogue.__dict__.setdefault("_mesh_layout_cache", {})
+    hit = cache.pop(key, None)
+    if hit is None:
+        try:
+            lm = _mesh_layout(layout, catalogue, lattice, size=size, counts=counts,
+                              templates_per_patch=templates_per_patch, sizes=sizes, smooth_cuts=smooth_cuts,
+                              template_cache=template_cache, progress=progress, first_templates=first_templates)
+        except (LayoutInfeasible, InputError) as e:
+            hit = (False, e)
+        else:
+            if lm.quads.shape[0] > REFINED_CACHE_QUADS:
+                return lm
+            hit = (True, lm)
+        while len(cache) >= MESH_CACHE_SIZE:
+            cache.pop(next(iter(cache)))
+        cache[key] = hit
+        if hit[0]:
+            return _copied(hit[1], layout)
+        raise hit[1]
+    cache[key] = hit
+    if not hit[0]:
+        raise hit[1]
+    if progress:
+        for p in range(layout.n_patches):
+            progress(p + 1, layout.n_patches)
+    return _copied(hit[1], layout)
+
+
+def _copied(lm: LayoutMesh, layout: Layout) -> LayoutMesh:
+    """``lm`` for ``layout``, its arrays copied (a caller may write to them)."""
+    import dataclasses
+
+    def cp(v):
+        if isinstance(v, np.ndarray):
+            return v.copy()
+        if isinstance(v, tuple):
+            return tuple(cp(x) for x in v)
+        if isinstance(v, list):
+            return [cp(x) for x in v]
+        return v
+
+    out = {f.name: cp(getattr(lm, f.name)) for f in dataclasses.fields(lm) if f.name not in ("layout", "sides")}
+    return dataclasses.replace(lm, layout=layout, **out)
+
+
+def _mesh_layout(layout: Layout, catalogue: Catalogue, lattice: Lattice, *, size, counts, templates_per_patch, sizes,
+                 smooth_cuts, template_cache, progress, first_templates) -> LayoutMesh:
+    """The work of :func:`mesh_layout` (see there)."""
+    lkey = _layout_key(layout)
+    sides = _lru_get(_SIDES, lkey, lambda: layout_sides(layout))
+    want = {s: c for s, c in parse_counts(dict(layout.requested), sides, layout.source).items()}
+    want.update(counts or {})
+    shapes = _lru_get(_SHAPES, lkey, lambda: patch_shapes(layout))
+    cands = []
+    for p, shp in enumerate(shapes):
+        key = (layout.points[layout.patches[p]].tobytes(), layout.corner[layout.patches[p]].tobytes(), sizes,
+               templates_per_patch)
+        if template_cache is not None and key in template_cache:
+            t = template_cache[key]
+        else:
+            t = _templates(shp, catalogue, lattice, templates_per_patch, sizes)
+            if template_cache is not None:
+                template_cache[key] = t
+        if not t:
+            ks = sorted({k for g in sizes for k in g if k in catalogue.internal})
+            raise InputError(f"patch {p}: no catalogue template with {ks[0]}..{ks[-1]} internal vertices keeps its "
+                             f"{shp.n_corners} corners without folding (split the patch)", where=layout.source)
+        cands.append(t)
+        if progress:
+            progress(p + 1, len(shapes))
+    floors = curve_floors(layout, sides, QUALITY.area_tol) if size is not None else None
+    choice = [0] * len(shapes) if first_templates is None else [int(j) for j in first_templates]
+    for p, j in enumerate(choice):
+        if not 0 <= j < len(cands[p]):
+            raise IndexError(f"patch {p} has {len(cands[p])} candidate templates, not {j + 1}")
+    cache: dict = {}
+    best = None
+    for _ in range(ROUNDS):
+        tmpl = [cands[p][choice[p]] for p in range(len(shapes))]
+        try:
+            mults, n = _solve_counts_cached(layout, sides, [t.side_matrix() for t in tmpl], want, size,
+                                            [t.chord_widths() for t in tmpl], floors)
+        except LayoutInfeasible:
+            if not _advance_for_feasibility(sides, cands, choice, want, size, layout.source):
+                raise
+            continue
+        refined = []
+        for p, (t, m) in enumerate(zip(tmpl, mults)):
+            key = (p, choice[p], tuple(m.tolist()))
+            if key not in cache:
+                cache[key] = _refine_cached(t, m)
+            rm = cache[key]
+            if any(len(parts) > 1 for parts in sides.patch_sides[p]):  # neighbours meet along a side
+                rm = rm._replace(xy=fit_sides(layout, sides, p, rm, n))
+            refined.append(rm)
+        keys = [_key(r) for r in refined]
+        total = (sum(k[0] for k in keys), max(k[1] for k in keys))  # inverted quads, then the worst patch
+        if best is None or total < best[0]:
+            best = (total, list(tmpl), mults, n, refined)
+        bad = [p for p, k in enumerate(keys) if (k[0] > 0 or -k[1] < MIN_SJ) and choice[p] + 1 < len(cands[p])]
+        if not bad:
+            break
+        for p in bad:
+            choice[p] += 1
+    _, tmpl, mults, n, refined = best
+    xy, quads, patch, side_ids, gap = merge_patches(layout, sides, refined, n)
+    loops = _boundary_loops(layout, sides, side_ids, xy)
+    outer, holes = loops[0], tuple(loops[1:])
+    if smooth_cuts:
+        xy = _smooth_cuts(xy, quads, np.concatenate(loops), sides, side_ids)
+    import shapely
+
+    region = shapely.union_all([shapely.Polygon(layout.points[lp]) for lp in layout.patches]).area
+    return LayoutMesh(layout=layout, sides=sides, xy=xy, quads=quads, patch=patch, side_vertices=side_ids,
+                      counts=n, outer=outer, holes=holes, templates=tuple(t.mesh_id for t in tmpl),
+                      multiplicities=tuple(mults), shared_gap=gap, region_area=float(region))

@@ -45,7 +45,7 @@ import scipy.sparse.linalg
 
 from jaxmatch.catalogue.mesh import edges
 from jaxmatch.defaults import QUALITY
-from jaxmatch.errors import InputError
+from jaxmatch.errors import InputError, UnmatchableError
 from jaxmatch.placement.milp import LayoutInfeasible, one_patch_sides, solve_counts
 from jaxmatch.placement.embed import Placement, inverted_mask, polygon_area, quad_areas, quality, smooth_in_frame
 from jaxmatch.shape import Shape
@@ -423,7 +423,65 @@ def patch_templates(shape: Shape, catalogue: "Catalogue", lattice: "Lattice", *,
     a mesh vertex and no quad is inverted or degenerate; at most ``limit`` are kept per size. Sizes are mixed
     because a request for few edges needs a small template and raw utilities favour large ones.
     """
-    return list(_iter_templates(shape, catalogue, lattice, limit=limit, internal=internal))
+    key = (_shape_key(shape), lattice, int(limit), None if internal is None else tuple(sorted(int(k) for k in internal)))
+    cache = _template_cache(catalogue)
+    hit = cache.get(key)
+    if hit is None:
+        try:
+            hit = (True, tuple(_iter_templates(shape, catalogue, lattice, limit=limit, internal=internal)))
+        except UnmatchableError as e:
+            hit = (False, e)
+        cache[key] = hit
+        while len(cache) > TEMPLATE_CACHE_SIZE:
+            cache.pop(next(iter(cache)))
+    else:
+        cache[key] = cache.pop(key)  # most recently used last
+    ok, found = hit
+    if not ok:
+        raise found
+    return [t._replace(shape=shape) for t in found]
+
+
+TEMPLATE_CACHE_SIZE = 512
+"""Shapes whose :func:`patch_templates` are kept per catalogue (least recently used dropped):
+ranking and placing candidates is most of a meshing call, and the same patch recurs across the
+pipeline's strategies, its size groups and across calls (a size slider, a batch of parts)."""
+
+
+def _array_key(a) -> tuple | None:
+    if a is None:
+        return None
+    a = np.ascontiguousarray(a)
+    return a.dtype.str, a.shape, a.tobytes()
+
+
+def _shape_key(shape: Shape) -> tuple:
+    """Everything of ``shape`` its templates depend on (all but ``source``: the cached templates
+    are given the caller's shape)."""
+    return (_array_key(shape.points), _array_key(shape.corners), _array_key(shape.convex), float(shape.scale),
+            _array_key(shape.offset), _array_key(shape.input_points), _array_key(shape.corner_order),
+            bool(shape.input_clockwise), tuple(_array_key(h) for h in shape.holes),
+            tuple(_array_key(c) for c in shape.hole_corners), bool(shape.explicit_corners))
+
+
+def _template_cache(catalogue: "Catalogue") -> dict:
+    """The catalogue's cache of :func:`patch_templates` (held by the catalogue object, so it
+    lives as long as the catalogue; the shipped catalogue is opened once per process)."""
+    cache = catalogue.__dict__.get("_patch_template_cache")
+    if cache is None:
+        cache = {}
+        catalogue.__dict__["_patch_template_cache"] = cache
+    return cache
+
+
+def clear_template_cache(catalogue: "Catalogue") -> None:
+    """Forget the templates :func:`patch_templates` cached for ``catalogue``, the layouts
+    :func:`jaxmatch.placement.layout.mesh_layout` meshed with it and the refined meshes (for
+    timings of a first call on a shape; :func:`jaxmatch.placement.layout.clear_caches` forgets
+    the layouts' integer programs, sides and patch shapes)."""
+    catalogue.__dict__.pop("_patch_template_cache", None)
+    catalogue.__dict__.pop("_mesh_layout_cache", None)
+    _REFINED.clear()
 
 
 # ---------------------------------------------------------------------------------------------
@@ -527,7 +585,7 @@ def estimated_mean_edge(template: PatchTemplate, mult) -> float:
     xy = pl.xy
     q = np.asarray(pl.mesh.quads, np.int64)
     p = xy[q]
-    ln = np.linalg.norm(np.roll(p, -1, axis=1) - p, axis=-1)  # (F, 4) edge k: q[k] -> q[k+1]
+    ln = np.linalg.norm(p[:, [1, 2, 3, 0]] - p, axis=-1)  # (F, 4) edge k: q[k] -> q[k+1]
     el = np.linalg.norm(xy[template.edge_list[:, 0]] - xy[template.edge_list[:, 1]], axis=1)
     ma, mb = m[template.quad_chords[:, 0]], m[template.quad_chords[:, 1]]
     total = el.sum() + np.sum((mb - 1) * (ln[:, 0] + ln[:, 2]) / 2 + (ma - 1) * (ln[:, 1] + ln[:, 3]) / 2)
@@ -740,7 +798,39 @@ def _laplacian(quads: np.ndarray, nv: int) -> scipy.sparse.csr_matrix:
     return (scipy.sparse.diags(deg) - A).tocsr()
 
 
+REFINED_CACHE_SIZE = 512
+"""Refined meshes of :func:`refine_and_place` kept between calls (least recently used dropped)."""
+
+REFINED_CACHE_QUADS = 20_000
+"""Only refined meshes of at most this many quads are kept (a large mesh is not asked twice)."""
+
+REFINED_CACHE_TOTAL_QUADS = 200_000
+"""At most this many quads in all the refined meshes kept (tens of MB), whatever their number."""
+
+_REFINED: dict = {}
+
+
 def refine_and_place(template: PatchTemplate, mult, *, smooth_iters: int | None = None) -> RefinedMesh:
+    """:func:`_refine_and_place`, answered from a cache when the same template (same shape,
+    match and placement) was refined at the same multiplicities before (the result names the
+    given template; its arrays are shared, not to be written to)."""
+    m = template.match
+    key = (_shape_key(template.shape), template.mesh_id, int(m.rotation), bool(m.reflected),
+           _array_key(m.alignment), _array_key(template.placement.xy), _array_key(np.asarray(mult, np.int64)),
+           None if smooth_iters is None else int(smooth_iters))
+    rm = _REFINED.pop(key, None)
+    if rm is None:
+        rm = _refine_and_place(template, mult, smooth_iters=smooth_iters)
+        if rm.quads.shape[0] > REFINED_CACHE_QUADS:
+            return rm
+        total = sum(r.quads.shape[0] for r in _REFINED.values()) + rm.quads.shape[0]
+        while _REFINED and (len(_REFINED) >= REFINED_CACHE_SIZE or total > REFINED_CACHE_TOTAL_QUADS):
+            total -= _REFINED.pop(next(iter(_REFINED))).quads.shape[0]
+    _REFINED[key] = rm
+    return rm._replace(template=template)
+
+
+def _refine_and_place(template: PatchTemplate, mult, *, smooth_iters: int | None = None) -> RefinedMesh:
     """Split every quad by the multiplicities of its two chords, put the refined boundary
     vertices on the user's boundary by arc length, place and smooth the interior.
 
@@ -815,7 +905,7 @@ def refine_and_place(template: PatchTemplate, mult, *, smooth_iters: int | None 
         xy = smooth_in_frame(xy, quads, bverts, frame=bxy, iters=iters)
         sj = quality(xy, quads)[0]
     p = xy[quads]
-    el = np.linalg.norm(np.roll(p, -1, axis=1) - p, axis=-1)
+    el = np.linalg.norm(p[:, [1, 2, 3, 0]] - p, axis=-1)
     ratio = el.max(axis=1) / np.maximum(el.min(axis=1), np.finfo(float).tiny)
     return RefinedMesh(
         xy=xy, quads=quads, side_vertices=tuple(side_vertices), counts=counts.astype(np.int64), mult=m,

@@ -41,6 +41,7 @@ lattice (table and skip weights) into the :class:`jaxmatch.scoring.model.Weights
 
 from __future__ import annotations
 
+import functools
 import importlib.resources
 import itertools
 import math
@@ -307,6 +308,13 @@ def load_lattice(name_or_path) -> Lattice:
     argument ending in ``.toml``, is read as a path.
     """
     source, data = _resolve(name_or_path)
+    return _parse_cached(data, source)
+
+
+@functools.lru_cache(maxsize=16)
+def _parse_cached(data: bytes, source: str) -> Lattice:
+    """:func:`parse_lattice` once per file content and source (a Lattice is immutable; parsing
+    and validating took ~30 ms, on every meshing call that names its lattice)."""
     return parse_lattice(data, source)
 
 

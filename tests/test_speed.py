@@ -1,0 +1,158 @@
+"""Caches of the meshing path (issue 22): cached answers equal freshly computed ones.
+
+No timings here: speed is measured by ``scripts/bench.py --mesh`` (docs/perf.md)."""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from jaxmatch.errors import UnmatchableError
+from jaxmatch.io.readers import load_shape
+from jaxmatch.placement import refine as R
+from jaxmatch.scoring.lattice import load_lattice
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def _same_templates(a, b) -> None:
+    assert [t.mesh_id for t in a] == [t.mesh_id for t in b]
+    for s, t in zip(a, b):
+        assert s.rank == t.rank and s.n_chords == t.n_chords
+        assert (s.match.rotation, s.match.reflected) == (t.match.rotation, t.match.reflected)
+        np.testing.assert_array_equal(s.placement.xy, t.placement.xy)
+        for x, y in zip(s.side_chords, t.side_chords):
+            np.testing.assert_array_equal(x, y)
+
+
+def test_cached_templates_equal_fresh_ones_and_carry_the_callers_shape(cat):
+    lat = load_lattice("fine")
+    shp = load_shape(ROOT / "examples" / "tshape.json")
+    R.clear_template_cache(cat)
+    fresh = R.patch_templates(shp, cat, lat, limit=3, internal=[0, 1, 2])
+    other = dataclasses.replace(load_shape(ROOT / "examples" / "tshape.json"), source="elsewhere")
+    again = R.patch_templates(other, cat, load_lattice("fine"), limit=3, internal=[2, 1, 0])
+    _same_templates(fresh, again)
+    assert all(t.shape is other for t in again)
+    R.clear_template_cache(cat)
+    _same_templates(fresh, R.patch_templates(shp, cat, lat, limit=3, internal=[0, 1, 2]))
+
+
+def test_a_different_request_is_not_answered_from_the_cache(cat):
+    lat = load_lattice("fine")
+    shp = load_shape(ROOT / "examples" / "lshape.json")
+    few = R.patch_templates(shp, cat, lat, limit=1, internal=[0, 1])
+    more = R.patch_templates(shp, cat, lat, limit=4, internal=[0, 1])
+    assert len(more) >= len(few)
+    assert R.patch_templates(shp, cat, lat, limit=1, internal=[0, 1])[0].mesh_id == few[0].mesh_id
+
+
+def test_unmatchable_is_raised_again_from_the_cache(cat, monkeypatch):
+    lat = load_lattice("fine")
+    shp = load_shape(ROOT / "examples" / "square.json")
+    R.clear_template_cache(cat)
+    calls = []
+
+    def boom(*a, **k):
+        calls.append(1)
+        raise UnmatchableError("none")
+
+    monkeypatch.setattr(R, "_iter_templates", boom)
+    for _ in range(2):
+        with pytest.raises(UnmatchableError):
+            R.patch_templates(shp, cat, lat, limit=2)
+    assert len(calls) == 1
+    R.clear_template_cache(cat)
+
+
+def _same_mesh(a, b) -> None:
+    np.testing.assert_array_equal(a.xy, b.xy)
+    np.testing.assert_array_equal(a.quads, b.quads)
+    assert a.templates == b.templates
+    np.testing.assert_array_equal(a.counts, b.counts)
+
+
+@pytest.mark.parametrize("name,size", [("house.json", 0.6), ("t-junction.json", 0.4)])
+def test_mesh_layout_from_its_caches_equals_a_fresh_one(cat, name, size):
+    from jaxmatch.placement import layout as L
+
+    lat = load_lattice("fine")
+    lay = L.load_layout(ROOT / "examples" / "layouts" / name)
+    L.clear_caches()
+    R.clear_template_cache(cat)
+    fresh = L.mesh_layout(lay, cat, lat, size=size)
+    again = L.mesh_layout(L.load_layout(ROOT / "examples" / "layouts" / name), cat, lat, size=size)
+    _same_mesh(fresh, again)
+    other = L.mesh_layout(lay, cat, lat, size=size * 0.7)  # another program, same templates
+    L.clear_caches()
+    _same_mesh(other, L.mesh_layout(lay, cat, lat, size=size * 0.7))
+
+
+def test_jaxmatch_mesh_twice_gives_the_same_mesh(cat):
+    import jaxmatch
+    from jaxmatch.placement import layout as L
+
+    shp = load_shape(ROOT / "examples" / "tshape.json")
+    L.clear_caches()
+    R.clear_template_cache(cat)
+    a = jaxmatch.mesh(shp, size=0.1, catalogue=cat)
+    b = jaxmatch.mesh(shp, size=0.1, catalogue=cat)
+    assert a.chosen == b.chosen
+    np.testing.assert_array_equal(a.xy, b.xy)
+    np.testing.assert_array_equal(a.quads, b.quads)
+
+
+def test_a_lattice_is_parsed_once_per_content():
+    assert load_lattice("fine") is load_lattice("fine")
+
+
+def test_a_large_decomposition_is_smoothed_near_its_cuts_only(cat):
+    from jaxmatch.placement import layout as L
+    from jaxmatch.placement.embed import inverted_mask, quality
+    from jaxmatch.placement.refine import SMOOTH_ALWAYS
+
+    lat = load_lattice("fine")
+    lay = L.load_layout(ROOT / "examples" / "layouts" / "two-blocks.json")
+    ext = float(np.ptp(lay.points, axis=0).max())
+    plain = L.mesh_layout(lay, cat, lat, size=ext / 70)
+    smoothed = L.mesh_layout(lay, cat, lat, size=ext / 70, smooth_cuts=True)
+    assert smoothed.quads.shape[0] > SMOOTH_ALWAYS
+    np.testing.assert_array_equal(plain.quads, smoothed.quads)
+    assert not inverted_mask(smoothed.xy, smoothed.quads).any()
+    assert quality(smoothed.xy, smoothed.quads)[0].min() >= quality(plain.xy, plain.quads)[0].min() - 1e-9
+    moved = np.any(plain.xy != smoothed.xy, axis=1)
+    assert moved.sum() < 0.5 * plain.xy.shape[0]  # the band around the cut, not every vertex
+
+
+def test_the_refined_meshes_kept_stay_within_their_quad_budget(cat, monkeypatch):
+    from jaxmatch.placement import layout as L
+
+    monkeypatch.setattr(R, "REFINED_CACHE_TOTAL_QUADS", 300)
+    R._REFINED.clear()
+    lat = load_lattice("fine")
+    lay = L.load_layout(ROOT / "examples" / "layouts" / "house.json")
+    for size in (0.6, 0.5, 0.4, 0.3, 0.25):
+        L.mesh_layout(lay, cat, lat, size=size)
+        assert sum(r.quads.shape[0] for r in R._REFINED.values()) <= 300
+    R._REFINED.clear()
+
+
+def test_a_meshed_layout_from_the_cache_is_a_copy_for_the_callers_layout(cat):
+    from jaxmatch.placement import layout as L
+
+    lat = load_lattice("fine")
+    R.clear_template_cache(cat)
+    lay = L.load_layout(ROOT / "examples" / "layouts" / "house.json")
+    a = L.mesh_layout(lay, cat, lat, size=0.5)
+    a.xy[:] = 0.0  # a caller writing to its answer does not change the next one
+    other = L.load_layout(ROOT / "examples" / "layouts" / "house.json")  # another object, the same layout
+    seen = []
+    b = L.mesh_layout(other, cat, lat, size=0.5, progress=lambda i, n: seen.append((i, n)))
+    assert b.layout is other and np.ptp(b.xy) > 0
+    assert seen == [(p + 1, lay.n_patches) for p in range(lay.n_patches)]
+    R.clear_template_cache(cat)
+    L.clear_caches()
+    _same_mesh(b, L.mesh_layout(other, cat, lat, size=0.5))
