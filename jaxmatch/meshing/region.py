@@ -1,0 +1,122 @@
+"""The region a request meshes: read from a file (a shape or a layout), its default size, and
+its loops written one canonical way with corners judged at the mesh size (step 1 of the
+pipeline, :mod:`jaxmatch.meshing.pipeline`)."""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+
+from jaxmatch.defaults import DEFAULT_DIVISIONS
+from jaxmatch.shape import DEFAULT_CORNER_ANGLE, Shape
+
+__all__ = ["DEDUPE", "canonical", "corner_points", "default_size", "load_region"]
+
+
+def default_size(region) -> float:
+    """Perimeter of the region's outer boundary / :data:`DEFAULT_DIVISIONS` (user units)."""
+    if isinstance(region, Shape):
+        pts = region.user_points
+    else:  # a Layout: its outer sides
+        from jaxmatch.placement.layout import layout_sides
+
+        sides = layout_sides(region)
+        return float(np.sum(sides.lengths[sides.outer])) / DEFAULT_DIVISIONS
+    return float(np.sum(np.linalg.norm(np.roll(pts, -1, axis=0) - pts, axis=1))) / DEFAULT_DIVISIONS
+
+
+def load_region(path: str | os.PathLike, *, corner_angle: float = DEFAULT_CORNER_ANGLE):
+    """A shape or a layout from a file: a JSON object with ``"patches"`` is a layout
+    (:func:`jaxmatch.placement.layout.parse_layout`), anything else a shape of any format
+    jaxmatch reads (``file#element`` chooses an element). Raises :class:`InputError` naming the
+    file."""
+    from jaxmatch.io.readers import load_shape
+
+    p = Path(path)
+    if p.suffix.lower() == ".json" and p.is_file():
+        from jaxmatch.files import read_limited
+        from jaxmatch.placement.layout import MAX_BYTES, parse_layout
+
+        raw = read_limited(p, MAX_BYTES, "shape file")
+        try:
+            doc = json.loads(raw.decode("utf-8-sig"))
+        except (ValueError, UnicodeDecodeError):
+            doc = None
+        if isinstance(doc, dict) and "patches" in doc:
+            return parse_layout(raw, str(path))
+    return load_shape(path, corner_angle=corner_angle)
+
+
+def corner_points(shape: Shape) -> np.ndarray:
+    """``(C, 2)`` every corner of the region (outer loop and holes), user coordinates."""
+    from jaxmatch.placement.decompose import _corner_points
+
+    return _corner_points(shape)
+
+
+DEDUPE = 1e-8
+"""Points of a loop closer than this fraction of its extent to the previous one are merged
+before meshing (a corner among them stays, at the first point): layouts need distinct points."""
+
+
+def _dedupe(ring: np.ndarray, corners: np.ndarray, tol: float) -> tuple[np.ndarray, np.ndarray]:
+    """``ring (P, 2)`` without points within ``tol`` of the previous kept point, and ``corners``
+    (indices) mapped onto the kept points."""
+    keep = [0]
+    owner = np.zeros(len(ring), np.int64)
+    for i in range(1, len(ring)):
+        if np.linalg.norm(ring[i] - ring[keep[-1]]) > tol:
+            keep.append(i)
+        owner[i] = len(keep) - 1
+    if len(keep) > 1 and np.linalg.norm(ring[keep[-1]] - ring[0]) <= tol:  # the last one wraps onto the first
+        owner[owner == len(keep) - 1] = 0
+        keep.pop()
+    if len(keep) == len(ring):
+        return ring, np.asarray(corners, np.int64)
+    return ring[keep], np.unique(owner[np.asarray(corners, np.int64)])
+
+
+def canonical(shape: Shape, size: float | None = None, corner_angle: float = DEFAULT_CORNER_ANGLE,
+              held_angle: float | None = None) -> Shape:
+    """The same shape with its loops written one way: the outer loop counter-clockwise and each
+    hole clockwise from its lexicographically smallest point (x, then y), holes in the order of
+    those points, points closer than :data:`DEDUPE` of the extent merged. Corners detected from
+    angles are judged again at ``size`` when it is given
+    (:func:`jaxmatch.shape.scale_corners`: wiggles shorter than about ``size`` are no corners);
+    explicit corners are kept. Meshing the canonical shape makes the mesh
+    independent of where the user's loop starts and which way it runs."""
+    from jaxmatch.placement.decompose import _xy
+    from jaxmatch.shape import make_shape
+
+    def first(ring: np.ndarray) -> int:
+        return int(np.lexsort((ring[:, 1], ring[:, 0]))[0])
+
+    from jaxmatch.shape import scale_corners
+
+    rejudge = size is not None and not shape.explicit_corners
+
+    def corners_of(ring: np.ndarray, given) -> np.ndarray:
+        if not rejudge:
+            return np.asarray(given, np.int64)
+        return scale_corners(ring, size, corner_angle, held_angle=held_angle)
+
+    pts = _xy(shape)
+    tol = DEDUPE * float(np.ptp(pts, axis=0).max())
+    holes, hole_corners = [], []
+    for ring, hc in sorted(zip(shape.holes, shape.hole_corners), key=lambda rc: tuple(rc[0][first(rc[0])])):
+        ring, hc = _dedupe(ring, corners_of(ring, hc), tol)
+        k = first(ring)
+        holes.append(np.roll(ring, -k, axis=0))
+        hole_corners.append(sorted(int(c) for c in (hc - k) % len(ring)))
+    pts2, outer = _dedupe(pts, corners_of(pts, shape.corners), tol)
+    start = first(pts2)
+    if start == 0 and shape.corner_order is None and not holes and len(pts2) == len(pts) \
+            and np.array_equal(outer, shape.corners):
+        return shape
+    pts = pts2
+    corners = sorted(int(c) for c in (outer - start) % len(pts))
+    return make_shape(np.roll(pts, -start, axis=0), corners=corners, source=shape.source, holes=holes or None,
+                      hole_corners=hole_corners or None)

@@ -1,0 +1,166 @@
+"""The candidates of the pipeline (step 2): each strategy's layout meshed by the one solve, and
+the extra single-template candidates asked for when none of them is good enough (larger
+templates below the quality floor, templates whose side counts follow the size, the central
+block of a region without corners, the bends of a curved outline as corners)."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from jaxmatch.defaults import Quality
+from jaxmatch.errors import InputError, SolverError
+from jaxmatch.meshing.build import from_layout, from_refined
+from jaxmatch.meshing.choose import choose
+from jaxmatch.meshing.region import corner_points
+from jaxmatch.meshing.result import Candidate, QuadMesh
+from jaxmatch.shape import Shape
+
+__all__ = ["CONFORMING_TRIES", "DISK", "FINER", "SINGLE", "conforming_templates", "larger_templates", "mesh_smooth",
+           "try_strategies"]
+
+SINGLE = "single"
+"""Name of the one-template candidate."""
+
+
+FINER = " +bends"
+"""Suffix of the candidates meshed with the bends of a curved outline as corners too (when every
+other candidate folds; :data:`jaxmatch.shape.HELD_ANGLE`)."""
+
+
+def try_strategies(shape: Shape, names, cat, lat, h: float, corners: np.ndarray, cache: dict, budget_s, t0: float,
+                    progress, suffix: str = "") -> list[Candidate]:
+    """Each strategy of ``names`` meshed (one :class:`Candidate` each, with its mesh or the reason
+    it has none): the same solve for every one (:func:`~jaxmatch.placement.layout.mesh_layout`).
+    A strategy whose cuts or solve fail for any reason is skipped with that reason."""
+    from jaxmatch.placement.decompose import _same, decompose, single_patch
+    from jaxmatch.placement.layout import ALL_SIZES, TEMPLATE_SIZES, mesh_layout
+
+    tried: list[Candidate] = []
+    seen = []
+    for i, name in enumerate(names):
+        label = name + suffix
+        if budget_s is not None and time.perf_counter() - t0 > budget_s and any(
+                c.mesh is not None and c.mesh.valid for c in tried):
+            tried.append(Candidate(label, None, f"not tried: time budget of {budget_s:g} s spent"))
+            continue
+        try:
+            lay = single_patch(shape) if name == SINGLE else decompose(shape, name)
+            if any(_same(lay, other) for other in seen):
+                tried.append(Candidate(label, None, "same patches as an earlier candidate"))
+                continue
+            seen.append(lay)
+            lm = mesh_layout(lay, cat, lat, size=h, smooth_cuts=lay.n_patches > 1,
+                             sizes=ALL_SIZES if name == SINGLE else TEMPLATE_SIZES, template_cache=cache)
+        except InputError as e:
+            tried.append(Candidate(label, None, e.problem))
+        except SolverError as e:  # not a verdict on the request: the other candidates go on
+            tried.append(Candidate(label, None, f"solver error: {e}"))
+        except (ValueError, ArithmeticError, IndexError) as e:  # degenerate cuts (near-duplicate points, slivers)
+            tried.append(Candidate(label, None, f"skipped: {type(e).__name__}: {e}"))
+        else:
+            tried.append(Candidate(label, from_layout(lm, size=h, corners=corners)))
+        if progress is not None:
+            progress(i + 1, len(names), label)
+    return tried
+
+
+def larger_templates(lay, cat, lat, h, corners, first: QuadMesh, cache) -> list[Candidate]:
+    """Single-patch candidates from the larger template sizes: the best template of each size
+    group of :data:`~jaxmatch.placement.layout.ALL_SIZES` after the first (the single candidate
+    takes the first group that has one), named ``"single <template id>"``."""
+    from jaxmatch.placement.layout import ALL_SIZES, mesh_layout
+
+    out, seen = [], {first.templates}
+    for group in ALL_SIZES[1:]:
+        try:
+            lm = mesh_layout(lay, cat, lat, size=h, sizes=(group,), template_cache=cache)
+        except (InputError, SolverError, IndexError):
+            continue
+        m = from_layout(lm, size=h, corners=corners)
+        if m.templates not in seen:
+            seen.add(m.templates)
+            out.append(Candidate(f"{SINGLE} {m.templates[0]}", m))
+    return out
+
+
+DISK = "disk"
+"""Name of the central-block candidate of a region with fewer than two corners."""
+
+
+def mesh_smooth(shape: Shape, cat, lat, h: float, quality: Quality, cache) -> QuadMesh:
+    """A region with fewer than two corners (a disk, an ellipse, a teardrop): one template
+    refined to the size (``"single"``), and a central block with four patches around it
+    (``"disk"``, :func:`jaxmatch.placement.decompose.disk_layout`); the better by the rule."""
+    from jaxmatch.placement.decompose import disk_layout
+    from jaxmatch.placement.layout import mesh_layout
+    from jaxmatch.placement.refine import refine_mesh
+
+    corners = corner_points(shape)
+    tried = []
+    try:
+        tried.append(Candidate(SINGLE, from_refined(shape, refine_mesh(shape, cat, lat, size=h).mesh, size=h)))
+    except (InputError, SolverError) as e:
+        tried.append(Candidate(SINGLE, None, str(getattr(e, "problem", e))))
+    try:
+        lm = mesh_layout(disk_layout(shape), cat, lat, size=h, smooth_cuts=True, template_cache=cache)
+        tried.append(Candidate(DISK, from_layout(lm, size=h, corners=corners)))
+    except (InputError, SolverError) as e:
+        tried.append(Candidate(DISK, None, str(getattr(e, "problem", e))))
+    if not any(c.mesh is not None for c in tried):
+        raise InputError("no candidate could be meshed: " + "; ".join(f"{c.name}: {c.note}" for c in tried),
+                         where=shape.source)
+    return choose(tried, quality)
+
+
+CONFORMING_TRIES = 3
+"""When the single template's side counts cannot follow the size (its chords tie sides of
+different lengths together, e.g. the two parallel sides of a trapezoid), the nearest even
+count vectors to ``length / h`` (at most this many) are asked of every catalogue template."""
+
+
+def _target_counts(lengths: np.ndarray, h: float, tries: int) -> list[np.ndarray]:
+    """Edge counts per side nearest to ``lengths / h`` with an even total (a quad mesh has an
+    even number of boundary edges), best first: ``(S,) int64`` each."""
+    want = np.asarray(lengths, np.float64) / h
+    base = np.maximum(np.rint(want), 1).astype(np.int64)
+    if base.sum() % 2 == 0:
+        return [base]
+    moves = []
+    for i in range(len(base)):
+        for d in (-1, 1):
+            if base[i] + d >= 1:
+                moves.append((abs(base[i] + d - want[i]) - abs(base[i] - want[i]), i, d))
+    out = []
+    for _, i, d in sorted(moves)[:tries]:
+        c = base.copy()
+        c[i] += d
+        out.append(c)
+    return out
+
+
+def conforming_templates(shape: Shape, cat, lat, h, first: QuadMesh, quality: Quality) -> list[Candidate]:
+    """A single-template candidate whose side counts follow ``h``: the nearest even counts
+    (:func:`_target_counts`), each met exactly by the best template of the catalogue that can
+    (:func:`jaxmatch.placement.refine.refine_mesh`), named ``"single <template id>"``."""
+    from jaxmatch.errors import UnmatchableError
+    from jaxmatch.placement.refine import DEFAULT_LIMIT, InfeasibleRequest, patch_templates, refine_mesh, side_lengths
+
+    try:
+        templates = patch_templates(shape, cat, lat, limit=DEFAULT_LIMIT)
+    except UnmatchableError:
+        return []
+    out, seen = [], {first.templates}
+    for counts in _target_counts(side_lengths(shape), h, CONFORMING_TRIES):
+        try:
+            choice = refine_mesh(shape, cat, lat, sides=counts.tolist(), templates=templates)
+        except (InfeasibleRequest, SolverError):
+            continue
+        m = from_refined(shape, choice.mesh, size=h)
+        if m.templates not in seen and not m.sides_off_size(quality.size_tol):
+            seen.add(m.templates)
+            out.append(Candidate(f"{SINGLE} {m.templates[0]}", m))
+    return out
+
+
