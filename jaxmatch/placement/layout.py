@@ -52,6 +52,7 @@ import numpy as np
 from jaxmatch.defaults import QUALITY
 from jaxmatch.errors import InputError
 from jaxmatch.files import read_limited
+from jaxmatch.placement.refine import _array_key
 from jaxmatch.placement.milp import CHORD_WEIGHT, LayoutInfeasible, solve_counts  # noqa: F401 (public here)
 from jaxmatch.placement.embed import inverted_mask, polygon_area, quad_areas, quality, smooth_in_frame
 from jaxmatch.catalogue.mesh import valences
@@ -912,23 +913,16 @@ def _lru_get(cache: dict, key, make):
     return value
 
 
-def _arr(a) -> tuple | None:
-    if a is None:
-        return None
-    a = np.ascontiguousarray(a)
-    return a.dtype.str, a.shape, a.tobytes()
-
-
 def _layout_key(layout: Layout) -> tuple:
-    return (_arr(layout.points), tuple(_arr(p) for p in layout.patches), _arr(layout.corner),
-            tuple(_arr(p) for p in layout.patch_corner), tuple(sorted(dict(layout.requested).items())), layout.source)
+    return (_array_key(layout.points), tuple(_array_key(p) for p in layout.patches), _array_key(layout.corner),
+            tuple(_array_key(p) for p in layout.patch_corner), tuple(sorted(dict(layout.requested).items())), layout.source)
 
 
 def _solve_counts_cached(layout: Layout, sides: Sides, matrices, want, size, widths, floors):
     """:func:`solve_counts` of ``layout`` (whose ``sides`` these are), from the cache when the
     same program was solved before; fresh copies of the arrays either way."""
-    key = (_layout_key(layout), tuple(_arr(A) for A in matrices), tuple(sorted((int(k), int(v)) for k, v in want.items())),
-           None if size is None else float(size), tuple(_arr(w) for w in widths), _arr(floors))
+    key = (_layout_key(layout), tuple(_array_key(A) for A in matrices), tuple(sorted((int(k), int(v)) for k, v in want.items())),
+           None if size is None else float(size), tuple(_array_key(w) for w in widths), _array_key(floors))
     mults, n = _lru_get(_SOLVES, key, lambda: solve_counts(sides, matrices, counts=want, size=size, widths=widths,
                                                            source=layout.source, floors=floors))
     return [np.array(m) for m in mults], np.array(n)
