@@ -43,6 +43,7 @@ import numpy as np
 import typer
 
 from jaxmatch.cli import run_typer
+from jaxmatch.geometry import cumulative_length
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
@@ -173,7 +174,7 @@ def shape_case(path: Path, div: int) -> tuple:
 
     shp = jaxmatch.load_shape(path)
     outline, corners = mesh_table._outline(shp)
-    per = float(np.sum(np.linalg.norm(np.roll(outline, -1, 0) - outline, axis=1)))
+    per = float(cumulative_length(outline)[-1])
     return shp, outline, corners, per, per / div
 
 

@@ -27,6 +27,7 @@ import typer
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from jaxmatch.cli import run_typer  # noqa: E402
+from jaxmatch.geometry import cumulative_length  # noqa: E402
 from holes_table import check  # noqa: E402
 from mesh_table import write_outputs  # noqa: E402
 
@@ -75,7 +76,7 @@ def main(divisions: str = typer.Option("40,80", help="h = perimeter / each of th
         name = path.stem
         shp = jaxmatch.load_shape(path)
         outline = shp.input_points
-        per = float(np.sum(np.linalg.norm(np.roll(outline, -1, 0) - outline, axis=1)))
+        per = float(cumulative_length(outline)[-1])
         for div in divs:
             h = per / div
             sharp = sharp_corners(outline, h)

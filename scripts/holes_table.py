@@ -25,6 +25,7 @@ import typer
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from jaxmatch.cli import run_typer  # noqa: E402
+from jaxmatch.geometry import cumulative_length  # noqa: E402
 from mesh_table import scaled_jacobian, write_outputs  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -113,7 +114,7 @@ def main(divisions: str = typer.Option("40,80", help="h = outer perimeter / each
         outer = shp.input_points
         holes = [np.asarray(r) for r in shp.holes]
         corners = np.concatenate([outer[shp.corners]] + [r[c] for r, c in zip(holes, shp.hole_corners)])
-        per = float(np.sum(np.linalg.norm(np.roll(outer, -1, 0) - outer, axis=1)))
+        per = float(cumulative_length(outer)[-1])
         for div in divs:
             h = per / div
             t0 = time.perf_counter()

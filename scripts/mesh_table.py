@@ -24,6 +24,7 @@ import numpy as np
 import typer
 
 from jaxmatch.cli import run_typer
+from jaxmatch.geometry import cumulative_length
 
 ROOT = Path(__file__).resolve().parent.parent
 EX, LAB = ROOT / "examples", ROOT / "examples" / "labels" / "shapes"
@@ -103,7 +104,7 @@ def main(divisions: str = typer.Option("16,32", help="h = perimeter / each of th
     for name, path in SHAPES.items():
         shp = jaxmatch.load_shape(path)
         outline, corners = _outline(shp)
-        per = float(np.sum(np.linalg.norm(np.roll(outline, -1, 0) - outline, axis=1)))
+        per = float(cumulative_length(outline)[-1])
         for div in (int(d) for d in divisions.split(",")):
             h = per / div
             methods = {"mesh": lambda: jaxmatch.mesh(shp, size=h, catalogue=cat)}

@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from jaxmatch.defaults import DEFAULT_DIVISIONS
+from jaxmatch.geometry import cumulative_length
 from jaxmatch.shape import DEFAULT_CORNER_ANGLE, Shape
 
 __all__ = ["DEDUPE", "canonical", "corner_points", "default_size", "load_region"]
@@ -25,7 +26,7 @@ def default_size(region) -> float:
 
         sides = layout_sides(region)
         return float(np.sum(sides.lengths[sides.outer])) / DEFAULT_DIVISIONS
-    return float(np.sum(np.linalg.norm(np.roll(pts, -1, axis=0) - pts, axis=1))) / DEFAULT_DIVISIONS
+    return float(cumulative_length(pts)[-1]) / DEFAULT_DIVISIONS
 
 
 def load_region(path: str | os.PathLike, *, corner_angle: float = DEFAULT_CORNER_ANGLE):
