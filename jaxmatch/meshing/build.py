@@ -13,7 +13,7 @@ import numpy as np
 from jaxmatch.meshing.result import QuadMesh
 from jaxmatch.shape import Shape
 
-__all__ = ["as_quadmesh", "from_layout", "from_placement", "from_refined"]
+__all__ = ["from_layout", "from_placement", "from_refined"]
 
 
 def _loop_edges(loop: np.ndarray) -> np.ndarray:
@@ -70,29 +70,3 @@ def from_refined(shape: Shape, rm, *, size: float | None = None) -> QuadMesh:
                     line_sets=line_sets, region_area=float(rm.region_area), corners=_shape_corners(shape), size=size,
                     side_lengths=dict(zip(names, map(float, lengths))),
                     side_counts=dict(zip(names, map(int, rm.counts))), templates=(rm.template.mesh_id,))
-
-
-def as_quadmesh(obj) -> QuadMesh:
-    """Any mesh result of jaxmatch as a :class:`QuadMesh` (for writers and pictures): a
-    QuadMesh as is, a LayoutMesh, a Placement (corners unknown), a RefinedMesh, a
-    RefineChoice or MeshChoice (their mesh). Raises TypeError for anything else."""
-    if isinstance(obj, QuadMesh):
-        return obj
-    for attr in ("placement",):  # MeshChoice
-        if hasattr(obj, attr) and hasattr(obj, "match"):
-            obj = getattr(obj, attr)
-    if hasattr(obj, "template") and hasattr(obj, "mesh") and hasattr(obj, "passed_over"):  # RefineChoice
-        obj = obj.mesh
-    if hasattr(obj, "layout") and hasattr(obj, "sides"):
-        return from_layout(obj)
-    if hasattr(obj, "mesh") and hasattr(obj, "alignment"):
-        quads = np.asarray(obj.mesh.quads, np.int64)
-        return QuadMesh(xy=np.asarray(obj.xy, np.float64), quads=quads, patch=np.zeros(len(quads), np.int64),
-                        line_sets={"boundary": _loop_edges(obj.mesh.boundary)}, region_area=float(obj.region_area),
-                        corners=np.zeros((0, 2)))
-    if hasattr(obj, "side_vertices") and hasattr(obj, "mult"):
-        quads = np.asarray(obj.quads, np.int64)
-        return QuadMesh(xy=np.asarray(obj.xy, np.float64), quads=quads, patch=np.zeros(len(quads), np.int64),
-                        line_sets={"boundary": _loop_edges(obj.boundary)}, region_area=float(obj.region_area),
-                        corners=np.zeros((0, 2)), templates=(obj.template.mesh_id,))
-    raise TypeError(f"not a jaxmatch mesh: {type(obj).__name__}")

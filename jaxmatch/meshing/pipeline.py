@@ -169,7 +169,7 @@ def _mesh_template(shape, cat, lat, options) -> QuadMesh:
 
 def _mesh_sides(shape, cat, lat, sides) -> QuadMesh:
     from jaxmatch.placement.decompose import single_patch
-    from jaxmatch.placement.layout import LayoutInfeasible, layout_sides, mesh_layout
+    from jaxmatch.placement.layout import ALL_SIZES, LayoutInfeasible, layout_sides, mesh_layout
     from jaxmatch.placement.refine import InfeasibleRequest, _check_counts, refine_mesh
 
     n_sides = max(shape.n_corners, 1)
@@ -182,7 +182,7 @@ def _mesh_sides(shape, cat, lat, sides) -> QuadMesh:
         ids = _side_ids(shape, lay)
         try:
             lm = mesh_layout(lay, cat, lat, counts={s: int(c) for s, c in zip(ids, counts)},
-                             sizes=_all_sizes())
+                             sizes=ALL_SIZES)
         except LayoutInfeasible as e:
             names = layout_sides(lay).names
             near = ("; nearest feasible counts " + ",".join(str(e.nearest.get(names[s], "?")) for s in ids)) if e.nearest else ""
@@ -192,12 +192,6 @@ def _mesh_sides(shape, cat, lat, sides) -> QuadMesh:
                                     f"{e.problem}{near}", shape.source) from None
         m = from_layout(lm, corners=corner_points(shape))
     return m.with_choice(SINGLE, "", None, (Candidate(SINGLE, m),))
-
-
-def _all_sizes():
-    from jaxmatch.placement.layout import ALL_SIZES
-
-    return ALL_SIZES
 
 
 def _mesh_size(shape, cat, lat, h, strategies, quality, budget_s, progress, template_cache, corner_angle) -> QuadMesh:
