@@ -5,7 +5,8 @@ file, independently of the code under test):
 
 * ``jaxmatch.mesh(shape, size=h)`` meshes the shape as one template and as each decomposition
   and keeps the best by one rule; the result names the candidate, the rule that decided and the
-  runner-up, and lists every candidate tried;
+  runner-up, and lists every candidate tried; a layout that cannot beat the best so far is not
+  meshed, and the answer is the one meshing every strategy alone would give;
 * every corner is a vertex, no quad folds, the area is kept, min scaled Jacobian >= 0.3, on the
   concave example shapes at two sizes;
 * squares and rectangles whose sides are multiples of h give the plain grid;
@@ -83,9 +84,33 @@ def test_l_shape_names_the_rule_and_the_runner_up(cat):
     m = jaxmatch.mesh(shp, size=0.25, catalogue=cat)
     check_mesh(shp, m)
     assert [c.name for c in m.tried] == list(strategy_names())
-    # the recursive cut meshes the L as two grids: fewer patches than the continuations' three
-    assert m.chosen == "recursive" and m.n_patches == 2 and m.rule == "fewer patches"
-    assert m.runner_up == "continuations" and len(m.irregular) == 0
+    # the recursive cut meshes the L as two grids (min scaled Jacobian 1); the single template and
+    # the bisectors have 45-degree corners; the continuations' three patches cannot beat two
+    # perfect ones, so they are not meshed
+    assert m.chosen == "recursive" and m.n_patches == 2 and m.rule == "min scaled Jacobian"
+    runner_up = next(c.mesh for c in m.tried if c.name == m.runner_up)
+    assert runner_up.min_scaled_jacobian < 0.9 and len(m.irregular) == 0
+    notes = {c.name: c.note for c in m.tried}
+    assert "cannot beat recursive" in notes["continuations"]
+
+
+@pytest.mark.parametrize("name,div", [("L", 16), ("T", 32), ("U", 16), ("plus", 32), ("stairs", 16),
+                                      ("notched-rectangle", 32)])
+def test_candidates_not_meshed_could_not_have_won(cat, name, div):
+    """The pipeline meshes fewest patches first and skips a layout that cannot beat the best so
+    far; meshing every strategy alone and choosing among all of them gives the same answer."""
+    from jaxmatch.geometry import cumulative_length
+
+    shp = jaxmatch.load_shape(CONCAVE[name])
+    h = float(cumulative_length(shp.input_points)[-1]) / div
+    m = jaxmatch.mesh(shp, size=h, catalogue=cat)
+    alone = []
+    for n in strategy_names():
+        one = jaxmatch.mesh(shp, size=h, catalogue=cat, strategies=[n])
+        alone.append(next(c for c in one.tried if c.name == n))
+    every = choose(alone)
+    assert m.chosen == every.chosen
+    assert mesh_key(m)[:-1] == mesh_key(every)[:-1]
 
 
 @pytest.mark.slow
@@ -257,7 +282,8 @@ def test_cli_mesh_reports_the_choice(cli, tmp_path):
     out, png = tmp_path / "l.msh", tmp_path / "l.png"
     code, stdout, err = cli("mesh", EX / "lshape.json", "--size", "0.25", "--out", out, "--png", png)
     assert code == 0, err
-    assert "chosen: recursive (rule that decided: fewer patches; runner-up continuations)" in stdout
+    assert "chosen: recursive (rule that decided: min scaled Jacobian; runner-up single)" in stdout
+    assert "continuations: not meshed (3 patches cannot beat recursive)" in stdout
     assert out.exists() and png.read_bytes().startswith(b"\x89PNG")
 
 

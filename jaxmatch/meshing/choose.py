@@ -11,13 +11,15 @@
    (with a target size);
 6. quality band: min scaled Jacobian ``>= Quality.high_sj``;
 7. irregular vertices: fewer irregular internal vertices beyond Euler's lower bound for the
-   boundary valences used (:func:`jaxmatch.meshing.result.irregular_bound`);
+   boundary valences used (:func:`jaxmatch.meshing.result.irregular_bound`; none below it counts
+   as 0: a valence-6 vertex can make up for two);
 8. quality: higher min scaled Jacobian, in steps of :data:`SJ_STEP`;
 9. fewer patches;
 10. higher mean scaled Jacobian (2 decimals);
 11. the order tried (single template first).
 
-:func:`choose` names the first rule on which the winner beats the runner-up.
+:func:`choose` names the first rule on which the winner beats the runner-up;
+:func:`cannot_win` tells, before a candidate is meshed, that it cannot beat a given key.
 """
 
 from __future__ import annotations
@@ -28,7 +30,7 @@ from typing import Sequence
 from jaxmatch.defaults import QUALITY, Quality
 from jaxmatch.meshing.result import Candidate, QuadMesh
 
-__all__ = ["RULES", "SJ_STEP", "choose", "mesh_key"]
+__all__ = ["RULES", "SJ_STEP", "best_possible_key", "cannot_win", "choose", "mesh_key"]
 
 RULES = ("no fold", "corners kept", "area kept", "quality floor", "size conformity", "quality band", "irregular vertices",
          "min scaled Jacobian", "fewer patches", "mean scaled Jacobian", "order tried")
@@ -50,12 +52,27 @@ def mesh_key(m: QuadMesh, order: int = 0, quality: Quality = QUALITY) -> tuple:
         not (sj >= quality.good_sj),
         len(m.sides_off_size(quality.size_tol)) + m.long_edges(quality.long_edge),
         not (sj >= quality.high_sj),
-        int(m.irregular.size) - m.irregular_bound,
+        max(int(m.irregular.size) - m.irregular_bound, 0),
         -math.floor(sj / SJ_STEP + 1e-9) if math.isfinite(sj) else math.inf,
         m.n_patches,
         -round(m.mean_scaled_jacobian, 2),
         order,
     )
+
+
+def best_possible_key(n_patches: int, order: int) -> tuple:
+    """The smallest :func:`mesh_key` any mesh of ``n_patches`` patches tried at ``order`` can
+    have: no fold, every corner, the area, every side at the size, no irregular vertex beyond the
+    bound, min and mean scaled Jacobian 1."""
+    return (False, False, False, False, 0, False, 0, -math.floor(1.0 / SJ_STEP + 1e-9), int(n_patches), -1.0,
+            int(order))
+
+
+def cannot_win(best_key: tuple, n_patches: int, order: int) -> bool:
+    """Whether a candidate of ``n_patches`` patches tried at ``order`` loses to a mesh of key
+    ``best_key`` whatever its mesh (so it need not be meshed): ``best_key`` is smaller than
+    :func:`best_possible_key`."""
+    return best_key < best_possible_key(n_patches, order)
 
 
 def choose(candidates: Sequence[Candidate], quality: Quality = QUALITY) -> QuadMesh:

@@ -207,7 +207,7 @@ def _mesh_size(shape, cat, lat, h, strategies, quality, budget_s, progress, temp
     corners = corner_points(region)
     cache = template_cache if template_cache is not None else {}
     t0 = time.perf_counter()
-    tried = try_strategies(region, names, cat, lat, h, corners, cache, budget_s, t0, progress)
+    tried = try_strategies(region, names, cat, lat, h, corners, cache, budget_s, t0, progress, quality=quality)
     if not any(c.mesh is not None for c in tried):
         raise InputError("no candidate could be meshed: " + "; ".join(f"{c.name}: {c.note}" for c in tried),
                          where=region.source)
@@ -227,7 +227,7 @@ def _mesh_size(shape, cat, lat, h, strategies, quality, budget_s, progress, temp
         finer = canonical(shape, h, corner_angle, held_angle=corner_angle)
         if not np.array_equal(finer.corners, region.corners):
             more = try_strategies(finer, names, cat, lat, h, corner_points(finer), cache, budget_s, t0, progress,
-                                   suffix=FINER)
+                                   suffix=FINER, quality=quality)
             if any(c.mesh is not None for c in more):
                 best = choose(tried + more, quality)
     return best

@@ -9,10 +9,10 @@ import time
 
 import numpy as np
 
-from jaxmatch.defaults import Quality
+from jaxmatch.defaults import QUALITY, Quality
 from jaxmatch.errors import InputError, SolverError
 from jaxmatch.meshing.build import from_layout, from_refined
-from jaxmatch.meshing.choose import choose
+from jaxmatch.meshing.choose import cannot_win, choose, mesh_key
 from jaxmatch.meshing.region import corner_points
 from jaxmatch.meshing.result import Candidate, QuadMesh
 from jaxmatch.shape import Shape
@@ -30,40 +30,58 @@ other candidate folds; :data:`jaxmatch.shape.HELD_ANGLE`)."""
 
 
 def try_strategies(shape: Shape, names, cat, lat, h: float, corners: np.ndarray, cache: dict, budget_s, t0: float,
-                    progress, suffix: str = "") -> list[Candidate]:
-    """Each strategy of ``names`` meshed (one :class:`Candidate` each, with its mesh or the reason
-    it has none): the same solve for every one (:func:`~jaxmatch.placement.layout.mesh_layout`).
-    A strategy whose cuts or solve fail for any reason is skipped with that reason."""
+                    progress, suffix: str = "", quality: Quality = QUALITY) -> list[Candidate]:
+    """Each strategy of ``names`` (one :class:`Candidate` each, in the order of ``names``, with its
+    mesh or the reason it has none): every strategy's layout is cut first, then meshed by the same
+    solve (:func:`~jaxmatch.placement.layout.mesh_layout`), fewest patches first. A layout that
+    cannot beat the best mesh so far whatever its mesh (:func:`~jaxmatch.meshing.choose.cannot_win`)
+    is not meshed, so the choice is the one meshing all of them would give. A strategy whose cuts
+    or solve fail for any reason is skipped with that reason."""
     from jaxmatch.placement.decompose import _same, decompose, single_patch
     from jaxmatch.placement.layout import ALL_SIZES, TEMPLATE_SIZES, mesh_layout
 
-    tried: list[Candidate] = []
-    seen = []
+    tried: list[Candidate | None] = [None] * len(names)
+    layouts: list[tuple[int, object]] = []
     for i, name in enumerate(names):
-        label = name + suffix
-        if budget_s is not None and time.perf_counter() - t0 > budget_s and any(
-                c.mesh is not None and c.mesh.valid for c in tried):
-            tried.append(Candidate(label, None, f"not tried: time budget of {budget_s:g} s spent"))
-            continue
         try:
             lay = single_patch(shape) if name == SINGLE else decompose(shape, name)
-            if any(_same(lay, other) for other in seen):
-                tried.append(Candidate(label, None, "same patches as an earlier candidate"))
-                continue
-            seen.append(lay)
-            lm = mesh_layout(lay, cat, lat, size=h, smooth_cuts=lay.n_patches > 1,
-                             sizes=ALL_SIZES if name == SINGLE else TEMPLATE_SIZES, template_cache=cache)
         except InputError as e:
-            tried.append(Candidate(label, None, e.problem))
-        except SolverError as e:  # not a verdict on the request: the other candidates go on
-            tried.append(Candidate(label, None, f"solver error: {e}"))
+            tried[i] = Candidate(name + suffix, None, e.problem)
+            continue
         except (ValueError, ArithmeticError, IndexError) as e:  # degenerate cuts (near-duplicate points, slivers)
-            tried.append(Candidate(label, None, f"skipped: {type(e).__name__}: {e}"))
+            tried[i] = Candidate(name + suffix, None, f"skipped: {type(e).__name__}: {e}")
+            continue
+        same = next((names[j] for j, other in layouts if _same(lay, other)), None)
+        if same is not None:
+            tried[i] = Candidate(name + suffix, None, "same patches as an earlier candidate")
+            continue
+        layouts.append((i, lay))
+    best: tuple | None = None
+    for done, (i, lay) in enumerate(sorted(layouts, key=lambda il: (il[1].n_patches, il[0])), start=1):
+        label = names[i] + suffix
+        if best is not None and cannot_win(best[0], lay.n_patches, i):
+            tried[i] = Candidate(label, None, f"{lay.n_patches} patches cannot beat {best[1]}")
+        elif budget_s is not None and time.perf_counter() - t0 > budget_s and best is not None and best[2]:
+            tried[i] = Candidate(label, None, f"not tried: time budget of {budget_s:g} s spent")
         else:
-            tried.append(Candidate(label, from_layout(lm, size=h, corners=corners)))
+            try:
+                lm = mesh_layout(lay, cat, lat, size=h, smooth_cuts=lay.n_patches > 1,
+                                 sizes=ALL_SIZES if names[i] == SINGLE else TEMPLATE_SIZES, template_cache=cache)
+            except InputError as e:
+                tried[i] = Candidate(label, None, e.problem)
+            except SolverError as e:  # not a verdict on the request: the other candidates go on
+                tried[i] = Candidate(label, None, f"solver error: {e}")
+            except (ValueError, ArithmeticError, IndexError) as e:  # degenerate patches (slivers)
+                tried[i] = Candidate(label, None, f"skipped: {type(e).__name__}: {e}")
+            else:
+                m = from_layout(lm, size=h, corners=corners)
+                tried[i] = Candidate(label, m)
+                key = mesh_key(m, i, quality)
+                if best is None or key < best[0]:
+                    best = (key, label, m.valid)
         if progress is not None:
-            progress(i + 1, len(names), label)
-    return tried
+            progress(done, len(layouts), label)
+    return list(tried)
 
 
 def larger_templates(lay, cat, lat, h, corners, first: QuadMesh, cache) -> list[Candidate]:
@@ -145,10 +163,13 @@ def conforming_templates(shape: Shape, cat, lat, h, first: QuadMesh, quality: Qu
     (:func:`_target_counts`), each met exactly by the best template of the catalogue that can
     (:func:`jaxmatch.placement.refine.refine_mesh`), named ``"single <template id>"``."""
     from jaxmatch.errors import UnmatchableError
-    from jaxmatch.placement.refine import DEFAULT_LIMIT, InfeasibleRequest, patch_templates, refine_mesh, side_lengths
+    from jaxmatch.placement.refine import (DEFAULT_LIMIT, InfeasibleRequest, lazy_patch_templates, refine_mesh,
+                                           side_lengths)
 
+    templates = lazy_patch_templates(shape, cat, lat, limit=DEFAULT_LIMIT, by_size=False)  # placed as far as used
     try:
-        templates = patch_templates(shape, cat, lat, limit=DEFAULT_LIMIT)
+        if not templates:
+            return []
     except UnmatchableError:
         return []
     out, seen = [], {first.templates}

@@ -765,24 +765,30 @@ def _boundary_loops(layout: Layout, sides: Sides, side_ids, xy: np.ndarray) -> l
 # meshing
 
 
-def _templates(shape: Shape, catalogue, lattice, limit: int, sizes=TEMPLATE_SIZES) -> list:
-    """Candidate templates for one patch: :func:`jaxmatch.placement.refine.patch_templates` of
-    the first group of ``sizes`` that has one (at most ``limit`` per size), fewest internal
-    vertices first, then in their ranked order."""
-    from jaxmatch.errors import UnmatchableError
-    from jaxmatch.placement.refine import patch_templates
+def _templates(shape: Shape, catalogue, lattice, limit: int, sizes=TEMPLATE_SIZES):
+    """Candidate templates for one patch: those of the first group of ``sizes`` that has one
+    (at most ``limit`` per size), fewest internal vertices first, then in their ranked order;
+    a :class:`~jaxmatch.placement.refine.LazyTemplates` (a template is placed when it is first
+    used: most patches use their first one). Empty when no group has one."""
+    from jaxmatch.placement.refine import lazy_patch_templates
 
     for group in sizes:
         ks = [k for k in group if k in catalogue.internal]
         if not ks:
             continue
-        try:
-            found = patch_templates(shape, catalogue, lattice, limit=limit, internal=ks)
-        except UnmatchableError:
-            continue
+        found = lazy_patch_templates(shape, catalogue, lattice, limit=limit, internal=ks)
         if found:
-            return sorted(found, key=lambda t: (t.match.internal_vertices, t.rank))
+            return found
     return []
+
+
+def _has(templates, j: int) -> bool:
+    """Whether a patch has a ``j``-th candidate template (placing no more than that one)."""
+    try:
+        templates[j]
+    except IndexError:
+        return False
+    return True
 
 
 def _key(refined_mesh) -> tuple:
@@ -1061,7 +1067,7 @@ def _mesh_layout(layout: Layout, catalogue: Catalogue, lattice: Lattice, *, size
     floors = curve_floors(layout, sides, QUALITY.area_tol) if size is not None else None
     choice = [0] * len(shapes) if first_templates is None else [int(j) for j in first_templates]
     for p, j in enumerate(choice):
-        if not 0 <= j < len(cands[p]):
+        if not (j >= 0 and _has(cands[p], j)):
             raise IndexError(f"patch {p} has {len(cands[p])} candidate templates, not {j + 1}")
     cache: dict = {}
     best = None
@@ -1087,7 +1093,7 @@ def _mesh_layout(layout: Layout, catalogue: Catalogue, lattice: Lattice, *, size
         total = (sum(k[0] for k in keys), max(k[1] for k in keys))  # inverted quads, then the worst patch
         if best is None or total < best[0]:
             best = (total, list(tmpl), mults, n, refined)
-        bad = [p for p, k in enumerate(keys) if (k[0] > 0 or -k[1] < MIN_SJ) and choice[p] + 1 < len(cands[p])]
+        bad = [p for p, k in enumerate(keys) if (k[0] > 0 or -k[1] < MIN_SJ) and _has(cands[p], choice[p] + 1)]
         if not bad:
             break
         for p in bad:

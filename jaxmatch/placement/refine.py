@@ -36,7 +36,8 @@ All lengths here are in the user's units.
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Callable, Iterator, NamedTuple, Sequence
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Callable, Iterator, NamedTuple
 
 import numpy as np
 import scipy.sparse
@@ -365,13 +366,33 @@ def _candidates(shape: Shape, catalogue: "Catalogue", lattice: "Lattice", *, lim
     return ranking.annotation, ms
 
 
+def _try_candidate(shape, ann, m: "Match", catalogue, r: int,
+                   check: Callable[[PatchTemplate], str | None] | None = None) -> tuple[PatchTemplate | None, str | None]:
+    """``(template, None)``: ranked match ``m`` (at ``r``) fitted and placed on ``shape`` with
+    every corner a mesh vertex and no folded or degenerate quad; else ``(fitted or None,
+    reason)``. ``check(unplaced template)``: a reason to skip it before placing (None: go on)."""
+    from jaxmatch.placement.choose import place_match
+
+    t = _fit(shape, ann, m, catalogue, r)
+    if t is None:
+        return None, "leaves a corner without a mesh vertex"
+    reason = check(t) if check is not None else None
+    if reason is not None:
+        return t, reason
+    pl = place_match(shape, ann, catalogue, m)
+    if pl.inverted:
+        return t, f"folds when placed ({pl.inverted} inverted quads)"
+    if not pl.min_scaled_jacobian >= TEMPLATE_SJ_MIN:
+        return t, (f"has a degenerate quad when placed (min scaled Jacobian {pl.min_scaled_jacobian:.3f}: "
+                   "a straight angle, e.g. a valence-2 vertex on a side)")
+    return t._replace(placement=pl), None
+
+
 def _iter_templates(shape, catalogue, lattice, *, limit: int, internal=None, rejected: list | None = None,
                     check: Callable[[PatchTemplate], str | None] | None = None) -> Iterator[PatchTemplate]:
     """Placed templates in candidate order (see :func:`patch_templates`), at most ``limit`` per
     size. ``check(unplaced template)``: a reason to skip it before placing (None: go on).
     Skipped candidates are appended to ``rejected`` as ``(rank, mesh_id, reason)``."""
-    from jaxmatch.placement.choose import place_match
-
     taken: dict[int, int] = {}
     seen: set = set()
     for scan in SCAN_PER_LIMIT:
@@ -383,24 +404,120 @@ def _iter_templates(shape, catalogue, lattice, *, limit: int, internal=None, rej
             if taken.get(m.internal_vertices, 0) >= limit or key in seen:
                 continue
             seen.add(key)
-            t = _fit(shape, ann, m, catalogue, r)
-            if t is None:
-                reason = "leaves a corner without a mesh vertex"
-            else:
-                reason = check(t) if check is not None else None
-            if reason is None:
-                pl = place_match(shape, ann, catalogue, m)
-                if pl.inverted:
-                    reason = f"folds when placed ({pl.inverted} inverted quads)"
-                elif not pl.min_scaled_jacobian >= TEMPLATE_SJ_MIN:
-                    reason = (f"has a degenerate quad when placed (min scaled Jacobian {pl.min_scaled_jacobian:.3f}: "
-                              "a straight angle, e.g. a valence-2 vertex on a side)")
+            t, reason = _try_candidate(shape, ann, m, catalogue, r, check)
             if reason is not None:
                 if rejected is not None and (scan == SCAN_PER_LIMIT[0] or t is not None):  # not every corner-skipper twice
                     rejected.append((r, m.mesh_id, reason))
                 continue
             taken[m.internal_vertices] = taken.get(m.internal_vertices, 0) + 1
-            yield t._replace(placement=pl)
+            yield t
+
+
+def _iter_by_size(shape, catalogue, lattice, *, limit: int, internal: Sequence[int]) -> Iterator[PatchTemplate]:
+    """The templates of :func:`_iter_templates` fewest internal vertices first, made one at a
+    time: each size ``k`` of ``internal`` (ascending) is ranked alone and its candidates placed in
+    ranked order until ``limit`` are kept (``rank``: the place in that size's ranking); the deeper
+    scan of :data:`SCAN_PER_LIMIT` when all sizes kept fewer than ``limit`` in all. A size no
+    catalogue mesh can match is passed over."""
+    kept: dict[int, int] = {}
+    seen: set = set()
+    for scan in SCAN_PER_LIMIT:
+        if scan > SCAN_PER_LIMIT[0] and sum(kept.values()) >= limit:
+            break  # the deeper scan only when the first found fewer than `limit` templates
+        for k in sorted(int(k) for k in internal):
+            if kept.get(k, 0) >= limit:
+                continue
+            try:
+                ann, ms = _candidates(shape, catalogue, lattice, limit=scan * max(int(limit), 1), internal=[k])
+            except UnmatchableError:
+                continue
+            for r, m in enumerate(ms, start=1):
+                key = (m.mesh_id, m.rotation, m.reflected)
+                if key in seen:
+                    continue
+                seen.add(key)
+                t, reason = _try_candidate(shape, ann, m, catalogue, r)
+                if reason is None:
+                    kept[k] = kept.get(k, 0) + 1
+                    yield t
+                    if kept[k] >= limit:
+                        break
+
+
+class _Walk:
+    """A template walk and the templates it has made so far (shared by every
+    :class:`LazyTemplates` of one patch)."""
+
+    def __init__(self, produce: Iterator[PatchTemplate]):
+        self.produce: Iterator[PatchTemplate] | None = produce
+        self.made: list[PatchTemplate] = []
+        self.error: Exception | None = None
+
+    def fill(self, n: float) -> None:
+        """Place candidates until ``n`` templates exist or none is left; an error of the walk
+        (e.g. :class:`~jaxmatch.errors.UnmatchableError`) is raised again on every later ask
+        beyond what was made before it."""
+        while len(self.made) < n:
+            if self.error is not None:
+                raise self.error
+            if self.produce is None:
+                return
+            try:
+                self.made.append(next(self.produce))
+            except StopIteration:
+                self.produce = None
+            except Exception as e:  # noqa: BLE001 - kept and raised again
+                self.produce, self.error = None, e
+                raise
+
+
+class LazyTemplates(Sequence):
+    """A patch's templates (:class:`PatchTemplate`), placed only when asked for: ``t[j]`` places
+    candidates until the ``j``-th template exists; ``len(t)`` places all, ``bool(t)`` the first.
+    Each template handed out carries ``shape`` (the caller's)."""
+
+    def __init__(self, walk: _Walk, shape: Shape):
+        self._walk = walk
+        self._shape = shape
+
+    def __getitem__(self, j):
+        whole = isinstance(j, slice) or j < 0
+        self._walk.fill(math.inf if whole else j + 1)
+        items = self._walk.made[j]
+        if isinstance(j, slice):
+            return [t._replace(shape=self._shape) for t in items]
+        return items._replace(shape=self._shape)
+
+    def __len__(self) -> int:
+        self._walk.fill(math.inf)
+        return len(self._walk.made)
+
+    def __bool__(self) -> bool:
+        self._walk.fill(1)
+        return bool(self._walk.made)
+
+
+def lazy_patch_templates(shape: Shape, catalogue: "Catalogue", lattice: "Lattice", *, limit: int,
+                         internal: Sequence[int] | None = None, by_size: bool = True) -> LazyTemplates:
+    """The templates of :func:`patch_templates` placed only as far as they are used
+    (:class:`LazyTemplates`), kept per catalogue like them. ``by_size``: fewest internal vertices
+    first, then ranked (:func:`_iter_by_size`; ``internal`` required); else in the candidate
+    order of :func:`patch_templates` (:func:`_iter_templates`). A shape no mesh matches raises
+    :class:`~jaxmatch.errors.UnmatchableError` when the first template is asked for."""
+    ks = None if internal is None else tuple(sorted(int(k) for k in internal))
+    key = ("lazy", by_size, _shape_key(shape), lattice, int(limit), ks)
+    cache = _template_cache(catalogue)
+    hit = cache.get(key)
+    if hit is None:
+        walk = (_iter_by_size(shape, catalogue, lattice, limit=limit, internal=ks) if by_size
+                else _iter_templates(shape, catalogue, lattice, limit=limit, internal=ks))
+        hit = _Walk(walk)
+        cache[key] = hit
+        while len(cache) > TEMPLATE_CACHE_SIZE:
+            cache.pop(next(iter(cache)))
+    else:
+        cache[key] = cache.pop(key)  # most recently used last
+    return LazyTemplates(hit, shape)
 
 
 def catalogue_oriented_quads(catalogue: "Catalogue", match: "Match") -> np.ndarray:
