@@ -156,3 +156,37 @@ def test_a_meshed_layout_from_the_cache_is_a_copy_for_the_callers_layout(cat):
     R.clear_template_cache(cat)
     L.clear_caches()
     _same_mesh(b, L.mesh_layout(other, cat, lat, size=0.5))
+
+
+def _same_matches(a, b) -> None:
+    assert [(m.mesh_id, m.rotation, m.reflected, m.utility) for m in a] == \
+        [(m.mesh_id, m.rotation, m.reflected, m.utility) for m in b]
+    for x, y in zip(a, b):
+        np.testing.assert_array_equal(x.alignment, y.alignment)
+
+
+@pytest.mark.parametrize("internal", [[0], [1], [2, 3]])
+def test_kept_rankings_equal_fresh_ones_for_shapes_of_the_same_point_types(cat, internal):
+    """Two rectangles of one aspect ratio (annotated alike) share a ranking; a third of another
+    aspect ratio does not; each answer equals a ranking computed with the memo cleared."""
+    from jaxmatch.scoring.rank import clear_memo, rank
+    from jaxmatch.shape import make_shape
+
+    lat = load_lattice("fine")
+    a = make_shape([[0, 0], [3, 0], [3, 1], [0, 1]])
+    b = make_shape([[5, 5], [11, 5], [11, 7], [5, 7]])  # a scaled and moved
+    c = make_shape([[0, 0], [1, 0], [1, 1], [0, 1]])
+    kw = dict(internal=internal, top=9, per_size=True, prune=True)
+    fresh = {}
+    for name, shp in (("a", a), ("b", b), ("c", c)):
+        clear_memo(cat)
+        fresh[name] = rank(shp, cat, lat, **kw)
+    clear_memo(cat)
+    kept = {name: rank(shp, cat, lat, **kw) for name, shp in (("a", a), ("b", b), ("c", c))}
+    assert np.array_equal(kept["a"].annotation.codes, kept["b"].annotation.codes)
+    assert not np.array_equal(kept["a"].annotation.codes, kept["c"].annotation.codes)
+    assert len(cat.__dict__["_rank_memo"]) == 2  # a and b share one ranking
+    for name in fresh:
+        _same_matches(fresh[name].results, kept[name].results)
+        np.testing.assert_array_equal(kept[name].annotation.positions, fresh[name].annotation.positions)
+    clear_memo(cat)

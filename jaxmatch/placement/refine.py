@@ -593,11 +593,15 @@ def _template_cache(catalogue: "Catalogue") -> dict:
 
 def clear_template_cache(catalogue: "Catalogue") -> None:
     """Forget the templates :func:`patch_templates` cached for ``catalogue``, the layouts
-    :func:`jaxmatch.placement.layout.mesh_layout` meshed with it and the refined meshes (for
+    :func:`jaxmatch.placement.layout.mesh_layout` meshed with it, the rankings
+    :func:`jaxmatch.scoring.rank.rank` kept for it and the refined meshes (for
     timings of a first call on a shape; :func:`jaxmatch.placement.layout.clear_caches` forgets
     the layouts' integer programs, sides and patch shapes)."""
+    from jaxmatch.scoring.rank import clear_memo
+
     catalogue.__dict__.pop("_patch_template_cache", None)
     catalogue.__dict__.pop("_mesh_layout_cache", None)
+    clear_memo(catalogue)
     _REFINED.clear()
 
 

@@ -74,6 +74,27 @@ class Ranking(NamedTuple):
     pruned: int = 0
 
 
+RANK_MEMO_SIZE = 4096
+"""Rankings kept per catalogue by :func:`rank` (per size, ``"id"`` ties, pruned: the template
+scan's calls), keyed on the annotation's point types, the sizes, the lattice and ``top``: with
+ties broken by id the matches depend on nothing else, and the patches of one region repeat
+their point types (about half of a concave region's rankings)."""
+
+
+def _memo(catalogue: Catalogue) -> dict:
+    """The catalogue's memo of :func:`rank` (held by the catalogue object, so it lives as long as
+    the catalogue)."""
+    memo = catalogue.__dict__.get("_rank_memo")
+    if memo is None:
+        memo = catalogue.__dict__["_rank_memo"] = {}
+    return memo
+
+
+def clear_memo(catalogue: Catalogue) -> None:
+    """Forget the rankings :func:`rank` kept for ``catalogue``."""
+    catalogue.__dict__.pop("_rank_memo", None)
+
+
 TIE_CAP = 64
 """Default largest number of meshes placed to break ties in one ranking."""
 
@@ -150,6 +171,16 @@ def rank(
         raise _unmatchable(f"the catalogue has no mesh with {internal_text(internal)}", "internal")
     m = points if points is not None else default_points(shape, max(lengths))
     ann = annotate(shape, m)
+    memo = _memo(catalogue) if (per_size and bulk_path and tie_break == "id" and progress is None
+                                and not (devices is not None and devices > 1)) else None
+    if memo is not None:
+        c = np.ascontiguousarray(ann.codes)
+        key = (c.dtype.str, c.shape, c.tobytes(), None if internal is None else tuple(internal), lattice,
+               int(top), bool(prune))
+        hit = memo.get(key)
+        if hit is not None:
+            memo[key] = memo.pop(key)  # most recently used last
+            return Ranking(ann, list(hit[0]), *hit[1:])
     weights = weights_of(lattice)
     buckets = [] if bulk_path else list(catalogue.buckets(internal))
     total = sum(len(p.ids) for p in parts) if bulk_path else sum(len(b.ids) for b in buckets)
@@ -199,6 +230,10 @@ def rank(
         results = []
         for k in sorted({r[1] for r in rows}):
             results.extend(islice(ordered([r for r in rows if r[1] == k]), top))
+        if memo is not None:
+            memo[key] = (tuple(results), total, unmatchable, placements, None, pruned)
+            while len(memo) > RANK_MEMO_SIZE:
+                memo.pop(next(iter(memo)))
         return Ranking(ann, results, total, unmatchable, placements, None, pruned)
     it = ordered(rows)
     results = list(islice(it, top))
