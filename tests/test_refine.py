@@ -267,6 +267,8 @@ def test_milp_feasibility_equals_enumeration(templates, name, cap):
         for c in itertools.product(range(1, cap + 1), repeat=n):
             ok = R.feasible(t, c)
             assert ok == (c in reach), (t.mesh_id, c)
+            if t is ts[0]:  # the nearest feasible counts are the counts themselves exactly when feasible
+                assert np.array_equal(R.nearest_counts(t, c), c) == ok, (t.mesh_id, c)
             if ok:
                 m = R.solve_multiplicities(t, counts=c)
                 assert m.min() >= 1 and np.array_equal(A @ m, c)

@@ -739,12 +739,21 @@ def feasible(template: PatchTemplate, counts) -> bool:
 
 def nearest_counts(template: PatchTemplate, counts) -> np.ndarray:
     """``(n_sides,) int64``: feasible counts closest (L1) to ``counts`` for ``template``: the one
-    integer program with the counts as targets (lengths ``counts``, size 1)."""
+    integer program with the counts as targets (lengths ``counts``, size 1), fewer extra chord
+    edges breaking ties. The chords' weight keeps their whole term below 1/2 for any solution
+    meeting ``counts`` (each multiplicity is at most the largest count), so the answer is
+    ``counts`` itself exactly when they are feasible (:func:`feasible`)."""
     A = template.side_matrix()
     c = np.asarray(counts, np.float64)
-    _, n = solve_counts(one_patch_sides(c), [A], size=1.0, widths=[np.ones(A.shape[1])], chord_weight=1e-4,
+    weight = min(NEAREST_CHORD_WEIGHT, 0.5 / (A.shape[1] * (float(c.max(initial=0.0)) + 1.0)))
+    _, n = solve_counts(one_patch_sides(c), [A], size=1.0, widths=[np.ones(A.shape[1])], chord_weight=weight,
                         source=template.shape.source)
     return n
+
+
+NEAREST_CHORD_WEIGHT = 1e-4
+"""Largest weight of the chords' deviations in :func:`nearest_counts` (the side counts' own
+deviations weigh 1)."""
 
 
 def _fmt(counts) -> str:
@@ -1103,10 +1112,12 @@ def refine_mesh(shape: Shape, catalogue: "Catalogue" = None, lattice: "Lattice" 
     best_size: tuple | None = None  # (deviation, template, mult)
     def check(t: PatchTemplate) -> str | None:
         nonlocal best_fail
-        if sides is None or feasible(t, sides):
+        if sides is None:
             return None
-        near = nearest_counts(t, sides)
+        near = nearest_counts(t, sides)  # one program: the counts themselves exactly when feasible
         d = int(np.abs(near - np.asarray(sides)).sum())
+        if d == 0:
+            return None
         if best_fail is None or d < best_fail[0]:
             best_fail = (d, t, near)
         return "cannot meet the counts: nearest feasible " + _fmt(near)
