@@ -269,6 +269,26 @@ def test_bad_requests(cat):
             jaxmatch.mesh(shp, catalogue=cat, **kwargs)
 
 
+@pytest.mark.parametrize("path", [EX / "lshape.json", EX / "hexagon.json"])
+def test_divisions_give_the_perimeter_over_that_many(cat, path):
+    from jaxmatch.geometry import cumulative_length
+
+    shp = jaxmatch.load_shape(path)
+    perimeter = float(cumulative_length(shp.input_points)[-1])
+    by_divisions = jaxmatch.mesh(shp, divisions=16, catalogue=cat)
+    by_size = jaxmatch.mesh(shp, size=perimeter / 16, catalogue=cat)
+    assert by_divisions.size == pytest.approx(perimeter / 16)
+    np.testing.assert_array_equal(by_divisions.quads, by_size.quads)
+    np.testing.assert_allclose(by_divisions.xy, by_size.xy)
+
+
+@pytest.mark.parametrize("kw", [dict(divisions=0), dict(divisions=2.5), dict(divisions=True),
+                                dict(divisions=8, size=0.5), dict(divisions=8, sides=[2, 2, 2, 2, 2, 2])])
+def test_bad_divisions(cat, kw):
+    with pytest.raises(InputError, match="divisions"):
+        jaxmatch.mesh(EX / "lshape.json", catalogue=cat, **kw)
+
+
 def test_default_size_is_a_fraction_of_the_perimeter(cat):
     m = jaxmatch.mesh(EX / "square.json", catalogue=cat)
     assert m.size == pytest.approx(4.0 / 32) and m.quads.shape[0] == 64

@@ -81,7 +81,7 @@ def _side_ids(shape: Shape, layout) -> list[int]:
     return out
 
 
-def mesh(region, *, size: float | None = None, sides: Sequence[int] | None = None,
+def mesh(region, *, size: float | None = None, divisions: int | None = None, sides: Sequence[int] | None = None,
          counts: Mapping[int, int] | None = None, template: bool = False,
          catalogue=None, lattice=DEFAULT_LATTICE, strategies: Sequence[str] | None = None,
          quality: Quality = QUALITY, corner_angle: float = DEFAULT_CORNER_ANGLE, budget_s: float | None = None,
@@ -93,6 +93,8 @@ def mesh(region, *, size: float | None = None, sides: Sequence[int] | None = Non
       region: a :class:`~jaxmatch.shape.Shape`, a :class:`~jaxmatch.placement.layout.Layout`,
         or a path (a shape file of any format, or a layout JSON file).
       size: target edge length (user units); default perimeter / :data:`DEFAULT_DIVISIONS`.
+      divisions: instead of ``size``: edge length = the region's perimeter / ``divisions``
+        (a whole number >= 1; each region of a batch gets its own size).
       sides: edges per user side (side ``i`` from corner ``i`` to ``i + 1``, file order), met
         exactly by one template; excludes ``size``.
       counts: layouts only: ``{side id: edges}`` (ids of
@@ -122,6 +124,12 @@ def mesh(region, *, size: float | None = None, sides: Sequence[int] | None = Non
         region = load_region(region, corner_angle=corner_angle)
     if sides is not None and size is not None:
         raise InputError("give either sides or size, not both")
+    if divisions is not None:
+        if size is not None or sides is not None:
+            raise InputError("give divisions or a size or sides, not two of them")
+        if isinstance(divisions, bool) or not isinstance(divisions, (int, np.integer)) or divisions < 1:
+            raise InputError(f"divisions must be a whole number >= 1, got {divisions!r}")
+        size = default_size(region, int(divisions)) if isinstance(region, (Shape, Layout)) else None
     if size is not None:
         size = _check_size(size)
     cat, lat = load_catalogue(catalogue), _lattice(lattice)

@@ -17,16 +17,16 @@ from jaxmatch.shape import DEFAULT_CORNER_ANGLE, Shape
 __all__ = ["DEDUPE", "canonical", "corner_points", "default_size", "load_region"]
 
 
-def default_size(region) -> float:
-    """Perimeter of the region's outer boundary / :data:`DEFAULT_DIVISIONS` (user units)."""
+def default_size(region, divisions: int = DEFAULT_DIVISIONS) -> float:
+    """Perimeter of the region's outer boundary / ``divisions`` (user units)."""
     if isinstance(region, Shape):
         pts = region.user_points
     else:  # a Layout: its outer sides
         from jaxmatch.placement.layout import layout_sides
 
         sides = layout_sides(region)
-        return float(np.sum(sides.lengths[sides.outer])) / DEFAULT_DIVISIONS
-    return float(cumulative_length(pts)[-1]) / DEFAULT_DIVISIONS
+        return float(np.sum(sides.lengths[sides.outer])) / divisions
+    return float(cumulative_length(pts)[-1]) / divisions
 
 
 def load_region(path: str | os.PathLike, *, corner_angle: float = DEFAULT_CORNER_ANGLE):
