@@ -408,6 +408,8 @@ def mesh(
     regions: List[Path] = typer.Argument(..., metavar="REGION...", help=REGION_HELP),
     size: Optional[float] = typer.Option(None, "--size", metavar="H", help="Target edge length in the region's units "
                                          "(default: the outer perimeter / 32, printed)."),
+    divisions: Optional[int] = typer.Option(None, "--divisions", min=1, metavar="N", help="Instead of --size: edge "
+                                            "length = each region's outer perimeter / N (one size per region in bulk)."),
     sides: Optional[str] = typer.Option(None, "--sides", help="Edges per side, e.g. 4,2,4,2: side i runs from corner i to "
                                         "corner i+1 in the file's order (see 'jaxmatch annotate'); one total count for a "
                                         "shape without corners. One template meets them exactly."),
@@ -475,7 +477,8 @@ def mesh(
     if not budget > 0:
         raise InputError(f"must be a positive number of seconds, got {budget:g}", "--budget")
     if template:
-        for opt, given in (("--size", size is not None), ("--sides", sides is not None),
+        for opt, given in (("--size", size is not None), ("--divisions", divisions is not None),
+                           ("--sides", sides is not None),
                            ("--sides-file", sides_file is not None), ("--strategy", strategy is not None),
                            ("--out-dir", out_dir is not None)):
             if given:
@@ -503,7 +506,10 @@ def mesh(
     from jaxmatch.scoring.lattice import load_lattice
 
     cat, lat = _open_catalogue(catalogue), load_lattice(lattice)
-    options = dict(size=size, catalogue=cat, lattice=lat, strategies=names, budget_s=budget)
+    for opt, given in (("--size", size is not None), ("--sides", sides is not None), ("--sides-file", sides_file is not None)):
+        if divisions is not None and given:
+            raise InputError(f"give --divisions or {opt}, not both", "--divisions")
+    options = dict(size=size, divisions=divisions, catalogue=cat, lattice=lat, strategies=names, budget_s=budget)
     if len(regions) > 1 or out_dir is not None:
         for opt, given in (("--out", out_path is not None), ("--png", png is not None), ("--svg", svg is not None),
                            ("--sides", sides is not None), ("--sides-file", sides_file is not None),
@@ -553,9 +559,9 @@ def _mesh_one(path: Path, angle: float, options: dict, sides, sides_file, out_pa
         from jaxmatch.placement.layout import load_counts, layout_sides
 
         named = load_counts(sides_file, layout_sides(region))
-    elif is_layout and options["size"] is None and not region.requested:
+    elif is_layout and options["size"] is None and options["divisions"] is None and not region.requested:
         options = {**options, "size": default_size(region)}
-    defaulted = options["size"] is None and counts is None and not is_layout
+    defaulted = options["size"] is None and options["divisions"] is None and counts is None and not is_layout
     with _progress() as prog:
         task = prog.add_task("meshing candidates", total=None)
         try:

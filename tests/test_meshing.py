@@ -313,6 +313,19 @@ def test_cli_mesh_without_size_prints_the_default(cli):
     assert "(default: perimeter / 32)" in stdout and "64 quads" in stdout
 
 
+def test_cli_divisions_give_each_region_its_own_size(cli, tmp_path):
+    code, stdout, err = cli("mesh", EX / "lshape.json", "--divisions", "16")
+    assert code == 0, err
+    assert "size 0.5:" in stdout  # the L's perimeter is 8
+    code, _, err = cli("mesh", EX / "square.json", EX / "lshape.json", "--divisions", "16", "--out-dir", tmp_path / "d")
+    assert code == 0, err
+    recs = [json.loads(line) for line in (tmp_path / "d" / "summary.jsonl").read_text().splitlines()]
+    assert [r["quads"] for r in recs] == [16, 12]  # the square (perimeter 4) at 0.25, the L at 0.5
+    for other in (["--size", "0.5"], ["--sides", "2,2,2,2,2,2"]):
+        code, _, err = cli("mesh", EX / "lshape.json", "--divisions", "16", *other)
+        assert code == EXIT_BAD_INPUT and "--divisions" in err and len(err.strip().splitlines()) == 1
+
+
 def test_cli_template_options_need_template(cli):
     code, _, err = cli("mesh", EX / "square.json", "--rank", "2")
     assert code == EXIT_BAD_INPUT and "--rank" in err and "--template" in err
