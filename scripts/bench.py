@@ -104,6 +104,10 @@ def parse_args(argv=None):
     ap.add_argument("--mesh-large", default="", metavar="FILE:H",
                     help="--mesh: only time one large jaxmatch.mesh (FILE at size H, after one call at 20 H) and its "
                          "peak RSS, e.g. examples/lshape.json:0.00548 (~100,000 quads)")
+    ap.add_argument("--mesh-bulk", type=int, default=0, metavar="DIV",
+                    help="--mesh: only the bulk benchmark: `jaxmatch mesh` of every example region at --divisions DIV "
+                         "with --jobs (--mesh-jobs) against gmsh meshing the same outlines one after another, e.g. 16")
+    ap.add_argument("--mesh-jobs", type=int, default=2, help="--mesh-bulk: worker processes (default 2)")
     ap.add_argument("--mesh-profile", default="", metavar="SHAPE:DIV",
                     help="--mesh: only profile one warm jaxmatch.mesh call (cProfile: top 10 by cumulative and by own time), e.g. T:32")
     return ap.parse_args(argv)
@@ -981,6 +985,59 @@ def mesh_large(path: str, size) -> dict:
             "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, "load": list(os.getloadavg())}
 
 
+MESH_BULK_REGIONS = ("examples/*.json", "examples/labels/shapes/*.json")
+"""The regions of the bulk benchmark (globs from the repository root): every example shape."""
+
+
+def mesh_bulk(divisions: int = 16, jobs: int = 2) -> dict:
+    """Bulk meshing as a user runs it: one ``jaxmatch mesh REGIONS --divisions DIV --out-dir DIR
+    --jobs N --skip-bad`` process over every region of :data:`MESH_BULK_REGIONS`, timed as a
+    whole (start-up, reading, meshing, writing): ``shapes_per_s``. Reference, same run: gmsh's
+    quasi-structured quads (:data:`MESH_GMSH`) of each region's outline at the same h, one after
+    another in this process (initialised, meshed, read back each; the characteristic length
+    calibrated untimed, as in :func:`mesh_case`), regions with holes left out of it:
+    ``gmsh.shapes_per_s``; ``bulk_vs_gmsh``: gmsh's shapes/s over jaxmatch's."""
+    import glob
+
+    import jaxmatch
+    from jaxmatch.geometry import cumulative_length
+
+    root = Path(__file__).resolve().parent.parent
+    paths = sorted(p for g in MESH_BULK_REGIONS for p in glob.glob(str(root / g)))
+    cg = _script("compare_gmsh")
+    opts = cg.GMSH_METHODS[MESH_GMSH]
+    with tempfile.TemporaryDirectory() as tmp:
+        cmd = [sys.executable, "-m", "jaxmatch", "mesh", *paths, "--divisions", str(int(divisions)), "--out-dir",
+               str(Path(tmp) / "out"), "--jobs", str(int(jobs)), "--skip-bad"]
+        load0 = list(os.getloadavg())
+        t = time.perf_counter()
+        run = subprocess.run(cmd, capture_output=True, text=True, cwd=root)
+        wall = time.perf_counter() - t
+        if run.returncode != 0:
+            raise RuntimeError(f"jaxmatch mesh failed ({run.returncode}): {run.stderr.strip()[-500:]}")
+        recs = [json.loads(line) for line in (Path(tmp) / "out" / "summary.jsonl").read_text().splitlines()]
+    per_region = sorted(r["seconds"] for r in recs if "seconds" in r)
+    gmsh_s, gmsh_n = 0.0, 0
+    for p in paths:
+        shp = jaxmatch.load_shape(p)
+        if shp.holes:
+            continue
+        outline, _ = cg.mesh_table._outline(shp)
+        h = float(cumulative_length(outline)[-1]) / divisions
+        cal = cg.gmsh_calibrated(outline, h, **opts)
+        t = time.perf_counter()
+        cg.gmsh_quads(outline, cal["lc"], **opts)
+        gmsh_s += time.perf_counter() - t
+        gmsh_n += 1
+    out = {"regions": len(paths), "meshed": sum("error" not in r for r in recs), "divisions": int(divisions),
+           "jobs": int(jobs), "wall_s": wall, "shapes_per_s": len(paths) / wall,
+           "per_region_s": {"median": statistics.median(per_region), "max": per_region[-1]} if per_region else None,
+           "gmsh": {"regions": gmsh_n, "seconds": gmsh_s, "shapes_per_s": gmsh_n / gmsh_s if gmsh_s else float("nan")},
+           "load": {"before": load0, "after": list(os.getloadavg())}}
+    out["bulk_vs_gmsh"] = out["gmsh"]["shapes_per_s"] / out["shapes_per_s"]
+    return out
+
+
 def profile_mesh(name: str, div: int, top: int = 10) -> dict:
     """cProfile of one warm ``jaxmatch.mesh(shape, size=h)`` call (after one untimed call): the
     wall time, the ``top`` entries by cumulative time (``"top"``) and by own time (``"top_own"``),
@@ -1016,6 +1073,17 @@ def main(argv=None) -> int:
         print(f"{r['file']} at size {r['size']:g}: {r['quads']} quads ({r['chosen']}, min SJ {r['min_sj']:.3f}, "
               f"valid {r['valid']}) in {r['seconds']:.2f} s; peak RSS {r['peak_rss_mb']:.0f} MB "
               f"({r['rss_before_mb']:.0f} MB before the call); load {r['load'][0]:.2f}",
+              file=sys.stderr if args.json else sys.stdout)
+        if args.json:
+            print(json.dumps(r))
+        return 0
+    if args.mesh and args.mesh_bulk:
+        r = mesh_bulk(args.mesh_bulk, args.mesh_jobs)
+        print(f"bulk: {r['meshed']}/{r['regions']} regions meshed at perimeter / {r['divisions']} with --jobs {r['jobs']} in "
+              f"{r['wall_s']:.2f} s (whole command): {r['shapes_per_s']:.1f} shapes/s (per region in the workers: median "
+              f"{r['per_region_s']['median']:.3f} s, max {r['per_region_s']['max']:.3f} s); gmsh, same outlines one after "
+              f"another in one process: {r['gmsh']['shapes_per_s']:.1f} shapes/s ({r['gmsh']['regions']} regions); "
+              f"bulk_vs_gmsh {r['bulk_vs_gmsh']:.1f}; load {r['load']['before'][0]:.2f} -> {r['load']['after'][0]:.2f}",
               file=sys.stderr if args.json else sys.stdout)
         if args.json:
             print(json.dumps(r))

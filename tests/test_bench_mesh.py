@@ -59,3 +59,13 @@ def test_gmsh_is_calibrated_towards_h(square):
     g = square["cases"][0]["gmsh"]
     assert g["lc_over_h"] > 0 and g["calibration"]  # tried at least once
     assert 0.5 <= g["mean_edge_over_h"] <= 2.0
+
+
+def test_bulk_times_the_whole_command_and_gmsh_on_the_same_outlines(bench, monkeypatch):
+    monkeypatch.setattr(bench, "MESH_BULK_REGIONS", ("examples/square.json", "examples/lshape.json"))
+    r = json.loads(json.dumps(bench.mesh_bulk(divisions=8, jobs=1)))
+    assert (r["regions"], r["meshed"], r["divisions"], r["jobs"]) == (2, 2, 8, 1)
+    assert r["wall_s"] > 0 and r["shapes_per_s"] == pytest.approx(2 / r["wall_s"])
+    assert r["gmsh"]["regions"] == 2 and r["gmsh"]["shapes_per_s"] > 0
+    assert r["bulk_vs_gmsh"] == pytest.approx(r["gmsh"]["shapes_per_s"] / r["shapes_per_s"])
+    assert 0 < r["per_region_s"]["median"] <= r["per_region_s"]["max"]
