@@ -15,8 +15,6 @@ from typing import List, Optional
 
 import typer
 from rich.console import Console
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
-from rich.table import Table
 
 from jaxmatch import __version__
 from jaxmatch.catalogue import store as cat_mod
@@ -107,12 +105,14 @@ def _progress():
     """A progress display: rich bars on a terminal (or with JAXMATCH_PROGRESS=1), else
     :class:`Heartbeat` lines; JAXMATCH_PROGRESS=0 shows nothing."""
     env = os.environ.get("JAXMATCH_PROGRESS", "").strip()
+    if not (err.is_terminal or env):
+        return Heartbeat()
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn  # only here (start-up)
+
     if env == "0":
         return Progress(console=err, disable=True)
-    if err.is_terminal or env:
-        return Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-                        console=err, transient=True)
-    return Heartbeat()
+    return Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                    console=err, transient=True)
 
 
 COMPILE_CACHE_SETTINGS = {"jax_persistent_cache_min_compile_time_secs": 0.0, "jax_persistent_cache_min_entry_size_bytes": 0}
@@ -273,6 +273,8 @@ def score(
     out.print(f"shape [bold]{shape}[/]: {len(ranking.annotation.codes)} points [cyan]{ranking.annotation.symbols}[/]")
     skipped = f", {ranking.pruned} skipped by the bound" if ranking.pruned else ""
     out.print(f"lattice {lat.name}; {ranking.scored} meshes, {ranking.unmatchable} unmatchable{skipped}")
+    from rich.table import Table
+
     table = Table(title="best per size" if per_size else f"top {top}")
     for col in ("rank", "mesh id", "internal", "boundary", "utility", "rotation", "reflected"):
         table.add_column(col, justify="right" if col not in ("mesh id",) else "left", no_wrap=True, min_width=15 if col == "mesh id" else None)
@@ -864,6 +866,8 @@ def annotate(
                                      "length": float(ln)} for i, (p, ln) in enumerate(zip(polys, lengths))]}))
         return
     out.print(ann.symbols)
+    from rich.table import Table
+
     table = Table()
     for col in ("index", "symbol", "x", "y", "side"):
         table.add_column(col, justify="right")
@@ -923,6 +927,8 @@ def catalogue_info(path: Path = typer.Argument(..., metavar="FILE", help="Catalo
         print(json.dumps(c))
         return
     out.print(f"format version {c['format_version']}")
+    from rich.table import Table
+
     t = Table(title="per k")
     for col in ("k", "meshes (up to rotation and reflection)", "up to rotation only"):
         t.add_column(col, justify="right")

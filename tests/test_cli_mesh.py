@@ -7,6 +7,7 @@ Most runs call :func:`jaxmatch.cli.main` in-process (exit codes come from main()
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 import xml.etree.ElementTree as ET
@@ -237,3 +238,40 @@ def test_mesh_quality_band_is_reported_and_can_be_turned_off(cli, small_cat):
 def test_mesh_band_out_of_range_is_a_clear_error(cli, small_cat, value):
     code, stdout, err = cli("mesh", STAIRS, "--template", "--catalogue", small_cat, "--internal", "3", "--band", value)
     assert code == EXIT_BAD_INPUT and "--band" in err and "Traceback" not in err
+
+
+MESH_IMPORTS = """
+import sys
+from jaxmatch.cli import main
+sys.argv = ["jaxmatch", *sys.argv[1:]]
+try:
+    main()
+except SystemExit as e:
+    assert not e.code, e.code
+unwanted = {"jax", "jaxlib", "numba", "matplotlib", "optax", "starlette", "uvicorn", "svgelements", "ezdxf",
+            "rich.progress", "rich.table", "jaxmatch.tuning", "jaxmatch.label", "jaxmatch.scoring.soft",
+            "jaxmatch.scoring.xla", "jaxmatch.io.plot", "jaxmatch.catalogue.canon_fast"}
+print(sorted(set(sys.modules) & unwanted))
+"""
+
+
+def test_mesh_command_loads_only_what_it_uses(tmp_path):
+    """Start-up (docs/perf.md, "Start-up"): a piped ``jaxmatch mesh SHAPE --size H --out FILE`` imports no
+    JAX, numba, matplotlib, labelling, tuning or progress-bar code (no timing asserted)."""
+    env = {k: v for k, v in os.environ.items() if k != "JAXMATCH_PROGRESS"}
+    out = tmp_path / "l.msh"
+    r = subprocess.run([sys.executable, "-c", MESH_IMPORTS, "mesh", str(EXAMPLES / "lshape.json"), "--size", "0.5",
+                        "--out", str(out)], capture_output=True, text=True, cwd=ROOT, timeout=300, env=env)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.rstrip().splitlines()[-1] == "[]", r.stdout
+    assert out.exists()
+
+
+def test_annotate_loads_no_solver():
+    """``jaxmatch annotate`` places nothing: scipy's sparse and optimize packages stay unloaded."""
+    code = (MESH_IMPORTS.replace('unwanted = {', 'unwanted = {"scipy.sparse", "scipy.optimize", "meshio", ')
+            .replace('"rich.table", ', ''))  # annotate prints tables
+    r = subprocess.run([sys.executable, "-c", code, "annotate", str(EXAMPLES / "lshape.json")],
+                       capture_output=True, text=True, cwd=ROOT, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.rstrip().splitlines()[-1] == "[]", r.stdout

@@ -40,9 +40,6 @@ from collections.abc import Sequence
 from typing import TYPE_CHECKING, Callable, Iterator, NamedTuple
 
 import numpy as np
-import scipy.sparse
-import scipy.sparse.csgraph
-import scipy.sparse.linalg
 
 from jaxmatch.catalogue.mesh import edges
 from jaxmatch.defaults import QUALITY
@@ -52,6 +49,8 @@ from jaxmatch.placement.embed import Placement, inverted_mask, polygon_area, qua
 from jaxmatch.shape import Shape
 
 if TYPE_CHECKING:  # pragma: no cover
+    import scipy.sparse
+
     from jaxmatch.catalogue.store import Catalogue
     from jaxmatch.scoring.lattice import Lattice
     from jaxmatch.scoring.rank import Match
@@ -274,6 +273,8 @@ def _chords(quads: np.ndarray, boundary: np.ndarray, first_edges: Sequence[tuple
     numbered by (a chord's number is the position of its first boundary edge in this order;
     closed chords follow, by their smallest edge). Returns ``(edge_list (E, 2), edge_chord
     (E,), quad_chords (F, 2), n_chords)``."""
+    import scipy.sparse.csgraph  # scipy.sparse loads on first use, not with this module (start-up, docs/perf.md)
+
     q = np.asarray(quads, np.int64)
     e = edges(q).astype(np.int64)
     V = int(q.max()) + 1
@@ -920,6 +921,8 @@ def _refine_topology(quads: np.ndarray, edge_list: np.ndarray, edge_chord: np.nd
 
 
 def _laplacian(quads: np.ndarray, nv: int) -> scipy.sparse.csr_matrix:
+    import scipy.sparse
+
     e = edges(quads)
     rows = np.concatenate([e[:, 0], e[:, 1]])
     cols = np.concatenate([e[:, 1], e[:, 0]])
@@ -1012,6 +1015,8 @@ def _refine_and_place(template: PatchTemplate, mult, *, smooth_iters: int | None
     # ccw loop
     loop = _ccw_loop(side_vertices, template)
     # harmonic extension of the boundary displacement
+    import scipy.sparse.linalg
+
     L = _laplacian(quads, nv)
     free = np.setdiff1d(np.arange(nv), bverts)
     disp = np.zeros((nv, 2))
