@@ -159,31 +159,6 @@ def solve_counts(sides, matrices: Sequence[np.ndarray], *, counts: Mapping[int, 
 MILP_TIME_LIMIT = 30.0
 """Seconds HiGHS may spend on one integer program; past it the best solution found is used."""
 
-MILP_OPTIONS = {"mip_heuristic_run_feasibility_jump": False}
-"""HiGHS options of every integer program beyond scipy's own: HiGHS's feasibility-jump heuristic
-costs about 10 ms a program and our programs (tens of variables) need no heuristic: 13 ms ->
-2-4 ms per layout program, the same solutions (docs/perf.md). Versions of HiGHS without an
-option are run without it."""
-
-_OPTIONS_OK = [True]
-
-
-def _milp(cost, constraints, integrality, bounds, options: dict):
-    """:func:`scipy.optimize.milp` with :data:`MILP_OPTIONS` added, when this HiGHS has them."""
-    import warnings
-
-    from scipy.optimize import milp
-
-    if _OPTIONS_OK[0]:
-        try:
-            with warnings.catch_warnings():  # scipy passes options it does not list to HiGHS verbatim
-                warnings.filterwarnings("ignore", message="Unrecognized options", category=RuntimeWarning)
-                return milp(cost, constraints=constraints, integrality=integrality, bounds=bounds,
-                            options={**options, **MILP_OPTIONS})
-        except (AttributeError, KeyError, TypeError, ValueError):  # this HiGHS lacks an option
-            _OPTIONS_OK[0] = False
-    return milp(cost, constraints=constraints, integrality=integrality, bounds=bounds, options=options)
-
 
 def run_milp(cost, constraints, integrality, bounds, *, time_limit: float = MILP_TIME_LIMIT):
     """Solve one integer program with :func:`scipy.optimize.milp` (HiGHS): ``x`` (the best
@@ -191,11 +166,14 @@ def run_milp(cost, constraints, integrality, bounds, *, time_limit: float = MILP
     infeasible. A solver failure (status 3 or 4, or a time limit without a solution) is retried
     once without presolve, then raised as :class:`jaxmatch.errors.SolverError`, never reported
     as infeasible."""
+    from scipy.optimize import milp
+
     from jaxmatch.errors import SolverError
 
     res = None
     for presolve in (True, False):
-        res = _milp(cost, constraints, integrality, bounds, {"time_limit": float(time_limit), "presolve": presolve})
+        res = milp(cost, constraints=constraints, integrality=integrality, bounds=bounds,
+                   options={"time_limit": float(time_limit), "presolve": presolve})
         if res.status in (0, 1) and res.x is not None:
             return res.x
         if res.status == 2:
