@@ -116,6 +116,12 @@ left. Up to this size the whole mesh is smoothed (a curved side's distortion spr
 further: a 12,000-quad quarter disk reached min scaled Jacobian 0.74 smoothed whole, 0.39 near
 its bad quads only)."""
 
+LARGE_ORDERING = "MMD_AT_PLUS_A"
+"""Column ordering of the sparse solve of the harmonic extension above :data:`SMOOTH_ALWAYS`
+quads (minimum degree on the symmetric pattern: ~35% less factor time than the default COLAMD
+on a 100,000-vertex grid Laplacian, whose pattern is symmetric; up to there the default, so
+small meshes come out as before to the last bit)."""
+
 BAD_RINGS = 6
 """Rings of quads around the bad quads smoothed above :data:`SMOOTH_LOCAL` quads."""
 
@@ -905,7 +911,8 @@ def _refine_and_place(template: PatchTemplate, mult, *, smooth_iters: int | None
     if free.size:
         Lf = L[free][:, free].tocsc()
         rhs = -(L[free][:, bverts] @ disp[bverts])
-        disp[free] = np.asarray(scipy.sparse.linalg.spsolve(Lf, rhs)).reshape(-1, 2)
+        order = LARGE_ORDERING if quads.shape[0] > SMOOTH_ALWAYS else None  # None: SuperLU's default, COLAMD
+        disp[free] = np.asarray(scipy.sparse.linalg.spsolve(Lf, rhs, permc_spec=order)).reshape(-1, 2)
     xy = xy + disp
     xy[bverts] = bxy
     sj = quality(xy, quads)[0]
