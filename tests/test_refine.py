@@ -409,3 +409,80 @@ def test_cli_annotate_lists_sides(cli):
     assert [s["length"] for s in sides] == pytest.approx([2, 1, 1, 1, 1, 2])
     code, stdout, _ = cli("annotate", EXAMPLES / "lshape.json")
     assert "mesh --sides" in stdout
+
+
+# ---------------------------------------------------------------------------------------------
+# large meshes (issue 22): the fast paths against the plain ones, measured independently
+
+
+def _grid(n: int):
+    """An n x n grid of unit quads, ``(xy (V, 2), quads (Q, 4) int64 ccw, boundary ids)``."""
+    ids = np.arange((n + 1) ** 2).reshape(n + 1, n + 1)
+    quads = np.stack([ids[:-1, :-1], ids[1:, :-1], ids[1:, 1:], ids[:-1, 1:]], -1).reshape(-1, 4)
+    xy = np.stack(np.meshgrid(np.arange(n + 1.0), np.arange(n + 1.0), indexing="ij"), -1).reshape(-1, 2)
+    return xy, quads, np.unique(np.concatenate([ids[0], ids[-1], ids[:, 0], ids[:, -1]]))
+
+
+def _folded(xy, quads):
+    """``(Q,) bool``: a corner whose two edges turn the wrong way (cross product <= 0)."""
+    p = xy[quads]
+    a, b = np.roll(p, -1, axis=1) - p, np.roll(p, 1, axis=1) - p
+    return (a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0] <= 0).any(axis=1)
+
+
+def _signed_areas(xy, quads):
+    p = xy[quads]
+    return 0.5 * np.sum(p[..., 0] * np.roll(p[..., 1], -1, axis=1) - np.roll(p[..., 0], -1, axis=1) * p[..., 1], axis=1)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_edges_and_boundary_edges_equal_the_unique_reference(seed):
+    from jaxmatch.catalogue.mesh import boundary_edges
+
+    _, quads, _ = _grid(7)
+    quads = np.random.default_rng(seed).permutation(quads.max() + 1)[quads]  # any vertex numbering
+    d = np.stack([quads, np.roll(quads, -1, axis=1)], -1).reshape(-1, 2)
+    ref = np.unique(np.sort(d, axis=1), axis=0)
+    assert np.array_equal(edges(quads), ref)
+    _, inv, cnt = np.unique(np.sort(d, axis=1), axis=0, return_inverse=True, return_counts=True)
+    assert np.array_equal(boundary_edges(quads), d[cnt[inv.ravel()] == 1])
+    assert boundary_edges(np.zeros((0, 4), np.int64)).shape == (0, 2)
+
+
+def test_smooth_near_unfolds_locally_and_keeps_the_rest():
+    from jaxmatch.placement.embed import smooth_in_frame, smooth_near
+
+    xy, quads, boundary = _grid(24)
+    folded = xy.copy()
+    v = 5 * 25 + 5  # an inner vertex pushed over its neighbour: folded quads around it
+    folded[v] += [1.6, 0.3]
+    inv = _folded(folded, quads)
+    assert inv.any()
+    out = smooth_near(folded, quads, quads[inv].ravel(), boundary, rings=3, frame=folded[boundary], iters=50)
+    assert not _folded(out, quads).any()
+    assert np.array_equal(out[boundary], folded[boundary])
+    assert _signed_areas(out, quads).sum() == pytest.approx(24.0 * 24.0)  # the region is kept
+    far = np.linalg.norm(xy - xy[v], axis=1) > 8  # beyond the rings (and their quads): untouched
+    assert np.array_equal(out[far], folded[far])
+    # rings that reach every vertex: the plain whole-mesh smoothing, to the last bit
+    whole = smooth_near(folded, quads, quads[inv].ravel(), boundary, rings=60, frame=folded[boundary], iters=50)
+    assert np.array_equal(whole, smooth_in_frame(folded, quads, boundary, frame=folded[boundary], iters=50))
+
+
+def test_large_mesh_paths_keep_the_refined_mesh_valid(templates, monkeypatch):
+    """The paths above SMOOTH_ALWAYS / SMOOTH_LOCAL quads, forced on a small refinement: the
+    solve's other ordering gives the same placement to round-off, the local smoothing a valid
+    mesh of the shape (check_refined: boundary, corners, area)."""
+    shp, ts = templates(EXAMPLES / "lshape.json")
+    t = ts[0]
+    m = np.full(t.n_chords, 4, np.int64)
+    plain = R._refine_and_place(t, m)
+    monkeypatch.setattr(R, "SMOOTH_ALWAYS", 0)
+    monkeypatch.setattr(R, "SMOOTH_LOCAL", 0)
+    monkeypatch.setattr(R, "SJ_FLOOR", 2.0)  # every quad "bad": the local smoothing runs
+    a = R._refine_and_place(t, m)
+    monkeypatch.setattr(R, "LARGE_ORDERING", "COLAMD")
+    b = R._refine_and_place(t, m)
+    assert np.allclose(a.xy, b.xy, rtol=0, atol=1e-9)
+    check_refined(a, shp)
+    assert a.inverted == 0 and plain.inverted == 0

@@ -62,9 +62,25 @@ def edges(quads: np.ndarray) -> np.ndarray:
         return np.unique(d, axis=0)
     # one int64 key per pair, a * base + b: its order is the pairs' lexicographic order, so this
     # is np.unique(d, axis=0), ~10x faster (placement calls it for every candidate)
+    # (sorted, then the first of each run: np.unique's answer; numpy >= 2.3 hashes instead, ~10x slower here)
     base = int(d.max()) + 1
-    key = np.unique(d[:, 0].astype(np.int64) * base + d[:, 1])
+    key = np.sort(d[:, 0].astype(np.int64) * base + d[:, 1])
+    key = key[np.concatenate([[True], key[1:] != key[:-1]])]
     return np.stack([key // base, key % base], axis=1).astype(d.dtype)
+
+
+def boundary_edges(quads: np.ndarray) -> np.ndarray:
+    """``(B, 2) int64`` directed edges used by exactly one quad, in the quads' order (ccw quads:
+    the region's boundary runs counter-clockwise along them). One int64 key per undirected edge
+    (as :func:`edges`), not ``np.unique(..., axis=0)``: the same edges, ~10x faster on large meshes."""
+    q = np.asarray(quads, dtype=np.int64)
+    d = np.stack([q, np.roll(q, -1, axis=1)], axis=-1).reshape(-1, 2)
+    if d.size == 0:
+        return d
+    base = int(d.max()) + 1
+    key = np.minimum(d[:, 0], d[:, 1]) * base + np.maximum(d[:, 0], d[:, 1])
+    _, inv, cnt = np.unique(key, return_inverse=True, return_counts=True)
+    return d[cnt[inv] == 1]
 
 
 def valences(quads: np.ndarray, n_vertices: int | None = None) -> np.ndarray:

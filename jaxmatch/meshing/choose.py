@@ -43,7 +43,9 @@ fewer irregular vertices or patches is not given up for a few hundredths of qual
 
 def mesh_key(m: QuadMesh, order: int = 0, quality: Quality = QUALITY) -> tuple:
     """The sort key of :data:`RULES` for mesh ``m`` (``order``: its place among the candidates)."""
-    sj = m.min_scaled_jacobian
+    per_quad = m.scaled_jacobian  # once: the min and the mean of the same (Q,) array, as QuadMesh gives them
+    sj = float(per_quad.min()) if per_quad.size else math.nan
+    mean = float(per_quad.mean()) if per_quad.size else math.nan
     area = m.area_ratio
     return (
         m.inverted > 0,
@@ -55,7 +57,7 @@ def mesh_key(m: QuadMesh, order: int = 0, quality: Quality = QUALITY) -> tuple:
         max(int(m.irregular.size) - m.irregular_bound, 0),
         -math.floor(sj / SJ_STEP + 1e-9) if math.isfinite(sj) else math.inf,
         m.n_patches,
-        -round(m.mean_scaled_jacobian, 2),
+        -round(mean, 2),
         order,
     )
 

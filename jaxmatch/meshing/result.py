@@ -13,7 +13,7 @@ from typing import Mapping, NamedTuple
 
 import numpy as np
 
-from jaxmatch.catalogue.mesh import valences
+from jaxmatch.catalogue.mesh import boundary_edges, edges, valences
 from jaxmatch.placement.embed import edge_ratios, inverted_mask, quad_areas, quality
 
 __all__ = ["Candidate", "QuadMesh", "boundary_loops", "irregular_bound"]
@@ -33,11 +33,7 @@ def boundary_loops(quads: np.ndarray) -> list[np.ndarray]:
     """The boundary loops of a quad mesh (edges used by exactly one quad), each ``(B,) int64``
     in the quads' direction (ccw quads: the outer loop runs ccw, holes cw). Assumes each
     boundary vertex has one outgoing boundary edge (a manifold mesh)."""
-    q = np.asarray(quads, dtype=np.int64)
-    d = np.stack([q, np.roll(q, -1, axis=1)], axis=-1).reshape(-1, 2)
-    key = np.sort(d, axis=1)
-    _, inv, cnt = np.unique(key, axis=0, return_inverse=True, return_counts=True)
-    b = d[cnt[inv.ravel()] == 1]
+    b = boundary_edges(quads)
     nxt = dict(zip(b[:, 0].tolist(), b[:, 1].tolist()))
     loops, seen = [], set()
     for start in b[:, 0].tolist():
@@ -199,15 +195,13 @@ class QuadMesh:
         """Edges longer than ``factor * size`` (0 without a size)."""
         if not self.size:
             return 0
-        q = np.asarray(self.quads, np.int64)
-        e = np.unique(np.sort(np.stack([q, np.roll(q, -1, axis=1)], -1).reshape(-1, 2), axis=1), axis=0)
+        e = edges(np.asarray(self.quads, np.int64))
         return int(np.sum(np.linalg.norm(self.xy[e[:, 0]] - self.xy[e[:, 1]], axis=1) > factor * self.size))
 
     @property
     def mean_edge_length(self) -> float:
         """Mean length of the mesh's edges, each counted once (user units)."""
-        q = np.asarray(self.quads, np.int64)
-        e = np.unique(np.sort(np.stack([q, np.roll(q, -1, axis=1)], -1).reshape(-1, 2), axis=1), axis=0)
+        e = edges(np.asarray(self.quads, np.int64))
         return float(np.linalg.norm(self.xy[e[:, 0]] - self.xy[e[:, 1]], axis=1).mean()) if e.size else math.nan
 
     @property

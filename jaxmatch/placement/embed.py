@@ -65,6 +65,7 @@ __all__ = [
     "quad_areas",
     "quality",
     "smooth",
+    "smooth_near",
     "to_user",
     "tutte",
 ]
@@ -616,6 +617,34 @@ def smooth_in_frame(xy: np.ndarray, quads: np.ndarray, fixed: np.ndarray, *, fra
     r = float(np.sqrt(np.mean(np.sum((pts - c) ** 2, axis=1)))) or 1.0
     out = smooth((xy - c) / r, quads, fixed, iters=iters) * r + c
     out[fixed] = xy[fixed]
+    return out
+
+
+def smooth_near(xy: np.ndarray, quads: np.ndarray, seeds: np.ndarray, fixed: np.ndarray, *, rings: int,
+                frame: np.ndarray, iters: int) -> np.ndarray:
+    """:func:`smooth_in_frame` of only the vertices within ``rings`` rings of quads of the
+    ``seeds`` (the quads that touch one of them smoothed as a submesh whose other vertices
+    stay): for large meshes whose trouble is local (cuts between patches, a few folded quads).
+    Quads outside the submesh keep their shape, so it never lowers the minimum scaled Jacobian
+    either.
+
+    xy: ``(V, 2) float64``; quads: ``(Q, 4) int64`` ccw; seeds: ``(k,)`` vertex ids; fixed:
+    vertex ids kept; frame: ``(m, 2)`` points that define the frame (:func:`smooth_in_frame`);
+    iters: L-BFGS iterations per round. Returns ``(V, 2) float64``.
+    """
+    near = np.zeros(xy.shape[0], bool)
+    near[np.asarray(seeds, np.int64)] = True
+    for _ in range(int(rings)):
+        near[quads[near[quads].any(axis=1)].ravel()] = True
+    free = near.copy()
+    free[fixed] = False
+    sub = quads[free[quads].any(axis=1)]
+    verts = np.unique(sub)
+    local = np.full(xy.shape[0], -1, np.int64)
+    local[verts] = np.arange(verts.shape[0])
+    keep = np.flatnonzero(~free[verts])
+    out = xy.copy()
+    out[verts] = smooth_in_frame(xy[verts], local[sub], keep, frame=frame, iters=iters)
     return out
 
 

@@ -54,8 +54,8 @@ from jaxmatch.errors import InputError
 from jaxmatch.files import read_limited
 from jaxmatch.placement.refine import _array_key
 from jaxmatch.placement.milp import CHORD_WEIGHT, LayoutInfeasible, solve_counts  # noqa: F401 (public here)
-from jaxmatch.placement.embed import inverted_mask, polygon_area, quad_areas, quality, smooth_in_frame
-from jaxmatch.catalogue.mesh import valences
+from jaxmatch.placement.embed import inverted_mask, polygon_area, quad_areas, quality, smooth_in_frame, smooth_near
+from jaxmatch.catalogue.mesh import boundary_edges, valences  # noqa: F401 (boundary_edges public here)
 from jaxmatch.shape import Shape, make_shape
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -726,16 +726,6 @@ def fit_sides(layout: Layout, sides: Sides, p: int, refined, counts: np.ndarray,
     return smooth_in_frame(xy, quads, b, frame=target, iters=smooth_iters)
 
 
-def boundary_edges(quads: np.ndarray) -> np.ndarray:
-    """``(B, 2) int64`` directed edges used by exactly one quad (ccw quads: the region's
-    boundary runs counter-clockwise along them)."""
-    q = np.asarray(quads, dtype=np.int64)
-    d = np.stack([q, np.roll(q, -1, axis=1)], axis=-1).reshape(-1, 2)
-    key = np.sort(d, axis=1)
-    _, inv, cnt = np.unique(key, axis=0, return_inverse=True, return_counts=True)
-    return d[cnt[inv.ravel()] == 1]
-
-
 def _boundary_loops(layout: Layout, sides: Sides, side_ids, xy: np.ndarray) -> list[np.ndarray]:
     """Vertex ids of every boundary loop (in the patches' direction: the outer loop ccw, holes
     cw), from the sides one patch uses; the outer loop (largest signed area) first."""
@@ -963,20 +953,8 @@ def _smooth_cuts(xy: np.ndarray, quads: np.ndarray, fixed: np.ndarray, sides: Si
     inner = [np.asarray(side_ids[s], np.int64) for s in range(len(side_ids)) if sides.users[s, 1] >= 0]
     if not inner:
         return xy
-    near = np.zeros(xy.shape[0], bool)
-    near[np.concatenate(inner)] = True
-    for _ in range(CUT_RINGS):
-        near[quads[near[quads].any(axis=1)].ravel()] = True
-    free = near.copy()
-    free[fixed] = False
-    sub = quads[free[quads].any(axis=1)]
-    verts = np.unique(sub)
-    local = np.full(xy.shape[0], -1, np.int64)
-    local[verts] = np.arange(verts.shape[0])
-    keep = np.flatnonzero(~free[verts])
-    out = xy.copy()
-    out[verts] = smooth_in_frame(xy[verts], local[sub], keep, frame=xy[fixed], iters=SMOOTH_ITERS_LARGE)
-    return out
+    return smooth_near(xy, quads, np.concatenate(inner), fixed, rings=CUT_RINGS, frame=xy[fixed],
+                       iters=SMOOTH_ITERS_LARGE)
 
 
 MESH_CACHE_SIZE = 256
