@@ -1066,28 +1066,30 @@ def profile_mesh(name: str, div: int, top: int = 10) -> dict:
     return {"shape": name, "div": div, "wall_s": wall, "profiled_s": st.total_tt, "top": entries(3), "top_own": entries(2)}
 
 
+def _report(line: str, result: dict, as_json: bool) -> int:
+    """Print a benchmark's one-line summary (to stderr with --json) and, with --json, its JSON
+    object on the last line; exit status 0."""
+    print(line, file=sys.stderr if as_json else sys.stdout)
+    if as_json:
+        print(json.dumps(result))
+    return 0
+
+
 def main(argv=None) -> int:
     args = parse_args(argv)
     if args.mesh and args.mesh_large:
         r = mesh_large(*args.mesh_large.rsplit(":", 1))
-        print(f"{r['file']} at size {r['size']:g}: {r['quads']} quads ({r['chosen']}, min SJ {r['min_sj']:.3f}, "
-              f"valid {r['valid']}) in {r['seconds']:.2f} s; peak RSS {r['peak_rss_mb']:.0f} MB "
-              f"({r['rss_before_mb']:.0f} MB before the call); load {r['load'][0]:.2f}",
-              file=sys.stderr if args.json else sys.stdout)
-        if args.json:
-            print(json.dumps(r))
-        return 0
+        return _report(f"{r['file']} at size {r['size']:g}: {r['quads']} quads ({r['chosen']}, min SJ {r['min_sj']:.3f}, "
+                       f"valid {r['valid']}) in {r['seconds']:.2f} s; peak RSS {r['peak_rss_mb']:.0f} MB "
+                       f"({r['rss_before_mb']:.0f} MB before the call); load {r['load'][0]:.2f}", r, args.json)
     if args.mesh and args.mesh_bulk:
         r = mesh_bulk(args.mesh_bulk, args.mesh_jobs)
-        print(f"bulk: {r['meshed']}/{r['regions']} regions meshed at perimeter / {r['divisions']} with --jobs {r['jobs']} in "
-              f"{r['wall_s']:.2f} s (whole command): {r['shapes_per_s']:.1f} shapes/s (per region in the workers: median "
-              f"{r['per_region_s']['median']:.3f} s, max {r['per_region_s']['max']:.3f} s); gmsh, same outlines one after "
-              f"another in one process: {r['gmsh']['shapes_per_s']:.1f} shapes/s ({r['gmsh']['regions']} regions); "
-              f"bulk_vs_gmsh {r['bulk_vs_gmsh']:.1f}; load {r['load']['before'][0]:.2f} -> {r['load']['after'][0]:.2f}",
-              file=sys.stderr if args.json else sys.stdout)
-        if args.json:
-            print(json.dumps(r))
-        return 0
+        return _report(f"bulk: {r['meshed']}/{r['regions']} regions meshed at perimeter / {r['divisions']} with --jobs "
+                       f"{r['jobs']} in {r['wall_s']:.2f} s (whole command): {r['shapes_per_s']:.1f} shapes/s (per region "
+                       f"in the workers: median {r['per_region_s']['median']:.3f} s, max {r['per_region_s']['max']:.3f} s); "
+                       f"gmsh, same outlines one after another in one process: {r['gmsh']['shapes_per_s']:.1f} shapes/s "
+                       f"({r['gmsh']['regions']} regions); bulk_vs_gmsh {r['bulk_vs_gmsh']:.1f}; load "
+                       f"{r['load']['before'][0]:.2f} -> {r['load']['after'][0]:.2f}", r, args.json)
     if args.mesh and args.mesh_profile:
         name, _, div = args.mesh_profile.partition(":")
         r = profile_mesh(name, int(div or 32))
