@@ -190,3 +190,26 @@ def test_kept_rankings_equal_fresh_ones_for_shapes_of_the_same_point_types(cat, 
         _same_matches(fresh[name].results, kept[name].results)
         np.testing.assert_array_equal(kept[name].annotation.positions, fresh[name].annotation.positions)
     clear_memo(cat)
+
+
+def test_lazy_templates_are_placed_once_and_as_far_as_asked(cat):
+    """A patch's templates are made as they are asked for, shared by every caller of the cache,
+    in the order of the plain walk (fewest internal vertices first); threads may share them."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    lat = load_lattice("fine")
+    shp = load_shape(ROOT / "examples" / "tshape.json")
+    R.clear_template_cache(cat)
+    lazy = R.lazy_patch_templates(shp, cat, lat, limit=2, internal=[0, 1, 2])
+    first = lazy[0]
+    walk = lazy._walk
+    assert len(walk.made) == 1  # only the first one placed
+    with ThreadPoolExecutor(4) as pool:
+        lens = list(pool.map(lambda _: len(R.lazy_patch_templates(shp, cat, lat, limit=2, internal=[0, 1, 2])), range(8)))
+    assert len(set(lens)) == 1 and lens[0] >= 1
+    plain = list(R._iter_by_size(shp, cat, lat, limit=2, internal=[0, 1, 2]))
+    _same_templates(plain, lazy[:])
+    assert lazy[0] is not first and lazy[0].mesh_id == first.mesh_id  # handed out with the caller's shape
+    ks = [t.match.internal_vertices for t in lazy[:]]
+    assert ks == sorted(ks)
+    R.clear_template_cache(cat)

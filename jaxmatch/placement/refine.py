@@ -471,26 +471,32 @@ class _Walk:
     :class:`LazyTemplates` of one patch)."""
 
     def __init__(self, produce: Iterator[PatchTemplate]):
+        import threading
+
         self.produce: Iterator[PatchTemplate] | None = produce
         self.made: list[PatchTemplate] = []
         self.error: Exception | None = None
+        self.lock = threading.Lock()  # one thread advances the walk at a time (callers may share a cache)
 
     def fill(self, n: float) -> None:
         """Place candidates until ``n`` templates exist or none is left; an error of the walk
         (e.g. :class:`~jaxmatch.errors.UnmatchableError`) is raised again on every later ask
         beyond what was made before it."""
-        while len(self.made) < n:
-            if self.error is not None:
-                raise self.error
-            if self.produce is None:
-                return
-            try:
-                self.made.append(next(self.produce))
-            except StopIteration:
-                self.produce = None
-            except Exception as e:  # noqa: BLE001 - kept and raised again
-                self.produce, self.error = None, e
-                raise
+        if len(self.made) >= n:
+            return
+        with self.lock:
+            while len(self.made) < n:
+                if self.error is not None:
+                    raise self.error
+                if self.produce is None:
+                    return
+                try:
+                    self.made.append(next(self.produce))
+                except StopIteration:
+                    self.produce = None
+                except Exception as e:  # noqa: BLE001 - kept and raised again
+                    self.produce, self.error = None, e
+                    raise
 
 
 class LazyTemplates(Sequence):
@@ -538,7 +544,7 @@ def lazy_patch_templates(shape: Shape, catalogue: "Catalogue", lattice: "Lattice
         while len(cache) > TEMPLATE_CACHE_SIZE:
             cache.pop(next(iter(cache)))
     else:
-        cache[key] = cache.pop(key)  # most recently used last
+        cache[key] = cache.pop(key, hit)  # most recently used last (another thread may have moved it)
     return LazyTemplates(hit, shape)
 
 

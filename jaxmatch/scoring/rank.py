@@ -179,7 +179,7 @@ def rank(
                int(top), bool(prune))
         hit = memo.get(key)
         if hit is not None:
-            memo[key] = memo.pop(key)  # most recently used last
+            memo[key] = memo.pop(key, hit)  # most recently used last (another thread may have moved it)
             return Ranking(ann, list(hit[0]), *hit[1:])
     weights = weights_of(lattice)
     buckets = [] if bulk_path else list(catalogue.buckets(internal))
