@@ -213,3 +213,25 @@ def test_lazy_templates_are_placed_once_and_as_far_as_asked(cat):
     ks = [t.match.internal_vertices for t in lazy[:]]
     assert ks == sorted(ks)
     R.clear_template_cache(cat)
+
+
+@pytest.mark.parametrize("internal", [[0, 1], [2, 3], None])
+def test_lazy_rankings_equal_eager_ones(cat, internal):
+    """rank(lazy=True) aligns a match when first asked for; every match, and the template scan's
+    reordering, equal the eager ranking's."""
+    from jaxmatch.scoring.rank import LazyMatches, clear_memo, rank
+
+    lat = load_lattice("fine")
+    shp = load_shape(ROOT / "examples" / "lshape.json")
+    kw = dict(internal=internal, top=6, per_size=True, prune=True)
+    clear_memo(cat)
+    eager = rank(shp, cat, lat, **kw).results
+    lazy = rank(shp, cat, lat, lazy=True, **kw).results
+    assert isinstance(lazy, LazyMatches) and len(lazy) == len(eager) and not lazy._made
+    _same_matches(eager, [lazy[i] for i in range(len(lazy))])
+    _same_matches(eager[-2:], lazy[-2:])
+    merged = lazy.reordered(lambda r: (-r[0], r[1], r[3]))
+    _same_matches(sorted(eager, key=lambda m: (-m.utility, m.internal_vertices, m.mesh_id)), merged[:])
+    with pytest.raises(IndexError):
+        lazy[len(lazy)]
+    clear_memo(cat)

@@ -383,8 +383,9 @@ def _candidates(shape: Shape, catalogue: "Catalogue", lattice: "Lattice", *, lim
     best utility first (then fewer internal vertices, then id)."""
     from jaxmatch.scoring.rank import rank
 
-    ranking = rank(shape, catalogue, lattice, internal=internal, top=max(int(limit), 1), per_size=True, prune=True)
-    ms = sorted(ranking.results, key=lambda m: (-m.utility, m.internal_vertices, m.mesh_id))
+    ranking = rank(shape, catalogue, lattice, internal=internal, top=max(int(limit), 1), per_size=True, prune=True,
+                   lazy=True)  # a scan aligns only the matches it reaches
+    ms = ranking.results.reordered(lambda r: (-r[0], r[1], r[3]))  # utility, internal vertices, id
     return ranking.annotation, ms
 
 

@@ -5,8 +5,10 @@ Everything the ``jaxmatch score`` command prints comes from :func:`rank`.
 
 from __future__ import annotations
 
+import copy
 from itertools import groupby, islice
-from typing import Callable, Iterator, NamedTuple, Sequence
+from collections.abc import Sequence
+from typing import Callable, Iterator, NamedTuple
 
 import numpy as np
 
@@ -74,6 +76,41 @@ class Ranking(NamedTuple):
     pruned: int = 0
 
 
+class LazyMatches(Sequence):
+    """Ranked matches, each made (aligned, its utility parts) when first asked for.
+
+    rows: ``(utility, k, n, mesh_id, rotation, reflected, valences)`` in rank order; make: row ->
+    :class:`Match`. :meth:`reordered` gives a view in another order sharing the matches made."""
+
+    def __init__(self, rows: Sequence[tuple], make: Callable[[tuple], Match]):
+        self.rows = list(rows)
+        self._make = make
+        self._made: dict[int, Match] = {}
+        self._order: list[int] | None = None
+
+    def reordered(self, key: Callable[[tuple], object]) -> "LazyMatches":
+        """The same matches ordered by ``key(row)`` (a stable sort of this view)."""
+        view = copy.copy(self)
+        view._order = sorted(self._indices(), key=lambda j: key(self.rows[j]))
+        return view
+
+    def _indices(self) -> list[int]:
+        return list(range(len(self.rows))) if self._order is None else self._order
+
+    def __len__(self) -> int:
+        return len(self.rows)
+
+    def __getitem__(self, i):
+        if isinstance(i, slice):
+            return [self[j] for j in range(*i.indices(len(self)))]
+        i = range(len(self.rows))[i]  # negative indices; IndexError past the end
+        j = i if self._order is None else self._order[i]
+        m = self._made.get(j)
+        if m is None:
+            m = self._made[j] = self._make(self.rows[j])
+        return m
+
+
 RANK_MEMO_SIZE = 4096
 """Rankings kept per catalogue by :func:`rank` (per size, ``"id"`` ties, pruned: the template
 scan's calls), keyed on the annotation's point types, the sizes, the lattice and ``top``: with
@@ -123,6 +160,7 @@ def rank(
     tie_cap: int | None = None,
     prune: bool = False,
     devices: int | None = None,
+    lazy: bool = False,
 ) -> Ranking:
     """Score every selected catalogue mesh against ``shape`` and return the best ``top``.
 
@@ -150,7 +188,9 @@ def rank(
     prune: find the top meshes with :func:`jaxmatch.scoring.bulk.top_k`: each distinct boundary sequence is
     scored once, in decreasing order of a cheap upper bound, and sequences that cannot enter the
     top are skipped (same results as exhaustive scoring, tested; ``Ranking.pruned`` counts the
-    skipped meshes and ``following`` then only holds the remaining tied rows). devices: shard the
+    skipped meshes and ``following`` then only holds the remaining tied rows). lazy (with
+    ``per_size`` and ties by id): ``results`` is a :class:`LazyMatches`, each match aligned when
+    first asked for (a template scan uses a few of them). devices: shard the
     scoring over that many JAX devices (:func:`jaxmatch.scoring.bulk.configure_host_devices` makes CPU
     devices; it must run before JAX is imported); implies the bulk path.
 
@@ -176,11 +216,11 @@ def rank(
     if memo is not None:
         c = np.ascontiguousarray(ann.codes)
         key = (c.dtype.str, c.shape, c.tobytes(), None if internal is None else tuple(internal), lattice,
-               int(top), bool(prune))
+               int(top), bool(prune), bool(lazy))
         hit = memo.get(key)
         if hit is not None:
             memo[key] = memo.pop(key, hit)  # most recently used last (another thread may have moved it)
-            return Ranking(ann, list(hit[0]), *hit[1:])
+            return Ranking(ann, hit[0] if lazy else list(hit[0]), *hit[1:])
     weights = weights_of(lattice)
     buckets = [] if bulk_path else list(catalogue.buckets(internal))
     total = sum(len(p.ids) for p in parts) if bulk_path else sum(len(b.ids) for b in buckets)
@@ -227,11 +267,18 @@ def rank(
             yield from (to_match(r) for r in grp[len(head):])
 
     if per_size:
-        results = []
-        for k in sorted({r[1] for r in rows}):
-            results.extend(islice(ordered([r for r in rows if r[1] == k]), top))
+        if lazy and placements is None:
+            chosen = []
+            for k in sorted({r[1] for r in rows}):
+                chosen.extend([r for r in rows if r[1] == k][:top])  # what ordered() yields with ties by id
+            results = LazyMatches(chosen, to_match)
+        else:
+            results = []
+            for k in sorted({r[1] for r in rows}):
+                results.extend(islice(ordered([r for r in rows if r[1] == k]), top))
         if memo is not None:
-            memo[key] = (tuple(results), total, unmatchable, placements, None, pruned)
+            memo[key] = (results if isinstance(results, LazyMatches) else tuple(results), total, unmatchable,
+                         placements, None, pruned)
             while len(memo) > RANK_MEMO_SIZE:
                 memo.pop(next(iter(memo)))
         return Ranking(ann, results, total, unmatchable, placements, None, pruned)
