@@ -257,8 +257,10 @@ def test_refined_topology_is_a_disk_without_new_irregular_vertices(cat, data):
 # integer programs
 
 
+@pytest.mark.parametrize("states", [R.FEASIBLE_STATES, 0])  # counted out, or the integer program
 @pytest.mark.parametrize("name, cap", [("square.json", 4), ("triangle.json", 6)])
-def test_milp_feasibility_equals_enumeration(templates, name, cap):
+def test_milp_feasibility_equals_enumeration(templates, name, cap, states, monkeypatch):
+    monkeypatch.setattr(R, "FEASIBLE_STATES", states)
     shp, ts = templates(EXAMPLES / name)
     n = max(shp.n_corners, 1)
     for t in ts[:5]:
@@ -316,10 +318,14 @@ def test_sampled_side_requests_are_met_exactly_or_refused(templates, path):
             assert tuple(ch.mesh.counts.tolist()) == c
             assert ch.mesh.inverted == 0
             check_refined(ch.mesh, shp)
+            quiet = R.refine_mesh(shp, sides=list(c), templates=ts, explain=False)  # the same mesh, unexplained
+            assert quiet.template.mesh_id == ch.template.mesh_id and np.array_equal(quiet.mesh.xy, ch.mesh.xy)
         else:
             with pytest.raises(R.InfeasibleRequest, match="nearest feasible counts") as err:
                 R.refine_mesh(shp, sides=list(c), templates=ts)
             assert err.value.nearest in union
+            with pytest.raises(R.InfeasibleRequest, match="cannot be met by any of the"):
+                R.refine_mesh(shp, sides=list(c), templates=ts, explain=False)
 
 
 SIZE_SHAPES = sorted(EXAMPLES.glob("*.json")) + [EXAMPLES / "lshape.txt"]

@@ -175,7 +175,7 @@ def conforming_templates(shape: Shape, cat, lat, h, first: QuadMesh, quality: Qu
     out, seen = [], {first.templates}
     for counts in _target_counts(side_lengths(shape), h, CONFORMING_TRIES):
         try:
-            choice = refine_mesh(shape, cat, lat, sides=counts.tolist(), templates=templates)
+            choice = refine_mesh(shape, cat, lat, sides=counts.tolist(), templates=templates, explain=False)
         except (InfeasibleRequest, SolverError):
             continue
         m = from_refined(shape, choice.mesh, size=h)

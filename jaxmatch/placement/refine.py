@@ -758,12 +758,53 @@ def _exact(template: PatchTemplate, counts: np.ndarray, h: float, widths: np.nda
     return m
 
 
+FEASIBLE_STATES = 100_000
+"""Largest number of count vectors :func:`feasible` enumerates (every vector below the counts);
+beyond it the integer program answers."""
+
+
+def _reachable(A: np.ndarray, target: np.ndarray) -> bool | None:
+    """Whether ``A @ x == target`` for some integer ``x >= 0`` (``A``: ``(S, C)`` nonnegative
+    integers, ``target``: ``(S,)``), by marking every vector ``<= target`` that sums of columns
+    reach (one column added at a time until nothing changes); None when there are more than
+    :data:`FEASIBLE_STATES` such vectors."""
+    t = np.asarray(target, np.int64)
+    if np.any(t < 0):
+        return False
+    dims = tuple(int(d) for d in t + 1)
+    if math.prod(dims) > FEASIBLE_STATES:
+        return None
+    coords = np.indices(dims).reshape(len(dims), -1)  # (S, states), C order: index = ravel_multi_index
+    reach = np.zeros(coords.shape[1], bool)
+    reach[0] = True
+    moves = []
+    for a in np.asarray(A, np.int64).T:
+        if a.any() and np.all(a <= t):
+            src = np.flatnonzero(np.all(coords + a[:, None] <= t[:, None], axis=0))
+            moves.append((src, int(np.ravel_multi_index(tuple(a), dims))))
+    grown = True
+    while grown:
+        grown = False
+        for src, offset in moves:
+            hit = src[reach[src] & ~reach[src + offset]]
+            if hit.size:
+                reach[hit + offset] = True
+                grown = True
+    return bool(reach[-1])
+
+
 def feasible(template: PatchTemplate, counts) -> bool:
-    """Whether some multiplicities give exactly ``counts`` ``(n_sides,)`` edges per side."""
+    """Whether some multiplicities give exactly ``counts`` ``(n_sides,)`` edges per side: every
+    chord at least once (``A @ 1``), the rest any sums of chords (:func:`_reachable`), or the
+    integer program when there are too many count vectors to enumerate."""
     c = np.asarray(counts, np.int64)
     if c.sum() % 2:
         return False
-    return _exact(template, c, 1.0, widths=np.ones(template.side_matrix().shape[1])) is not None
+    A = template.side_matrix()
+    found = _reachable(A, c - A.sum(axis=1))
+    if found is not None:
+        return found
+    return _exact(template, c, 1.0, widths=np.ones(A.shape[1])) is not None
 
 
 def nearest_counts(template: PatchTemplate, counts) -> np.ndarray:
@@ -1112,7 +1153,8 @@ class RefineChoice(NamedTuple):
 
 
 def refine_mesh(shape: Shape, catalogue: "Catalogue" = None, lattice: "Lattice" = None, *, sides=None, size=None,
-                internal=None, limit: int = None, templates: Sequence[PatchTemplate] | None = None) -> RefineChoice:
+                internal=None, limit: int = None, templates: Sequence[PatchTemplate] | None = None,
+                explain: bool = True) -> RefineChoice:
     """A quad mesh of ``shape`` with the requested number of edges per side, or edges of about
     the requested length: the Python API of ``jaxmatch mesh --sides/--size``.
 
@@ -1137,6 +1179,9 @@ def refine_mesh(shape: Shape, catalogue: "Catalogue" = None, lattice: "Lattice" 
 
     templates: already fitted templates of ``shape`` (e.g. from :func:`patch_templates`, to
     serve many requests); then ``catalogue``, ``lattice``, ``internal`` and ``limit`` are unused.
+    explain: False skips the nearest feasible counts of each template that cannot meet ``sides``
+    (one integer program each; :func:`feasible` decides without one): the reasons and the
+    error then name none. The mesh chosen is the same.
     """
     if (sides is None) == (size is None):
         raise ValueError("give exactly one of sides and size")
@@ -1153,6 +1198,8 @@ def refine_mesh(shape: Shape, catalogue: "Catalogue" = None, lattice: "Lattice" 
         nonlocal best_fail
         if sides is None:
             return None
+        if not explain:
+            return None if feasible(t, sides) else "cannot meet the counts"
         near = nearest_counts(t, sides)  # one program: the counts themselves exactly when feasible
         d = int(np.abs(near - np.asarray(sides)).sum())
         if d == 0:
@@ -1203,6 +1250,10 @@ def refine_mesh(shape: Shape, catalogue: "Catalogue" = None, lattice: "Lattice" 
         raise InfeasibleRequest(f"edge counts {_fmt(c)} cannot be met by any of the {tried} templates that keep the "
                                 f"corners; closest template {t.mesh_id}: {why}; nearest feasible counts {_fmt(near)}",
                                 shape.source, near)
+    tried = sum(1 for p in passed if p[2].startswith("cannot meet"))
+    if tried:  # explain=False
+        raise InfeasibleRequest(f"edge counts {_fmt(np.asarray(sides, np.int64))} cannot be met by any of the {tried} "
+                                "templates that keep the corners", shape.source)
     raise InfeasibleRequest("no catalogue mesh keeps every corner of the shape without folding"
                             + (f" (tried {len(passed)})" if passed else ""), shape.source)
 
