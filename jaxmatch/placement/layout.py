@@ -54,7 +54,8 @@ from jaxmatch.errors import InputError
 from jaxmatch.files import read_limited
 from jaxmatch.placement.refine import _array_key
 from jaxmatch.placement.milp import CHORD_WEIGHT, LayoutInfeasible, solve_counts  # noqa: F401 (public here)
-from jaxmatch.placement.embed import inverted_mask, polygon_area, quad_areas, quality, smooth_in_frame, smooth_near
+from jaxmatch.placement.embed import (inverted_mask, polygon_area, quad_areas, quality, sj_inverted, smooth_in_frame,
+                                      smooth_near)
 from jaxmatch.catalogue.mesh import boundary_edges, valences  # noqa: F401 (boundary_edges public here)
 from jaxmatch.shape import Shape, make_shape
 
@@ -782,8 +783,16 @@ def _has(templates, j: int) -> bool:
 
 
 def _key(refined_mesh) -> tuple:
-    sj = quality(refined_mesh.xy, refined_mesh.quads)[0]
-    return (int(inverted_mask(refined_mesh.xy, refined_mesh.quads).sum()), -round(float(sj.min()), 3))
+    """``(inverted quads, -min scaled Jacobian to 3 decimals)`` of a refined patch, from its own
+    figures (which :func:`_fitted` keeps up to date when its sides move)."""
+    return (int(refined_mesh.inverted), -round(float(refined_mesh.scaled_jacobian.min()), 3))
+
+
+def _fitted(refined_mesh, xy: np.ndarray):
+    """``refined_mesh`` at positions ``xy (V, 2)`` (e.g. from :func:`fit_sides`), its scaled
+    Jacobians and inverted count measured there (the other figures are the refinement's)."""
+    sj, inv = sj_inverted(xy, refined_mesh.quads)
+    return refined_mesh._replace(xy=xy, scaled_jacobian=sj, inverted=int(inv.sum()))
 
 
 def mesh_layout(layout: Layout, catalogue: Catalogue, lattice: Lattice, *, size: float | None = None,
@@ -1065,7 +1074,7 @@ def _mesh_layout(layout: Layout, catalogue: Catalogue, lattice: Lattice, *, size
                 cache[key] = _refine_cached(t, m)
             rm = cache[key]
             if any(len(parts) > 1 for parts in sides.patch_sides[p]):  # neighbours meet along a side
-                rm = rm._replace(xy=fit_sides(layout, sides, p, rm, n))
+                rm = _fitted(rm, fit_sides(layout, sides, p, rm, n))
             refined.append(rm)
         keys = [_key(r) for r in refined]
         total = (sum(k[0] for k in keys), max(k[1] for k in keys))  # inverted quads, then the worst patch

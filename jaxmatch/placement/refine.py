@@ -45,7 +45,7 @@ from jaxmatch.catalogue.mesh import edges
 from jaxmatch.defaults import QUALITY
 from jaxmatch.errors import InputError, UnmatchableError
 from jaxmatch.placement.milp import LayoutInfeasible, one_patch_sides, solve_counts
-from jaxmatch.placement.embed import (Placement, inverted_mask, polygon_area, quad_areas, quality, smooth_in_frame,
+from jaxmatch.placement.embed import (Placement, polygon_area, quad_areas, quality, sj_inverted, smooth_in_frame,
                                       smooth_near)
 from jaxmatch.shape import Shape
 
@@ -1050,8 +1050,8 @@ def _refine_and_place(template: PatchTemplate, mult, *, smooth_iters: int | None
         disp[free] = np.asarray(scipy.sparse.linalg.spsolve(Lf, rhs, permc_spec=order)).reshape(-1, 2)
     xy = xy + disp
     xy[bverts] = bxy
-    sj = quality(xy, quads)[0]
-    bad = inverted_mask(xy, quads) | (sj < SJ_FLOOR)
+    sj, inv = sj_inverted(xy, quads)
+    bad = inv | (sj < SJ_FLOOR)
     local = smooth_iters is None and quads.shape[0] > SMOOTH_LOCAL
     if smooth_iters is not None:
         iters = int(smooth_iters)
@@ -1065,13 +1065,13 @@ def _refine_and_place(template: PatchTemplate, mult, *, smooth_iters: int | None
             xy = smooth_near(xy, quads, quads[bad].ravel(), bverts, rings=BAD_RINGS, frame=bxy, iters=iters)
         else:
             xy = smooth_in_frame(xy, quads, bverts, frame=bxy, iters=iters)
-        sj = quality(xy, quads)[0]
+        sj, inv = sj_inverted(xy, quads)
     p = xy[quads]
     el = np.linalg.norm(p[:, [1, 2, 3, 0]] - p, axis=-1)
     ratio = el.max(axis=1) / np.maximum(el.min(axis=1), np.finfo(float).tiny)
     return RefinedMesh(
         xy=xy, quads=quads, side_vertices=tuple(side_vertices), counts=counts.astype(np.int64), mult=m,
-        boundary=loop, scaled_jacobian=sj, inverted=int(inverted_mask(xy, quads).sum()), edge_ratio=ratio,
+        boundary=loop, scaled_jacobian=sj, inverted=int(inv.sum()), edge_ratio=ratio,
         region_area=abs(polygon_area(_user_xy(template.shape))), mesh_area=float(quad_areas(xy, quads).sum()),
         template=template,
     )
