@@ -696,9 +696,17 @@ def fit_sides(layout: Layout, sides: Sides, p: int, refined, counts: np.ndarray,
     several layout sides (neighbours meet along it), its vertices move so that one lands on
     each node; then the interior follows (harmonic extension of the boundary displacement, one
     sparse solve) and is untangled and smoothed (:func:`jaxmatch.placement.embed.smooth`,
-    never lowering the minimum scaled Jacobian from there)."""
+    never lowering the minimum scaled Jacobian from there). Above
+    :data:`~jaxmatch.placement.refine.SMOOTH_LOCAL` quads, as a refinement of that size: the
+    solve with :data:`~jaxmatch.placement.refine.LARGE_ORDERING`, and only the vertices within
+    :data:`~jaxmatch.placement.refine.BAD_RINGS` rings of the quads that fold or fall below
+    :data:`~jaxmatch.placement.refine.SJ_FLOOR` smoothed, with
+    :data:`~jaxmatch.placement.refine.SMOOTH_ITERS_LARGE` iterations (none when there are none).
+
+    Returns ``(V, 2) float64`` user coordinates."""
     from jaxmatch.placement.embed import tutte
-    from jaxmatch.placement.refine import side_points
+    from jaxmatch.placement.refine import (BAD_RINGS, LARGE_ORDERING, SJ_FLOOR, SMOOTH_ITERS_LARGE, SMOOTH_LOCAL,
+                                           side_points)
 
     xy = np.array(refined.xy, dtype=np.float64)
     moved = False
@@ -721,10 +729,17 @@ def fit_sides(layout: Layout, sides: Sides, p: int, refined, counts: np.ndarray,
     b = np.unique(np.concatenate(bverts))
     quads = np.asarray(refined.quads, dtype=np.int64)
     target = xy[b].copy()
-    disp = tutte(quads, xy.shape[0], b, target - np.asarray(refined.xy)[b])
+    large = quads.shape[0] > SMOOTH_LOCAL
+    disp = tutte(quads, xy.shape[0], b, target - np.asarray(refined.xy)[b], permc_spec=LARGE_ORDERING if large else None)
     xy = np.asarray(refined.xy) + disp
     xy[b] = target
-    return smooth_in_frame(xy, quads, b, frame=target, iters=smooth_iters)
+    if not large:
+        return smooth_in_frame(xy, quads, b, frame=target, iters=smooth_iters)
+    sj, inv = sj_inverted(xy, quads)
+    bad = inv | (sj < SJ_FLOOR)
+    if not bad.any():
+        return xy
+    return smooth_near(xy, quads, quads[bad].ravel(), b, rings=BAD_RINGS, frame=target, iters=SMOOTH_ITERS_LARGE)
 
 
 def _boundary_loops(layout: Layout, sides: Sides, side_ids, xy: np.ndarray) -> list[np.ndarray]:

@@ -122,6 +122,13 @@ quads (minimum degree on the symmetric pattern: ~35% less factor time than the d
 on a 100,000-vertex grid Laplacian, whose pattern is symmetric; up to there the default, so
 small meshes come out as before to the last bit)."""
 
+FACTOR_CACHE_SIZE = 1
+"""Factorisations of the harmonic extension's system kept above :data:`SMOOTH_LOCAL` quads
+(:func:`_harmonic_solve`): the system depends on the refined topology only, and the patches of
+one decomposition (and the same patch in two decompositions) are often the same template at the
+same multiplicities (the L-shape at 100,000 quads: 5 of 10 solves). One: a 100,000-vertex
+factor is ~70 MB, and the one kept is dropped before the next is made."""
+
 BAD_RINGS = 6
 """Rings of quads around the bad quads smoothed above :data:`SMOOTH_LOCAL` quads."""
 
@@ -1046,8 +1053,11 @@ def _refine_and_place(template: PatchTemplate, mult, *, smooth_iters: int | None
     if free.size:
         Lf = L[free][:, free].tocsc()
         rhs = -(L[free][:, bverts] @ disp[bverts])
-        order = LARGE_ORDERING if quads.shape[0] > SMOOTH_ALWAYS else None  # None: SuperLU's default, COLAMD
-        disp[free] = np.asarray(scipy.sparse.linalg.spsolve(Lf, rhs, permc_spec=order)).reshape(-1, 2)
+        if quads.shape[0] > SMOOTH_LOCAL:
+            disp[free] = _harmonic_solve(Lf, rhs, quads, free)
+        else:
+            order = LARGE_ORDERING if quads.shape[0] > SMOOTH_ALWAYS else None  # None: SuperLU's default, COLAMD
+            disp[free] = np.asarray(scipy.sparse.linalg.spsolve(Lf, rhs, permc_spec=order)).reshape(-1, 2)
     xy = xy + disp
     xy[bverts] = bxy
     sj, inv = sj_inverted(xy, quads)
@@ -1075,6 +1085,32 @@ def _refine_and_place(template: PatchTemplate, mult, *, smooth_iters: int | None
         region_area=abs(polygon_area(_user_xy(template.shape))), mesh_area=float(quad_areas(xy, quads).sum()),
         template=template,
     )
+
+
+_FACTORS: dict = {}
+
+
+def _harmonic_solve(Lf: "scipy.sparse.csc_matrix", rhs: np.ndarray, quads: np.ndarray, free: np.ndarray) -> np.ndarray:
+    """``Lf^-1 rhs``, ``(n, 2) float64``: the harmonic extension's solve on a large refined mesh.
+
+    Lf: ``(n, n)`` the Laplacian of ``quads (Q, 4)`` on its ``free (n,)`` vertices (which it
+    depends on alone); rhs: ``(n, 2)``. SuperLU's factorisation (:data:`LARGE_ORDERING`) is kept
+    for the next call on the same topology (:data:`FACTOR_CACHE_SIZE`), so both coordinates
+    and every patch of the same refinement share one."""
+    import hashlib
+
+    import scipy.sparse.linalg
+
+    key = hashlib.sha1(np.ascontiguousarray(quads, np.int64).tobytes()
+                       + np.ascontiguousarray(free, np.int64).tobytes()).digest()
+    lu = _FACTORS.pop(key, None)
+    if lu is None:
+        while len(_FACTORS) >= FACTOR_CACHE_SIZE and _FACTORS:  # dropped before the next is made (peak memory)
+            _FACTORS.pop(next(iter(_FACTORS)))
+        lu = scipy.sparse.linalg.splu(Lf, permc_spec=LARGE_ORDERING)
+    if FACTOR_CACHE_SIZE > 0:
+        _FACTORS[key] = lu
+    return lu.solve(np.ascontiguousarray(rhs, np.float64))
 
 
 def _ccw_loop(side_vertices, template: PatchTemplate) -> np.ndarray:
