@@ -324,16 +324,14 @@ set-up; refined meshes (thousands of vertices) use the sparse solver."""
 
 
 def tutte(quads: np.ndarray, n_vertices: int, boundary: np.ndarray, boundary_xy: np.ndarray, *,
-          reference: bool = False, permc_spec: str | None = None) -> np.ndarray:
+          reference: bool = False) -> np.ndarray:
     """Uniform-weight (Tutte / harmonic) embedding.
 
     quads: (F, 4); boundary: (n,) vertex ids fixed at ``boundary_xy`` (n, 2). Every other vertex
     is the average of its edge neighbours (one linear solve: dense and compiled,
     :func:`jaxmatch.placement.kernels.tutte_dense`, up to :data:`DENSE_TUTTE` free vertices;
     sparse beyond).
-    ``reference``: the numpy/scipy version (tests). ``permc_spec``: the column ordering of the
-    sparse solve (:func:`scipy.sparse.linalg.spsolve`; None: its default, COLAMD).
-    Returns ``(V, 2) float64``.
+    ``reference``: the numpy/scipy version (tests). Returns ``(V, 2) float64``.
     """
     V = int(n_vertices)
     if not reference and 0 < V - len(boundary) <= DENSE_TUTTE:
@@ -364,7 +362,7 @@ def tutte(quads: np.ndarray, n_vertices: int, boundary: np.ndarray, boundary_xy:
         deg = np.asarray(A.sum(axis=1)).ravel()
         L = (scipy.sparse.diags(deg) - A).tocsr()
         rhs = -(L[free][:, b] @ xy[b])
-        sol = scipy.sparse.linalg.spsolve(L[free][:, free].tocsc(), rhs, permc_spec=permc_spec)
+        sol = scipy.sparse.linalg.spsolve(L[free][:, free].tocsc(), rhs)
     xy[free] = np.asarray(sol).reshape(-1, 2)
     return xy
 

@@ -698,14 +698,15 @@ def fit_sides(layout: Layout, sides: Sides, p: int, refined, counts: np.ndarray,
     sparse solve) and is untangled and smoothed (:func:`jaxmatch.placement.embed.smooth`,
     never lowering the minimum scaled Jacobian from there). Above
     :data:`~jaxmatch.placement.refine.SMOOTH_LOCAL` quads, as a refinement of that size: the
-    solve with :data:`~jaxmatch.placement.refine.LARGE_ORDERING`, and only the vertices within
+    solve of the refinement (:func:`~jaxmatch.placement.refine.harmonic_displacement`: the same
+    system, its factorisation kept), and only the vertices within
     :data:`~jaxmatch.placement.refine.BAD_RINGS` rings of the quads that fold or fall below
     :data:`~jaxmatch.placement.refine.SJ_FLOOR` smoothed, with
     :data:`~jaxmatch.placement.refine.SMOOTH_ITERS_LARGE` iterations (none when there are none).
 
     Returns ``(V, 2) float64`` user coordinates."""
     from jaxmatch.placement.embed import tutte
-    from jaxmatch.placement.refine import (BAD_RINGS, LARGE_ORDERING, SJ_FLOOR, SMOOTH_ITERS_LARGE, SMOOTH_LOCAL,
+    from jaxmatch.placement.refine import (BAD_RINGS, SJ_FLOOR, SMOOTH_ITERS_LARGE, SMOOTH_LOCAL, harmonic_displacement,
                                            side_points)
 
     xy = np.array(refined.xy, dtype=np.float64)
@@ -730,7 +731,10 @@ def fit_sides(layout: Layout, sides: Sides, p: int, refined, counts: np.ndarray,
     quads = np.asarray(refined.quads, dtype=np.int64)
     target = xy[b].copy()
     large = quads.shape[0] > SMOOTH_LOCAL
-    disp = tutte(quads, xy.shape[0], b, target - np.asarray(refined.xy)[b], permc_spec=LARGE_ORDERING if large else None)
+    if large:
+        disp = harmonic_displacement(quads, xy.shape[0], b, target - np.asarray(refined.xy)[b])
+    else:
+        disp = tutte(quads, xy.shape[0], b, target - np.asarray(refined.xy)[b])
     xy = np.asarray(refined.xy) + disp
     xy[b] = target
     if not large:

@@ -75,6 +75,7 @@ __all__ = [
     "side_polylines",
     "estimated_mean_edge",
     "feasible",
+    "harmonic_displacement",
     "nearest_counts",
     "side_points",
     "solve_multiplicities",
@@ -1044,21 +1045,7 @@ def _refine_and_place(template: PatchTemplate, mult, *, smooth_iters: int | None
     # ccw loop
     loop = _ccw_loop(side_vertices, template)
     # harmonic extension of the boundary displacement
-    import scipy.sparse.linalg
-
-    L = _laplacian(quads, nv)
-    free = np.setdiff1d(np.arange(nv), bverts)
-    disp = np.zeros((nv, 2))
-    disp[bverts] = bxy - xy[bverts]
-    if free.size:
-        Lf = L[free][:, free].tocsc()
-        rhs = -(L[free][:, bverts] @ disp[bverts])
-        if quads.shape[0] > SMOOTH_LOCAL:
-            disp[free] = _harmonic_solve(Lf, rhs, quads, free)
-        else:
-            order = LARGE_ORDERING if quads.shape[0] > SMOOTH_ALWAYS else None  # None: SuperLU's default, COLAMD
-            disp[free] = np.asarray(scipy.sparse.linalg.spsolve(Lf, rhs, permc_spec=order)).reshape(-1, 2)
-    xy = xy + disp
+    xy = xy + harmonic_displacement(quads, nv, bverts, bxy - xy[bverts])
     xy[bverts] = bxy
     sj, inv = sj_inverted(xy, quads)
     bad = inv | (sj < SJ_FLOOR)
@@ -1085,6 +1072,31 @@ def _refine_and_place(template: PatchTemplate, mult, *, smooth_iters: int | None
         region_area=abs(polygon_area(_user_xy(template.shape))), mesh_area=float(quad_areas(xy, quads).sum()),
         template=template,
     )
+
+
+def harmonic_displacement(quads: np.ndarray, nv: int, bverts: np.ndarray, bdisp: np.ndarray) -> np.ndarray:
+    """``(nv, 2) float64``: ``bdisp (b, 2)`` on the vertices ``bverts (b,)``, elsewhere its
+    uniform-weight harmonic extension over ``quads (Q, 4)`` (one sparse solve; user units).
+
+    Up to :data:`SMOOTH_ALWAYS` quads SuperLU's default ordering, then :data:`LARGE_ORDERING`;
+    above :data:`SMOOTH_LOCAL` quads the factorisation is kept for the next solve on the same
+    topology (:func:`_harmonic_solve`; also :func:`jaxmatch.placement.layout.fit_sides`'s)."""
+    import scipy.sparse.linalg
+
+    L = _laplacian(quads, nv)
+    free = np.setdiff1d(np.arange(nv), bverts)
+    disp = np.zeros((nv, 2))
+    disp[bverts] = bdisp
+    if free.size:
+        Lr = L[free]
+        Lf = Lr[:, free].tocsc()
+        rhs = -(Lr[:, bverts] @ disp[bverts])
+        if quads.shape[0] > SMOOTH_LOCAL:
+            disp[free] = _harmonic_solve(Lf, rhs, quads, free)
+        else:
+            order = LARGE_ORDERING if quads.shape[0] > SMOOTH_ALWAYS else None  # None: SuperLU's default, COLAMD
+            disp[free] = np.asarray(scipy.sparse.linalg.spsolve(Lf, rhs, permc_spec=order)).reshape(-1, 2)
+    return disp
 
 
 _FACTORS: dict = {}
