@@ -950,14 +950,20 @@ def _refine_topology(quads: np.ndarray, edge_list: np.ndarray, edge_chord: np.nd
 
 
 def _laplacian(quads: np.ndarray, nv: int) -> scipy.sparse.csr_matrix:
+    """``(nv, nv)`` uniform-weight graph Laplacian of the edges of ``quads (Q, 4)``: degree on
+    the diagonal, -1 per edge; built in one go (canonical CSR: sorted indices, no duplicates, the
+    arrays ``diags(deg) - adjacency`` gives)."""
     import scipy.sparse
 
     e = edges(quads)
-    rows = np.concatenate([e[:, 0], e[:, 1]])
-    cols = np.concatenate([e[:, 1], e[:, 0]])
-    A = scipy.sparse.csr_matrix((np.ones(rows.size), (rows, cols)), shape=(nv, nv))
-    deg = np.asarray(A.sum(axis=1)).ravel()
-    return (scipy.sparse.diags(deg) - A).tocsr()
+    diag = np.arange(nv)
+    rows = np.concatenate([e[:, 0], e[:, 1], diag])
+    cols = np.concatenate([e[:, 1], e[:, 0], diag])
+    vals = np.concatenate([np.full(2 * e.shape[0], -1.0), np.bincount(e.ravel(), minlength=nv).astype(np.float64)])
+    L = scipy.sparse.csr_matrix((vals, (rows, cols)), shape=(nv, nv))
+    L.sum_duplicates()
+    L.sort_indices()
+    return L
 
 
 REFINED_CACHE_SIZE = 512
@@ -1084,7 +1090,9 @@ def harmonic_displacement(quads: np.ndarray, nv: int, bverts: np.ndarray, bdisp:
     import scipy.sparse.linalg
 
     L = _laplacian(quads, nv)
-    free = np.setdiff1d(np.arange(nv), bverts)
+    is_free = np.ones(nv, bool)
+    is_free[np.asarray(bverts, np.int64)] = False
+    free = np.flatnonzero(is_free)  # = np.setdiff1d(np.arange(nv), bverts), without its sort
     disp = np.zeros((nv, 2))
     disp[bverts] = bdisp
     if free.size:
