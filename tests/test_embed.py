@@ -22,6 +22,7 @@ from jaxmatch.placement.embed import (
     polygon_area,
     quad_areas,
     quality,
+    sj_inverted,
     smooth,
     to_user,
     tutte,
@@ -512,6 +513,18 @@ def test_inverted_mask_and_vectorised_quality():
     assert sj.shape == (4,)
     np.testing.assert_allclose(sj[:2], 1.0)
     assert sj[2] == pytest.approx(0.0) and sj[3] == pytest.approx(-1.0)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_sj_inverted_is_quality_and_inverted_mask(seed):
+    """The one-pass measure gives exactly the plain paths' arrays (random, partly folded quads)."""
+    rng = np.random.default_rng(seed)
+    xy = rng.normal(size=(40, 2))
+    quads = rng.integers(0, 40, size=(60, 4))
+    sj, inv = sj_inverted(xy, quads)
+    np.testing.assert_array_equal(sj, quality(xy, quads)[0])
+    np.testing.assert_array_equal(inv, inverted_mask(xy, quads))
+    assert sj_inverted(xy, np.zeros((0, 4), np.int64))[0].shape == (0,)
 
 
 # ---------------------------------------------------------------------------------------------

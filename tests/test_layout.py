@@ -395,6 +395,33 @@ def test_t_junction_mesh_is_conforming(cat, lat):
         assert np.allclose(step, step[0])
 
 
+def test_t_junction_large_mesh_paths(cat, lat, monkeypatch):
+    """fit_sides's path above SMOOTH_LOCAL quads (the solve's large ordering, smoothing only
+    near the bad quads), forced on a small mesh with every quad "bad": the plain path's quads
+    and boundary, conforming and valid."""
+    from jaxmatch.placement import layout as LM
+    from jaxmatch.placement import refine as R
+
+    def fresh():
+        LM.clear_caches()
+        R._REFINED.clear()
+        cat.__dict__.pop("_mesh_layout_cache", None)
+        lay = make_layout(TJ["points"], TJ["patches"])
+        return lay, mesh_layout(lay, cat, lat, size=0.25)
+
+    _, plain = fresh()
+    monkeypatch.setattr(R, "SMOOTH_LOCAL", 0)
+    monkeypatch.setattr(R, "SJ_FLOOR", 2.0)
+    lay, fast = fresh()
+    np.testing.assert_array_equal(fast.quads, plain.quads)
+    np.testing.assert_array_equal(fast.xy[plain.outer], plain.xy[plain.outer])
+    check_conforming(fast.xy, fast.quads, outline_of(lay))
+    assert fast.inverted == 0 and fast.shared_gap == 0.0
+    assert fast.min_scaled_jacobian >= 0.3
+    monkeypatch.undo()
+    fresh()
+
+
 def read_gmsh(path):
     """(physical groups {name: (dim, tag)}, {name: (element type names, element count)}) via gmsh."""
     gmsh = pytest.importorskip("gmsh")

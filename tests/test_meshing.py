@@ -181,6 +181,33 @@ def grid_mesh(nx, ny, fold: bool = False, patches: int = 1) -> QuadMesh:
     return QuadMesh(xy=xy, quads=quads, patch=patch, line_sets={}, region_area=float(nx * ny), corners=corners)
 
 
+@pytest.mark.parametrize("fold", [False, True])
+def test_kept_measures_are_the_plain_ones(fold):
+    """QuadMesh computes its measures once (also across with_choice); they are the plain
+    functions' values, and the arrays it hands out are copies."""
+    from jaxmatch.catalogue.mesh import edges, valences
+    from jaxmatch.meshing.result import boundary_loops
+    from jaxmatch.placement.embed import inverted_mask, quality
+
+    m = grid_mesh(4, 3, fold=fold, patches=2)
+    for mm in (m, m.with_choice("x", "", None, ()), m.with_choice("y", "", None, ())):
+        sj = quality(m.xy, m.quads)[0]
+        np.testing.assert_array_equal(mm.scaled_jacobian, sj)
+        assert mm.min_scaled_jacobian == float(sj.min()) and mm.mean_scaled_jacobian == float(sj.mean())
+        assert mm.inverted == int(inverted_mask(m.xy, m.quads).sum())
+        assert mm.irregular_bound == irregular_bound(m.quads, m.xy.shape[0])
+        e = edges(m.quads)
+        assert mm.mean_edge_length == float(np.linalg.norm(m.xy[e[:, 0]] - m.xy[e[:, 1]], axis=1).mean())
+        val = valences(m.quads, m.xy.shape[0])
+        internal = np.ones(m.xy.shape[0], bool)
+        for loop in boundary_loops(m.quads):
+            internal[loop] = False
+        np.testing.assert_array_equal(mm.irregular, np.flatnonzero(internal & (val != 4) & (val > 0)))
+        assert mm.missed_corners.shape == (0, 2)
+    m.scaled_jacobian[:] = 5.0
+    assert m.min_scaled_jacobian <= 1.0
+
+
 def test_irregular_bound_is_eulers():
     assert irregular_bound(grid_mesh(3, 2).quads, 12) == 0
     # one quad: four valence-2 corners, sum of (3 - valence) = 4 = 4 * (1 - 0 holes)

@@ -475,6 +475,31 @@ def test_smooth_near_unfolds_locally_and_keeps_the_rest():
     assert np.array_equal(whole, smooth_in_frame(folded, quads, boundary, frame=folded[boundary], iters=50))
 
 
+def test_harmonic_solve_is_spsolve_and_keeps_one_factor(monkeypatch):
+    """The large meshes' solve (a kept SuperLU factor) against the plain spsolve on a small grid
+    Laplacian; a second call on the same topology reuses the factor, another topology replaces it."""
+    import scipy.sparse.linalg
+
+    monkeypatch.setattr(R, "_FACTORS", {})
+    xy, quads, boundary = _grid(12)
+    nv = xy.shape[0]
+    free = np.setdiff1d(np.arange(nv), boundary)
+    L = R._laplacian(quads, nv)
+    Lf = L[free][:, free].tocsc()
+    rhs = np.random.default_rng(0).normal(size=(free.size, 2))
+    x = R._harmonic_solve(Lf, rhs, quads, free)
+    assert x.shape == (free.size, 2)
+    np.testing.assert_allclose(x, scipy.sparse.linalg.spsolve(Lf, rhs), rtol=0, atol=1e-12)
+    assert len(R._FACTORS) == 1
+    np.testing.assert_array_equal(R._harmonic_solve(2.0 * Lf, rhs, quads, free), x)  # the key: the topology
+    xy2, quads2, b2 = _grid(10)
+    free2 = np.setdiff1d(np.arange(xy2.shape[0]), b2)
+    L2 = R._laplacian(quads2, xy2.shape[0])[free2][:, free2].tocsc()
+    x2 = R._harmonic_solve(L2, rhs[:free2.size], quads2, free2)
+    np.testing.assert_allclose(x2, scipy.sparse.linalg.spsolve(L2, rhs[:free2.size]), rtol=0, atol=1e-12)
+    assert len(R._FACTORS) == R.FACTOR_CACHE_SIZE
+
+
 def test_large_mesh_paths_keep_the_refined_mesh_valid(templates, monkeypatch):
     """The paths above SMOOTH_ALWAYS / SMOOTH_LOCAL quads, forced on a small refinement: the
     solve's other ordering gives the same placement to round-off, the local smoothing a valid

@@ -43,9 +43,7 @@ fewer irregular vertices or patches is not given up for a few hundredths of qual
 
 def mesh_key(m: QuadMesh, order: int = 0, quality: Quality = QUALITY) -> tuple:
     """The sort key of :data:`RULES` for mesh ``m`` (``order``: its place among the candidates)."""
-    per_quad = m.scaled_jacobian  # once: the min and the mean of the same (Q,) array, as QuadMesh gives them
-    sj = float(per_quad.min()) if per_quad.size else math.nan
-    mean = float(per_quad.mean()) if per_quad.size else math.nan
+    sj, mean = m.min_scaled_jacobian, m.mean_scaled_jacobian  # of the (Q,) array the mesh keeps
     area = m.area_ratio
     return (
         m.inverted > 0,

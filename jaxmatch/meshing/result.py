@@ -9,14 +9,18 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 from typing import Mapping, NamedTuple
 
 import numpy as np
 
 from jaxmatch.catalogue.mesh import boundary_edges, edges, valences
-from jaxmatch.placement.embed import edge_ratios, inverted_mask, quad_areas, quality
+from jaxmatch.placement.embed import edge_ratios, quad_areas, sj_inverted
 
 __all__ = ["Candidate", "QuadMesh", "boundary_loops", "irregular_bound"]
+
+_KEPT = ("_sj_inverted", "_edges", "_valences", "_loops", "_missed")
+"""The :class:`QuadMesh` measures computed once per mesh (``cached_property`` names)."""
 
 
 class Candidate(NamedTuple):
@@ -57,8 +61,11 @@ def irregular_bound(quads: np.ndarray, n_vertices: int) -> int:
     ``|4 (1 - H) - sum_boundary (3 - valence)|`` of them are needed.
     """
     quads = np.asarray(quads, dtype=np.int64)
-    val = valences(quads, n_vertices)
-    loops = boundary_loops(quads)
+    return _irregular_bound(valences(quads, n_vertices), boundary_loops(quads))
+
+
+def _irregular_bound(val: np.ndarray, loops: list[np.ndarray]) -> int:
+    """:func:`irregular_bound` from the valences ``(V,)`` and the boundary loops."""
     bverts = np.concatenate(loops) if loops else np.zeros(0, np.int64)
     total = 4 * (1 - (len(loops) - 1)) - int(np.sum(3 - val[bverts]))
     return abs(total)
@@ -80,6 +87,10 @@ class QuadMesh:
     rule: the rule of :mod:`jaxmatch.meshing.choose` that decided (empty with one candidate);
     runner_up: the best other candidate's name or None; tried: every :class:`Candidate`;
     templates: catalogue ids of the templates used, per patch.
+
+    The measures of ``xy`` and ``quads`` (scaled Jacobians, edges, valences, boundary loops,
+    missed corners) are computed once per mesh and kept (:data:`_KEPT`): the choice rule reads
+    them for every candidate, twice; ``xy`` and ``quads`` are not to be written to.
     """
 
     xy: np.ndarray
@@ -98,8 +109,42 @@ class QuadMesh:
     tried: tuple[Candidate, ...] = ()
 
     def with_choice(self, chosen: str, rule: str, runner_up: str | None, tried) -> "QuadMesh":
-        """This mesh, labelled with how it was chosen."""
-        return replace(self, chosen=chosen, rule=rule, runner_up=runner_up, tried=tuple(tried))
+        """This mesh, labelled with how it was chosen (the measures kept so far kept with it)."""
+        out = replace(self, chosen=chosen, rule=rule, runner_up=runner_up, tried=tuple(tried))
+        out.__dict__.update({k: self.__dict__[k] for k in _KEPT if k in self.__dict__})
+        return out
+
+    # -- measures kept once computed (cached_property: written to the instance's __dict__) ------
+
+    @cached_property
+    def _sj_inverted(self) -> tuple[np.ndarray, int]:
+        """``((Q,) float64`` scaled Jacobian per quad, inverted quads``)``, one pass over the corners."""
+        sj, inv = sj_inverted(self.xy, self.quads)
+        return sj, int(inv.sum())
+
+    @cached_property
+    def _edges(self) -> np.ndarray:
+        """``(E, 2) int64`` undirected edges (:func:`~jaxmatch.catalogue.mesh.edges`)."""
+        return edges(np.asarray(self.quads, np.int64))
+
+    @cached_property
+    def _valences(self) -> np.ndarray:
+        """``(V,) int32`` vertex valences."""
+        return valences(self.quads, self.xy.shape[0])
+
+    @cached_property
+    def _loops(self) -> list[np.ndarray]:
+        """The boundary loops (:func:`boundary_loops`)."""
+        return boundary_loops(self.quads)
+
+    @cached_property
+    def _missed(self) -> np.ndarray:
+        """``(c, 2)`` :attr:`missed_corners`."""
+        if not self.corners.size:
+            return np.zeros((0, 2))
+        ext = float(np.ptp(self.xy, axis=0).max()) or 1.0
+        d = np.min(np.linalg.norm(self.corners[:, None, :] - self.xy[None, :, :], axis=2), axis=1)
+        return self.corners[d > 1e-9 * ext]
 
     # -- sets and data, as meshio names them ---------------------------------------------------
 
@@ -121,23 +166,23 @@ class QuadMesh:
 
     @property
     def scaled_jacobian(self) -> np.ndarray:
-        """``(Q,) float64`` Verdict scaled Jacobian per quad, in ``[-1, 1]``."""
-        return quality(self.xy, self.quads)[0]
+        """``(Q,) float64`` Verdict scaled Jacobian per quad, in ``[-1, 1]`` (a copy)."""
+        return self._sj_inverted[0].copy()
 
     @property
     def min_scaled_jacobian(self) -> float:
-        sj = self.scaled_jacobian
+        sj = self._sj_inverted[0]
         return float(sj.min()) if sj.size else math.nan
 
     @property
     def mean_scaled_jacobian(self) -> float:
-        sj = self.scaled_jacobian
+        sj = self._sj_inverted[0]
         return float(sj.mean()) if sj.size else math.nan
 
     @property
     def inverted(self) -> int:
         """Quads with a corner of signed area <= 0."""
-        return int(inverted_mask(self.xy, self.quads).sum())
+        return self._sj_inverted[1]
 
     @property
     def max_edge_ratio(self) -> float:
@@ -152,26 +197,21 @@ class QuadMesh:
     @property
     def irregular(self) -> np.ndarray:
         """``(I,) int64`` internal vertices (on no boundary loop) whose valence is not 4."""
-        n = self.xy.shape[0]
-        val = valences(self.quads, n)
-        internal = np.ones(n, bool)
-        for loop in boundary_loops(self.quads):
+        val = self._valences
+        internal = np.ones(self.xy.shape[0], bool)
+        for loop in self._loops:
             internal[loop] = False
         return np.flatnonzero(internal & (val != 4) & (val > 0))
 
     @property
     def irregular_bound(self) -> int:
         """Euler's lower bound on irregular internal vertices for these boundary valences."""
-        return irregular_bound(self.quads, self.xy.shape[0])
+        return _irregular_bound(self._valences, self._loops)
 
     @property
     def missed_corners(self) -> np.ndarray:
         """``(c, 2)`` corners of the region with no mesh vertex within 1e-9 of the region's extent."""
-        if not self.corners.size:
-            return np.zeros((0, 2))
-        ext = float(np.ptp(self.xy, axis=0).max()) or 1.0
-        d = np.min(np.linalg.norm(self.corners[:, None, :] - self.xy[None, :, :], axis=2), axis=1)
-        return self.corners[d > 1e-9 * ext]
+        return self._missed.copy()
 
     @property
     def size_deviation(self) -> float:
@@ -195,19 +235,19 @@ class QuadMesh:
         """Edges longer than ``factor * size`` (0 without a size)."""
         if not self.size:
             return 0
-        e = edges(np.asarray(self.quads, np.int64))
+        e = self._edges
         return int(np.sum(np.linalg.norm(self.xy[e[:, 0]] - self.xy[e[:, 1]], axis=1) > factor * self.size))
 
     @property
     def mean_edge_length(self) -> float:
         """Mean length of the mesh's edges, each counted once (user units)."""
-        e = edges(np.asarray(self.quads, np.int64))
+        e = self._edges
         return float(np.linalg.norm(self.xy[e[:, 0]] - self.xy[e[:, 1]], axis=1).mean()) if e.size else math.nan
 
     @property
     def valid(self) -> bool:
         """A mesh of the region: no inverted quad and every corner a vertex."""
-        return self.inverted == 0 and self.missed_corners.shape[0] == 0
+        return self.inverted == 0 and self._missed.shape[0] == 0
 
     def summary(self) -> dict:
         """JSON-ready figures."""

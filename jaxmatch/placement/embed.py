@@ -64,6 +64,7 @@ __all__ = [
     "polygon_area",
     "quad_areas",
     "quality",
+    "sj_inverted",
     "smooth",
     "smooth_near",
     "to_user",
@@ -264,12 +265,30 @@ def quality(xy: np.ndarray, quads: np.ndarray) -> tuple[np.ndarray, np.ndarray, 
         return z, z.copy(), z.copy()
     e1, e2, cross = _corners(xy, q)
     dot = np.sum(e1 * e2, axis=-1)
+    ang = np.degrees(np.mod(np.arctan2(cross, dot), 2 * np.pi))
+    return _scaled_jacobian(e1, e2, cross), ang.min(axis=1), ang.max(axis=1)
+
+
+def _scaled_jacobian(e1: np.ndarray, e2: np.ndarray, cross: np.ndarray) -> np.ndarray:
+    """``(F,) float64`` scaled Jacobian from the corner vectors of :func:`_corners` (the one
+    formula of :func:`quality` and :func:`sj_inverted`)."""
     ln = np.linalg.norm(e1, axis=-1) * np.linalg.norm(e2, axis=-1)
     ok = ln > _TINY
     sj_c = np.where(ok, cross / np.where(ok, ln, 1.0), 0.0)
-    sj = np.clip(sj_c.min(axis=1), -1.0, 1.0)
-    ang = np.degrees(np.mod(np.arctan2(cross, dot), 2 * np.pi))
-    return sj, ang.min(axis=1), ang.max(axis=1)
+    return np.clip(sj_c.min(axis=1), -1.0, 1.0)
+
+
+def sj_inverted(xy: np.ndarray, quads: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(scaled_jacobian (F,) float64, inverted (F,) bool)``: :func:`quality`'s first array and
+    :func:`inverted_mask`, the same values from one pass over the corners (no angles), for
+    callers that need both of a large mesh.
+
+    xy: (V, 2) positions; quads: (F, 4) vertex ids, ccw."""
+    q = np.asarray(quads)
+    if q.size == 0:
+        return np.zeros(0), np.zeros(0, bool)
+    e1, e2, cross = _corners(xy, q)
+    return _scaled_jacobian(e1, e2, cross), (cross <= 0).any(axis=1)
 
 
 def inverted_mask(xy: np.ndarray, quads: np.ndarray) -> np.ndarray:
@@ -650,8 +669,8 @@ def smooth_near(xy: np.ndarray, quads: np.ndarray, seeds: np.ndarray, fixed: np.
 
 def _key(xy: np.ndarray, quads: np.ndarray) -> tuple[int, float, float]:
     """(inverted count, min scaled Jacobian, mean scaled Jacobian)."""
-    sj = quality(xy, quads)[0]
-    return int(inverted_mask(xy, quads).sum()), float(sj.min()), float(sj.mean())
+    sj, inv = sj_inverted(xy, quads)
+    return int(inv.sum()), float(sj.min()), float(sj.mean())
 
 
 def _pick(best, best_key, cand, quads, tol: float = 1e-9):

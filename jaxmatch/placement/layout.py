@@ -54,7 +54,8 @@ from jaxmatch.errors import InputError
 from jaxmatch.files import read_limited
 from jaxmatch.placement.refine import _array_key
 from jaxmatch.placement.milp import CHORD_WEIGHT, LayoutInfeasible, solve_counts  # noqa: F401 (public here)
-from jaxmatch.placement.embed import inverted_mask, polygon_area, quad_areas, quality, smooth_in_frame, smooth_near
+from jaxmatch.placement.embed import (inverted_mask, polygon_area, quad_areas, quality, sj_inverted, smooth_in_frame,
+                                      smooth_near)
 from jaxmatch.catalogue.mesh import boundary_edges, valences  # noqa: F401 (boundary_edges public here)
 from jaxmatch.shape import Shape, make_shape
 
@@ -695,9 +696,18 @@ def fit_sides(layout: Layout, sides: Sides, p: int, refined, counts: np.ndarray,
     several layout sides (neighbours meet along it), its vertices move so that one lands on
     each node; then the interior follows (harmonic extension of the boundary displacement, one
     sparse solve) and is untangled and smoothed (:func:`jaxmatch.placement.embed.smooth`,
-    never lowering the minimum scaled Jacobian from there)."""
+    never lowering the minimum scaled Jacobian from there). Above
+    :data:`~jaxmatch.placement.refine.SMOOTH_LOCAL` quads, as a refinement of that size: the
+    solve of the refinement (:func:`~jaxmatch.placement.refine.harmonic_displacement`: the same
+    system, its factorisation kept), and only the vertices within
+    :data:`~jaxmatch.placement.refine.BAD_RINGS` rings of the quads that fold or fall below
+    :data:`~jaxmatch.placement.refine.SJ_FLOOR` smoothed, with
+    :data:`~jaxmatch.placement.refine.SMOOTH_ITERS_LARGE` iterations (none when there are none).
+
+    Returns ``(V, 2) float64`` user coordinates."""
     from jaxmatch.placement.embed import tutte
-    from jaxmatch.placement.refine import side_points
+    from jaxmatch.placement.refine import (BAD_RINGS, SJ_FLOOR, SMOOTH_ITERS_LARGE, SMOOTH_LOCAL, harmonic_displacement,
+                                           side_points)
 
     xy = np.array(refined.xy, dtype=np.float64)
     moved = False
@@ -720,10 +730,20 @@ def fit_sides(layout: Layout, sides: Sides, p: int, refined, counts: np.ndarray,
     b = np.unique(np.concatenate(bverts))
     quads = np.asarray(refined.quads, dtype=np.int64)
     target = xy[b].copy()
-    disp = tutte(quads, xy.shape[0], b, target - np.asarray(refined.xy)[b])
+    large = quads.shape[0] > SMOOTH_LOCAL
+    if large:
+        disp = harmonic_displacement(quads, xy.shape[0], b, target - np.asarray(refined.xy)[b])
+    else:
+        disp = tutte(quads, xy.shape[0], b, target - np.asarray(refined.xy)[b])
     xy = np.asarray(refined.xy) + disp
     xy[b] = target
-    return smooth_in_frame(xy, quads, b, frame=target, iters=smooth_iters)
+    if not large:
+        return smooth_in_frame(xy, quads, b, frame=target, iters=smooth_iters)
+    sj, inv = sj_inverted(xy, quads)
+    bad = inv | (sj < SJ_FLOOR)
+    if not bad.any():
+        return xy
+    return smooth_near(xy, quads, quads[bad].ravel(), b, rings=BAD_RINGS, frame=target, iters=SMOOTH_ITERS_LARGE)
 
 
 def _boundary_loops(layout: Layout, sides: Sides, side_ids, xy: np.ndarray) -> list[np.ndarray]:
@@ -782,8 +802,16 @@ def _has(templates, j: int) -> bool:
 
 
 def _key(refined_mesh) -> tuple:
-    sj = quality(refined_mesh.xy, refined_mesh.quads)[0]
-    return (int(inverted_mask(refined_mesh.xy, refined_mesh.quads).sum()), -round(float(sj.min()), 3))
+    """``(inverted quads, -min scaled Jacobian to 3 decimals)`` of a refined patch, from its own
+    figures (which :func:`_fitted` keeps up to date when its sides move)."""
+    return (int(refined_mesh.inverted), -round(float(refined_mesh.scaled_jacobian.min()), 3))
+
+
+def _fitted(refined_mesh, xy: np.ndarray):
+    """``refined_mesh`` at positions ``xy (V, 2)`` (e.g. from :func:`fit_sides`), its scaled
+    Jacobians and inverted count measured there (the other figures are the refinement's)."""
+    sj, inv = sj_inverted(xy, refined_mesh.quads)
+    return refined_mesh._replace(xy=xy, scaled_jacobian=sj, inverted=int(inv.sum()))
 
 
 def mesh_layout(layout: Layout, catalogue: Catalogue, lattice: Lattice, *, size: float | None = None,
@@ -1065,7 +1093,7 @@ def _mesh_layout(layout: Layout, catalogue: Catalogue, lattice: Lattice, *, size
                 cache[key] = _refine_cached(t, m)
             rm = cache[key]
             if any(len(parts) > 1 for parts in sides.patch_sides[p]):  # neighbours meet along a side
-                rm = rm._replace(xy=fit_sides(layout, sides, p, rm, n))
+                rm = _fitted(rm, fit_sides(layout, sides, p, rm, n))
             refined.append(rm)
         keys = [_key(r) for r in refined]
         total = (sum(k[0] for k in keys), max(k[1] for k in keys))  # inverted quads, then the worst patch

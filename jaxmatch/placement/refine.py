@@ -45,7 +45,7 @@ from jaxmatch.catalogue.mesh import edges
 from jaxmatch.defaults import QUALITY
 from jaxmatch.errors import InputError, UnmatchableError
 from jaxmatch.placement.milp import LayoutInfeasible, one_patch_sides, solve_counts
-from jaxmatch.placement.embed import (Placement, inverted_mask, polygon_area, quad_areas, quality, smooth_in_frame,
+from jaxmatch.placement.embed import (Placement, polygon_area, quad_areas, quality, sj_inverted, smooth_in_frame,
                                       smooth_near)
 from jaxmatch.shape import Shape
 
@@ -75,6 +75,7 @@ __all__ = [
     "side_polylines",
     "estimated_mean_edge",
     "feasible",
+    "harmonic_displacement",
     "nearest_counts",
     "side_points",
     "solve_multiplicities",
@@ -121,6 +122,13 @@ LARGE_ORDERING = "MMD_AT_PLUS_A"
 quads (minimum degree on the symmetric pattern: ~35% less factor time than the default COLAMD
 on a 100,000-vertex grid Laplacian, whose pattern is symmetric; up to there the default, so
 small meshes come out as before to the last bit)."""
+
+FACTOR_CACHE_SIZE = 1
+"""Factorisations of the harmonic extension's system kept above :data:`SMOOTH_LOCAL` quads
+(:func:`_harmonic_solve`): the system depends on the refined topology only, and the patches of
+one decomposition (and the same patch in two decompositions) are often the same template at the
+same multiplicities (the L-shape at 100,000 quads: 5 of 10 solves). One: a 100,000-vertex
+factor is ~70 MB, and the one kept is dropped before the next is made."""
 
 BAD_RINGS = 6
 """Rings of quads around the bad quads smoothed above :data:`SMOOTH_LOCAL` quads."""
@@ -990,14 +998,20 @@ def _refine_topology(quads: np.ndarray, edge_list: np.ndarray, edge_chord: np.nd
 
 
 def _laplacian(quads: np.ndarray, nv: int) -> scipy.sparse.csr_matrix:
+    """``(nv, nv)`` uniform-weight graph Laplacian of the edges of ``quads (Q, 4)``: degree on
+    the diagonal, -1 per edge; built in one go (canonical CSR: sorted indices, no duplicates, the
+    arrays ``diags(deg) - adjacency`` gives)."""
     import scipy.sparse
 
     e = edges(quads)
-    rows = np.concatenate([e[:, 0], e[:, 1]])
-    cols = np.concatenate([e[:, 1], e[:, 0]])
-    A = scipy.sparse.csr_matrix((np.ones(rows.size), (rows, cols)), shape=(nv, nv))
-    deg = np.asarray(A.sum(axis=1)).ravel()
-    return (scipy.sparse.diags(deg) - A).tocsr()
+    diag = np.arange(nv)
+    rows = np.concatenate([e[:, 0], e[:, 1], diag])
+    cols = np.concatenate([e[:, 1], e[:, 0], diag])
+    vals = np.concatenate([np.full(2 * e.shape[0], -1.0), np.bincount(e.ravel(), minlength=nv).astype(np.float64)])
+    L = scipy.sparse.csr_matrix((vals, (rows, cols)), shape=(nv, nv))
+    L.sum_duplicates()
+    L.sort_indices()
+    return L
 
 
 REFINED_CACHE_SIZE = 512
@@ -1085,21 +1099,10 @@ def _refine_and_place(template: PatchTemplate, mult, *, smooth_iters: int | None
     # ccw loop
     loop = _ccw_loop(side_vertices, template)
     # harmonic extension of the boundary displacement
-    import scipy.sparse.linalg
-
-    L = _laplacian(quads, nv)
-    free = np.setdiff1d(np.arange(nv), bverts)
-    disp = np.zeros((nv, 2))
-    disp[bverts] = bxy - xy[bverts]
-    if free.size:
-        Lf = L[free][:, free].tocsc()
-        rhs = -(L[free][:, bverts] @ disp[bverts])
-        order = LARGE_ORDERING if quads.shape[0] > SMOOTH_ALWAYS else None  # None: SuperLU's default, COLAMD
-        disp[free] = np.asarray(scipy.sparse.linalg.spsolve(Lf, rhs, permc_spec=order)).reshape(-1, 2)
-    xy = xy + disp
+    xy = xy + harmonic_displacement(quads, nv, bverts, bxy - xy[bverts])
     xy[bverts] = bxy
-    sj = quality(xy, quads)[0]
-    bad = inverted_mask(xy, quads) | (sj < SJ_FLOOR)
+    sj, inv = sj_inverted(xy, quads)
+    bad = inv | (sj < SJ_FLOOR)
     local = smooth_iters is None and quads.shape[0] > SMOOTH_LOCAL
     if smooth_iters is not None:
         iters = int(smooth_iters)
@@ -1113,16 +1116,69 @@ def _refine_and_place(template: PatchTemplate, mult, *, smooth_iters: int | None
             xy = smooth_near(xy, quads, quads[bad].ravel(), bverts, rings=BAD_RINGS, frame=bxy, iters=iters)
         else:
             xy = smooth_in_frame(xy, quads, bverts, frame=bxy, iters=iters)
-        sj = quality(xy, quads)[0]
+        sj, inv = sj_inverted(xy, quads)
     p = xy[quads]
     el = np.linalg.norm(p[:, [1, 2, 3, 0]] - p, axis=-1)
     ratio = el.max(axis=1) / np.maximum(el.min(axis=1), np.finfo(float).tiny)
     return RefinedMesh(
         xy=xy, quads=quads, side_vertices=tuple(side_vertices), counts=counts.astype(np.int64), mult=m,
-        boundary=loop, scaled_jacobian=sj, inverted=int(inverted_mask(xy, quads).sum()), edge_ratio=ratio,
+        boundary=loop, scaled_jacobian=sj, inverted=int(inv.sum()), edge_ratio=ratio,
         region_area=abs(polygon_area(_user_xy(template.shape))), mesh_area=float(quad_areas(xy, quads).sum()),
         template=template,
     )
+
+
+def harmonic_displacement(quads: np.ndarray, nv: int, bverts: np.ndarray, bdisp: np.ndarray) -> np.ndarray:
+    """``(nv, 2) float64``: ``bdisp (b, 2)`` on the vertices ``bverts (b,)``, elsewhere its
+    uniform-weight harmonic extension over ``quads (Q, 4)`` (one sparse solve; user units).
+
+    Up to :data:`SMOOTH_ALWAYS` quads SuperLU's default ordering, then :data:`LARGE_ORDERING`;
+    above :data:`SMOOTH_LOCAL` quads the factorisation is kept for the next solve on the same
+    topology (:func:`_harmonic_solve`; also :func:`jaxmatch.placement.layout.fit_sides`'s)."""
+    import scipy.sparse.linalg
+
+    L = _laplacian(quads, nv)
+    is_free = np.ones(nv, bool)
+    is_free[np.asarray(bverts, np.int64)] = False
+    free = np.flatnonzero(is_free)  # = np.setdiff1d(np.arange(nv), bverts), without its sort
+    disp = np.zeros((nv, 2))
+    disp[bverts] = bdisp
+    if free.size:
+        Lr = L[free]
+        Lf = Lr[:, free].tocsc()
+        rhs = -(Lr[:, bverts] @ disp[bverts])
+        if quads.shape[0] > SMOOTH_LOCAL:
+            disp[free] = _harmonic_solve(Lf, rhs, quads, free)
+        else:
+            order = LARGE_ORDERING if quads.shape[0] > SMOOTH_ALWAYS else None  # None: SuperLU's default, COLAMD
+            disp[free] = np.asarray(scipy.sparse.linalg.spsolve(Lf, rhs, permc_spec=order)).reshape(-1, 2)
+    return disp
+
+
+_FACTORS: dict = {}
+
+
+def _harmonic_solve(Lf: "scipy.sparse.csc_matrix", rhs: np.ndarray, quads: np.ndarray, free: np.ndarray) -> np.ndarray:
+    """``Lf^-1 rhs``, ``(n, 2) float64``: the harmonic extension's solve on a large refined mesh.
+
+    Lf: ``(n, n)`` the Laplacian of ``quads (Q, 4)`` on its ``free (n,)`` vertices (which it
+    depends on alone); rhs: ``(n, 2)``. SuperLU's factorisation (:data:`LARGE_ORDERING`) is kept
+    for the next call on the same topology (:data:`FACTOR_CACHE_SIZE`), so both coordinates
+    and every patch of the same refinement share one."""
+    import hashlib
+
+    import scipy.sparse.linalg
+
+    key = hashlib.sha1(np.ascontiguousarray(quads, np.int64).tobytes()
+                       + np.ascontiguousarray(free, np.int64).tobytes()).digest()
+    lu = _FACTORS.pop(key, None)
+    if lu is None:
+        while len(_FACTORS) >= FACTOR_CACHE_SIZE and _FACTORS:  # dropped before the next is made (peak memory)
+            _FACTORS.pop(next(iter(_FACTORS)))
+        lu = scipy.sparse.linalg.splu(Lf, permc_spec=LARGE_ORDERING)
+    if FACTOR_CACHE_SIZE > 0:
+        _FACTORS[key] = lu
+    return lu.solve(np.ascontiguousarray(rhs, np.float64))
 
 
 def _ccw_loop(side_vertices, template: PatchTemplate) -> np.ndarray:
