@@ -28,7 +28,7 @@ from hypothesis import strategies as st
 import jaxmatch
 from jaxmatch.defaults import QUALITY
 from jaxmatch.errors import EXIT_BAD_INPUT, InputError, SolverError
-from jaxmatch.meshing.choose import RULES, choose, mesh_key
+from jaxmatch.meshing.choose import RULES, best_possible_key, cannot_win, choose, mesh_key
 from jaxmatch.meshing.pipeline import strategy_names
 from jaxmatch.meshing.result import Candidate, QuadMesh, irregular_bound
 from jaxmatch.placement.decompose import STRATEGIES
@@ -229,6 +229,24 @@ def test_the_rule_order():
     assert RULES[0] == "no fold" and RULES[-1] == "order tried"
     with pytest.raises(ValueError):
         choose([Candidate("a", None, "failed")])
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(1, 4), st.integers(1, 4), st.booleans(), st.integers(1, 4), st.integers(0, 6),
+       st.sampled_from([None, 0.5, 1.0, 3.0]))
+def test_no_mesh_beats_the_best_possible_key(nx, ny, fold, patches, order, size):
+    """The skip rule's bound: no mesh of that many patches, tried at that place, has a smaller
+    key; and a candidate is skipped only when the best so far is smaller than that bound."""
+    import dataclasses
+
+    m = grid_mesh(max(nx, 2) if fold else nx, max(ny, 2) if fold else ny, fold=fold, patches=patches)
+    if size is not None:
+        m = dataclasses.replace(m, size=size)
+    bound = best_possible_key(m.n_patches, order)
+    assert mesh_key(m, order) >= bound
+    assert not cannot_win(mesh_key(m, order), m.n_patches, order)  # never skips a mesh as good as itself
+    assert cannot_win(bound, m.n_patches + 1, order)  # more patches: a perfect mesh beats it
+    assert cannot_win(bound, m.n_patches, order + 1)  # tried later: the earlier wins a tie
 
 
 @settings(max_examples=30, deadline=None)
