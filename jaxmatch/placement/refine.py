@@ -479,10 +479,11 @@ class _Walk:
     """A template walk and the templates it has made so far (shared by every
     :class:`LazyTemplates` of one patch)."""
 
-    def __init__(self, produce: Iterator[PatchTemplate]):
+    def __init__(self, start: Callable[[], Iterator[PatchTemplate]]):
         import threading
 
-        self.produce: Iterator[PatchTemplate] | None = produce
+        self.start: Callable[[], Iterator[PatchTemplate]] | None = start  # called on the first ask
+        self.produce: Iterator[PatchTemplate] | None = None
         self.made: list[PatchTemplate] = []
         self.error: Exception | None = None
         self.lock = threading.Lock()  # one thread advances the walk at a time (callers may share a cache)
@@ -497,9 +498,11 @@ class _Walk:
             while len(self.made) < n:
                 if self.error is not None:
                     raise self.error
-                if self.produce is None:
+                if self.produce is None and self.start is None:
                     return
                 try:
+                    if self.start is not None:
+                        self.produce, self.start = self.start(), None
                     self.made.append(next(self.produce))
                 except StopIteration:
                     self.produce = None
@@ -537,7 +540,8 @@ class LazyTemplates(Sequence):
 def lazy_patch_templates(shape: Shape, catalogue: "Catalogue", lattice: "Lattice", *, limit: int,
                          internal: Sequence[int] | None = None, by_size: bool = True) -> LazyTemplates:
     """The templates of :func:`patch_templates` placed only as far as they are used
-    (:class:`LazyTemplates`), kept per catalogue like them. ``by_size``: fewest internal vertices
+    (:class:`LazyTemplates`), kept per catalogue (:data:`TEMPLATE_CACHE_SIZE` shapes, an error
+    of the walk kept with them). ``by_size``: fewest internal vertices
     first, then ranked (:func:`_iter_by_size`; ``internal`` required); else in the candidate
     order of :func:`patch_templates` (:func:`_iter_templates`). A shape no mesh matches raises
     :class:`~jaxmatch.errors.UnmatchableError` when the first template is asked for."""
@@ -546,9 +550,8 @@ def lazy_patch_templates(shape: Shape, catalogue: "Catalogue", lattice: "Lattice
     cache = _template_cache(catalogue)
     hit = cache.get(key)
     if hit is None:
-        walk = (_iter_by_size(shape, catalogue, lattice, limit=limit, internal=ks) if by_size
-                else _iter_templates(shape, catalogue, lattice, limit=limit, internal=ks))
-        hit = _Walk(walk)
+        walk = _iter_by_size if by_size else _iter_templates
+        hit = _Walk(lambda: walk(shape, catalogue, lattice, limit=limit, internal=ks))
         cache[key] = hit
         while len(cache) > TEMPLATE_CACHE_SIZE:
             cache.pop(next(iter(cache)))
@@ -577,23 +580,7 @@ def patch_templates(shape: Shape, catalogue: "Catalogue", lattice: "Lattice", *,
     a mesh vertex and no quad is inverted or degenerate; at most ``limit`` are kept per size. Sizes are mixed
     because a request for few edges needs a small template and raw utilities favour large ones.
     """
-    key = (_shape_key(shape), lattice, int(limit), None if internal is None else tuple(sorted(int(k) for k in internal)))
-    cache = _template_cache(catalogue)
-    hit = cache.get(key)
-    if hit is None:
-        try:
-            hit = (True, tuple(_iter_templates(shape, catalogue, lattice, limit=limit, internal=internal)))
-        except UnmatchableError as e:
-            hit = (False, e)
-        cache[key] = hit
-        while len(cache) > TEMPLATE_CACHE_SIZE:
-            cache.pop(next(iter(cache)))
-    else:
-        cache[key] = cache.pop(key)  # most recently used last
-    ok, found = hit
-    if not ok:
-        raise found
-    return [t._replace(shape=shape) for t in found]
+    return lazy_patch_templates(shape, catalogue, lattice, limit=limit, internal=internal, by_size=False)[:]
 
 
 TEMPLATE_CACHE_SIZE = 512
