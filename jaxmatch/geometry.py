@@ -123,7 +123,7 @@ def sub_polyline(points, t0: float, t1: float, cum: np.ndarray | None = None) ->
     return np.concatenate([ends[:1], inner, ends[1:]])
 
 
-def first_crossing(points) -> tuple[int, int] | None:
+def first_crossing(points, tol: float = 0.0) -> tuple[int, int] | None:
     """First pair ``(i, j)``, ``i < j``, of loop segments ``i -> i+1`` and ``j -> j+1`` that
     meet where they must not, or None when the loop is simple.
 
@@ -131,13 +131,22 @@ def first_crossing(points) -> tuple[int, int] | None:
     overlap along a piece (a fold back at the shared vertex). A simple loop is recognised by
     ``shapely.is_simple`` (GEOS noding; 1.1 s for the worst case of 10,000 thin spikes whose
     bounding boxes all overlap, where a pair search takes 10-12 s); for a loop that is not,
-    the pair is found with an STR-tree query and GEOS's ``intersects`` predicate.
+    the pair is found with an STR-tree query and GEOS's ``intersects`` predicate. ``tol``
+    (length): a vertex nearer than it to a segment not its own touches it, so that a vertex
+    exactly on another side is refused whatever rounding moving or scaling it brings.
     """
     p = _loop(points)
     n = p.shape[0]
-    if n >= 3 and shapely.is_simple(shapely.LinearRing(p)):  # GEOS's noding: fast, also on bad cases
-        return None
     segs = shapely.linestrings(np.stack([p, np.roll(p, -1, axis=0)], axis=1))
+    if n >= 3 and shapely.is_simple(shapely.LinearRing(p)):  # GEOS's noding: fast, also on bad cases
+        if not tol > 0:
+            return None
+        v, s = shapely.STRtree(segs).query(shapely.points(p), predicate="dwithin", distance=tol)
+        own = (s == v) | (s == (v - 1) % n)  # the two segments ending at the vertex
+        if own.all():
+            return None
+        pairs = sorted((min(int(a), int(b)), max(int(a), int(b))) for a, b in zip(v[~own], s[~own]))
+        return pairs[0]
     tree = shapely.STRtree(segs)
     left, right = tree.query(segs, predicate="intersects")
     keep = left < right

@@ -497,7 +497,7 @@ def _make_shape(points, corners, angle: float, source: str) -> Shape:
     if area < 0:  # clockwise: reverse keeping point 0 first
         index = (-index) % n
         unit = unit[index]
-    hit = first_crossing(unit)
+    hit = first_crossing(unit, tol=_TINY)
     if not (abs(area) > _TINY) and (hit is None or _collinear(unit)):
         raise InputError("boundary has zero area (all points on one line)" if _collinear(unit) else "boundary has zero area", where=source)
     if hit is not None:

@@ -92,3 +92,16 @@ def test_sub_polyline_has_the_requested_length_and_ends(t0, span):
     length = np.linalg.norm(np.diff(piece, axis=0), axis=1).sum()
     assert length == pytest.approx(span, rel=1e-8, abs=1e-9)  # summed segment lengths: round-off grows with the count
     np.testing.assert_allclose(piece[[0, -1]], point_at(L_SHAPE, [t0, t0 + span]))
+
+
+@pytest.mark.parametrize("scale, shift", [(1.0, (0.0, 0.0)), (10**0.5, (0.0, 0.0)), (1e-5, (7.0, 3.0)), (1e5, (-300.0, 11.0))])
+def test_a_vertex_on_another_side_is_refused_at_every_scale(scale, shift):
+    """Point 2 lies exactly on side 3-0; rounding after scaling or moving must not decide it
+    (hypothesis found such a loop accepted at one scale and refused at another)."""
+    from jaxmatch.errors import InputError
+    from jaxmatch.shape import make_shape
+
+    pts = np.array([[-4, 13], [-2, 8], [3, 12], [10, 11]], float)
+    with pytest.raises(InputError, match="touches itself"):
+        make_shape(pts * scale + np.array(shift) * 14 * scale)
+    make_shape(np.array([[-4, 13], [-2, 8], [3, 11.5], [10, 11]]) * scale)  # just inside: a simple loop
