@@ -29,6 +29,21 @@ FINER = " +bends"
 other candidate folds; :data:`jaxmatch.shape.HELD_ANGLE`)."""
 
 
+FAILED = (InputError, SolverError, ValueError, ArithmeticError, IndexError)
+"""What skips one strategy, the others going on: a request its cuts or patches cannot meet, a
+solver failure (not a verdict on the request), degenerate cuts or patches (near-duplicate
+points, slivers)."""
+
+
+def _why_not(e: Exception) -> str:
+    """The note of a strategy skipped for ``e`` (one of :data:`FAILED`)."""
+    if isinstance(e, InputError):
+        return e.problem
+    if isinstance(e, SolverError):
+        return f"solver error: {e}"
+    return f"skipped: {type(e).__name__}: {e}"
+
+
 def try_strategies(shape: Shape, names, cat, lat, h: float, corners: np.ndarray, cache: dict, budget_s, t0: float,
                     progress, suffix: str = "", quality: Quality = QUALITY) -> list[Candidate]:
     """Each strategy of ``names`` (one :class:`Candidate` each, in the order of ``names``, with its
@@ -45,14 +60,10 @@ def try_strategies(shape: Shape, names, cat, lat, h: float, corners: np.ndarray,
     for i, name in enumerate(names):
         try:
             lay = single_patch(shape) if name == SINGLE else decompose(shape, name)
-        except InputError as e:
-            tried[i] = Candidate(name + suffix, None, e.problem)
+        except FAILED as e:
+            tried[i] = Candidate(name + suffix, None, _why_not(e))
             continue
-        except (ValueError, ArithmeticError, IndexError) as e:  # degenerate cuts (near-duplicate points, slivers)
-            tried[i] = Candidate(name + suffix, None, f"skipped: {type(e).__name__}: {e}")
-            continue
-        same = next((names[j] for j, other in layouts if _same(lay, other)), None)
-        if same is not None:
+        if any(_same(lay, other) for _, other in layouts):
             tried[i] = Candidate(name + suffix, None, "same patches as an earlier candidate")
             continue
         layouts.append((i, lay))
@@ -67,12 +78,8 @@ def try_strategies(shape: Shape, names, cat, lat, h: float, corners: np.ndarray,
             try:
                 lm = mesh_layout(lay, cat, lat, size=h, smooth_cuts=lay.n_patches > 1,
                                  sizes=ALL_SIZES if names[i] == SINGLE else TEMPLATE_SIZES, template_cache=cache)
-            except InputError as e:
-                tried[i] = Candidate(label, None, e.problem)
-            except SolverError as e:  # not a verdict on the request: the other candidates go on
-                tried[i] = Candidate(label, None, f"solver error: {e}")
-            except (ValueError, ArithmeticError, IndexError) as e:  # degenerate patches (slivers)
-                tried[i] = Candidate(label, None, f"skipped: {type(e).__name__}: {e}")
+            except FAILED as e:
+                tried[i] = Candidate(label, None, _why_not(e))
             else:
                 m = from_layout(lm, size=h, corners=corners)
                 tried[i] = Candidate(label, m)
