@@ -58,3 +58,22 @@ def cli(capsys, monkeypatch, tmp_path):
         return code, out, err
 
     return run
+
+
+CLI_THEN = """
+import sys
+from jaxmatch.cli import main
+sys.argv = ["jaxmatch", *sys.argv[1:]]
+try:
+    main()
+except SystemExit as e:
+    assert not e.code, e.code
+"""
+
+
+@pytest.fixture
+def cli_then():
+    """``cli_then(after) -> str``: a ``python -c`` program that runs the ``jaxmatch`` command given
+    as its arguments in-process (a nonzero exit fails it), then the lines ``after`` (e.g. a look
+    at ``sys.modules``)."""
+    return lambda after: CLI_THEN + after

@@ -277,13 +277,6 @@ def test_piped_run_says_it_is_alive(small_cat):
 
 
 NO_JAX = """
-import sys
-from jaxmatch.cli import main
-sys.argv = ["jaxmatch", *sys.argv[1:]]
-try:
-    main()
-except SystemExit as e:
-    assert not e.code, e.code
 loaded = sorted(m for m in sys.modules if m == "jax" or m.startswith(("jax.", "jaxlib")))
 assert not loaded, loaded[:5]
 print("no jax")
@@ -291,10 +284,10 @@ print("no jax")
 
 
 @pytest.mark.parametrize("env", [{"JAXMATCH_BACKEND": "numba"}, {"JAXMATCH_BACKEND": "auto", "JAX_PLATFORMS": "cpu"}])
-def test_score_on_the_numba_backend_never_imports_jax(small_cat, tmp_path, env):
+def test_score_on_the_numba_backend_never_imports_jax(small_cat, tmp_path, env, cli_then):
     """The default CPU path (numba kernel, numpy backtrack, compile-cache settings) runs without JAX."""
     env = {**os.environ, "JAXMATCH_CACHE": str(tmp_path / "cache"), **env}
-    r = subprocess.run([sys.executable, "-c", NO_JAX, "score", str(EXAMPLES / "lshape.json"), "--catalogue", str(small_cat),
+    r = subprocess.run([sys.executable, "-c", cli_then(NO_JAX), "score", str(EXAMPLES / "lshape.json"), "--catalogue", str(small_cat),
                         "--tie-break", "id", "--json"], capture_output=True, text=True, cwd=ROOT, timeout=300, env=env)
     assert r.returncode == 0, r.stderr
     assert r.stdout.rstrip().endswith("no jax") and json.loads(r.stdout.rstrip()[: -len("no jax")])["results"]

@@ -241,13 +241,6 @@ def test_mesh_band_out_of_range_is_a_clear_error(cli, small_cat, value):
 
 
 MESH_IMPORTS = """
-import sys
-from jaxmatch.cli import main
-sys.argv = ["jaxmatch", *sys.argv[1:]]
-try:
-    main()
-except SystemExit as e:
-    assert not e.code, e.code
 unwanted = {"jax", "jaxlib", "numba", "matplotlib", "optax", "starlette", "uvicorn", "svgelements", "ezdxf",
             "rich.progress", "rich.table", "jaxmatch.tuning", "jaxmatch.label", "jaxmatch.scoring.soft",
             "jaxmatch.scoring.xla", "jaxmatch.io.plot", "jaxmatch.catalogue.canon_fast"}
@@ -255,21 +248,21 @@ print(sorted(set(sys.modules) & unwanted))
 """
 
 
-def test_mesh_command_loads_only_what_it_uses(tmp_path):
+def test_mesh_command_loads_only_what_it_uses(tmp_path, cli_then):
     """Start-up (docs/perf.md, "Start-up"): a piped ``jaxmatch mesh SHAPE --size H --out FILE`` imports no
     JAX, numba, matplotlib, labelling, tuning or progress-bar code (no timing asserted)."""
     env = {k: v for k, v in os.environ.items() if k != "JAXMATCH_PROGRESS"}
     out = tmp_path / "l.msh"
-    r = subprocess.run([sys.executable, "-c", MESH_IMPORTS, "mesh", str(EXAMPLES / "lshape.json"), "--size", "0.5",
+    r = subprocess.run([sys.executable, "-c", cli_then(MESH_IMPORTS), "mesh", str(EXAMPLES / "lshape.json"), "--size", "0.5",
                         "--out", str(out)], capture_output=True, text=True, cwd=ROOT, timeout=300, env=env)
     assert r.returncode == 0, r.stderr
     assert r.stdout.rstrip().splitlines()[-1] == "[]", r.stdout
     assert out.exists()
 
 
-def test_annotate_loads_no_solver():
+def test_annotate_loads_no_solver(cli_then):
     """``jaxmatch annotate`` places nothing: scipy's sparse and optimize packages stay unloaded."""
-    code = (MESH_IMPORTS.replace('unwanted = {', 'unwanted = {"scipy.sparse", "scipy.optimize", "meshio", ')
+    code = cli_then(MESH_IMPORTS.replace('unwanted = {', 'unwanted = {"scipy.sparse", "scipy.optimize", "meshio", ')
             .replace('"rich.table", ', ''))  # annotate prints tables
     r = subprocess.run([sys.executable, "-c", code, "annotate", str(EXAMPLES / "lshape.json")],
                        capture_output=True, text=True, cwd=ROOT, timeout=300)
