@@ -475,29 +475,52 @@ def test_smooth_near_unfolds_locally_and_keeps_the_rest():
     assert np.array_equal(whole, smooth_in_frame(folded, quads, boundary, frame=folded[boundary], iters=50))
 
 
-def test_harmonic_solve_is_spsolve_and_keeps_one_factor(monkeypatch):
-    """The large meshes' solve (a kept SuperLU factor) against the plain spsolve on a small grid
-    Laplacian; a second call on the same topology reuses the factor, another topology replaces it."""
+@pytest.mark.parametrize("solver", ["qdldl", "superlu"])
+def test_harmonic_solve_is_spsolve_and_keeps_one_factor(monkeypatch, solver):
+    """The large meshes' solve (a kept LDL^T or SuperLU factor and Laplacian) against the plain
+    spsolve on a small grid Laplacian; a second call on the same topology reuses them, another
+    topology replaces them."""
     import scipy.sparse.linalg
 
+    if solver == "qdldl":
+        pytest.importorskip("qdldl")
+    else:
+        monkeypatch.setattr(R, "_large_solver", R._SuperLU)
     monkeypatch.setattr(R, "_FACTORS", {})
-    xy, quads, boundary = _grid(12)
-    nv = xy.shape[0]
-    free = np.setdiff1d(np.arange(nv), boundary)
-    L = R._laplacian(quads, nv)
-    Lf = L[free][:, free].tocsc()
-    rhs = np.random.default_rng(0).normal(size=(free.size, 2))
-    x = R._harmonic_solve(Lf, rhs, quads, free)
+    rng = np.random.default_rng(0)
+
+    def case(k):
+        xy, quads, boundary = _grid(k)
+        nv = xy.shape[0]
+        free = np.setdiff1d(np.arange(nv), boundary)
+        disp = np.zeros((nv, 2))
+        disp[boundary] = rng.normal(size=(boundary.size, 2))
+        L = R._laplacian(quads, nv)
+        want = scipy.sparse.linalg.spsolve(L[free][:, free].tocsc(), -(L[free][:, boundary] @ disp[boundary]))
+        return quads, nv, free, disp, want
+
+    quads, nv, free, disp, want = case(12)
+    x = R._harmonic_solve(quads, nv, free, disp)
     assert x.shape == (free.size, 2)
-    np.testing.assert_allclose(x, scipy.sparse.linalg.spsolve(Lf, rhs), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(x, want, rtol=0, atol=1e-12)
     assert len(R._FACTORS) == 1
-    np.testing.assert_array_equal(R._harmonic_solve(2.0 * Lf, rhs, quads, free), x)  # the key: the topology
-    xy2, quads2, b2 = _grid(10)
-    free2 = np.setdiff1d(np.arange(xy2.shape[0]), b2)
-    L2 = R._laplacian(quads2, xy2.shape[0])[free2][:, free2].tocsc()
-    x2 = R._harmonic_solve(L2, rhs[:free2.size], quads2, free2)
-    np.testing.assert_allclose(x2, scipy.sparse.linalg.spsolve(L2, rhs[:free2.size]), rtol=0, atol=1e-12)
-    assert len(R._FACTORS) == R.FACTOR_CACHE_SIZE
+    (kept,) = R._FACTORS.values()
+    np.testing.assert_array_equal(R._harmonic_solve(quads, nv, free, disp), x)
+    assert next(iter(R._FACTORS.values())) is kept  # the same topology: the kept factor
+    quads2, nv2, free2, disp2, want2 = case(10)
+    np.testing.assert_allclose(R._harmonic_solve(quads2, nv2, free2, disp2), want2, rtol=0, atol=1e-12)
+    assert len(R._FACTORS) == R.FACTOR_CACHE_SIZE and next(iter(R._FACTORS.values())) is not kept
+
+
+def test_harmonic_displacement_large_path_is_the_plain_one(monkeypatch):
+    """Above SMOOTH_LOCAL quads (forced) the harmonic extension (kept factor, rhs from the whole
+    Laplacian) equals the plain spsolve path to round-off."""
+    xy, quads, boundary = _grid(9)
+    bdisp = np.random.default_rng(1).normal(size=(boundary.size, 2))
+    plain = R.harmonic_displacement(quads, xy.shape[0], boundary, bdisp)
+    monkeypatch.setattr(R, "SMOOTH_LOCAL", 0)
+    monkeypatch.setattr(R, "_FACTORS", {})
+    np.testing.assert_allclose(R.harmonic_displacement(quads, xy.shape[0], boundary, bdisp), plain, rtol=0, atol=1e-12)
 
 
 def test_large_mesh_paths_keep_the_refined_mesh_valid(templates, monkeypatch):

@@ -19,7 +19,7 @@ from jaxmatch.placement.embed import edge_ratios, quad_areas, sj_inverted
 
 __all__ = ["Candidate", "QuadMesh", "boundary_loops", "irregular_bound"]
 
-_KEPT = ("_sj_inverted", "_edges", "_valences", "_loops", "_missed")
+_KEPT = ("_sj_inverted", "_edges", "_edge_lengths", "_valences", "_loops", "_missed", "_area")
 """The :class:`QuadMesh` measures computed once per mesh (``cached_property`` names)."""
 
 
@@ -128,9 +128,20 @@ class QuadMesh:
         return edges(np.asarray(self.quads, np.int64))
 
     @cached_property
+    def _edge_lengths(self) -> np.ndarray:
+        """``(E,) float64`` length of each edge of :attr:`_edges` (user units)."""
+        e = self._edges
+        return np.linalg.norm(self.xy[e[:, 0]] - self.xy[e[:, 1]], axis=1)
+
+    @cached_property
     def _valences(self) -> np.ndarray:
-        """``(V,) int32`` vertex valences."""
-        return valences(self.quads, self.xy.shape[0])
+        """``(V,) int32`` vertex valences (:func:`~jaxmatch.catalogue.mesh.valences`, from :attr:`_edges`)."""
+        return np.bincount(self._edges.ravel(), minlength=self.xy.shape[0]).astype(np.int32)
+
+    @cached_property
+    def _area(self) -> float:
+        """Sum of the quads' signed areas (user units squared)."""
+        return float(quad_areas(self.xy, self.quads).sum())
 
     @cached_property
     def _loops(self) -> list[np.ndarray]:
@@ -192,7 +203,7 @@ class QuadMesh:
     @property
     def area_ratio(self) -> float:
         """Sum of the quads' signed areas / area of the region."""
-        return float(quad_areas(self.xy, self.quads).sum() / self.region_area) if self.region_area else math.nan
+        return float(self._area / self.region_area) if self.region_area else math.nan
 
     @property
     def irregular(self) -> np.ndarray:
@@ -235,14 +246,12 @@ class QuadMesh:
         """Edges longer than ``factor * size`` (0 without a size)."""
         if not self.size:
             return 0
-        e = self._edges
-        return int(np.sum(np.linalg.norm(self.xy[e[:, 0]] - self.xy[e[:, 1]], axis=1) > factor * self.size))
+        return int(np.sum(self._edge_lengths > factor * self.size))
 
     @property
     def mean_edge_length(self) -> float:
         """Mean length of the mesh's edges, each counted once (user units)."""
-        e = self._edges
-        return float(np.linalg.norm(self.xy[e[:, 0]] - self.xy[e[:, 1]], axis=1).mean()) if e.size else math.nan
+        return float(self._edge_lengths.mean()) if self._edges.size else math.nan
 
     @property
     def valid(self) -> bool:

@@ -672,6 +672,36 @@ out:
 }
 
 /* ------------------------------------------------------------------------------------------ */
+/* per-quad quality: embed.sj_inverted's numpy operations in the same order (the same doubles) */
+
+/* sj[f]: min over the four corners of (e1 x e2) / (|e1| |e2|) (0 where |e1| |e2| <= tiny), clipped
+ * to [-1, 1] (NaN kept, as numpy's min and clip keep it); inv[f]: 1 when a corner's e1 x e2 <= 0.
+ * e1 = p[next] - p, e2 = p[prev] - p; |e| = sqrt(ex * ex + ey * ey). */
+void jm_sj_inverted(const double *xy, const i64 *quads, i64 F, double *sj, uint8_t *inv) {
+    const double tiny = 2.2250738585072014e-308;
+    for (i64 f = 0; f < F; f++) {
+        const i64 *q = quads + 4 * f;
+        double m = 0.0;
+        int bad = 0;
+        for (int c = 0; c < 4; c++) {
+            const double *p = xy + 2 * q[c], *a = xy + 2 * q[(c + 1) & 3], *b = xy + 2 * q[(c + 3) & 3];
+            double e1x = a[0] - p[0], e1y = a[1] - p[1], e2x = b[0] - p[0], e2y = b[1] - p[1];
+            double cross = e1x * e2y - e1y * e2x;
+            double l1 = e1x * e1x, l2 = e2x * e2x;
+            l1 = sqrt(l1 + e1y * e1y);
+            l2 = sqrt(l2 + e2y * e2y);
+            double ln = l1 * l2;
+            double v = ln > tiny ? cross / ln : 0.0;
+            if (c == 0) m = v;
+            else if (!isnan(m) && (isnan(v) || v < m)) m = v;  /* numpy's min: NaN wins */
+            if (cross <= 0) bad = 1;
+        }
+        sj[f] = isnan(m) ? m : (m < -1.0 ? -1.0 : (m > 1.0 ? 1.0 : m));
+        inv[f] = (uint8_t)bad;
+    }
+}
+
+/* ------------------------------------------------------------------------------------------ */
 
 static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_ckernels",
                                     "jaxmatch's compiled placement kernels (called through ctypes)", -1, NULL};

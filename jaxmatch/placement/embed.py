@@ -287,6 +287,10 @@ def sj_inverted(xy: np.ndarray, quads: np.ndarray) -> tuple[np.ndarray, np.ndarr
     q = np.asarray(quads)
     if q.size == 0:
         return np.zeros(0), np.zeros(0, bool)
+    from jaxmatch.placement import kernels
+
+    if kernels.BACKEND == "c":  # the same operations in C, one pass (100,000 quads: ~40 ms in numpy)
+        return kernels.sj_inverted(xy, q)
     e1, e2, cross = _corners(xy, q)
     return _scaled_jacobian(e1, e2, cross), (cross <= 0).any(axis=1)
 

@@ -17,6 +17,8 @@ Functions (arrays C-contiguous; ``float64`` or ``int64``):
 * :func:`lbfgs`, :func:`energy`, :func:`objective`: its pieces (tests);
 * :func:`tutte_dense` ``(quads, V, boundary (n,), boundary_xy (n, 2)) -> (V, 2)``;
 * :func:`orientation_utilities` ``(codes (m,), vals (n,), table (3, 64), skip (3,)) -> (2n,)``;
+* :func:`sj_inverted` ``(xy (V, 2), quads (F, 4)) -> (sj (F,), inverted (F,) bool)``: C only (no numba
+  version: ``embed.sj_inverted`` computes it in numpy when the library is absent, the same values);
 * :func:`candidates` ``(codes, seqs (O, n), table, between (m, m), prefix, suffix (m,), gq (m, m),
   tt (m,), perimeter, unit, limit) -> (utility (O,), gap (O,), orientation (K,), alignments (K, n))``.
 """
@@ -63,6 +65,7 @@ def _load_c():
         "jm_tutte": (ctypes.c_int, [P, L, L, P, L, P]),
         "jm_orientation_utilities": (None, [P, L, P, L, P, P, P]),
         "jm_candidates": (L, [P, L, P, L, L, P, P, P, P, P, P, D, D, L, P, P, P, P]),
+        "jm_sj_inverted": (None, [P, P, L, P, P]),
     }
     for name, (res, args) in sig.items():
         fn = getattr(lib, name)
@@ -150,6 +153,12 @@ if _C is not None:
         if K < 0:
             raise MemoryError("placement kernel: out of memory")
         return util, gap, own[:K].copy(), A[:K].copy()
+
+    def sj_inverted(xy, quads):
+        xy, q = _f(xy), _i(quads)
+        sj, inv = np.empty(q.shape[0]), np.empty(q.shape[0], np.uint8)
+        _C.jm_sj_inverted(_p(xy), _p(q), q.shape[0], _p(sj), _p(inv))
+        return sj, inv.view(bool)
 
 else:  # pragma: no cover - exercised with JAXMATCH_PLACEMENT_KERNELS=numba
     from jaxmatch.placement._numba_smooth import energy, lbfgs, objective, smooth, tutte_dense  # noqa: F401
