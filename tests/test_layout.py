@@ -597,3 +597,23 @@ def test_cli_sides_file_errors(cli, tmp_path):
     assert code == EXIT_BAD_INPUT and str(sides) in err and "not a side" in err
     code, _, err = cli("mesh", ROOT / "examples" / "lshape.json", "--sides-file", sides)
     assert code == EXIT_BAD_INPUT and "--sides-file" in err
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), n=st.integers(2, 30), tol=st.sampled_from([1e-9, 1e-3, 0.05, 0.3]))
+def test_coincident_points_are_the_brute_force_pairs(seed, n, tol):
+    """_check_coincident refuses a point set exactly when some pair is within tol (every pair
+    measured), naming the first such pair i < j."""
+    from jaxmatch.placement.layout import _check_coincident
+
+    rng = np.random.default_rng(seed)
+    pts = rng.uniform(0, 1, size=(n, 2))
+    if rng.random() < 0.5:
+        pts[rng.integers(0, n)] = pts[rng.integers(0, n)] + rng.uniform(-tol, tol, 2) * 0.5
+    d = np.linalg.norm(pts[:, None] - pts[None], axis=2)
+    close = [(i, j) for i in range(n) for j in range(i + 1, n) if d[i, j] <= tol]
+    if not close:
+        _check_coincident(pts, tol, "<test>")
+        return
+    with pytest.raises(InputError, match=rf"points {close[0][0]} and {close[0][1]} are at the same place"):
+        _check_coincident(pts, tol, "<test>")

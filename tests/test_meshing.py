@@ -284,26 +284,62 @@ def test_every_result_writes_with_groups(cat, tmp_path):
 
 
 def test_solver_failure_is_not_infeasible(monkeypatch):
-    import scipy.optimize
-
-    from jaxmatch.placement.milp import run_milp
-
-    class Res:
-        def __init__(self, status):
-            self.status, self.x, self.message = status, None, "stub"
+    from jaxmatch.placement import milp
 
     calls = []
 
-    def fake(*a, status=4, **k):
-        calls.append(k["options"]["presolve"])
-        return Res(status)
+    def fake(*a, presolve, time_limit, status=4):
+        calls.append(presolve)
+        return status, None, "stub"
 
-    monkeypatch.setattr(scipy.optimize, "milp", fake)
+    monkeypatch.setattr(milp, "_highs", fake)
+    args = (np.ones(1), np.ones((1, 1)), np.ones(1), np.ones(1), np.ones(1), np.zeros(1), np.ones(1))
     with pytest.raises(SolverError) as e:
-        run_milp(np.ones(1), None, np.ones(1), None)
+        milp.run_milp(*args)
     assert e.value.status == 4 and calls == [True, False]  # retried without presolve
-    monkeypatch.setattr(scipy.optimize, "milp", lambda *a, **k: Res(2))
-    assert run_milp(np.ones(1), None, np.ones(1), None) is None  # infeasible
+    monkeypatch.setattr(milp, "_highs", lambda *a, **k: (2, None, "infeasible"))
+    assert milp.run_milp(*args) is None  # infeasible
+
+
+@pytest.mark.parametrize("name", ["lshape.json", "tshape.json", "hexagon.json", "curved.json"])
+def test_highs_directly_is_scipy_milp_to_the_bit(cat, monkeypatch, name):
+    """The integer programs of a mesh solved through highspy give scipy.optimize.milp's solutions
+    bit for bit (the same HiGHS release), and the same status for an infeasible one."""
+    pytest.importorskip("highspy")
+    import scipy.optimize
+
+    from jaxmatch.placement import layout, milp, refine
+
+    programs = []
+    real = milp.run_milp
+
+    def spy(*args, **kw):
+        programs.append(args)
+        return real(*args, **kw)
+
+    monkeypatch.setattr(milp, "run_milp", spy)
+    refine.clear_template_cache(cat)
+    layout.clear_caches()
+    shp = jaxmatch.load_shape(EX / name)
+    jaxmatch.mesh(shp, catalogue=cat, divisions=24)
+    assert programs
+    cost, A, lo, hi, integ, lb, ub = (np.asarray(a, np.float64).copy() for a in programs[0])
+    j = int(np.flatnonzero(integ)[0])
+    lb[j], ub[j] = 1.25, 1.75  # no integer between: infeasible
+    programs.append((cost, A, lo, hi, integ, lb, ub))
+    statuses = []
+    for cost, A, lo, hi, integ, lb, ub in programs:
+        st, x, _ = milp._highs(*(np.asarray(a, np.float64) for a in (cost, A, lo, hi, integ, lb, ub)), presolve=True,
+                               time_limit=30.0)
+        ref = scipy.optimize.milp(cost, constraints=scipy.optimize.LinearConstraint(A, lo, hi), integrality=integ,
+                                  bounds=scipy.optimize.Bounds(lb, ub), options={"time_limit": 30.0, "presolve": True})
+        assert st == ref.status
+        statuses.append(st)
+        if ref.x is None:
+            assert x is None
+        else:
+            np.testing.assert_array_equal(x, ref.x)
+    assert statuses[-1] == 2 and 0 in statuses
 
 
 def test_bad_requests(cat):

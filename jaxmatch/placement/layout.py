@@ -385,11 +385,16 @@ def _straight(loop_xy: np.ndarray) -> np.ndarray:
 
 
 def _check_coincident(pts: np.ndarray, tol: float, source: str) -> None:
-    from scipy.spatial import cKDTree
+    """InputError naming the first pair ``i < j`` of points ``(P, 2)`` within ``tol`` of each other
+    (shapely's STRtree, ``dwithin``: distance <= tol; not scipy's cKDTree, whose import costs the
+    meshing command ~0.3 s, docs/perf.md "Start-up")."""
+    import shapely
 
-    pairs = cKDTree(pts).query_pairs(tol, output_type="ndarray")
-    if len(pairs):
-        i, j = sorted(int(v) for v in pairs[0])
+    geoms = shapely.points(pts)
+    i, j = shapely.STRtree(geoms).query(geoms, predicate="dwithin", distance=tol)
+    keep = i < j
+    if keep.any():
+        i, j = min(zip(i[keep].tolist(), j[keep].tolist()))
         raise InputError(f"points {i} and {j} are at the same place", where=source)
 
 

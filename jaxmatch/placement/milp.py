@@ -76,8 +76,6 @@ def solve_counts(sides, matrices: Sequence[np.ndarray], *, counts: Mapping[int, 
     counts) when the requested counts cannot be met; :class:`InputError` for a bad size or when
     neither a size nor counts are given.
     """
-    from scipy.optimize import Bounds, LinearConstraint
-
     counts = dict(counts or {})
     S = len(sides.chains)
     nc = [int(np.asarray(A).shape[1]) for A in matrices]
@@ -134,7 +132,7 @@ def solve_counts(sides, matrices: Sequence[np.ndarray], *, counts: Mapping[int, 
         for s, v in fixed.items():
             lb[M + s] = ub[M + s] = float(v)
         integrality = np.concatenate([np.ones(M + S), np.zeros(T + M)])
-        x = run_milp(cost, LinearConstraint(np.array(rows), lo, hi), integrality, Bounds(lb, ub))
+        x = run_milp(cost, np.array(rows), lo, hi, integrality, lb, ub)
         if x is None:
             return None
         x = np.rint(x).astype(np.int64)
@@ -160,22 +158,71 @@ MILP_TIME_LIMIT = 30.0
 """Seconds HiGHS may spend on one integer program; past it the best solution found is used."""
 
 
-def run_milp(cost, constraints, integrality, bounds, *, time_limit: float = MILP_TIME_LIMIT):
-    """Solve one integer program with :func:`scipy.optimize.milp` (HiGHS): ``x`` (the best
-    solution found: optimal, or the incumbent at the time limit), or None when the program is
-    infeasible. A solver failure (status 3 or 4, or a time limit without a solution) is retried
-    once without presolve, then raised as :class:`jaxmatch.errors.SolverError`, never reported
-    as infeasible."""
-    from scipy.optimize import milp
+def run_milp(cost, A, lo, hi, integrality, lb, ub, *, time_limit: float = MILP_TIME_LIMIT):
+    """Solve one integer program with HiGHS: minimise ``cost @ x`` subject to ``lo <= A @ x <= hi``,
+    ``lb <= x <= ub``, ``x[j]`` integer where ``integrality[j]`` is 1.
 
+    cost, integrality, lb, ub: ``(n,)``; A: ``(m, n)`` dense; lo, hi: ``(m,)`` (``+-inf`` allowed).
+    Returns ``x (n,) float64`` (the best solution found: optimal, or the incumbent at the time
+    limit), or None when the program is infeasible. A solver failure (status 3 or 4, or a time
+    limit without a solution) is retried once without presolve, then raised as
+    :class:`jaxmatch.errors.SolverError`, never reported as infeasible. The solver:
+    :func:`_highs` (status numbers as :func:`scipy.optimize.milp`'s)."""
     from jaxmatch.errors import SolverError
 
-    res = None
+    args = [np.asarray(a, np.float64) for a in (cost, A, lo, hi, integrality, lb, ub)]
+    status, x, message = 4, None, ""
     for presolve in (True, False):
-        res = milp(cost, constraints=constraints, integrality=integrality, bounds=bounds,
-                   options={"time_limit": float(time_limit), "presolve": presolve})
-        if res.status in (0, 1) and res.x is not None:
-            return res.x
-        if res.status == 2:
+        status, x, message = _highs(*args, presolve=presolve, time_limit=float(time_limit))
+        if status in (0, 1) and x is not None:
+            return x
+        if status == 2:
             return None
-    raise SolverError(f"the integer program failed (HiGHS status {res.status}: {res.message})", res.status)
+    raise SolverError(f"the integer program failed (HiGHS status {status}: {message})", status)
+
+
+def _highs(cost, A, lo, hi, integrality, lb, ub, *, presolve: bool, time_limit: float):
+    """``(status, x or None, message)`` of one HiGHS run, status as :func:`scipy.optimize.milp`'s (0
+    optimal, 1 time or iteration limit, 2 infeasible, 3 unbounded, 4 other).
+
+    Through the ``highspy`` package when it is installed (the model passed as
+    :func:`scipy.optimize.milp` passes it; ``pyproject.toml`` pins the release of the HiGHS that
+    scipy bundles, so both give the same solutions bit for bit, tested), which spares the command ``scipy.optimize``'s import
+    (~0.3 s with the ``scipy.spatial`` and ``scipy.special`` it loads; docs/perf.md, "Start-up");
+    else :func:`scipy.optimize.milp`."""
+    try:
+        import highspy
+    except ImportError:
+        from scipy.optimize import Bounds, LinearConstraint, milp
+
+        res = milp(cost, constraints=LinearConstraint(A, lo, hi), integrality=integrality, bounds=Bounds(lb, ub),
+                   options={"time_limit": time_limit, "presolve": presolve})
+        return res.status, res.x, res.message
+    m, n = A.shape
+    nz = A.T != 0  # column-wise (CSC), rows ascending in each column
+    lp = highspy.HighsLp()
+    lp.num_col_, lp.num_row_ = n, m
+    lp.a_matrix_.num_col_, lp.a_matrix_.num_row_ = n, m
+    lp.a_matrix_.format_ = highspy.MatrixFormat.kColwise
+    lp.a_matrix_.start_ = np.concatenate([[0], np.cumsum(nz.sum(axis=1))]).astype(np.int32)
+    lp.a_matrix_.index_ = np.nonzero(nz)[1].astype(np.int32)
+    lp.a_matrix_.value_ = A.T[nz]
+    lp.col_cost_, lp.col_lower_, lp.col_upper_ = cost, lb, ub
+    lp.row_lower_, lp.row_upper_ = lo, hi
+    lp.integrality_ = [highspy.HighsVarType(int(i)) for i in integrality]
+    h = highspy.Highs()
+    h.setOptionValue("log_to_console", False)  # as scipy sets it
+    h.setOptionValue("time_limit", float(time_limit))
+    h.setOptionValue("presolve", "on" if presolve else "off")
+    S = highspy.HighsModelStatus
+    if h.passModel(lp) == highspy.HighsStatus.kError:
+        return 2, None, "the model could not be loaded"  # as scipy: kModelError
+    h.run()
+    st = h.getModelStatus()
+    status = {S.kOptimal: 0, S.kTimeLimit: 1, S.kIterationLimit: 1, S.kInfeasible: 2, S.kModelError: 2,
+              S.kUnbounded: 3}.get(st, 4)
+    limit = st in (S.kTimeLimit, S.kIterationLimit, S.kSolutionLimit)
+    if st != S.kOptimal and not (limit and h.getInfo().objective_function_value != highspy.kHighsInf):
+        return status, None, h.modelStatusToString(st)
+    return status, np.array(h.getSolution().col_value), h.modelStatusToString(st)
+
