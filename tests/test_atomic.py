@@ -252,6 +252,15 @@ def test_static_check_catches_in_place_writes():
 # an interrupted catalogue build (real processes)
 
 
+def _default_sigint() -> None:
+    """In the child: Ctrl-C's default disposition, as in a terminal. A suite started in the
+    background of a non-interactive shell (``scripts/test &``) has SIGINT ignored, which the
+    child would inherit (Python then installs no KeyboardInterrupt handler), so the
+    interrupt tests would see a build run to its end; likewise a blocked SIGINT."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+
+
 class Cli:
     """``python -m jaxmatch.cli ARGS`` in its own process group, stderr to a file (so that it
     can be watched while the process runs and read completely after it ends)."""
@@ -260,7 +269,7 @@ class Cli:
         self.err_path = tmp.parent / f"{tmp.name}-stderr.txt"
         self.err_file = open(self.err_path, "w")
         self.proc = subprocess.Popen([sys.executable, "-m", "jaxmatch.cli", *map(str, args)], cwd=ROOT, stdout=subprocess.DEVNULL,
-                                     stderr=self.err_file, text=True, start_new_session=True,
+                                     stderr=self.err_file, text=True, start_new_session=True, preexec_fn=_default_sigint,
                                      env={**os.environ, "JAX_PLATFORMS": "cpu", "JAXMATCH_PROGRESS": ""})
         self.pid = self.proc.pid
 
