@@ -540,3 +540,31 @@ def test_large_mesh_paths_keep_the_refined_mesh_valid(templates, monkeypatch):
     assert np.allclose(a.xy, b.xy, rtol=0, atol=1e-9)
     check_refined(a, shp)
     assert a.inverted == 0 and plain.inverted == 0
+
+
+@pytest.mark.parametrize("path", [EXAMPLES / "plus.json", LABELLED / "stairs.json", LABELLED / "ushape.json",
+                                  EXAMPLES / "lshape.json"])
+def test_sizes_too_short_for_the_corners_are_not_ranked_and_change_nothing(cat, lat, monkeypatch, path):
+    """_iter_by_size passes over a size whose longest boundary loop is shorter than the shape's
+    corners without ranking it; the templates it makes (ids, orientations, ranks) are those of
+    the walk that ranks every size."""
+    shp = load_shape(path)
+    ks = (0, 1, 2, 3)
+
+    def walk():
+        R.clear_template_cache(cat)
+        return [(t.mesh_id, t.match.rotation, t.match.reflected, t.rank)
+                for t in R._iter_by_size(shp, cat, lat, limit=R.DEFAULT_LIMIT, internal=ks)]
+
+    ranked = []
+    real = R._candidates
+    monkeypatch.setattr(R, "_candidates", lambda *a, **k: ranked.append(k["internal"][0]) or real(*a, **k))
+    fast = walk()
+    short = [k for k in ks if R._longest_boundary(cat, k) < shp.n_corners]
+    assert not set(short) & set(ranked)
+    monkeypatch.setattr(R, "_longest_boundary", lambda c, k: 10**9)  # every size ranked
+    ranked.clear()
+    assert walk() == fast
+    assert set(short) <= set(ranked)
+    if shp.n_corners > 8:
+        assert short  # the plus and the stairs: k = 0 and 1 are too short

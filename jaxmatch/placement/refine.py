@@ -445,20 +445,28 @@ def _iter_templates(shape, catalogue, lattice, *, limit: int, internal=None, rej
             yield t
 
 
+def _longest_boundary(catalogue: "Catalogue", k: int) -> int:
+    """The longest boundary loop of the catalogue's meshes with ``k`` internal vertices (0: none)."""
+    from jaxmatch.scoring.bulk import prepared  # the grouping the ranking of size k uses, kept on the catalogue
+
+    return max((int(p.n) for p in prepared(catalogue, [int(k)])), default=0)
+
+
 def _iter_by_size(shape, catalogue, lattice, *, limit: int, internal: Sequence[int]) -> Iterator[PatchTemplate]:
     """The templates of :func:`_iter_templates` fewest internal vertices first, made one at a
     time: each size ``k`` of ``internal`` (ascending) is ranked alone and its candidates placed in
     ranked order until ``limit`` are kept (``rank``: the place in that size's ranking); the deeper
     scan of :data:`SCAN_PER_LIMIT` when all sizes kept fewer than ``limit`` in all. A size no
-    catalogue mesh can match is passed over."""
+    catalogue mesh can match is passed over, and so is one whose boundary loops are all shorter
+    than the shape's corners (none of its meshes could keep every corner: not ranked at all)."""
     kept: dict[int, int] = {}
     seen: set = set()
     for scan in SCAN_PER_LIMIT:
         if scan > SCAN_PER_LIMIT[0] and sum(kept.values()) >= limit:
             break  # the deeper scan only when the first found fewer than `limit` templates
         for k in sorted(int(k) for k in internal):
-            if kept.get(k, 0) >= limit:
-                continue
+            if kept.get(k, 0) >= limit or _longest_boundary(catalogue, k) < shape.n_corners:
+                continue  # (every corner needs its own boundary vertex: no mesh of size k keeps them all)
             try:
                 ann, ms = _candidates(shape, catalogue, lattice, limit=scan * max(int(limit), 1), internal=[k])
             except UnmatchableError:
