@@ -645,3 +645,10 @@ def test_boundary_paths_are_the_sub_polylines(seed, n, P):
         a, b = t[j], t[(j + 1) % n]
         want = sub_polyline(pts, a, b if b > a else b + cum[-1], cum)
         np.testing.assert_array_equal(got[j], want)
+
+
+def test_sj_inverted_refuses_vertex_ids_out_of_range():
+    """A quad naming a vertex that does not exist is an IndexError (numpy's), not a read past the array."""
+    xy = np.zeros((4, 2))
+    with pytest.raises(IndexError):
+        sj_inverted(xy, np.array([[0, 1, 2, 4]]))

@@ -18,6 +18,7 @@ file, independently of the code under test):
 from __future__ import annotations
 
 import json
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -340,6 +341,21 @@ def test_highs_directly_is_scipy_milp_to_the_bit(cat, monkeypatch, name):
         else:
             np.testing.assert_array_equal(x, ref.x)
     assert statuses[-1] == 2 and 0 in statuses
+
+
+def test_highs_without_highspy_is_scipy_milp(monkeypatch):
+    """Without the highspy package the integer program goes to scipy.optimize.milp, with the same answer."""
+    pytest.importorskip("highspy")
+    from jaxmatch.placement import milp
+
+    # min x + y subject to x + 2 y >= 3.5, x and y integers in [0, 10]: x + y = 2 at (0, 2)
+    args = [np.array(v, np.float64) for v in ([1.0, 1.0], [[1.0, 2.0]], [3.5], [np.inf], [1, 1], [0, 0], [10, 10])]
+    with_highspy = milp._highs(*args, presolve=True, time_limit=30.0)
+    monkeypatch.setitem(sys.modules, "highspy", None)  # import highspy -> ImportError
+    without = milp._highs(*args, presolve=True, time_limit=30.0)
+    assert with_highspy[0] == without[0] == 0
+    np.testing.assert_array_equal(with_highspy[1], without[1])
+    assert with_highspy[1] @ [1.0, 1.0] == 2.0
 
 
 def test_bad_requests(cat):

@@ -387,7 +387,7 @@ def _straight(loop_xy: np.ndarray) -> np.ndarray:
 def _check_coincident(pts: np.ndarray, tol: float, source: str) -> None:
     """InputError naming the first pair ``i < j`` of points ``(P, 2)`` within ``tol`` of each other
     (shapely's STRtree, ``dwithin``: distance <= tol; not scipy's cKDTree, whose import costs the
-    meshing command ~0.3 s, docs/perf.md "Start-up")."""
+    meshing command ~0.3 s, docs/perf.md "Third pass")."""
     import shapely
 
     geoms = shapely.points(pts)

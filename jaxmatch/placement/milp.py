@@ -187,9 +187,9 @@ def _highs(cost, A, lo, hi, integrality, lb, ub, *, presolve: bool, time_limit: 
 
     Through the ``highspy`` package when it is installed (the model passed as
     :func:`scipy.optimize.milp` passes it; ``pyproject.toml`` pins the release of the HiGHS that
-    scipy bundles, so both give the same solutions bit for bit, tested), which spares the command ``scipy.optimize``'s import
-    (~0.3 s with the ``scipy.spatial`` and ``scipy.special`` it loads; docs/perf.md, "Start-up");
-    else :func:`scipy.optimize.milp`."""
+    scipy bundles, so both give the same solutions bit for bit, tested), which spares the
+    command the import of ``scipy.optimize`` (~0.3 s with the ``scipy.spatial`` and
+    ``scipy.special`` it loads; docs/perf.md, "Third pass"); else :func:`scipy.optimize.milp`."""
     try:
         import highspy
     except ImportError:

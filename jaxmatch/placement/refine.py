@@ -130,7 +130,6 @@ one decomposition (and the same patch in two decompositions) are often the same 
 same multiplicities (the L-shape at 100,000 quads: 5 of 10 solves). One: a 100,000-vertex
 factor is ~70 MB, and the one kept is dropped before the next is made."""
 
-
 BAD_RINGS = 6
 """Rings of quads around the bad quads smoothed above :data:`SMOOTH_LOCAL` quads."""
 
