@@ -252,24 +252,28 @@ def test_static_check_catches_in_place_writes():
 # an interrupted catalogue build (real processes)
 
 
-def _default_sigint() -> None:
-    """In the child: Ctrl-C's default disposition, as in a terminal. A suite started in the
-    background of a non-interactive shell (``scripts/test &``) has SIGINT ignored, which the
-    child would inherit (Python then installs no KeyboardInterrupt handler), so the
-    interrupt tests would see a build run to its end; likewise a blocked SIGINT."""
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
-    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+CLI_WITH_CTRL_C = ("import signal, sys\n"
+                   "signal.signal(signal.SIGINT, signal.default_int_handler)\n"
+                   "signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})\n"
+                   "sys.argv[0] = 'jaxmatch'\n"
+                   "from jaxmatch.cli import main\n"
+                   "main()\n")
+"""The command with Ctrl-C as in a terminal (KeyboardInterrupt, SIGINT not blocked), whatever
+disposition the test process hands down: two background runs of the whole suite had the builds
+of the interrupt tests ignore SIGINT and run to their end. Set in the child's own interpreter,
+not by a ``preexec_fn`` (Python code between fork and exec deadlocks when the test process
+runs threads, e.g. JAX's)."""
 
 
 class Cli:
-    """``python -m jaxmatch.cli ARGS`` in its own process group, stderr to a file (so that it
-    can be watched while the process runs and read completely after it ends)."""
+    """The command (``jaxmatch ARGS``, :data:`CLI_WITH_CTRL_C`) in its own process group, stderr
+    to a file (so that it can be watched while the process runs and read completely after it ends)."""
 
     def __init__(self, tmp: Path, *args):
         self.err_path = tmp.parent / f"{tmp.name}-stderr.txt"
         self.err_file = open(self.err_path, "w")
-        self.proc = subprocess.Popen([sys.executable, "-m", "jaxmatch.cli", *map(str, args)], cwd=ROOT, stdout=subprocess.DEVNULL,
-                                     stderr=self.err_file, text=True, start_new_session=True, preexec_fn=_default_sigint,
+        self.proc = subprocess.Popen([sys.executable, "-c", CLI_WITH_CTRL_C, *map(str, args)], cwd=ROOT, stdout=subprocess.DEVNULL,
+                                     stderr=self.err_file, text=True, start_new_session=True,
                                      env={**os.environ, "JAX_PLATFORMS": "cpu", "JAXMATCH_PROGRESS": ""})
         self.pid = self.proc.pid
 

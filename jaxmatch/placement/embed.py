@@ -289,7 +289,8 @@ def sj_inverted(xy: np.ndarray, quads: np.ndarray) -> tuple[np.ndarray, np.ndarr
         return np.zeros(0), np.zeros(0, bool)
     from jaxmatch.placement import kernels
 
-    if kernels.BACKEND == "c" and q.min() >= 0 and q.max() < len(xy):  # the same operations in C, one pass
+    if kernels.BACKEND == "c" and q.ndim == 2 and q.shape[1] == 4 and q.min() >= 0 and q.max() < len(xy) \
+            and np.ndim(xy) == 2 and np.shape(xy)[1] == 2:  # the same operations in C, one pass
         return kernels.sj_inverted(xy, q)  # (100,000 quads: ~40 ms in numpy); numpy's errors for bad ids below
     e1, e2, cross = _corners(xy, q)
     return _scaled_jacobian(e1, e2, cross), (cross <= 0).any(axis=1)
