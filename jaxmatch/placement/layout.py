@@ -711,8 +711,7 @@ def fit_sides(layout: Layout, sides: Sides, p: int, refined, counts: np.ndarray,
 
     Returns ``(V, 2) float64`` user coordinates."""
     from jaxmatch.placement.embed import tutte
-    from jaxmatch.placement.refine import (BAD_RINGS, SJ_FLOOR, SMOOTH_ITERS_LARGE, SMOOTH_LOCAL, harmonic_displacement,
-                                           side_points)
+    from jaxmatch.placement.refine import SMOOTH_LOCAL, bad_quads, harmonic_displacement, side_points, smooth_near_bad
 
     xy = np.array(refined.xy, dtype=np.float64)
     moved = False
@@ -744,11 +743,8 @@ def fit_sides(layout: Layout, sides: Sides, p: int, refined, counts: np.ndarray,
     xy[b] = target
     if not large:
         return smooth_in_frame(xy, quads, b, frame=target, iters=smooth_iters)
-    sj, inv = sj_inverted(xy, quads)
-    bad = inv | (sj < SJ_FLOOR)
-    if not bad.any():
-        return xy
-    return smooth_near(xy, quads, quads[bad].ravel(), b, rings=BAD_RINGS, frame=target, iters=SMOOTH_ITERS_LARGE)
+    bad = bad_quads(*sj_inverted(xy, quads))
+    return smooth_near_bad(xy, quads, bad, b, frame=target) if bad.any() else xy
 
 
 def _boundary_loops(layout: Layout, sides: Sides, side_ids, xy: np.ndarray) -> list[np.ndarray]:

@@ -75,7 +75,9 @@ __all__ = [
     "side_polylines",
     "estimated_mean_edge",
     "feasible",
+    "bad_quads",
     "harmonic_displacement",
+    "smooth_near_bad",
     "nearest_counts",
     "side_points",
     "solve_multiplicities",
@@ -1097,7 +1099,7 @@ def _refine_and_place(template: PatchTemplate, mult, *, smooth_iters: int | None
     xy = xy + harmonic_displacement(quads, nv, bverts, bxy - xy[bverts])
     xy[bverts] = bxy
     sj, inv = sj_inverted(xy, quads)
-    bad = inv | (sj < SJ_FLOOR)
+    bad = bad_quads(sj, inv)
     local = smooth_iters is None and quads.shape[0] > SMOOTH_LOCAL
     if smooth_iters is not None:
         iters = int(smooth_iters)
@@ -1108,7 +1110,7 @@ def _refine_and_place(template: PatchTemplate, mult, *, smooth_iters: int | None
     if iters > 0:
         xy[bverts] = bxy  # exact boundary positions
         if local:
-            xy = smooth_near(xy, quads, quads[bad].ravel(), bverts, rings=BAD_RINGS, frame=bxy, iters=iters)
+            xy = smooth_near_bad(xy, quads, bad, bverts, frame=bxy, iters=iters)
         else:
             xy = smooth_in_frame(xy, quads, bverts, frame=bxy, iters=iters)
         sj, inv = sj_inverted(xy, quads)
@@ -1121,6 +1123,21 @@ def _refine_and_place(template: PatchTemplate, mult, *, smooth_iters: int | None
         region_area=abs(polygon_area(_user_xy(template.shape))), mesh_area=float(quad_areas(xy, quads).sum()),
         template=template,
     )
+
+
+def bad_quads(sj: np.ndarray, inverted: np.ndarray) -> np.ndarray:
+    """``(Q,) bool``: the quads a large mesh smooths around: inverted, or a scaled Jacobian
+    below :data:`SJ_FLOOR` (``sj``, ``inverted``: :func:`~jaxmatch.placement.embed.sj_inverted`)."""
+    return inverted | (sj < SJ_FLOOR)
+
+
+def smooth_near_bad(xy: np.ndarray, quads: np.ndarray, bad: np.ndarray, fixed: np.ndarray, *, frame: np.ndarray,
+                    iters: int = SMOOTH_ITERS_LARGE) -> np.ndarray:
+    """A large mesh smoothed only within :data:`BAD_RINGS` rings of its ``bad (Q,) bool`` quads
+    (:func:`~jaxmatch.placement.embed.smooth_near`; ``fixed`` vertex ids kept, ``frame`` as
+    there): the refinement's and :func:`jaxmatch.placement.layout.fit_sides`'s policy above
+    :data:`SMOOTH_LOCAL` quads. Returns ``(V, 2) float64``."""
+    return smooth_near(xy, quads, quads[bad].ravel(), fixed, rings=BAD_RINGS, frame=frame, iters=iters)
 
 
 def harmonic_displacement(quads: np.ndarray, nv: int, bverts: np.ndarray, bdisp: np.ndarray) -> np.ndarray:
