@@ -228,6 +228,31 @@ def test_chords_equal_walked_strips(cat):
         assert all(bch.count(c) == 2 for c in set(bch))
 
 
+@given(st.integers(1, 40).flatmap(lambda n: st.tuples(
+    st.just(n), st.lists(st.tuples(st.integers(0, n - 1), st.integers(0, n - 1)), max_size=80))))
+def test_components_are_the_connected_components_of_a_plain_search(case):
+    """The union-find of ``_chords`` against a breadth-first search written here: the same
+    partition, each component named by its smallest node."""
+    n, pairs = case
+    a = np.array([p[0] for p in pairs], np.int64)
+    b = np.array([p[1] for p in pairs], np.int64)
+    nbr = {i: set() for i in range(n)}
+    for x, y in pairs:
+        nbr[x].add(y)
+        nbr[y].add(x)
+    want = [-1] * n
+    for s in range(n):  # s is the smallest node of the component it finds first
+        if want[s] < 0:
+            want[s], todo = s, [s]
+            while todo:
+                for y in nbr[todo.pop()]:
+                    if want[y] < 0:
+                        want[y] = s
+                        todo.append(y)
+    got = R._components(n, a, b)
+    assert got.dtype == np.int64 and got.tolist() == want
+
+
 @settings(max_examples=30)
 @given(st.data())
 def test_refined_topology_is_a_disk_without_new_irregular_vertices(cat, data):
@@ -512,11 +537,26 @@ def test_harmonic_solve_is_spsolve_and_keeps_one_factor(monkeypatch, solver):
     assert len(R._FACTORS) == R.FACTOR_CACHE_SIZE and next(iter(R._FACTORS.values())) is not kept
 
 
+@pytest.mark.parametrize("k", [2, 5, 12, 17])
+def test_harmonic_displacement_dense_path_is_the_sparse_one(monkeypatch, k):
+    """Up to DENSE_TUTTE free vertices the extension is the dense compiled Tutte solve (no
+    scipy.sparse): the sparse solve's values to round-off (DENSE_TUTTE forced to 0 for that)."""
+    xy, quads, boundary = _grid(k)
+    bdisp = np.random.default_rng(k).normal(size=(boundary.size, 2))
+    dense = R.harmonic_displacement(quads, xy.shape[0], boundary, bdisp)
+    assert (k - 1) ** 2 <= R.DENSE_TUTTE
+    monkeypatch.setattr(R, "DENSE_TUTTE", 0)
+    sparse = R.harmonic_displacement(quads, xy.shape[0], boundary, bdisp)
+    np.testing.assert_array_equal(dense[boundary], bdisp)
+    np.testing.assert_allclose(dense, sparse, rtol=0, atol=1e-12)
+
+
 def test_harmonic_displacement_large_path_is_the_plain_one(monkeypatch):
     """Above SMOOTH_LOCAL quads (forced) the harmonic extension (kept factor, rhs from the whole
     Laplacian) equals the plain spsolve path to round-off."""
     xy, quads, boundary = _grid(9)
     bdisp = np.random.default_rng(1).normal(size=(boundary.size, 2))
+    monkeypatch.setattr(R, "DENSE_TUTTE", 0)  # the sparse solve up to SMOOTH_LOCAL quads
     plain = R.harmonic_displacement(quads, xy.shape[0], boundary, bdisp)
     monkeypatch.setattr(R, "SMOOTH_LOCAL", 0)
     monkeypatch.setattr(R, "_FACTORS", {})
@@ -568,3 +608,65 @@ def test_sizes_too_short_for_the_corners_are_not_ranked_and_change_nothing(cat, 
     assert set(short) <= set(ranked)
     if shp.n_corners > 8:
         assert short  # the plus and the stairs: k = 0 and 1 are too short
+
+
+def _refuse_some(t) -> str | None:
+    """A check that refuses about two templates in three (a fixed pseudo-random choice)."""
+    import zlib
+
+    key = f"{t.mesh_id}:{t.match.rotation}:{t.match.reflected}".encode()
+    return None if zlib.crc32(key) % 3 == 0 else "refused"
+
+
+@pytest.mark.parametrize("limit", [1, 3, R.DEFAULT_LIMIT])
+@pytest.mark.parametrize("path", [LABELLED / "trapezoid.json", LABELLED / "notched-rectangle.json",
+                                  LABELLED / "quarter-disk.json", EXAMPLES / "plus.json"])
+def test_checked_walk_is_the_filtered_walk_with_fewer_placements(cat, lat, monkeypatch, path, limit):
+    """_iter_checked hands out exactly the templates of the whole walk (_iter_templates) that
+    pass the check, in its order (ids, orientations, ranks, placements), whether the check is
+    the counts' feasibility or refuses at random; it places no more candidates than the whole
+    walk does, and far fewer when most are refused."""
+    shp = load_shape(path)
+    counts = np.maximum(np.rint(R.side_lengths(shp) / (float(R.side_lengths(shp).sum()) / 16)), 1).astype(np.int64)
+    counts[0] += counts.sum() % 2
+    feasible_counts = lambda t: None if R.feasible(t, counts) else "cannot meet the counts"  # noqa: E731
+    placed = []
+    real = R._try_candidate
+    monkeypatch.setattr(R, "_try_candidate", lambda *a, **k: placed.append(1) or real(*a, **k))
+    for check in (feasible_counts, _refuse_some):
+        placed.clear()
+        whole = list(R._iter_templates(shp, cat, lat, limit=limit))
+        n_whole = len(placed)
+        want = [t for t in whole if check(t) is None]
+        placed.clear()
+        passed: list = []
+        got = list(R._iter_checked(shp, cat, lat, limit=limit, internal=None, check=check, memo=R._Memo(),
+                                   passed=passed))
+        assert [(t.mesh_id, t.match.rotation, t.match.reflected, t.rank) for t in got] == \
+            [(t.mesh_id, t.match.rotation, t.match.reflected, t.rank) for t in want]
+        for a, b in zip(got, want):
+            np.testing.assert_array_equal(a.placement.xy, b.placement.xy)
+        refused = {(r, mid) for r, mid, _ in passed}
+        assert {(t.rank, t.mesh_id) for t in whole if check(t) is not None} <= refused
+        assert len(placed) <= n_whole
+        if check is _refuse_some and len(whole) > 6:
+            assert len(placed) < n_whole
+
+
+def test_conforming_search_through_the_lazy_templates_is_the_plain_search(cat, lat):
+    """refine_mesh given lazily placed templates (explain=False, as the pipeline's conforming
+    search asks) takes the template, counts and mesh that the plain list of the same templates
+    gives."""
+    shp = load_shape(LABELLED / "trapezoid.json")
+    h = float(R.side_lengths(shp).sum()) / 16
+    counts = np.maximum(np.rint(R.side_lengths(shp) / h), 1).astype(np.int64)
+    counts[0] += counts.sum() % 2
+    R.clear_template_cache(cat)
+    lazy = R.lazy_patch_templates(shp, cat, lat, limit=R.DEFAULT_LIMIT, by_size=False)
+    a = R.refine_mesh(shp, cat, lat, sides=counts.tolist(), templates=lazy, explain=False)
+    plain = R.patch_templates(shp, cat, lat, limit=R.DEFAULT_LIMIT)
+    b = R.refine_mesh(shp, cat, lat, sides=counts.tolist(), templates=plain, explain=False)
+    assert (a.template.mesh_id, a.template.rank) == (b.template.mesh_id, b.template.rank)
+    np.testing.assert_array_equal(a.mesh.counts, b.mesh.counts)
+    np.testing.assert_array_equal(a.mesh.xy, b.mesh.xy)
+    R.clear_template_cache(cat)

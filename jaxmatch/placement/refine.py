@@ -45,8 +45,8 @@ from jaxmatch.catalogue.mesh import edges
 from jaxmatch.defaults import QUALITY
 from jaxmatch.errors import InputError, UnmatchableError
 from jaxmatch.placement.milp import LayoutInfeasible, one_patch_sides, solve_counts
-from jaxmatch.placement.embed import (Placement, polygon_area, quad_areas, quality, sj_inverted, smooth_in_frame,
-                                      smooth_near)
+from jaxmatch.placement.embed import (DENSE_TUTTE, Placement, polygon_area, quad_areas, quality, sj_inverted,
+                                      smooth_in_frame, smooth_near, tutte)
 from jaxmatch.shape import Shape
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -297,6 +297,28 @@ class PatchTemplate(NamedTuple):
         return tot / np.maximum(cnt, 1)
 
 
+def _components(n: int, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Connected components of the undirected graph on ``n`` nodes with the edges ``a[i]-b[i]``
+    (``a``, ``b``: (m,) ints): ``(n,) int64``, each node's component named by its smallest node.
+
+    A union-find over the few hundred edges of a template (what :func:`_chords` joins: a quad's
+    opposite edges), rather than ``scipy.sparse.csgraph.connected_components``, whose import
+    (with ``scipy.sparse.linalg`` it loads) costs the command ~0.1 s (docs/perf.md, "Fourth pass")."""
+    parent = list(range(int(n)))
+
+    def root(x: int) -> int:
+        while parent[x] != x:
+            parent[x] = parent[parent[x]]  # path halving
+            x = parent[x]
+        return x
+
+    for x, y in zip(np.asarray(a).tolist(), np.asarray(b).tolist()):
+        rx, ry = root(x), root(y)
+        if rx != ry:
+            parent[max(rx, ry)] = min(rx, ry)  # the smaller node is the root
+    return np.asarray([root(x) for x in range(int(n))], np.int64)
+
+
 def _chords(quads: np.ndarray, boundary: np.ndarray, first_edges: Sequence[tuple[int, int]]):
     """Chords of a quad mesh of a disk.
 
@@ -304,8 +326,6 @@ def _chords(quads: np.ndarray, boundary: np.ndarray, first_edges: Sequence[tuple
     numbered by (a chord's number is the position of its first boundary edge in this order;
     closed chords follow, by their smallest edge). Returns ``(edge_list (E, 2), edge_chord
     (E,), quad_chords (F, 2), n_chords)``."""
-    import scipy.sparse.csgraph  # scipy.sparse loads on first use, not with this module (start-up, docs/perf.md)
-
     q = np.asarray(quads, np.int64)
     e = edges(q).astype(np.int64)
     V = int(q.max()) + 1
@@ -317,10 +337,9 @@ def _chords(quads: np.ndarray, boundary: np.ndarray, first_edges: Sequence[tuple
 
     qe = np.stack([edge_id(q[:, k], q[:, (k + 1) % 4]) for k in range(4)], axis=1)  # (F, 4)
     E = e.shape[0]
-    rows = np.concatenate([qe[:, 0], qe[:, 1]])
-    cols = np.concatenate([qe[:, 2], qe[:, 3]])
-    g = scipy.sparse.coo_matrix((np.ones(rows.size), (rows, cols)), shape=(E, E))
-    ncomp, label = scipy.sparse.csgraph.connected_components(g, directed=False)
+    label = _components(E, np.concatenate([qe[:, 0], qe[:, 1]]), np.concatenate([qe[:, 2], qe[:, 3]]))
+    roots, label = np.unique(label, return_inverse=True)  # components 0 .. ncomp - 1
+    ncomp = int(roots.size)
     # renumber: by first boundary edge along the sides, then the rest by smallest edge
     rename = np.full(ncomp, -1, np.int64)
     nxt = 0
@@ -399,14 +418,19 @@ def _candidates(shape: Shape, catalogue: "Catalogue", lattice: "Lattice", *, lim
     return ranking.annotation, ms
 
 
+_UNFITTED = object()
+
+
 def _try_candidate(shape, ann, m: "Match", catalogue, r: int,
-                   check: Callable[[PatchTemplate], str | None] | None = None) -> tuple[PatchTemplate | None, str | None]:
+                   check: Callable[[PatchTemplate], str | None] | None = None,
+                   fitted=_UNFITTED) -> tuple[PatchTemplate | None, str | None]:
     """``(template, None)``: ranked match ``m`` (at ``r``) fitted and placed on ``shape`` with
     every corner a mesh vertex and no folded or degenerate quad; else ``(fitted or None,
-    reason)``. ``check(unplaced template)``: a reason to skip it before placing (None: go on)."""
+    reason)``. ``check(unplaced template)``: a reason to skip it before placing (None: go on).
+    ``fitted``: :func:`_fit`'s answer for ``m`` when the caller has it."""
     from jaxmatch.placement.choose import place_match
 
-    t = _fit(shape, ann, m, catalogue, r)
+    t = _fit(shape, ann, m, catalogue, r) if fitted is _UNFITTED else fitted
     if t is None:
         return None, "leaves a corner without a mesh vertex"
     reason = check(t) if check is not None else None
@@ -421,29 +445,140 @@ def _try_candidate(shape, ann, m: "Match", catalogue, r: int,
     return t._replace(placement=pl), None
 
 
+class _Memo:
+    """What the walks of one shape's templates share (:func:`lazy_patch_templates`): each scan's
+    ranking, each candidate's fit and placement, computed once whichever walk asks first.
+    ``lock``: held while one is computed (callers may share the template cache across threads)."""
+
+    def __init__(self):
+        import threading
+
+        self.lock = threading.RLock()
+        self.scans: dict = {}
+        self.fits: dict = {}
+        self.placed: dict = {}
+
+    def scan(self, shape, catalogue, lattice, n: int, internal):
+        """:func:`_candidates` with ``limit=n``: ``(annotation, matches)``."""
+        with self.lock:
+            if n not in self.scans:
+                self.scans[n] = _candidates(shape, catalogue, lattice, limit=n, internal=internal)
+            return self.scans[n]
+
+    def fit(self, shape, ann, m: "Match", catalogue, r: int) -> PatchTemplate | None:
+        """:func:`_fit` of candidate ``m`` (ranked ``r``)."""
+        key = (m.mesh_id, m.rotation, m.reflected, r)
+        with self.lock:
+            if key not in self.fits:
+                self.fits[key] = _fit(shape, ann, m, catalogue, r)
+            return self.fits[key]
+
+    def place(self, shape, ann, m: "Match", catalogue, r: int) -> tuple[PatchTemplate | None, str | None]:
+        """:func:`_try_candidate` of candidate ``m`` (ranked ``r``), its fit from :meth:`fit`."""
+        key = (m.mesh_id, m.rotation, m.reflected, r)
+        with self.lock:
+            if key not in self.placed:
+                t = self.fit(shape, ann, m, catalogue, r)
+                self.placed[key] = _try_candidate(shape, ann, m, catalogue, r, fitted=t)
+            return self.placed[key]
+
+
 def _iter_templates(shape, catalogue, lattice, *, limit: int, internal=None, rejected: list | None = None,
-                    check: Callable[[PatchTemplate], str | None] | None = None) -> Iterator[PatchTemplate]:
+                    check: Callable[[PatchTemplate], str | None] | None = None,
+                    memo: _Memo | None = None) -> Iterator[PatchTemplate]:
     """Placed templates in candidate order (see :func:`patch_templates`), at most ``limit`` per
     size. ``check(unplaced template)``: a reason to skip it before placing (None: go on).
-    Skipped candidates are appended to ``rejected`` as ``(rank, mesh_id, reason)``."""
+    Skipped candidates are appended to ``rejected`` as ``(rank, mesh_id, reason)``. ``memo``:
+    scans, fits and placements shared with other walks of the shape (without ``check``)."""
     taken: dict[int, int] = {}
     seen: set = set()
     for scan in SCAN_PER_LIMIT:
         if scan > SCAN_PER_LIMIT[0] and sum(taken.values()) >= limit:
             break  # the deeper scan only when the first found fewer than `limit` templates
-        ann, ms = _candidates(shape, catalogue, lattice, limit=scan * max(int(limit), 1), internal=internal)
+        n = scan * max(int(limit), 1)
+        ann, ms = memo.scan(shape, catalogue, lattice, n, internal) if memo is not None else \
+            _candidates(shape, catalogue, lattice, limit=n, internal=internal)
         for r, m in enumerate(ms, start=1):
             key = (m.mesh_id, m.rotation, m.reflected)
             if taken.get(m.internal_vertices, 0) >= limit or key in seen:
                 continue
             seen.add(key)
-            t, reason = _try_candidate(shape, ann, m, catalogue, r, check)
+            if memo is not None and check is None:
+                t, reason = memo.place(shape, ann, m, catalogue, r)
+            else:
+                t, reason = _try_candidate(shape, ann, m, catalogue, r, check)
             if reason is not None:
                 if rejected is not None and (scan == SCAN_PER_LIMIT[0] or t is not None):  # not every corner-skipper twice
                     rejected.append((r, m.mesh_id, reason))
                 continue
             taken[m.internal_vertices] = taken.get(m.internal_vertices, 0) + 1
             yield t
+
+
+def _iter_checked(shape, catalogue, lattice, *, limit: int, internal, check: Callable[[PatchTemplate], str | None],
+                  memo: _Memo, passed: list) -> Iterator[PatchTemplate]:
+    """The templates of :func:`_iter_templates` (same arguments, no ``check``) that pass
+    ``check``, in their order: what walking them all and skipping those ``check`` refuses gives
+    (:func:`_given`), with fewer placements. A candidate ``check`` refuses is never handed out,
+    so it is placed only when whether it folds decides which later candidates are templates
+    (the per-size ``limit``, and whether the deeper scan runs); until then it waits in its
+    size's queue. The refused are appended to ``passed`` as ``(rank, mesh_id, reason)`` when
+    met (also those that, placed, would have folded: not templates at all)."""
+    limit = int(limit)
+    sure: dict[int, int] = {}  # per size: candidates known to be templates
+    waiting: dict[int, list] = {}  # per size: refused candidates not yet placed, in order
+
+    def place_waiting(k: int, *, all_of_them: bool = False) -> None:
+        """Place size k's waiting candidates in order until the next candidate's fate no longer
+        depends on them (the limit reached, or out of reach of all of them together), or with
+        ``all_of_them`` until none waits (how many are templates); the rest are dropped once the
+        limit is reached (beyond it: not templates)."""
+        q = waiting.setdefault(k, [])
+        while q and sure.get(k, 0) < limit and (all_of_them or limit <= sure.get(k, 0) + len(q)):
+            ann, m, r = q.pop(0)
+            if memo.place(shape, ann, m, catalogue, r)[1] is None:
+                sure[k] = sure.get(k, 0) + 1
+        if sure.get(k, 0) >= limit:
+            q.clear()
+
+    def at_least_limit() -> bool:
+        """Whether the walk has ``limit`` templates in all sizes together (placing waiting
+        candidates only while that is undecided)."""
+        while True:
+            low = sum(sure.values())
+            high = low + sum(min(len(q), limit - sure.get(j, 0)) for j, q in waiting.items())
+            if low >= limit or high < limit:
+                return low >= limit
+            place_waiting(next(j for j, q in waiting.items() if q), all_of_them=True)
+
+    seen: set = set()
+    for scan in SCAN_PER_LIMIT:
+        if scan > SCAN_PER_LIMIT[0] and at_least_limit():
+            break
+        ann, ms = memo.scan(shape, catalogue, lattice, scan * max(limit, 1), internal)
+        for r, m in enumerate(ms, start=1):
+            key = (m.mesh_id, m.rotation, m.reflected)
+            k = m.internal_vertices
+            if key in seen or sure.get(k, 0) >= limit:
+                continue
+            t = memo.fit(shape, ann, m, catalogue, r)
+            if t is None:  # leaves a corner without a vertex: never a template
+                seen.add(key)
+                continue
+            why = check(t)
+            if why is not None:
+                seen.add(key)
+                waiting.setdefault(k, []).append((ann, m, r))
+                passed.append((r, m.mesh_id, why))
+                continue
+            place_waiting(k)
+            if sure.get(k, 0) >= limit:
+                continue
+            seen.add(key)
+            placed, reason = memo.place(shape, ann, m, catalogue, r)
+            if reason is None:
+                sure[k] = sure.get(k, 0) + 1
+                yield placed._replace(shape=shape)
 
 
 def _longest_boundary(catalogue: "Catalogue", k: int) -> int:
@@ -497,6 +632,7 @@ class _Walk:
         self.made: list[PatchTemplate] = []
         self.error: Exception | None = None
         self.lock = threading.Lock()  # one thread advances the walk at a time (callers may share a cache)
+        self.checked: Callable | None = None  # (shape, check, passed) -> the templates passing check (_iter_checked)
 
     def fill(self, n: float) -> None:
         """Place candidates until ``n`` templates exist or none is left; an error of the walk
@@ -546,6 +682,14 @@ class LazyTemplates(Sequence):
         self._walk.fill(1)
         return bool(self._walk.made)
 
+    def checked(self, check: Callable[[PatchTemplate], str | None], passed: list) -> Iterator[PatchTemplate] | None:
+        """The templates that pass ``check(unplaced template)`` (None: go on) in order, each
+        refused one appended to ``passed`` as ``(rank, mesh_id, reason)``, placing as few
+        candidates as that allows (:func:`_iter_checked`); None for a walk by size."""
+        if self._walk.checked is None:
+            return None
+        return self._walk.checked(self._shape, check, passed)
+
 
 def lazy_patch_templates(shape: Shape, catalogue: "Catalogue", lattice: "Lattice", *, limit: int,
                          internal: Sequence[int] | None = None, by_size: bool = True) -> LazyTemplates:
@@ -560,8 +704,13 @@ def lazy_patch_templates(shape: Shape, catalogue: "Catalogue", lattice: "Lattice
     cache = _template_cache(catalogue)
     hit = cache.get(key)
     if hit is None:
-        walk = _iter_by_size if by_size else _iter_templates
-        hit = _Walk(lambda: walk(shape, catalogue, lattice, limit=limit, internal=ks))
+        if by_size:
+            hit = _Walk(lambda: _iter_by_size(shape, catalogue, lattice, limit=limit, internal=ks))
+        else:
+            memo = _Memo()
+            hit = _Walk(lambda: _iter_templates(shape, catalogue, lattice, limit=limit, internal=ks, memo=memo))
+            hit.checked = lambda caller, check, passed: _iter_checked(caller, catalogue, lattice, limit=limit,
+                                                                      internal=ks, check=check, memo=memo, passed=passed)
         cache[key] = hit
         while len(cache) > TEMPLATE_CACHE_SIZE:
             cache.pop(next(iter(cache)))
@@ -1142,14 +1291,15 @@ def smooth_near_bad(xy: np.ndarray, quads: np.ndarray, bad: np.ndarray, fixed: n
 
 def harmonic_displacement(quads: np.ndarray, nv: int, bverts: np.ndarray, bdisp: np.ndarray) -> np.ndarray:
     """``(nv, 2) float64``: ``bdisp (b, 2)`` on the vertices ``bverts (b,)``, elsewhere its
-    uniform-weight harmonic extension over ``quads (Q, 4)`` (one sparse solve; user units).
+    uniform-weight harmonic extension over ``quads (Q, 4)`` (one linear solve; user units).
 
-    Up to :data:`SMOOTH_ALWAYS` quads SuperLU's default ordering, then :data:`LARGE_ORDERING`;
+    Up to :data:`~jaxmatch.placement.embed.DENSE_TUTTE` free vertices it is the Tutte embedding
+    of the displacement (:func:`~jaxmatch.placement.embed.tutte`: a dense compiled solve, and no
+    ``scipy.sparse`` to import); beyond, one sparse solve: up to :data:`SMOOTH_ALWAYS` quads
+    SuperLU's default ordering, then :data:`LARGE_ORDERING`;
     above :data:`SMOOTH_LOCAL` quads the Laplacian and its factorisation are kept for the next
     solve on the same topology (:func:`_harmonic_solve`; also
     :func:`jaxmatch.placement.layout.fit_sides`'s)."""
-    import scipy.sparse.linalg
-
     is_free = np.ones(nv, bool)
     is_free[np.asarray(bverts, np.int64)] = False
     free = np.flatnonzero(is_free)  # = np.setdiff1d(np.arange(nv), bverts), without its sort
@@ -1160,6 +1310,10 @@ def harmonic_displacement(quads: np.ndarray, nv: int, bverts: np.ndarray, bdisp:
     if quads.shape[0] > SMOOTH_LOCAL:
         disp[free] = _harmonic_solve(quads, nv, free, disp)
         return disp
+    if free.size <= DENSE_TUTTE:  # the Tutte embedding's system: its dense compiled solve
+        return tutte(quads, nv, bverts, bdisp)
+    import scipy.sparse.linalg  # only beyond DENSE_TUTTE: its import costs the command ~0.2 s (docs/perf.md)
+
     L = _laplacian(quads, nv)
     Lr = L[free]
     Lf = Lr[:, free].tocsc()
@@ -1319,7 +1473,7 @@ def refine_mesh(shape: Shape, catalogue: "Catalogue" = None, lattice: "Lattice" 
     if templates is None:
         walk = _iter_templates(shape, catalogue, lattice, limit=limit, internal=internal, rejected=passed, check=check)
     else:
-        walk = _given(templates, passed, check)
+        walk = _given(templates, passed, check, lazy=not explain)
     for t in walk:
         mult = solve_multiplicities(t, counts=sides, size=size)
         if size is not None:
@@ -1366,7 +1520,14 @@ def refine_mesh(shape: Shape, catalogue: "Catalogue" = None, lattice: "Lattice" 
                             + (f" (tried {len(passed)})" if passed else ""), shape.source)
 
 
-def _given(templates, passed: list, check) -> Iterator[PatchTemplate]:
+def _given(templates, passed: list, check, *, lazy: bool = False) -> Iterator[PatchTemplate]:
+    """The given ``templates`` that pass ``check``, the others appended to ``passed`` with the
+    reason. ``lazy`` (a cheap ``check``, whose reasons need not be limited to templates):
+    lazily placed templates place only what that needs (:meth:`LazyTemplates.checked`)."""
+    walk = templates.checked(check, passed) if lazy and isinstance(templates, LazyTemplates) else None
+    if walk is not None:
+        yield from walk
+        return
     for t in templates:
         why = check(t)
         if why is None:
