@@ -302,14 +302,21 @@ def test_solver_failure_is_not_infeasible(monkeypatch):
     assert milp.run_milp(*args) is None  # infeasible
 
 
+@pytest.mark.parametrize("small", [None, 0])
 @pytest.mark.parametrize("name", ["lshape.json", "tshape.json", "hexagon.json", "curved.json"])
-def test_highs_directly_is_scipy_milp_to_the_bit(cat, monkeypatch, name):
+def test_highs_directly_is_scipy_milp_to_the_bit(cat, monkeypatch, name, small):
     """The integer programs of a mesh solved through highspy give scipy.optimize.milp's solutions
-    bit for bit (the same HiGHS release), and the same status for an infeasible one."""
+    bit for bit (the same HiGHS release), and the same status for an infeasible one; a program
+    below SMALL_PROGRAM integer variables (solved without the feasibility jump, which scipy cannot
+    turn off) the same optimum, its solution meeting every constraint (bit for bit too with
+    SMALL_PROGRAM set to 0)."""
     pytest.importorskip("highspy")
     import scipy.optimize
 
     from jaxmatch.placement import layout, milp, refine
+
+    if small is not None:
+        monkeypatch.setattr(milp, "SMALL_PROGRAM", small)
 
     programs = []
     real = milp.run_milp
@@ -329,17 +336,23 @@ def test_highs_directly_is_scipy_milp_to_the_bit(cat, monkeypatch, name):
     lb[j], ub[j] = 1.25, 1.75  # no integer between: infeasible
     programs.append((cost, A, lo, hi, integ, lb, ub))
     statuses = []
-    for cost, A, lo, hi, integ, lb, ub in programs:
-        st, x, _ = milp._highs(*(np.asarray(a, np.float64) for a in (cost, A, lo, hi, integ, lb, ub)), presolve=True,
-                               time_limit=30.0)
+    for prog in programs:
+        cost, A, lo, hi, integ, lb, ub = (np.asarray(a, np.float64) for a in prog)
+        st, x, _ = milp._highs(cost, A, lo, hi, integ, lb, ub, presolve=True, time_limit=30.0)
         ref = scipy.optimize.milp(cost, constraints=scipy.optimize.LinearConstraint(A, lo, hi), integrality=integ,
                                   bounds=scipy.optimize.Bounds(lb, ub), options={"time_limit": 30.0, "presolve": True})
         assert st == ref.status
         statuses.append(st)
         if ref.x is None:
             assert x is None
-        else:
+        elif np.count_nonzero(integ) >= milp.SMALL_PROGRAM:
             np.testing.assert_array_equal(x, ref.x)
+        else:  # the same optimum; a tie may be broken otherwise
+            assert cost @ x == pytest.approx(cost @ ref.x, rel=1e-9, abs=1e-9)
+            ii = integ == 1
+            assert np.all(np.abs(x[ii] - np.rint(x[ii])) < 1e-6)
+            assert np.all(A @ x >= lo - 1e-6) and np.all(A @ x <= hi + 1e-6)  # HiGHS's tolerances
+            assert np.all(x >= lb - 1e-9) and np.all(x <= ub + 1e-9)
     assert statuses[-1] == 2 and 0 in statuses
 
 

@@ -157,6 +157,12 @@ def solve_counts(sides, matrices: Sequence[np.ndarray], *, counts: Mapping[int, 
 MILP_TIME_LIMIT = 30.0
 """Seconds HiGHS may spend on one integer program; past it the best solution found is used."""
 
+SMALL_PROGRAM = 20
+"""Integer programs with fewer integer variables than this are solved without HiGHS's
+feasibility-jump heuristic: on the 409 programs of the meshing, holes and dense tables, those
+took 2.9 ms each without it against 7.1 ms with it, while larger ones took longer without it
+(docs/perf.md, "Fourth pass")."""
+
 
 def run_milp(cost, A, lo, hi, integrality, lb, ub, *, time_limit: float = MILP_TIME_LIMIT):
     """Solve one integer program with HiGHS: minimise ``cost @ x`` subject to ``lo <= A @ x <= hi``,
@@ -187,7 +193,9 @@ def _highs(cost, A, lo, hi, integrality, lb, ub, *, presolve: bool, time_limit: 
 
     Through the ``highspy`` package when it is installed (the model passed as
     :func:`scipy.optimize.milp` passes it; ``pyproject.toml`` pins the release of the HiGHS that
-    scipy bundles, so both give the same solutions bit for bit, tested), which spares the
+    scipy bundles, so both give the same solutions bit for bit, tested; a program with fewer than
+    :data:`SMALL_PROGRAM` integer variables skips the feasibility jump, which scipy cannot ask
+    for: the same optimum, a tie possibly broken otherwise), which spares the
     command the import of ``scipy.optimize`` (~0.3 s with the ``scipy.spatial`` and
     ``scipy.special`` it loads; docs/perf.md, "Third pass"); else :func:`scipy.optimize.milp`."""
     try:
@@ -214,6 +222,8 @@ def _highs(cost, A, lo, hi, integrality, lb, ub, *, presolve: bool, time_limit: 
     h.setOptionValue("log_to_console", False)  # as scipy sets it
     h.setOptionValue("time_limit", float(time_limit))
     h.setOptionValue("presolve", "on" if presolve else "off")
+    if int(np.count_nonzero(integrality)) < SMALL_PROGRAM:
+        h.setOptionValue("mip_heuristic_run_feasibility_jump", False)
     S = highspy.HighsModelStatus
     if h.passModel(lp) == highspy.HighsStatus.kError:
         return 2, None, "the model could not be loaded"  # as scipy: kModelError
