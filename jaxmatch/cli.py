@@ -638,6 +638,7 @@ def _mesh_many(regions: List[Path], out_dir: Optional[Path], fmt: str, angle: fl
     summary, all written atomically."""
     import jaxmatch
     from jaxmatch.io.meshfile import MESH_FORMATS, write_mesh
+    from jaxmatch.meshing.pipeline import warm_up
     from jaxmatch.parallel import available_cpus, ordered_map
     from jaxmatch.scoring.bulk import write_jsonl
 
@@ -685,7 +686,8 @@ def _mesh_many(regions: List[Path], out_dir: Optional[Path], fmt: str, angle: fl
             _plain_streams()
             options["catalogue"].reopen()
 
-        for rec in ordered_map(one, list(range(len(loaded))), workers, initializer=worker_start, warm_first=True):
+        warm = lambda: warm_up(options["catalogue"], options["lattice"])  # noqa: E731 - loads what workers inherit
+        for rec in ordered_map(one, list(range(len(loaded))), workers, initializer=worker_start, warm=warm):
             if "error" in rec and not skip_bad:
                 raise InputError(rec["error"].split(": ", 1)[-1] if rec["error"].startswith(rec["shape"]) else rec["error"],
                                  rec["shape"])

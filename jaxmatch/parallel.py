@@ -43,7 +43,8 @@ def _call(i: int):
 
 
 def ordered_map(fn: Callable[[Any], Any], items: Sequence[Any], jobs: int = 1,
-                initializer: Callable[[], None] | None = None, warm_first: bool = False) -> Iterator[Any]:
+                initializer: Callable[[], None] | None = None, warm_first: bool = False,
+                warm: Callable[[], Any] | None = None) -> Iterator[Any]:
     """``fn(item)`` for every item, yielded in the order of ``items``.
 
     fn: any callable (a closure is fine: workers inherit it by ``fork``, nothing is pickled
@@ -52,11 +53,14 @@ def ordered_map(fn: Callable[[Any], Any], items: Sequence[Any], jobs: int = 1,
     initializer: run once in each worker (e.g. :func:`jaxmatch.scoring.backends.serial_only`).
     warm_first: run the first item in this process before starting the workers, so that what
     it loads and compiles (prepared catalogue, compiled kernels) is inherited, not redone in
-    every worker.
+    every worker. warm: instead, run ``warm()`` in this process before starting the workers
+    (a cheaper call that loads the same), every item going to the workers.
     """
     global _FN, _ITEMS
     n = len(items)
-    if warm_first and n and min(int(jobs), n) > 1 and can_fork():
+    if warm is not None and n and min(int(jobs), n) > 1 and can_fork():
+        warm()
+    elif warm_first and n and min(int(jobs), n) > 1 and can_fork():
         yield fn(items[0])
         items = items[1:]
         n -= 1

@@ -57,6 +57,20 @@ def test_initializer_runs_in_each_worker_not_here():
     assert available_cpus() >= 1
 
 
+def test_warm_runs_here_and_every_item_in_the_workers():
+    in_fresh_python("""
+        import os
+        from jaxmatch.parallel import ordered_map
+        here = []
+        pids = list(ordered_map(lambda i: (i, os.getpid(), len(here)), list(range(5)), 2,
+                                warm=lambda: here.append(os.getpid())))
+        assert here == [os.getpid()]
+        assert [p[0] for p in pids] == list(range(5)) and os.getpid() not in [p[1] for p in pids]
+        assert all(p[2] == 1 for p in pids)  # the workers inherit what the warm-up did
+        assert list(ordered_map(lambda i: i, [7], 2, warm=lambda: 1 / 0)) == [7]  # one item: no workers, no warm-up
+    """)
+
+
 def test_warm_first_runs_the_first_item_here():
     in_fresh_python("""
         import os
