@@ -167,11 +167,13 @@ def test_concurrent_choices_from_threads(make, tmp_path, index):
         except Exception as e:  # noqa: BLE001 - reported below
             errors.append(e)
 
-    threads = [threading.Thread(target=worker, args=(t,)) for t in range(8)]
-    for t in threads:
-        t.start()
-    for t in threads:
-        t.join()
+    # one event loop serves every thread's requests (as uvicorn does), not one started per request
+    with client:
+        threads = [threading.Thread(target=worker, args=(t,)) for t in range(8)]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join()
     assert not errors
     text = (tmp_path / "labels.jsonl").read_text()
     assert text.endswith("\n") and len(text.splitlines()) == 80
