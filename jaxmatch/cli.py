@@ -686,7 +686,12 @@ def _mesh_many(regions: List[Path], out_dir: Optional[Path], fmt: str, angle: fl
             _plain_streams()
             options["catalogue"].reopen()
 
-        warm = lambda: warm_up(options["catalogue"], options["lattice"])  # noqa: E731 - loads what workers inherit
+        def warm() -> None:  # in this process, before the workers fork: they inherit what it loads
+            try:
+                warm_up(options["catalogue"], options["lattice"])
+            except Exception:  # noqa: BLE001 - only a head start: the regions themselves report any problem
+                pass
+
         for rec in ordered_map(one, list(range(len(loaded))), workers, initializer=worker_start, warm=warm):
             if "error" in rec and not skip_bad:
                 raise InputError(rec["error"].split(": ", 1)[-1] if rec["error"].startswith(rec["shape"]) else rec["error"],
