@@ -159,9 +159,9 @@ MILP_TIME_LIMIT = 30.0
 
 SMALL_PROGRAM = 20
 """Integer programs with fewer integer variables than this are solved without HiGHS's
-feasibility-jump heuristic: on the 409 programs of the meshing, holes and dense tables, those
-took 2.9 ms each without it against 7.1 ms with it, while larger ones took longer without it
-(docs/perf.md, "Fourth pass")."""
+feasibility-jump heuristic: of the 387 programs of the meshing, holes and dense tables, those
+took 3.1 ms each without it against 7.3 ms with it, while larger ones took longer without it
+(``scripts/milp_options.py``; docs/perf.md, "Fourth pass")."""
 
 
 def run_milp(cost, A, lo, hi, integrality, lb, ub, *, time_limit: float = MILP_TIME_LIMIT):
