@@ -478,3 +478,14 @@ def test_time_budget_keeps_the_best_valid_mesh_so_far(cat):
     notes = {c.name: c.note for c in m.tried}
     assert m.chosen == "single" and m.valid
     assert all("time budget" in notes[n] for n in ("continuations", "bisectors", "recursive"))
+
+
+def test_pipeline_warm_up_meshes_with_the_defaults_and_with_given_models():
+    """jaxmatch mesh of many regions warms its parent with pipeline.warm_up (which must not fail
+    silently there): with its defaults and with a catalogue and lattice passed."""
+    import jaxmatch
+    from jaxmatch.meshing.pipeline import warm_up
+    from jaxmatch.scoring.lattice import load_lattice
+
+    warm_up()
+    warm_up(jaxmatch.load_catalogue(), load_lattice("coarse"))

@@ -78,3 +78,4 @@ def test_warm_first_runs_the_first_item_here():
         pids = list(ordered_map(lambda i: os.getpid(), list(range(5)), 2, warm_first=True))
         assert pids[0] == os.getpid() and os.getpid() not in pids[1:]
     """)
+

@@ -153,7 +153,7 @@ def mesh(region, *, size: float | None = None, divisions: int | None = None, sid
     return _mesh_size(region, cat, lat, h, strategies, quality, budget_s, progress, template_cache, corner_angle)
 
 
-def warm_up(catalogue=None, lattice=None) -> None:
+def warm_up(catalogue=None, lattice=DEFAULT_LATTICE) -> None:
     """Load what a process's first :func:`mesh` call loads (the catalogue's groupings, the
     compiled kernels, the solvers' modules) by meshing a unit square at 4 edges a side: about a
     tenth of a second, where a first real region can take three times that. For a parent that
