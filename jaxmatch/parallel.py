@@ -58,9 +58,10 @@ def ordered_map(fn: Callable[[Any], Any], items: Sequence[Any], jobs: int = 1,
     """
     global _FN, _ITEMS
     n = len(items)
-    if warm is not None and n and min(int(jobs), n) > 1 and can_fork():
+    workers_to_come = bool(n) and min(int(jobs), n) > 1 and can_fork()
+    if warm is not None and workers_to_come:
         warm()
-    elif warm_first and n and min(int(jobs), n) > 1 and can_fork():
+    elif warm_first and workers_to_come:
         yield fn(items[0])
         items = items[1:]
         n -= 1

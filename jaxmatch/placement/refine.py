@@ -446,24 +446,17 @@ def _try_candidate(shape, ann, m: "Match", catalogue, r: int,
 
 
 class _Memo:
-    """What the walks of one shape's templates share (:func:`lazy_patch_templates`): each scan's
-    ranking, each candidate's fit and placement, computed once whichever walk asks first.
-    ``lock``: held while one is computed (callers may share the template cache across threads)."""
+    """What the walks of one shape's templates share (:func:`lazy_patch_templates`): each
+    candidate's fit and placement, computed once whichever walk asks first (their rankings are
+    kept by :func:`jaxmatch.scoring.rank.rank`'s own memo). ``lock``: held while one is computed
+    (callers may share the template cache across threads)."""
 
     def __init__(self):
         import threading
 
         self.lock = threading.RLock()
-        self.scans: dict = {}
         self.fits: dict = {}
         self.placed: dict = {}
-
-    def scan(self, shape, catalogue, lattice, n: int, internal):
-        """:func:`_candidates` with ``limit=n``: ``(annotation, matches)``."""
-        with self.lock:
-            if n not in self.scans:
-                self.scans[n] = _candidates(shape, catalogue, lattice, limit=n, internal=internal)
-            return self.scans[n]
 
     def fit(self, shape, ann, m: "Match", catalogue, r: int) -> PatchTemplate | None:
         """:func:`_fit` of candidate ``m`` (ranked ``r``)."""
@@ -489,15 +482,13 @@ def _iter_templates(shape, catalogue, lattice, *, limit: int, internal=None, rej
     """Placed templates in candidate order (see :func:`patch_templates`), at most ``limit`` per
     size. ``check(unplaced template)``: a reason to skip it before placing (None: go on).
     Skipped candidates are appended to ``rejected`` as ``(rank, mesh_id, reason)``. ``memo``:
-    scans, fits and placements shared with other walks of the shape (without ``check``)."""
+    fits and placements shared with other walks of the shape (without ``check``)."""
     taken: dict[int, int] = {}
     seen: set = set()
     for scan in SCAN_PER_LIMIT:
         if scan > SCAN_PER_LIMIT[0] and sum(taken.values()) >= limit:
             break  # the deeper scan only when the first found fewer than `limit` templates
-        n = scan * max(int(limit), 1)
-        ann, ms = memo.scan(shape, catalogue, lattice, n, internal) if memo is not None else \
-            _candidates(shape, catalogue, lattice, limit=n, internal=internal)
+        ann, ms = _candidates(shape, catalogue, lattice, limit=scan * max(int(limit), 1), internal=internal)
         for r, m in enumerate(ms, start=1):
             key = (m.mesh_id, m.rotation, m.reflected)
             if taken.get(m.internal_vertices, 0) >= limit or key in seen:
@@ -555,7 +546,7 @@ def _iter_checked(shape, catalogue, lattice, *, limit: int, internal, check: Cal
     for scan in SCAN_PER_LIMIT:
         if scan > SCAN_PER_LIMIT[0] and at_least_limit():
             break
-        ann, ms = memo.scan(shape, catalogue, lattice, scan * max(limit, 1), internal)
+        ann, ms = _candidates(shape, catalogue, lattice, limit=scan * max(limit, 1), internal=internal)
         for r, m in enumerate(ms, start=1):
             key = (m.mesh_id, m.rotation, m.reflected)
             k = m.internal_vertices
