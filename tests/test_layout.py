@@ -250,7 +250,7 @@ def brute(sides, matrices, counts, size, bound=7):
 
 @settings(max_examples=25)
 @given(widths=st.lists(st.sampled_from([0.5, 1.0, 1.5, 2.0]), min_size=1, max_size=3),
-       size=st.sampled_from([0.5, 0.75, 1.0]), data=st.data())
+       size=st.sampled_from([0.5, 0.75, 1.0, 0.7, 0.45]), data=st.data())
 def test_program_matches_brute_force(widths, size, data):
     lay, sd = strip(widths)
     mats = [QUAD] * lay.n_patches
@@ -269,6 +269,26 @@ def test_program_matches_brute_force(widths, size, data):
     assert all(n[s] == c for s, c in req.items())
     got = sum(abs(n[s] - sd.lengths[s] / size) for s in range(S) if s not in req) + 0.01 * sum(float(np.sum(m - 1)) for m in mults)
     assert got == pytest.approx(want, abs=1e-6)
+
+
+@given(tau=st.floats(0.0, 1000.0), x=st.integers(0, 1002), t=st.floats(0.0, 1.0))
+def test_chord_row_is_the_absolute_value_at_integers_and_its_hull_between(tau, x, t):
+    """The row the program adds per deviation (d >= slope * x + bound) never exceeds |x - tau| at
+    an integer x, so the integer optimum is unchanged; between the integers around tau it is the
+    chord of the two integer values, above |x - tau| (the tighter relaxation)."""
+    from jaxmatch.placement.milp import _chord_row
+
+    row = _chord_row(tau)
+    if row is None:
+        assert tau - np.floor(tau) <= 1e-12  # whole (up to round-off): the two lines suffice
+        return
+    slope, bound = row
+    assert slope * x + bound <= abs(x - tau) + 1e-9
+    lo = np.floor(tau)
+    y = lo + t
+    chord = (1 - t) * abs(lo - tau) + t * abs(lo + 1 - tau)
+    assert slope * y + bound == pytest.approx(chord, abs=1e-9)
+    assert slope * y + bound >= abs(y - tau) - 1e-9
 
 
 def sid(sides, name: str) -> int:

@@ -302,21 +302,20 @@ def test_solver_failure_is_not_infeasible(monkeypatch):
     assert milp.run_milp(*args) is None  # infeasible
 
 
-@pytest.mark.parametrize("small", [None, 0])
+@pytest.mark.parametrize("jump", [None, True])
 @pytest.mark.parametrize("name", ["lshape.json", "tshape.json", "hexagon.json", "curved.json"])
-def test_highs_directly_is_scipy_milp_to_the_bit(cat, monkeypatch, name, small):
-    """The integer programs of a mesh solved through highspy give scipy.optimize.milp's solutions
-    bit for bit (the same HiGHS release), and the same status for an infeasible one; a program
-    below SMALL_PROGRAM integer variables (solved without the feasibility jump, which scipy cannot
-    turn off) the same optimum, its solution meeting every constraint (bit for bit too with
-    SMALL_PROGRAM set to 0)."""
+def test_highs_directly_is_scipy_milp_to_the_bit(cat, monkeypatch, name, jump):
+    """The integer programs of a mesh solved through highspy give scipy.optimize.milp's optimum
+    and the same status for an infeasible one; without the feasibility jump (the default,
+    FEASIBILITY_JUMP, which scipy cannot turn off) a solution meeting every constraint, a tie
+    possibly broken otherwise; with it scipy's solutions bit for bit (the same HiGHS release)."""
     pytest.importorskip("highspy")
     import scipy.optimize
 
     from jaxmatch.placement import layout, milp, refine
 
-    if small is not None:
-        monkeypatch.setattr(milp, "SMALL_PROGRAM", small)
+    if jump is not None:
+        monkeypatch.setattr(milp, "FEASIBILITY_JUMP", jump)
 
     programs = []
     real = milp.run_milp
@@ -345,7 +344,7 @@ def test_highs_directly_is_scipy_milp_to_the_bit(cat, monkeypatch, name, small):
         statuses.append(st)
         if ref.x is None:
             assert x is None
-        elif np.count_nonzero(integ) >= milp.SMALL_PROGRAM:
+        elif milp.FEASIBILITY_JUMP:
             np.testing.assert_array_equal(x, ref.x)
         else:  # the same optimum; a tie may be broken otherwise
             assert cost @ x == pytest.approx(cost @ ref.x, rel=1e-9, abs=1e-9)

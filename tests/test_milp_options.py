@@ -1,5 +1,5 @@
 """scripts/milp_options.py: the integer programs of a table collected and timed both ways (the
-measurement behind jaxmatch.placement.milp.SMALL_PROGRAM); figures only, no timing assertions."""
+measurement behind jaxmatch.placement.milp.FEASIBILITY_JUMP); figures only, no timing assertions."""
 
 from __future__ import annotations
 
@@ -25,10 +25,11 @@ def test_collects_the_mesh_tables_programs_and_tabulates_both_variants(capsys):
     mo = _script()
     progs = mo.collect(["mesh"])
     assert progs and all(len(args) == 7 and set(kw) == {"presolve", "time_limit"} for args, kw in progs)
-    small = [args for args, _ in progs if np.count_nonzero(args[4]) < milp.SMALL_PROGRAM]
-    assert small  # the mesh table's programs are mostly small ones
+    assert all(np.count_nonzero(args[4]) > 0 for args, _ in progs)  # integer programs
     assert milp._highs.__name__ == "_highs"  # the recorder is gone afterwards
+    jump = milp.FEASIBILITY_JUMP
     assert mo.main(["--tables", "mesh", "--reps", "1"]) == 0
     out = capsys.readouterr().out
     counts = [int(m.group(1)) for m in re.finditer(r"^\| [0-9]+-[0-9]+ \| ([0-9]+) \| [0-9]+ \| [0-9]+ \|$", out, re.M)]
     assert out.startswith(f"{len(progs)} programs from mesh") and sum(counts) == len(progs)
+    assert milp.FEASIBILITY_JUMP == jump  # the option put back

@@ -12,7 +12,7 @@ import numpy as np
 
 from jaxmatch.errors import InputError
 
-__all__ = ["CHORD_WEIGHT", "LayoutInfeasible", "MILP_TIME_LIMIT", "OneSides", "one_patch_sides", "run_milp", "solve_counts"]
+__all__ = ["CHORD_WEIGHT", "FEASIBILITY_JUMP", "LayoutInfeasible", "MILP_TIME_LIMIT", "OneSides", "one_patch_sides", "run_milp", "solve_counts"]
 
 
 class LayoutInfeasible(InputError):
@@ -112,20 +112,29 @@ def solve_counts(sides, matrices: Sequence[np.ndarray], *, counts: Mapping[int, 
                 r[M + parts] = -1.0
                 lo.append(0.0)
                 hi.append(0.0)
-        for j, (s, tau) in enumerate(targets.items()):
-            for sign in (1.0, -1.0):  # t_j >= sign * (n_s - tau)
+        def deviation(x: int, d: int, tau: float) -> None:
+            """Rows making variable ``d`` at least ``|x - tau|`` for integer ``x``: the two
+            lines of the absolute value, and the chord through its values at the integers on
+            either side of ``tau`` (:func:`_chord_row`)."""
+            for sign in (1.0, -1.0):  # d >= sign * (x - tau)
                 r = row()
-                r[M + s] = -sign
-                r[M + S + j] = 1.0
+                r[x] = -sign
+                r[d] = 1.0
                 lo.append(-sign * tau)
                 hi.append(np.inf)
-        for c in range(M):
-            for sign in (1.0, -1.0):  # u_c >= sign * (m_c - tau_c)
+            chord = _chord_row(tau)
+            if chord is not None:  # d - slope * x >= bound
+                slope, bound = chord
                 r = row()
-                r[c] = -sign
-                r[M + S + T + c] = 1.0
-                lo.append(-sign * tau_m[c])
+                r[x] = -slope
+                r[d] = 1.0
+                lo.append(bound)
                 hi.append(np.inf)
+
+        for j, (s, tau) in enumerate(targets.items()):
+            deviation(M + s, M + S + j, tau)
+        for c in range(M):
+            deviation(c, M + S + T + c, float(tau_m[c]))
         cost = np.concatenate([np.zeros(M + S), np.ones(T), np.full(M, chord_weight)])
         lb = np.concatenate([np.ones(M), np.ones(S) if floors is None else np.maximum(floors, 1), np.zeros(T + M)])
         ub = np.full(nv, np.inf)
@@ -154,14 +163,31 @@ def solve_counts(sides, matrices: Sequence[np.ndarray], *, counts: Mapping[int, 
                            where=source, nearest=nearest)
 
 
+def _chord_row(tau: float) -> tuple[float, float] | None:
+    """The chord of ``|x - tau|`` between the integers ``floor(tau)`` and ``floor(tau) + 1``,
+    as ``(slope, bound)`` of the row ``d - slope * x >= bound``; None for a whole ``tau``.
+
+    At every integer ``x`` the chord lies on or below ``|x - tau|`` (the function is convex and
+    the chord joins two of its integer points), so adding the row changes no integer solution's
+    cost. Without it the relaxation sets ``x = tau`` at no cost, and HiGHS branched on every
+    side: on the letter A's largest program, 190 ms against 6 ms with the chords (docs/perf.md,
+    "Fifth pass"). With it the relaxation's cost of ``x`` is that of the nearest integers."""
+    lo = math.floor(tau)
+    f = tau - lo
+    if f <= 1e-12:
+        return None
+    slope = 1.0 - 2.0 * f
+    return slope, f - slope * lo
+
+
 MILP_TIME_LIMIT = 30.0
 """Seconds HiGHS may spend on one integer program; past it the best solution found is used."""
 
-SMALL_PROGRAM = 20
-"""Integer programs with fewer integer variables than this are solved without HiGHS's
-feasibility-jump heuristic: of the 387 programs of the meshing, holes and dense tables, those
-took 3.1 ms each without it against 7.3 ms with it, while larger ones took longer without it
-(``scripts/milp_options.py``; docs/perf.md, "Fourth pass")."""
+FEASIBILITY_JUMP = False
+"""Whether HiGHS runs its feasibility-jump heuristic. With the chord rows (:func:`_chord_row`)
+the relaxation is tight and the heuristic only costs time: the 386 programs of the meshing,
+holes and dense tables took 3.18 s with it and 2.23 s without, faster without in every size
+band (``scripts/milp_options.py``; docs/perf.md, "Fifth pass")."""
 
 
 def run_milp(cost, A, lo, hi, integrality, lb, ub, *, time_limit: float = MILP_TIME_LIMIT):
@@ -193,9 +219,9 @@ def _highs(cost, A, lo, hi, integrality, lb, ub, *, presolve: bool, time_limit: 
 
     Through the ``highspy`` package when it is installed (the model passed as
     :func:`scipy.optimize.milp` passes it; ``pyproject.toml`` pins the release of the HiGHS that
-    scipy bundles, so both give the same solutions bit for bit, tested; a program with fewer than
-    :data:`SMALL_PROGRAM` integer variables skips the feasibility jump, which scipy cannot ask
-    for: the same optimum, a tie possibly broken otherwise), which spares the
+    scipy bundles, so both give the same solutions bit for bit with the feasibility jump on, tested; without it
+    (:data:`FEASIBILITY_JUMP`), which scipy cannot ask for, the same optimum, a tie possibly
+    broken otherwise), which spares the
     command the import of ``scipy.optimize`` (~0.3 s with the ``scipy.spatial`` and
     ``scipy.special`` it loads; docs/perf.md, "Third pass"); else :func:`scipy.optimize.milp`."""
     try:
@@ -222,8 +248,7 @@ def _highs(cost, A, lo, hi, integrality, lb, ub, *, presolve: bool, time_limit: 
     h.setOptionValue("log_to_console", False)  # as scipy sets it
     h.setOptionValue("time_limit", float(time_limit))
     h.setOptionValue("presolve", "on" if presolve else "off")
-    if int(np.count_nonzero(integrality)) < SMALL_PROGRAM:
-        h.setOptionValue("mip_heuristic_run_feasibility_jump", False)
+    h.setOptionValue("mip_heuristic_run_feasibility_jump", bool(FEASIBILITY_JUMP))
     S = highspy.HighsModelStatus
     if h.passModel(lp) == highspy.HighsStatus.kError:
         return 2, None, "the model could not be loaded"  # as scipy: kModelError
