@@ -69,7 +69,10 @@ def solve_counts(sides, matrices: Sequence[np.ndarray], *, counts: Mapping[int, 
     every patch side (so a shared side has one count in both patches, a side along which two
     neighbours meet is split between them, and each patch's total is even), ``n_s = counts[s]``
     when requested. Objective: ``sum_s |n_s - length_s / size|`` over the sides not requested, plus
-    :data:`CHORD_WEIGHT` ``* sum_c |m_c - max(width_c / size, 1)|``.
+    :data:`CHORD_WEIGHT` ``* sum_c |m_c - max(width_c / size, 1)|``; each ``|x - tau|`` is a
+    continuous variable bounded below by the two lines of the absolute value and by its chord
+    between the integers around ``tau`` (:func:`_chord_row`: a tight relaxation, the same
+    integer optimum).
 
     Returns ``(multiplicities per patch ((c_p,) int64), counts per side ((S,) int64))``.
     Raises :class:`LayoutInfeasible` (naming the requested sides and the nearest feasible
@@ -219,11 +222,11 @@ def _highs(cost, A, lo, hi, integrality, lb, ub, *, presolve: bool, time_limit: 
 
     Through the ``highspy`` package when it is installed (the model passed as
     :func:`scipy.optimize.milp` passes it; ``pyproject.toml`` pins the release of the HiGHS that
-    scipy bundles, so both give the same solutions bit for bit with the feasibility jump on, tested; without it
-    (:data:`FEASIBILITY_JUMP`), which scipy cannot ask for, the same optimum, a tie possibly
-    broken otherwise), which spares the
-    command the import of ``scipy.optimize`` (~0.3 s with the ``scipy.spatial`` and
-    ``scipy.special`` it loads; docs/perf.md, "Third pass"); else :func:`scipy.optimize.milp`."""
+    scipy bundles, so both give the same solutions bit for bit with the feasibility jump on,
+    tested; without it (:data:`FEASIBILITY_JUMP`, which scipy cannot ask for) the same optimum,
+    a tie possibly broken otherwise), which spares the command the import of ``scipy.optimize``
+    (~0.3 s with the ``scipy.spatial`` and ``scipy.special`` it loads; docs/perf.md, "Third
+    pass"); else :func:`scipy.optimize.milp`."""
     try:
         import highspy
     except ImportError:
