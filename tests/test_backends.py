@@ -1,6 +1,6 @@
-"""The numba backend of the exact host (jaxmatch.scoring.backends) and its numpy kernel for small
-problems against the XLA backend and the plain-Python DP, with and without skip weights
-(must-match types included)."""
+"""The numba backend of the exact host (jaxmatch.scoring.backends), its C kernel for problems of one
+thread and its numpy kernel for small problems, against the XLA backend and the plain-Python DP,
+with and without skip weights (must-match types included)."""
 
 import math
 
@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 from jaxmatch.scoring import reference
 from jaxmatch.errors import InputError
-from jaxmatch.scoring.backends import NumbaBackend, default_backend, numba_values, numpy_values
+from jaxmatch.scoring.backends import NumbaBackend, c_kernel, c_values, default_backend, numba_values, numpy_values
 from jaxmatch.scoring.exact import CPUBackend, dp_problem, exact_values, score_bucket
 from jaxmatch.scoring.model import make_weights
 
@@ -71,8 +71,62 @@ def test_numpy_kernel_equals_the_xla_backend(case, wider):
     np.testing.assert_array_equal(ours[valid], theirs[valid])
 
 
-def test_numba_backend_runs_small_problems_in_numpy_within_its_budget(monkeypatch):
+needs_c = pytest.mark.skipif(c_kernel() is None, reason="the C kernel (jaxmatch.scoring._cdp) is not built")
+
+
+@needs_c
+@settings(max_examples=60, deadline=None)
+@given(problems(), st.booleans())
+def test_c_kernel_is_the_numba_kernel_bit_for_bit(case, strict):
+    """c_values against numba_values on the same padded problem: every value equal, the invalid
+    ones' sentinels too (the same steps in the same int16 arithmetic), strict or not."""
+    shapes, vals, weights, lanes = case
+    prob = dp_problem(shapes, weights, vals.shape[1])
+    if prob.tab.dtype != np.int16:
+        return
+    ours = c_values(prob.codes, prob.lengths, vals, prob.tab, prob.gate, strict)
+    theirs = numba_values(prob.codes, prob.lengths, vals, prob.tab, prob.gate, strict, lanes)
+    assert ours.dtype == theirs.dtype == np.int16 and ours.shape == theirs.shape
+    np.testing.assert_array_equal(ours, theirs)
+
+
+@needs_c
+def test_c_kernel_takes_int16_only():
+    tab = np.zeros((4, 64), np.int32)
+    with pytest.raises(ValueError, match="int16"):
+        c_values(np.zeros((1, 3), np.int32), [3], np.full((2, 4), 4), tab, np.zeros(4, np.int32))
+
+
+@needs_c
+def test_default_backend_runs_problems_of_one_thread_in_c(monkeypatch):
+    """The default backend sends a problem under PARALLEL_CELLS, or any problem in a serial-only
+    process, to the C kernel, and a larger one to numba's threads; the values are XLA's."""
     from jaxmatch.scoring import backends
+
+    rng = np.random.default_rng(4)
+    shapes, vals = [rng.integers(0, 3, 30)], rng.integers(2, 6, (40, 8))
+    w = make_weights(*random_model(4, 0.2, "neg"))
+    ref = exact_values(shapes, vals, w, backend=CPUBackend())
+    ran = []
+    monkeypatch.setattr(backends, "c_values", lambda *a: ran.append("c") or c_values(*a))
+    monkeypatch.setattr(backends, "numba_values", lambda *a: ran.append("numba") or numba_values(*a))
+    be = default_backend()
+    assert be.c_serial and not NumbaBackend().c_serial  # a NumbaBackend asked for by name runs numba
+    np.testing.assert_array_equal(exact_values(shapes, vals, w, backend=be), ref)
+    assert ran == ["c"]
+    monkeypatch.setattr(backends, "PARALLEL_CELLS", 1)  # now "large": numba's threads, unless serial-only
+    np.testing.assert_array_equal(exact_values(shapes, vals, w, backend=be), ref)
+    assert ran == ["c", "numba"]
+    monkeypatch.setattr(backends, "_SERIAL_ONLY", [True])
+    np.testing.assert_array_equal(exact_values(shapes, vals, w, backend=be), ref)
+    assert ran == ["c", "numba", "c"]
+
+
+def test_numba_backend_runs_small_problems_in_numpy_within_its_budget(monkeypatch):
+    """Without the C library: small problems in numpy until the budget is spent, then numba."""
+    from jaxmatch.scoring import backends
+
+    monkeypatch.setattr(backends, "_C_DP", [None, True])  # as if not built
 
     rng = np.random.default_rng(3)
     shapes, vals = [rng.integers(0, 3, 30)], rng.integers(2, 6, (40, 8))
