@@ -163,6 +163,44 @@ def test_dp_rows_are_the_rows_of_dp_scan(m, n, skip, seed):
     np.testing.assert_array_equal(dp_rows(codes, seq, w), np.asarray(rows))
 
 
+@pytest.mark.skipif(__import__("jaxmatch.scoring.backends", fromlist=["c_kernel"]).c_kernel() is None,
+                    reason="the C kernel (jaxmatch.scoring._cdp) is not built")
+@given(st.integers(1, 40), st.integers(1, 14), st.sampled_from(["zero", "neg", "must"]), st.integers(0, 2**32 - 1),
+       st.integers(0, 13), st.booleans(), st.booleans())
+def test_align_in_c_is_align_in_numpy(m, n, skip, seed, rotation, reflected, strided):
+    """align's C rows and backtrack give numpy's alignment (ties included: integer weights make
+    many) or both find none; strided codes (a view) too."""
+    from jaxmatch.scoring import backends
+
+    rng = np.random.default_rng(seed)
+    codes, vals = rng.integers(0, 3, 2 * m), rng.integers(2, 6, n)
+    codes = codes[::2] if strided else codes[:m]
+    sk = np.zeros(3) if skip == "zero" else rng.integers(-3, 1, 3).astype(np.float64)
+    if skip == "must":
+        sk[rng.integers(0, 3)] = -np.inf
+    w = make_weights(random_table(seed, 0.3), sk)
+    r = rotation % n
+
+    def run():
+        try:
+            return align(codes, vals, w, r, reflected)
+        except UnmatchableError as e:
+            return str(e)
+
+    in_c = run()
+    saved = backends._C_DP[:]
+    backends._C_DP[:] = [None, True]  # as if not built: numpy
+    try:
+        in_numpy = run()
+    finally:
+        backends._C_DP[:] = saved
+    if isinstance(in_numpy, str):
+        assert in_c == in_numpy
+    else:
+        assert in_c.dtype == in_numpy.dtype == np.int32
+        np.testing.assert_array_equal(in_c, in_numpy)
+
+
 # --------------------------------------------------------------------------- unmatchable, padding
 
 

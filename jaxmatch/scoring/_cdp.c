@@ -1,6 +1,9 @@
-/* The max-plus DP of the exact host in C (jaxmatch/scoring/backends.py, c_values): the numba
- * kernel's steps (jaxmatch/scoring/_numba_dp.py), in int16, lanes = meshes innermost, so values
- * are bit for bit the numba kernel's, without numba's import (~0.45 s per process).
+/* The scoring DPs in C, without numba's import (~0.45 s per process):
+ *   - jm_dp_i16: the max-plus DP of the exact host (jaxmatch/scoring/backends.py, c_values), the
+ *     numba kernel's steps (jaxmatch/scoring/_numba_dp.py) in int16, lanes = meshes innermost, so
+ *     its values are bit for bit the numba kernel's;
+ *   - jm_align_f32: one orientation's alignment (jaxmatch/scoring/exact.py, align): the float32
+ *     rows of exact.dp_rows, the same operations in the same order, and align's backtrack.
  * Arrays are C-contiguous. The module init makes it importable (its __file__ locates the
  * library, loaded with ctypes); it exports no Python functions. */
 #define PY_SSIZE_T_CLEAN
@@ -83,6 +86,60 @@ int jm_dp_i16(const int32_t *codes, i64 S, i64 mpad, const i64 *lengths, const i
     free(pv);
     free(d);
     return 0;
+}
+
+/* codes (m,) int32 in 0..2; seq (n,) int64 valences 2..5 in matched order; table (3, 64) float32
+ * (the shifted frame, NEG where forbidden); must (3,) uint8; neg = NEG. out (n,) int32: the input
+ * point each vertex takes. Returns 0, 1 when no alignment is finite (D[m][n] <= neg / 2), -1 out of
+ * memory. */
+int jm_align_f32(const int32_t *codes, i64 m, const i64 *seq, i64 n, const float *table, const uint8_t *must,
+                 float neg, int32_t *out) {
+    const i64 w = n + 1;
+    float *rows = (float *)malloc(sizeof(float) * (size_t)(m + 1) * (size_t)w);
+    float *wc = (float *)malloc(sizeof(float) * 3 * (size_t)(n > 0 ? n : 1));
+    if (!rows || !wc) {
+        free(rows);
+        free(wc);
+        return -1;
+    }
+    for (i64 j = 0; j < n; j++) {
+        i64 t = (seq[(j + 1) % n] - 2) * 16 + (seq[j] - 2) * 4 + (seq[(j - 1 + n) % n] - 2); /* [s[j+1], s[j], s[j-1]] */
+        for (int c = 0; c < 3; c++) wc[c * n + j] = table[c * 64 + t];
+    }
+    float gate[3];
+    for (int c = 0; c < 3; c++) gate[c] = must[c] ? neg : 0.0f;
+    rows[0] = 0.0f;
+    for (i64 j = 1; j <= n; j++) rows[j] = neg;
+    for (i64 i = 0; i < m; i++) {
+        const float *prev = rows + i * w;
+        float *cur = rows + (i + 1) * w;
+        const int c = codes[i];
+        const float g = gate[c];
+        const float *wi = wc + c * n;
+        for (i64 j = 1; j <= n; j++) {
+            float skip = prev[j] + g, take = prev[j - 1] + wi[j - 1];
+            cur[j] = skip >= take ? skip : take; /* np.maximum */
+        }
+        cur[0] = prev[0] + g;
+    }
+    int rc = 0;
+    if ((double)rows[m * w + n] <= (double)neg / 2.0) {
+        rc = 1;
+    } else {
+        i64 i = m, j = n;
+        while (j > 0) {
+            if (i > j && !must[codes[i - 1]] && rows[i * w + j] == rows[(i - 1) * w + j]) {
+                i -= 1; /* skip input point i - 1 */
+            } else {
+                out[j - 1] = (int32_t)(i - 1);
+                i -= 1;
+                j -= 1;
+            }
+        }
+    }
+    free(rows);
+    free(wc);
+    return rc;
 }
 
 static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_cdp",

@@ -129,8 +129,9 @@ def _kernel(parallel: bool):
 
 
 def _load_c_dp():
-    """The C library of :func:`c_values` through ctypes, or None when it was not built (it is
-    optional: a machine without a C compiler installs the package without it)."""
+    """The C library of :func:`c_values` (and of :func:`jaxmatch.scoring.exact.align`'s rows)
+    through ctypes, or None when it was not built (it is optional: a machine without a C
+    compiler installs the package without it)."""
     import ctypes
 
     try:
@@ -141,6 +142,8 @@ def _load_c_dp():
     P, L = ctypes.c_void_p, ctypes.c_int64
     lib.jm_dp_i16.restype = ctypes.c_int
     lib.jm_dp_i16.argtypes = [P, L, L, P, P, L, L, P, P, ctypes.c_int, P]
+    lib.jm_align_f32.restype = ctypes.c_int
+    lib.jm_align_f32.argtypes = [P, L, P, L, P, P, ctypes.c_float, P]
     return lib
 
 

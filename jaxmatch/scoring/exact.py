@@ -87,7 +87,7 @@ from typing import NamedTuple, Sequence
 import numpy as np
 
 from jaxmatch.errors import UnmatchableError
-from jaxmatch.scoring.backends import default_backend
+from jaxmatch.scoring.backends import c_kernel, default_backend
 from jaxmatch.scoring.model import NEG, SkipFrame, skip_frame, skip_offset, weights_of  # noqa: F401 (SkipFrame re-exported)
 from jaxmatch.scoring.problem import (  # noqa: F401 (the problem contract, re-exported)
     _INVALID,
@@ -381,6 +381,9 @@ def dp_rows(codes, seq, weights) -> np.ndarray:
     return rows
 
 
+_NO_ALIGNMENT = "every alignment of this orientation uses a forbidden weight or skips a point that must be matched"
+
+
 def align(codes, vals_one, weights, rotation: int, reflected: bool, *, m_pad: int | None = None) -> np.ndarray:
     """Best alignment for one orientation: ``(n,) int32`` strictly increasing input indices.
 
@@ -390,7 +393,9 @@ def align(codes, vals_one, weights, rotation: int, reflected: bool, *, m_pad: in
     point ``i - 1`` (allowed unless its type must be matched) and matching it, skipping wins (so
     each vertex takes the earliest best point counted from the end). Raises
     :class:`UnmatchableError` when this orientation has no finite alignment. ``m_pad`` is only
-    checked (``>= m``): padded points never change the rows up to ``m``.
+    checked (``>= m``): padded points never change the rows up to ``m``. Rows and backtrack run
+    in C when its library is built (:func:`jaxmatch.scoring.backends.c_kernel`: the same float32
+    operations in the same order, so the same alignment, tested), else in numpy.
     """
     seq = oriented_sequence(vals_one, rotation, reflected)
     n = seq.shape[0]
@@ -401,9 +406,22 @@ def align(codes, vals_one, weights, rotation: int, reflected: bool, *, m_pad: in
     _check_vals(seq)
     pad_codes(c, m_pad)  # checks the codes (and m_pad)
     fr = skip_frame(weights)
+    lib = c_kernel()
+    if lib is not None:  # the same rows and backtrack in C (jaxmatch/scoring/_cdp.c)
+        out = np.empty(n, np.int32)
+        tab = np.ascontiguousarray(fr.table, dtype=np.float32).reshape(3, 64)
+        must = np.ascontiguousarray(fr.gate, dtype=np.uint8)
+        s64 = np.ascontiguousarray(seq, dtype=np.int64)
+        cc = np.ascontiguousarray(c)
+        rc = lib.jm_align_f32(cc.ctypes.data, m, s64.ctypes.data, n, tab.ctypes.data, must.ctypes.data, NEG, out.ctypes.data)
+        if rc < 0:
+            raise MemoryError("alignment kernel: out of memory")
+        if rc == 1:
+            raise UnmatchableError(_NO_ALIGNMENT)
+        return out
     rows = dp_rows(c, seq, weights)
     if rows[m, n] <= NEG / 2:
-        raise UnmatchableError("every alignment of this orientation uses a forbidden weight or skips a point that must be matched")
+        raise UnmatchableError(_NO_ALIGNMENT)
     out = np.empty(n, np.int32)
     i, j = m, n
     while j > 0:
