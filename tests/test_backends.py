@@ -79,13 +79,14 @@ needs_c = pytest.mark.skipif(c_kernel() is None, reason="the C kernel (jaxmatch.
 @given(problems(), st.booleans())
 def test_c_kernel_is_the_numba_kernel_bit_for_bit(case, strict):
     """c_values against numba_values on the same padded problem: every value equal, the invalid
-    ones' sentinels too (the same steps in the same int16 arithmetic), strict or not."""
+    ones' sentinels too (the same steps in the same int16 arithmetic), strict or not, whatever
+    the chunk of meshes (lanes 1, 7, 32, 128 against numba's 256)."""
     shapes, vals, weights, lanes = case
     prob = dp_problem(shapes, weights, vals.shape[1])
     if prob.tab.dtype != np.int16:
         return
-    ours = c_values(prob.codes, prob.lengths, vals, prob.tab, prob.gate, strict)
-    theirs = numba_values(prob.codes, prob.lengths, vals, prob.tab, prob.gate, strict, lanes)
+    ours = c_values(prob.codes, prob.lengths, vals, prob.tab, prob.gate, strict, lanes)
+    theirs = numba_values(prob.codes, prob.lengths, vals, prob.tab, prob.gate, strict, 256)
     assert ours.dtype == theirs.dtype == np.int16 and ours.shape == theirs.shape
     np.testing.assert_array_equal(ours, theirs)
 
@@ -98,9 +99,9 @@ def test_c_kernel_takes_int16_only():
 
 
 @needs_c
-def test_default_backend_runs_problems_of_one_thread_in_c(monkeypatch):
-    """The default backend sends a problem under PARALLEL_CELLS, or any problem in a serial-only
-    process, to the C kernel, and a larger one to numba's threads; the values are XLA's."""
+def test_small_problems_run_in_c_within_the_budget(monkeypatch):
+    """With the C library built, the light kernel of the budget is C (not numpy): the same
+    budget, numba after it; the values are XLA's."""
     from jaxmatch.scoring import backends
 
     rng = np.random.default_rng(4)
@@ -109,17 +110,14 @@ def test_default_backend_runs_problems_of_one_thread_in_c(monkeypatch):
     ref = exact_values(shapes, vals, w, backend=CPUBackend())
     ran = []
     monkeypatch.setattr(backends, "c_values", lambda *a: ran.append("c") or c_values(*a))
+    monkeypatch.setattr(backends, "numpy_values", lambda *a: ran.append("numpy") or numpy_values(*a))
     monkeypatch.setattr(backends, "numba_values", lambda *a: ran.append("numba") or numba_values(*a))
-    be = default_backend()
-    assert be.c_serial and not NumbaBackend().c_serial  # a NumbaBackend asked for by name runs numba
-    np.testing.assert_array_equal(exact_values(shapes, vals, w, backend=be), ref)
-    assert ran == ["c"]
-    monkeypatch.setattr(backends, "PARALLEL_CELLS", 1)  # now "large": numba's threads, unless serial-only
-    np.testing.assert_array_equal(exact_values(shapes, vals, w, backend=be), ref)
-    assert ran == ["c", "numba"]
-    monkeypatch.setattr(backends, "_SERIAL_ONLY", [True])
-    np.testing.assert_array_equal(exact_values(shapes, vals, w, backend=be), ref)
-    assert ran == ["c", "numba", "c"]
+    monkeypatch.setattr(backends, "_NUMPY_SPENT", [0])
+    monkeypatch.setattr(backends, "_NUMBA_LOADED", [False])
+    be = NumbaBackend(numpy_cells=2 * 2 * 8 * 8 * 30 * 64)  # two problems of 2n * n * m * meshes (padded)
+    for _ in range(3):
+        np.testing.assert_array_equal(exact_values(shapes, vals, w, backend=be), ref)
+    assert ran == ["c", "c", "numba"]
 
 
 def test_numba_backend_runs_small_problems_in_numpy_within_its_budget(monkeypatch):

@@ -1,7 +1,7 @@
 /* The scoring DPs in C, without numba's import (~0.45 s per process):
  *   - jm_dp_i16: the max-plus DP of the exact host (jaxmatch/scoring/backends.py, c_values), the
- *     numba kernel's steps (jaxmatch/scoring/_numba_dp.py) in int16, lanes = meshes innermost, so
- *     its values are bit for bit the numba kernel's;
+ *     numba kernel's steps (jaxmatch/scoring/_numba_dp.py) in int16, chunks of meshes as the
+ *     lanes, so its values are bit for bit the numba kernel's;
  *   - jm_align_f32: one orientation's alignment (jaxmatch/scoring/exact.py, align): the float32
  *     rows of exact.dp_rows, the same operations in the same order, and align's backtrack.
  * Arrays are C-contiguous. The module init makes it importable (its __file__ locates the
@@ -14,73 +14,82 @@
 typedef int64_t i64;
 
 /* codes (S, mpad) int32; lengths (S,) int64 (<= mpad); vals (N, n) int32 valences 2..5;
- * tab (4, 64) int16; gate (4,) int16; out (S, N, 2n) int16. Returns 0, or -1 out of memory. */
+ * tab (4, 64) int16; gate (4,) int16; out (S, N, 2n) int16; lanes: meshes per chunk (the numba
+ * kernel's LANES: the weights (2, 4, n, lanes) and the row (n + 1, lanes) of a chunk stay in
+ * cache, whatever N). Returns 0, or -1 out of memory. */
 int jm_dp_i16(const int32_t *codes, i64 S, i64 mpad, const i64 *lengths, const int32_t *vals, i64 N, i64 n,
-              const int16_t *tab, const int16_t *gate, int strict, int16_t *out) {
+              const int16_t *tab, const int16_t *gate, int strict, i64 lanes, int16_t *out) {
     if (N <= 0 || S <= 0 || n <= 0) return 0;
+    if (lanes < 1) lanes = 1;
+    if (lanes > N) lanes = N;
     const int16_t neg = tab[3 * 64];
-    int16_t *pv = (int16_t *)malloc(sizeof(int16_t) * 2 * 4 * (size_t)n * (size_t)N);
-    int16_t *d = (int16_t *)malloc(sizeof(int16_t) * (size_t)(n + 1) * (size_t)N);
+    const i64 L = lanes;
+    int16_t *pv = (int16_t *)malloc(sizeof(int16_t) * 2 * 4 * (size_t)n * (size_t)L);
+    int16_t *d = (int16_t *)malloc(sizeof(int16_t) * (size_t)(n + 1) * (size_t)L);
     if (!pv || !d) {
         free(pv);
         free(d);
         return -1;
     }
-    for (i64 b = 0; b < N; b++) {
-        const int32_t *vb = vals + b * n;
-        for (i64 k = 0; k < n; k++) {
-            int a = vb[(k + 1) % n] - 2, v = vb[k] - 2, c0 = vb[(k - 1 + n) % n] - 2;
-            int t = a * 16 + v * 4 + c0;  /* triple [s[k+1], s[k], s[k-1]] */
-            int tr = c0 * 16 + v * 4 + a; /* in vals[::-1] vertex k sits at n - 1 - k, neighbours swapped */
-            for (int c = 0; c < 4; c++) {
-                pv[((0 * 4 + c) * n + k) * N + b] = tab[c * 64 + t];
-                pv[((1 * 4 + c) * n + (n - 1 - k)) * N + b] = tab[c * 64 + tr];
+    for (i64 b0 = 0; b0 < N; b0 += L) {
+        const i64 nl = N - b0 < L ? N - b0 : L; /* lanes of this chunk */
+        for (i64 bl = 0; bl < nl; bl++) {
+            const int32_t *vb = vals + (b0 + bl) * n;
+            for (i64 k = 0; k < n; k++) {
+                int a = vb[(k + 1) % n] - 2, v = vb[k] - 2, c0 = vb[(k - 1 + n) % n] - 2;
+                int t = a * 16 + v * 4 + c0;  /* triple [s[k+1], s[k], s[k-1]] */
+                int tr = c0 * 16 + v * 4 + a; /* in vals[::-1] vertex k sits at n - 1 - k, neighbours swapped */
+                for (int c = 0; c < 4; c++) {
+                    pv[((0 * 4 + c) * n + k) * L + bl] = tab[c * 64 + t];
+                    pv[((1 * 4 + c) * n + (n - 1 - k)) * L + bl] = tab[c * 64 + tr];
+                }
             }
         }
-    }
-    for (i64 s = 0; s < S; s++) {
-        const i64 m = lengths[s];
-        const int32_t *cs = codes + s * mpad;
-        for (i64 o = 0; o < 2 * n; o++) {
-            const i64 h = o < n ? 0 : 1, r = o - h * n;
-            for (i64 l = 0; l < N; l++) d[l] = 0;
-            for (i64 l = N; l < (n + 1) * N; l++) d[l] = neg;
-            int16_t z = 0;
-            for (i64 i = 0; i < m; i++) {
-                const int c = cs[i];
-                i64 lo = n - m + i + 1, hi = i + 1;
-                if (lo < 1) lo = 1;
-                if (hi > n) hi = n;
-                if (strict) {
-                    const int16_t g = gate[c];
-                    for (i64 j = hi; j >= lo; j--) {
-                        int16_t *restrict dj = d + j * N;
-                        const int16_t *restrict dm = d + (j - 1) * N;
-                        const int16_t *restrict w = pv + ((h * 4 + c) * n + (r + j - 1) % n) * N;
-                        for (i64 l = 0; l < N; l++) {
-                            int16_t x = (int16_t)(dm[l] + w[l]);
-                            int16_t y = dj[l] < g ? dj[l] : g;
-                            dj[l] = x > y ? x : y;
+        for (i64 s = 0; s < S; s++) {
+            const i64 m = lengths[s];
+            const int32_t *cs = codes + s * mpad;
+            for (i64 o = 0; o < 2 * n; o++) {
+                const i64 h = o < n ? 0 : 1, r = o - h * n;
+                for (i64 l = 0; l < nl; l++) d[l] = 0;
+                for (i64 j = 1; j <= n; j++)
+                    for (i64 l = 0; l < nl; l++) d[j * L + l] = neg;
+                int16_t z = 0;
+                for (i64 i = 0; i < m; i++) {
+                    const int c = cs[i];
+                    i64 lo = n - m + i + 1, hi = i + 1;
+                    if (lo < 1) lo = 1;
+                    if (hi > n) hi = n;
+                    if (strict) {
+                        const int16_t g = gate[c];
+                        for (i64 j = hi; j >= lo; j--) {
+                            int16_t *restrict dj = d + j * L;
+                            const int16_t *restrict dm = d + (j - 1) * L;
+                            const int16_t *restrict w = pv + ((h * 4 + c) * n + (r + j - 1) % n) * L;
+                            for (i64 l = 0; l < nl; l++) {
+                                int16_t x = (int16_t)(dm[l] + w[l]);
+                                int16_t y = dj[l] < g ? dj[l] : g;
+                                dj[l] = x > y ? x : y;
+                            }
                         }
-                    }
-                    if (z > g) {
-                        z = g;
-                        for (i64 l = 0; l < N; l++) d[l] = z;
-                    }
-                } else {
-                    for (i64 j = hi; j >= lo; j--) {
-                        int16_t *restrict dj = d + j * N;
-                        const int16_t *restrict dm = d + (j - 1) * N;
-                        const int16_t *restrict w = pv + ((h * 4 + c) * n + (r + j - 1) % n) * N;
-                        for (i64 l = 0; l < N; l++) {
-                            int16_t x = (int16_t)(dm[l] + w[l]);
-                            dj[l] = x > dj[l] ? x : dj[l];
+                        if (z > g) {
+                            z = g;
+                            for (i64 l = 0; l < nl; l++) d[l] = z;
+                        }
+                    } else {
+                        for (i64 j = hi; j >= lo; j--) {
+                            int16_t *restrict dj = d + j * L;
+                            const int16_t *restrict dm = d + (j - 1) * L;
+                            const int16_t *restrict w = pv + ((h * 4 + c) * n + (r + j - 1) % n) * L;
+                            for (i64 l = 0; l < nl; l++) {
+                                int16_t x = (int16_t)(dm[l] + w[l]);
+                                dj[l] = x > dj[l] ? x : dj[l];
+                            }
                         }
                     }
                 }
+                const int16_t *dn = d + n * L;
+                for (i64 l = 0; l < nl; l++) out[(s * N + b0 + l) * 2 * n + o] = dn[l];
             }
-            const int16_t *dn = d + n * N;
-            for (i64 l = 0; l < N; l++) out[(s * N + l) * 2 * n + o] = dn[l];
         }
     }
     free(pv);

@@ -21,15 +21,15 @@ with ``numba.prange`` (problems under :data:`PARALLEL_CELLS` on the calling thre
 * padded input points (code 3) are not visited at all (``problem.lengths``).
 
 Start-up: importing numba and loading its cached kernel costs ~0.45 s per process, far more than
-the pruned search of one shape computes (a few million DP cells, ~3 ms in numpy). So the default
-backend (:func:`default_backend`, ``auto``) runs every problem that numba would run on one thread
-(under :data:`PARALLEL_CELLS`, or any in a serial-only process) with :func:`c_values`: the same
-kernel's steps in C (``jaxmatch/scoring/_cdp.c``, built with the package, loaded with ctypes in
-milliseconds), bit for bit its values. Without that library it runs small problems with
-:func:`numpy_values` (the same recurrence as the XLA kernel, vectorised over meshes x
-orientations) until the process has spent :data:`NUMPY_CELLS` cells on them, and numba from then
-on (or at once for a larger problem, or when the kernel is already loaded). All kernels give the
-same utilities (tests/test_backends.py).
+the pruned search of one shape computes (a few million DP cells). So the default backend
+(:func:`default_backend`, ``auto``) runs small problems in a light kernel until the process has
+spent :data:`NUMPY_CELLS` cells on them, and numba from then on (or at once for a larger problem,
+or when the kernel is already loaded). The light kernel is :func:`c_values`, the numba kernel's
+steps in C (``jaxmatch/scoring/_cdp.c``, built with the package, loaded with ctypes in
+milliseconds; bit for bit the numba kernel's values, ~7x numpy's speed on a small ranking), or,
+where that library was not built, :func:`numpy_values` (the same recurrence as the XLA kernel,
+vectorised over meshes x orientations). All kernels give the same utilities
+(tests/test_backends.py).
 
 Measurements and the alternatives tried: ``docs/perf.md``.
 """
@@ -141,7 +141,7 @@ def _load_c_dp():
     lib = ctypes.CDLL(_cdp.__file__)
     P, L = ctypes.c_void_p, ctypes.c_int64
     lib.jm_dp_i16.restype = ctypes.c_int
-    lib.jm_dp_i16.argtypes = [P, L, L, P, P, L, L, P, P, ctypes.c_int, P]
+    lib.jm_dp_i16.argtypes = [P, L, L, P, P, L, L, P, P, ctypes.c_int, L, P]
     lib.jm_align_f32.restype = ctypes.c_int
     lib.jm_align_f32.argtypes = [P, L, P, L, P, P, ctypes.c_float, P]
     return lib
@@ -157,11 +157,12 @@ def c_kernel():
     return _C_DP[0]
 
 
-def c_values(codes, lengths, vals, tab, gate, strict: bool = False) -> np.ndarray:
+def c_values(codes, lengths, vals, tab, gate, strict: bool = False, lanes: int = LANES) -> np.ndarray:
     """:func:`numba_values` in C on the calling thread: ``(S, N, 2n) int16``, the same steps in
-    the same order (``jaxmatch/scoring/_cdp.c``, all meshes as the lanes of one row), so the
-    same values bit for bit, invalid ones included. Arguments as :func:`numba_values`; int16
-    only. Raises RuntimeError when the library was not built, MemoryError when it runs out."""
+    the same order (``jaxmatch/scoring/_cdp.c``, chunks of ``lanes`` meshes as the lanes of one
+    row), so the same values bit for bit, invalid ones included. Arguments as
+    :func:`numba_values`; int16 only. Raises RuntimeError when the library was not built,
+    MemoryError when it runs out."""
     tab = np.ascontiguousarray(tab)
     if tab.dtype != np.int16:
         raise ValueError(f"the C kernel is int16 only, got {tab.dtype}")
@@ -177,7 +178,7 @@ def c_values(codes, lengths, vals, tab, gate, strict: bool = False) -> np.ndarra
     if big_n == 0 or c.shape[0] == 0:
         return out
     if lib.jm_dp_i16(c.ctypes.data, c.shape[0], c.shape[1], lens.ctypes.data, v.ctypes.data, big_n, n,
-                     tab.ctypes.data, g.ctypes.data, int(bool(strict)), out.ctypes.data) != 0:
+                     tab.ctypes.data, g.ctypes.data, int(bool(strict)), max(int(lanes), 1), out.ctypes.data) != 0:
         raise MemoryError("scoring kernel: out of memory")
     return out
 
@@ -212,28 +213,18 @@ class NumbaBackend:
     """Backend of :func:`jaxmatch.scoring.exact.exact_values` running :func:`numba_values` on all
     cores of this process (``numba.set_num_threads``: ``threads``, default all).
 
-    numpy_cells: run a problem with :func:`numpy_values` instead while the numba kernel is not
-    loaded in this process and the problems so run (by any instance) stay within this many DP
-    cells in all (:data:`NUMPY_CELLS` for :func:`default_backend`'s choice; 0: always numba).
-    c_serial: run every int16 problem numba would run on one thread (under
-    :data:`PARALLEL_CELLS`, one thread asked for, or a serial-only process) with
-    :func:`c_values` when its library is built (:func:`default_backend`'s choice; the same values).
+    numpy_cells: run a problem with the light kernel instead (:func:`c_values` for int16 models
+    when its library is built, else :func:`numpy_values`) while the numba kernel is not loaded in
+    this process and the problems so run (by any instance) stay within this many DP cells in all
+    (:data:`NUMPY_CELLS` for :func:`default_backend`'s choice; 0: always numba).
     int32 / float32 models go to the XLA kernel (or numpy within that budget)."""
 
     mesh_lanes = 1
 
-    def __init__(self, threads: int | None = None, lanes: int = LANES, numpy_cells: int = 0, c_serial: bool = False):
+    def __init__(self, threads: int | None = None, lanes: int = LANES, numpy_cells: int = 0):
         self.threads = threads
         self.lanes = int(lanes)
         self.numpy_cells = int(numpy_cells)
-        self.c_serial = bool(c_serial)
-
-    def _in_c(self, problem, big_n: int) -> bool:
-        """Whether this problem runs in :func:`c_values`: see ``c_serial``."""
-        if not self.c_serial or np.dtype(problem.kind.dtype) != np.int16 or c_kernel() is None:
-            return False
-        cells = 2 * problem.n * problem.n * big_n * int(np.minimum(problem.lengths, problem.codes.shape[1]).sum())
-        return _SERIAL_ONLY[0] or self.threads == 1 or cells < PARALLEL_CELLS
 
     def _numpy_first(self, problem, big_n: int) -> bool:
         """Whether this problem runs in numpy (and book its cells): see ``numpy_cells``."""
@@ -248,9 +239,9 @@ class NumbaBackend:
 
     def run(self, problem: DPProblem, vals: np.ndarray) -> np.ndarray:
         flat = np.asarray(vals).reshape(-1, problem.n)
-        if self._in_c(problem, flat.shape[0]):
-            return c_values(problem.codes, problem.lengths, flat, problem.tab, problem.gate, problem.strict)
         if self._numpy_first(problem, flat.shape[0]):
+            if np.dtype(problem.kind.dtype) == np.int16 and c_kernel() is not None:
+                return c_values(problem.codes, problem.lengths, flat, problem.tab, problem.gate, problem.strict, self.lanes)
             return numpy_values(problem.codes, problem.lengths, flat, problem.tab, problem.gate, problem.strict)
         if np.dtype(problem.kind.dtype) != np.int16:  # int32 / float32 models: the XLA kernel
             from jaxmatch.scoring.xla import CPUBackend  # imports JAX
@@ -309,8 +300,8 @@ def default_backend(threads: int | None = None, unroll: int | None = None):
 
     ``JAXMATCH_BACKEND`` = ``auto`` (default): :class:`NumbaBackend` when JAX computes on the CPU
     (:func:`jax_on_cpu`) and numba is installed (int16 models; others fall back to the XLA
-    kernel), problems for one thread in C (``c_serial=True``) and, without the C library, small
-    problems first in numpy (``numpy_cells=NUMPY_CELLS``, module docstring),
+    kernel), small problems first in the light kernel, C or numpy (``numpy_cells=NUMPY_CELLS``,
+    module docstring),
     else the XLA kernel :class:`jaxmatch.scoring.xla.CPUBackend` (GPUs, TPUs); ``numba``
     (always the numba kernel) or ``xla`` force one. Both give identical utilities (tests/test_backends.py).
     The numba choice does not import JAX. InputError for another value.
@@ -324,7 +315,7 @@ def default_backend(threads: int | None = None, unroll: int | None = None):
         raise InputError(f"must be one of {', '.join(BACKENDS)}, got {choice!r}", "JAXMATCH_BACKEND")
     if choice == "auto":
         if _numba_available() and jax_on_cpu():
-            return NumbaBackend(threads, numpy_cells=NUMPY_CELLS, c_serial=True)
+            return NumbaBackend(threads, numpy_cells=NUMPY_CELLS)
         choice = "xla"
     if choice == "numba":
         return NumbaBackend(threads)
