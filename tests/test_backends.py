@@ -98,22 +98,29 @@ def test_c_kernel_takes_int16_only():
         c_values(np.zeros((1, 3), np.int32), [3], np.full((2, 4), 4), tab, np.zeros(4, np.int32))
 
 
+def budget_case(monkeypatch, seed: int, skip: str):
+    """A small problem (one 30-point shape, 40 meshes of 8 vertices), its XLA values, and the
+    list every kernel call of the numba backend is recorded in ("c", "numpy", "numba"), in a
+    process where neither the budget nor the numba kernel has been used yet."""
+    from jaxmatch.scoring import backends
+
+    rng = np.random.default_rng(seed)
+    shapes, vals = [rng.integers(0, 3, 30)], rng.integers(2, 6, (40, 8))
+    w = make_weights(*random_model(seed, 0.2, skip))
+    ref = exact_values(shapes, vals, w, backend=CPUBackend())
+    ran = []
+    for name, kernel in (("c", c_values), ("numpy", numpy_values), ("numba", numba_values)):
+        monkeypatch.setattr(backends, f"{name}_values", lambda *a, name=name, kernel=kernel: ran.append(name) or kernel(*a))
+    monkeypatch.setattr(backends, "_NUMPY_SPENT", [0])
+    monkeypatch.setattr(backends, "_NUMBA_LOADED", [False])
+    return shapes, vals, w, ref, ran
+
+
 @needs_c
 def test_small_problems_run_in_c_within_the_budget(monkeypatch):
     """With the C library built, the light kernel of the budget is C (not numpy): the same
     budget, numba after it; the values are XLA's."""
-    from jaxmatch.scoring import backends
-
-    rng = np.random.default_rng(4)
-    shapes, vals = [rng.integers(0, 3, 30)], rng.integers(2, 6, (40, 8))
-    w = make_weights(*random_model(4, 0.2, "neg"))
-    ref = exact_values(shapes, vals, w, backend=CPUBackend())
-    ran = []
-    monkeypatch.setattr(backends, "c_values", lambda *a: ran.append("c") or c_values(*a))
-    monkeypatch.setattr(backends, "numpy_values", lambda *a: ran.append("numpy") or numpy_values(*a))
-    monkeypatch.setattr(backends, "numba_values", lambda *a: ran.append("numba") or numba_values(*a))
-    monkeypatch.setattr(backends, "_NUMPY_SPENT", [0])
-    monkeypatch.setattr(backends, "_NUMBA_LOADED", [False])
+    shapes, vals, w, ref, ran = budget_case(monkeypatch, 4, "neg")
     be = NumbaBackend(numpy_cells=2 * 2 * 8 * 8 * 30 * 64)  # two problems of 2n * n * m * meshes (padded)
     for _ in range(3):
         np.testing.assert_array_equal(exact_values(shapes, vals, w, backend=be), ref)
@@ -125,16 +132,7 @@ def test_numba_backend_runs_small_problems_in_numpy_within_its_budget(monkeypatc
     from jaxmatch.scoring import backends
 
     monkeypatch.setattr(backends, "_C_DP", [None, True])  # as if not built
-
-    rng = np.random.default_rng(3)
-    shapes, vals = [rng.integers(0, 3, 30)], rng.integers(2, 6, (40, 8))
-    w = make_weights(*random_model(3, 0.2, "must"))
-    ref = exact_values(shapes, vals, w, backend=CPUBackend())
-    ran = []
-    monkeypatch.setattr(backends, "numpy_values", lambda *a: ran.append("numpy") or numpy_values(*a))
-    monkeypatch.setattr(backends, "numba_values", lambda *a: ran.append("numba") or numba_values(*a))
-    monkeypatch.setattr(backends, "_NUMPY_SPENT", [0])
-    monkeypatch.setattr(backends, "_NUMBA_LOADED", [False])
+    shapes, vals, w, ref, ran = budget_case(monkeypatch, 3, "must")
     exact_values(shapes, vals, w, backend=NumbaBackend(numpy_cells=1 << 40))
     cells = backends._NUMPY_SPENT[0]  # 2n * n * m * meshes (padded to the chunk)
     assert ran == ["numpy"] and cells == 2 * 8 * 8 * 30 * 64

@@ -13,6 +13,24 @@
 
 typedef int64_t i64;
 
+/* One input point's band of a chunk's DP: rows hi down to lo of d (n + 1, L), row j from row
+ * j - 1 plus the weights of vertex (r + j - 1) % n (wc: (n, L), one code); with strict, the skip
+ * branch capped at the gate g first. Inlined with strict a constant, so each variant's lane loop
+ * is compiled (and vectorised) on its own. */
+static inline __attribute__((always_inline)) void band(int16_t *d, const int16_t *wc, i64 n, i64 L, i64 nl, i64 r,
+                                                       i64 lo, i64 hi, const int strict, const int16_t g) {
+    for (i64 j = hi; j >= lo; j--) {
+        int16_t *restrict dj = d + j * L;
+        const int16_t *restrict dm = d + (j - 1) * L;
+        const int16_t *restrict w = wc + ((r + j - 1) % n) * L;
+        for (i64 l = 0; l < nl; l++) {
+            int16_t x = (int16_t)(dm[l] + w[l]);
+            int16_t y = strict ? (dj[l] < g ? dj[l] : g) : dj[l];
+            dj[l] = x > y ? x : y;
+        }
+    }
+}
+
 /* codes (S, mpad) int32; lengths (S,) int64 (<= mpad); vals (N, n) int32 valences 2..5;
  * tab (4, 64) int16; gate (4,) int16; out (S, N, 2n) int16; lanes: meshes per chunk (the numba
  * kernel's LANES: the weights (2, 4, n, lanes) and the row (n + 1, lanes) of a chunk stay in
@@ -59,32 +77,16 @@ int jm_dp_i16(const int32_t *codes, i64 S, i64 mpad, const i64 *lengths, const i
                     i64 lo = n - m + i + 1, hi = i + 1;
                     if (lo < 1) lo = 1;
                     if (hi > n) hi = n;
+                    const int16_t *wc = pv + (h * 4 + c) * n * L;
                     if (strict) {
                         const int16_t g = gate[c];
-                        for (i64 j = hi; j >= lo; j--) {
-                            int16_t *restrict dj = d + j * L;
-                            const int16_t *restrict dm = d + (j - 1) * L;
-                            const int16_t *restrict w = pv + ((h * 4 + c) * n + (r + j - 1) % n) * L;
-                            for (i64 l = 0; l < nl; l++) {
-                                int16_t x = (int16_t)(dm[l] + w[l]);
-                                int16_t y = dj[l] < g ? dj[l] : g;
-                                dj[l] = x > y ? x : y;
-                            }
-                        }
+                        band(d, wc, n, L, nl, r, lo, hi, 1, g);
                         if (z > g) {
                             z = g;
                             for (i64 l = 0; l < nl; l++) d[l] = z;
                         }
                     } else {
-                        for (i64 j = hi; j >= lo; j--) {
-                            int16_t *restrict dj = d + j * L;
-                            const int16_t *restrict dm = d + (j - 1) * L;
-                            const int16_t *restrict w = pv + ((h * 4 + c) * n + (r + j - 1) % n) * L;
-                            for (i64 l = 0; l < nl; l++) {
-                                int16_t x = (int16_t)(dm[l] + w[l]);
-                                dj[l] = x > dj[l] ? x : dj[l];
-                            }
-                        }
+                        band(d, wc, n, L, nl, r, lo, hi, 0, 0);
                     }
                 }
                 const int16_t *dn = d + n * L;
