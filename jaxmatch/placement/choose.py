@@ -676,11 +676,11 @@ def place_match(shape: Shape, annotation: Annotation, catalogue: Catalogue, matc
             if (rot, refl) not in loops:
                 loops[rot, refl] = val[oriented_boundary(mesh, rot, refl)[1]]
             sig = _boundary_signature(boundaries[key], loops[rot, refl])
-            unique.setdefault(sig, (rot, refl, al))
+            unique.setdefault(sig, (rot, refl, al, boundaries[key]))
         best = None
         for sig in sorted(unique)[:MAX_CANDIDATES if min_utility is None else MAX_REORIENTED]:
-            rot, refl, al = unique[sig]
-            for pl, u in _place_candidate(shape, annotation, mesh, rot, refl, al, smooth_iters):
+            rot, refl, al, b = unique[sig]
+            for pl, u in _place_candidate(shape, annotation, mesh, rot, refl, al, smooth_iters, b):
                 key = placement_key(pl)
                 if best is None or key < best[0]:
                     best = (key, pl, u)
@@ -715,11 +715,11 @@ def _boundary_signature(b: Boundary, loop_valences: np.ndarray) -> tuple:
     return tuple(sorted(zip(xy[:, 0].tolist(), xy[:, 1].tolist(), np.asarray(loop_valences).tolist())))
 
 
-def _place_candidate(shape, annotation, mesh, rot, refl, al, smooth_iters):
+def _place_candidate(shape, annotation, mesh, rot, refl, al, smooth_iters, b: Boundary):
     """Placements (unit box, without boundary paths) of one orientation and alignment, each with
     its boundary vertices' arc-length parameters ``(n,)``: evenly spread, and, when that folds
-    or is poor, with sliding straight-side vertices too."""
-    b = corner_boundary(shape, annotation, al)
+    or is poor, with sliding straight-side vertices too. ``b``: the alignment's
+    :func:`corner_boundary` (the same for every alignment of the same :func:`_pin_keys` key)."""
     per = float(shape.arc_length[-1])
 
     def put(groups):

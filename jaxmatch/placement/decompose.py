@@ -32,7 +32,7 @@ from jaxmatch.placement.layout import Layout, make_layout
 from jaxmatch.shape import Shape
 
 
-__all__ = ["STRATEGIES", "cut_segments", "decompose", "single_patch"]
+__all__ = ["STRATEGIES", "cut_segments", "cuts_nothing", "decompose", "single_patch"]
 
 STRATEGIES = ("continuations", "bisectors", "recursive", "radial")
 """The ways :func:`decompose` cuts at concave corners (and, for regions with holes, from the
@@ -388,6 +388,12 @@ def _recursive(shape: Shape) -> Layout:
         cuts.append(np.array([v, end]))
         over.append(on_cut)
     return _layout(shape, _faces([pts], cuts, inserts, over), "recursive")
+
+
+def cuts_nothing(shape: Shape) -> bool:
+    """Whether every strategy leaves ``shape`` whole (:func:`decompose` gives
+    :func:`single_patch`): no hole and no concave corner."""
+    return not shape.holes and bool(np.all(shape.convex))
 
 
 def decompose(shape: Shape, strategy: str = "continuations") -> Layout:

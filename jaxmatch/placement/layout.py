@@ -369,8 +369,10 @@ def make_layout(points, patches, corners=None, sides=None, *, source: str = "<la
     _check_cover(pts, loops, polys, tol, source)
     layout = Layout(points=pts, patches=tuple(loops), corner=corner, patch_corner=tuple(pcorners), requested={},
                     source=source)
+    if sides is None:
+        return layout
     sd = layout_sides(layout)
-    requested = parse_counts(sides, sd, source) if sides is not None else {}
+    requested = parse_counts(sides, sd, source)
     return Layout(points=pts, patches=tuple(loops), corner=corner, patch_corner=tuple(pcorners),
                   requested={sd.names[s]: c for s, c in requested.items()}, source=source)
 
@@ -601,23 +603,30 @@ CURVE_SHARE = 0.8
 use, shared among the boundary sides by length (:func:`curve_floors`)."""
 
 
-def curve_floors(layout: Layout, sides: Sides, area_tol: float) -> np.ndarray:
+def region_area(layout: Layout) -> float:
+    """Area of the region the patches of ``layout`` cover (their union; user units squared)."""
+    import shapely
+
+    return float(shapely.union_all([shapely.Polygon(layout.points[lp]) for lp in layout.patches]).area)
+
+
+def curve_floors(layout: Layout, sides: Sides, area_tol: float, region: float | None = None) -> np.ndarray:
     """``(S,) int64`` the fewest edges each side may have so that its chords keep the region's
     area: a boundary side whose points do not lie on one line gets at least the edges that keep
     the area between it and its chords within its share (its length over the boundary's) of
-    :data:`CURVE_SHARE` ``* area_tol`` of the region's area; every other side 1."""
+    :data:`CURVE_SHARE` ``* area_tol`` of the region's area; every other side 1. ``region``:
+    :func:`region_area` of ``layout`` when the caller has it."""
     floors = np.ones(len(sides.chains), np.int64)
     bound = np.flatnonzero(sides.outer)
     if not bound.size:
         return floors
-    import shapely
-
-    region = shapely.union_all([shapely.Polygon(layout.points[lp]) for lp in layout.patches]).area
     total = float(np.sum(sides.lengths[bound]))
     for s in bound:
         poly = layout.points[sides.chains[s]]
         if poly.shape[0] <= 2:
             continue
+        if region is None:
+            region = region_area(layout)
         budget = CURVE_SHARE * area_tol * region * float(sides.lengths[s]) / total
         if chord_area_error(poly, 1) <= budget:
             continue
@@ -1071,7 +1080,8 @@ def _mesh_layout(layout: Layout, catalogue: Catalogue, lattice: Lattice, *, size
         cands.append(t)
         if progress:
             progress(p + 1, len(shapes))
-    floors = curve_floors(layout, sides, QUALITY.area_tol) if size is not None else None
+    region = region_area(layout)
+    floors = curve_floors(layout, sides, QUALITY.area_tol, region) if size is not None else None
     choice = [0] * len(shapes) if first_templates is None else [int(j) for j in first_templates]
     for p, j in enumerate(choice):
         if not (j >= 0 and _has(cands[p], j)):
@@ -1111,9 +1121,6 @@ def _mesh_layout(layout: Layout, catalogue: Catalogue, lattice: Lattice, *, size
     outer, holes = loops[0], tuple(loops[1:])
     if smooth_cuts:
         xy = _smooth_cuts(xy, quads, np.concatenate(loops), sides, side_ids)
-    import shapely
-
-    region = shapely.union_all([shapely.Polygon(layout.points[lp]) for lp in layout.patches]).area
     return LayoutMesh(layout=layout, sides=sides, xy=xy, quads=quads, patch=patch, side_vertices=side_ids,
                       counts=n, outer=outer, holes=holes, templates=tuple(t.mesh_id for t in tmpl),
                       multiplicities=tuple(mults), shared_gap=gap, region_area=float(region))

@@ -911,31 +911,27 @@ beyond it the integer program answers."""
 def _reachable(A: np.ndarray, target: np.ndarray) -> bool | None:
     """Whether ``A @ x == target`` for some integer ``x >= 0`` (``A``: ``(S, C)`` nonnegative
     integers, ``target``: ``(S,)``), by marking every vector ``<= target`` that sums of columns
-    reach (one column added at a time until nothing changes); None when there are more than
-    :data:`FEASIBLE_STATES` such vectors."""
+    reach, one column at a time: the marks shifted by ``a``, ``2a``, ``4a``, ... (each a slice of
+    the ``target + 1`` box) close them under adding any number of copies of column ``a``; None
+    when there are more than :data:`FEASIBLE_STATES` such vectors."""
     t = np.asarray(target, np.int64)
     if np.any(t < 0):
         return False
     dims = tuple(int(d) for d in t + 1)
     if math.prod(dims) > FEASIBLE_STATES:
         return None
-    coords = np.indices(dims).reshape(len(dims), -1)  # (S, states), C order: index = ravel_multi_index
-    reach = np.zeros(coords.shape[1], bool)
-    reach[0] = True
-    moves = []
+    reach = np.zeros(dims, bool)
+    reach[(0,) * len(dims)] = True
     for a in np.asarray(A, np.int64).T:
-        if a.any() and np.all(a <= t):
-            src = np.flatnonzero(np.all(coords + a[:, None] <= t[:, None], axis=0))
-            moves.append((src, int(np.ravel_multi_index(tuple(a), dims))))
-    grown = True
-    while grown:
-        grown = False
-        for src, offset in moves:
-            hit = src[reach[src] & ~reach[src + offset]]
-            if hit.size:
-                reach[hit + offset] = True
-                grown = True
-    return bool(reach[-1])
+        if not a.any():
+            continue
+        step = a.copy()
+        while np.all(step <= t):
+            dst = tuple(slice(int(k), None) for k in step)
+            src = tuple(slice(0, d - int(k)) for d, k in zip(dims, step))
+            reach[dst] |= reach[src]
+            step = 2 * step
+    return bool(reach[tuple(t.tolist())])
 
 
 def feasible(template: PatchTemplate, counts) -> bool:
