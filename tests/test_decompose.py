@@ -18,7 +18,8 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from jaxmatch.placement.decompose import STRATEGIES, cut_segments, decompose, single_patch
+from jaxmatch.errors import InputError
+from jaxmatch.placement.decompose import STRATEGIES, _same, cut_segments, decompose, same_cuts, single_patch
 from jaxmatch.io.readers import load_shape
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -106,7 +107,6 @@ def polyominoes(draw):
 @settings(max_examples=40)
 @given(outline=polyominoes(), strategy=st.sampled_from(["continuations", "recursive"]))
 def test_random_rectilinear_shapes_become_rectangles(outline, strategy):
-    from jaxmatch.errors import InputError
     from jaxmatch.shape import make_shape
 
     try:
@@ -118,3 +118,31 @@ def test_random_rectilinear_shapes_become_rectangles(outline, strategy):
     for loop, pc in zip(lay.patches, lay.patch_corner):
         c = lay.points[loop][pc]
         assert c.shape[0] == 4 and len(np.unique(c[:, 0])) == 2 and len(np.unique(c[:, 1])) == 2
+
+
+@pytest.mark.parametrize("path", sorted(EX.glob("*.json")) + sorted(LAB.glob("*.json")) + sorted((EX / "holes").glob("*.json")),
+                         ids=lambda p: p.name)
+def test_same_cuts_names_a_strategy_with_the_same_patches(path):
+    """``same_cuts(shape, s)`` names a strategy (or None: the single patch) whose layout has the
+    patches of ``s``'s layout, so the pipeline cuts each layout once."""
+    shape = load_shape(path)
+    for s in STRATEGIES:
+        how = same_cuts(shape, s)
+        try:
+            lay = decompose(shape, s)
+        except InputError:
+            continue
+        other = single_patch(shape) if how is None else decompose(shape, how)
+        assert _same(lay, other), (path.name, s, how)
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.floats(-10, 10), min_size=4, max_size=4), st.lists(st.floats(-1e-4, 1e-4), min_size=4, max_size=4),
+       st.floats(0, 1e-4))
+def test_close_is_allclose(a, d, tol):
+    """The cut dedup's ``_close`` answers as ``np.allclose(a, b, atol=tol)``."""
+    from jaxmatch.placement.decompose import _close
+
+    a = np.array(a).reshape(2, 2)
+    b = a + np.array(d).reshape(2, 2)
+    assert _close(a, b, tol) == np.allclose(a, b, atol=tol)

@@ -52,19 +52,18 @@ def try_strategies(shape: Shape, names, cat, lat, h: float, corners: np.ndarray,
     cannot beat the best mesh so far whatever its mesh (:func:`~jaxmatch.meshing.choose.cannot_win`)
     is not meshed, so the choice is the one meshing all of them would give. A strategy whose cuts
     or solve fail for any reason is skipped with that reason."""
-    from jaxmatch.placement.decompose import _same, cuts_nothing, decompose, single_patch
+    from jaxmatch.placement.decompose import _same, decompose, same_cuts, single_patch
     from jaxmatch.placement.layout import ALL_SIZES, TEMPLATE_SIZES, mesh_layout
 
     tried: list[Candidate | None] = [None] * len(names)
     layouts: list[tuple[int, object]] = []
-    whole = [] if cuts_nothing(shape) else None  # every strategy gives the single patch: made once
+    made: dict = {}  # layouts by the strategy that gives them (same_cuts): each cut once
     for i, name in enumerate(names):
         try:
-            if whole is not None:
-                whole = whole or [single_patch(shape)]
-                lay = whole[0]
-            else:
-                lay = single_patch(shape) if name == SINGLE else decompose(shape, name)
+            how = None if name == SINGLE else same_cuts(shape, name)
+            if how not in made:
+                made[how] = single_patch(shape) if how is None else decompose(shape, how)
+            lay = made[how]
         except FAILED as e:
             tried[i] = Candidate(name + suffix, None, _why_not(e))
             continue

@@ -32,7 +32,7 @@ from jaxmatch.placement.layout import Layout, make_layout
 from jaxmatch.shape import Shape
 
 
-__all__ = ["STRATEGIES", "cut_segments", "cuts_nothing", "decompose", "single_patch"]
+__all__ = ["STRATEGIES", "cut_segments", "decompose", "same_cuts", "single_patch"]
 
 STRATEGIES = ("continuations", "bisectors", "recursive", "radial")
 """The ways :func:`decompose` cuts at concave corners (and, for regions with holes, from the
@@ -119,6 +119,12 @@ def _snap(rings: list[np.ndarray], end: np.ndarray, tol: float, inserts: list) -
     return end
 
 
+def _close(a: np.ndarray, b: np.ndarray, tol: float) -> bool:
+    """``np.allclose(a, b, atol=tol)`` for finite arrays (its default ``rtol`` 1e-5 kept), without
+    its per-call overhead (the cut dedup calls it for every pair of cuts)."""
+    return bool(np.all(np.abs(a - b) <= tol + 1e-5 * np.abs(b)))
+
+
 def _hits(shape: Shape, strategy: str) -> tuple[list[np.ndarray], list[tuple[int, int, float, np.ndarray]]]:
     """Cuts (``(2, 2)`` segments) and where they end on a boundary loop: ``(ring, segment index,
     fraction along it, point)`` for ends inside a loop segment (ends within ``1e-9`` of the
@@ -142,7 +148,7 @@ def _hits(shape: Shape, strategy: str) -> tuple[list[np.ndarray], list[tuple[int
             continue
         end = _snap(rings, coords[ok][np.argmin(dist[ok])], tol, inserts)
         seg = np.array([v, end])
-        if any(np.allclose(seg, c[::-1], atol=tol) or np.allclose(seg, c, atol=tol) for c in cuts):
+        if any(_close(seg, c[::-1], tol) or _close(seg, c, tol) for c in cuts):
             continue
         cuts.append(seg)
     return cuts, inserts
@@ -390,10 +396,18 @@ def _recursive(shape: Shape) -> Layout:
     return _layout(shape, _faces([pts], cuts, inserts, over), "recursive")
 
 
-def cuts_nothing(shape: Shape) -> bool:
-    """Whether every strategy leaves ``shape`` whole (:func:`decompose` gives
-    :func:`single_patch`): no hole and no concave corner."""
-    return not shape.holes and bool(np.all(shape.convex))
+def same_cuts(shape: Shape, strategy: str) -> str | None:
+    """The strategy whose cuts :func:`decompose` makes in ``shape`` for ``strategy`` (the same
+    patches; only the layout's ``source`` names the strategy): None (no cut, the shape whole,
+    :func:`single_patch`) for every strategy when the shape has no hole and no concave corner,
+    ``"continuations"`` for ``"radial"`` without holes (its cuts are then the concave corners'
+    continuations alone), else ``strategy``."""
+    if not shape.holes:
+        if bool(np.all(shape.convex)):
+            return None
+        if strategy == "radial":
+            return "continuations"
+    return strategy
 
 
 def decompose(shape: Shape, strategy: str = "continuations") -> Layout:
