@@ -1101,9 +1101,10 @@ def _refine_topology(quads: np.ndarray, edge_list: np.ndarray, edge_chord: np.nd
     s = ks / me[eidx]
     w_rows.append(np.stack([1 - s, s, np.zeros_like(s), np.zeros_like(s)], axis=1))
     v_rows.append(np.stack([edge_list[eidx, 0], edge_list[eidx, 1], edge_list[eidx, 0], edge_list[eidx, 1]], axis=1))
-    pairs = np.unique(np.stack([ma_all, mb_all], axis=1), axis=0)
+    span = int(mb_all.max(initial=0)) + 1  # (ma, mb) pairs in lexicographic order, as np.unique(axis=0) gives them
+    pairs = [divmod(int(c), span) for c in np.unique(ma_all.astype(np.int64) * span + mb_all)]
     base = nv
-    for ma, mb in pairs.tolist():
+    for ma, mb in pairs:
         f = np.flatnonzero((ma_all == ma) & (mb_all == mb))
         nf = f.size
         Q = q[f]
