@@ -164,6 +164,17 @@ class Shape:
         """Area enclosed by ``points`` (unit box; positive: the loop is ccw), computed once."""
         return float(signed_area(self.points))
 
+    @property
+    def given_points(self) -> np.ndarray:
+        """``(P, 2) float64`` the points in user coordinates, exactly as given when known
+        (``input_points``), else :attr:`user_points`."""
+        return self.input_points if self.input_points is not None else self.user_points
+
+    @cached_property
+    def user_area(self) -> float:
+        """Area enclosed by :attr:`given_points` (user units squared, unsigned), computed once."""
+        return abs(signed_area(self.given_points))
+
     @cached_property
     def arc_length(self) -> np.ndarray:
         """``(P + 1,) float64`` :func:`cumulative_length` of ``points`` (computed once; read-only)."""
@@ -610,7 +621,7 @@ def annotate(shape: Shape, m: int) -> Annotation:
         raise InputError(f"{m} boundary points requested, but the shape has {c} corners (need at least {max(c, 1)})", where=shape.source)
     if m > MAX_ANNOTATED:
         raise InputError(f"{m} boundary points requested, more than the maximum {MAX_ANNOTATED}", where=shape.source)
-    cum = cumulative_length(shape.points)
+    cum = shape.arc_length
     per = float(cum[-1])
     if c == 0:
         t = per * np.arange(m, dtype=np.float64) / m

@@ -437,3 +437,15 @@ def test_points_added_on_sides_change_no_corner_of_a_near_regular_polygon(n, fra
     base, fine = make_shape(pts), make_shape(np.array(loop))
     assert fine.n_corners == base.n_corners
     assert corner_points(fine) == corner_points(base)
+
+
+@pytest.mark.parametrize("points", [[[0, 0], [4, 0], [4, 3], [0, 3]], [[10, 10], [10, 13], [14, 13], [14, 10]],
+                                    [[0, 0], [2, 0], [2, 1], [1, 1], [1, 2], [0, 2]]])
+def test_given_points_and_user_area(points):
+    """``given_points`` are the input coordinates (reordered ccw from the first corner), and
+    ``user_area`` is the area they enclose (shapely, independently of the shoelace code)."""
+    import shapely
+
+    s = make_shape(points)
+    assert sorted(map(tuple, s.given_points.tolist())) == sorted(map(tuple, np.asarray(points, float).tolist()))
+    assert s.user_area == pytest.approx(shapely.Polygon(points).area, rel=1e-12)

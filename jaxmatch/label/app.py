@@ -175,7 +175,7 @@ class LabelSession:
     def _inline(self, shape, name: str) -> int:
         """Add a shape given by the page (drawn or dropped); its label lines hold it inline.
         Returns its id (an existing one when the same shape is there already)."""
-        pts = shape.input_points if shape.input_points is not None else shape.user_points
+        pts = shape.given_points
         spec = {"boundary": [[float(x), float(y)] for x, y in np.asarray(pts, np.float64).tolist()]}
         if shape.n_corners:
             spec["corners"] = [int(c) for c in np.asarray(shape.corners).tolist()]

@@ -685,7 +685,7 @@ def place_match(shape: Shape, annotation: Annotation, catalogue: Catalogue, matc
                 if best is None or key < best[0]:
                     best = (key, pl, u)
         _, pl, u = best  # boundary paths only for the one kept
-        pl = dataclasses.replace(pl, boundary_paths=exact_paths(shape.points, u, pl.xy[pl.mesh.boundary]))
+        pl = dataclasses.replace(pl, boundary_paths=exact_paths(shape.points, u, pl.xy[pl.mesh.boundary], shape.arc_length))
         user = to_user_placement(shape, pl)
     if placements is not None:
         placements[cache_key] = user

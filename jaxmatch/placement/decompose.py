@@ -42,7 +42,7 @@ holes: ``radial`` cuts each hole to the outer loop's convex corners and to its n
 
 def _xy(shape: Shape) -> np.ndarray:
     """``(P, 2)`` the shape's points in user coordinates, exactly as given when known."""
-    return shape.input_points if shape.input_points is not None else shape.user_points
+    return shape.given_points
 
 
 def _rings(shape: Shape) -> list[np.ndarray]:

@@ -183,16 +183,17 @@ arc_lengths = cumulative_length
 """Cumulative arc length of a closed loop (:func:`jaxmatch.geometry.cumulative_length`)."""
 
 
-def boundary_paths(points: np.ndarray, t_aligned: np.ndarray) -> tuple[np.ndarray, ...]:
+def boundary_paths(points: np.ndarray, t_aligned: np.ndarray, cum: np.ndarray | None = None) -> tuple[np.ndarray, ...]:
     """The input polyline between consecutive aligned parameters.
 
-    points: (P, 2) closed ccw loop; t_aligned: (n,) increasing arc-length parameters.
+    points: (P, 2) closed ccw loop; t_aligned: (n,) increasing arc-length parameters; cum: the
+    loop's :func:`arc_lengths` when the caller has it.
     Returns ``n`` arrays ``(k_j, 2)``: from ``t_aligned[j]`` to ``t_aligned[j+1]`` (the last one
     wraps around past ``points[0]`` back to ``t_aligned[0]``), through every polyline vertex in
     between.
     """
     p = np.asarray(points, dtype=np.float64)
-    cum = arc_lengths(p)
+    cum = arc_lengths(p) if cum is None else cum
     per = cum[-1]
     ta = np.asarray(t_aligned, dtype=np.float64).ravel()
     n = ta.shape[0]
@@ -802,10 +803,11 @@ def place(
     )
 
 
-def exact_paths(points: np.ndarray, t_aligned: np.ndarray, bxy: np.ndarray) -> tuple[np.ndarray, ...]:
+def exact_paths(points: np.ndarray, t_aligned: np.ndarray, bxy: np.ndarray,
+                cum: np.ndarray | None = None) -> tuple[np.ndarray, ...]:
     """:func:`boundary_paths` between the parameters ``t_aligned (n,)`` whose end points are
-    exactly the boundary vertex positions ``bxy (n, 2)``."""
-    paths = boundary_paths(points, t_aligned)
+    exactly the boundary vertex positions ``bxy (n, 2)`` (``cum``: as there)."""
+    paths = boundary_paths(points, t_aligned, cum)
     n = len(paths)
     out = []
     for j, p in enumerate(paths):

@@ -350,12 +350,13 @@ def make_layout(points, patches, corners=None, sides=None, *, source: str = "<la
         uniq, cnt = np.unique(ids, return_counts=True)
         if (cnt > 1).any():
             raise InputError(f"patch {p} lists point {int(uniq[cnt > 1][0])} twice", where=source)
-        if not abs(polygon_area(pts[ids])) > tol * extent:
+        area = polygon_area(pts[ids])
+        if not abs(area) > tol * extent:
             raise InputError(f"patch {p} has zero area", where=source)
         poly = shapely.Polygon(pts[ids])
         if not poly.is_valid:
             raise InputError(f"patch {p} crosses or touches itself ({shapely.is_valid_reason(poly)})", where=source)
-        if polygon_area(pts[ids]) < 0:
+        if area < 0:
             ids = ids[::-1]
         pc = corner[ids] & ~_straight(pts[ids])
         cpos = np.flatnonzero(pc)
@@ -777,7 +778,8 @@ def _boundary_loops(layout: Layout, sides: Sides, side_ids, xy: np.ndarray) -> l
             seen.update(int(i) for i in ids[1:-1])
             v = int(ids[-1])
         loops.append(np.concatenate(out))
-    loops.sort(key=lambda lp: -polygon_area(xy[lp]))
+    if len(loops) > 1:
+        loops.sort(key=lambda lp: -polygon_area(xy[lp]))
     return loops
 
 

@@ -45,7 +45,7 @@ from jaxmatch.catalogue.mesh import edges
 from jaxmatch.defaults import QUALITY
 from jaxmatch.errors import InputError, UnmatchableError
 from jaxmatch.placement.milp import LayoutInfeasible, one_patch_sides, solve_counts
-from jaxmatch.placement.embed import (DENSE_TUTTE, Placement, polygon_area, quad_areas, quality, sj_inverted,
+from jaxmatch.placement.embed import (DENSE_TUTTE, Placement, quad_areas, quality, sj_inverted,
                                       smooth_in_frame, smooth_near, tutte)
 from jaxmatch.shape import Shape
 
@@ -185,7 +185,7 @@ def _side_frame(shape: Shape) -> list[tuple[int, bool]]:
 
 def _user_xy(shape: Shape) -> np.ndarray:
     """``(P, 2)`` the shape's points in user coordinates, exactly as given when known."""
-    return shape.input_points if shape.input_points is not None else shape.user_points
+    return shape.given_points
 
 
 def side_polylines(shape: Shape) -> tuple[np.ndarray, ...]:
@@ -1257,7 +1257,7 @@ def _refine_and_place(template: PatchTemplate, mult, *, smooth_iters: int | None
     return RefinedMesh(
         xy=xy, quads=quads, side_vertices=tuple(side_vertices), counts=counts.astype(np.int64), mult=m,
         boundary=loop, scaled_jacobian=sj, inverted=int(inv.sum()), edge_ratio=ratio,
-        region_area=abs(polygon_area(_user_xy(template.shape))), mesh_area=float(quad_areas(xy, quads).sum()),
+        region_area=template.shape.user_area, mesh_area=float(quad_areas(xy, quads).sum()),
         template=template,
     )
 
