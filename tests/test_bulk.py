@@ -236,6 +236,19 @@ def test_pruned_top_k_equals_exhaustive_random(seed, top, per_size, forbidden, s
     assert got.scored + got.pruned + got.unmatchable >= got.total
 
 
+@given(seed=st.integers(0, 2**32 - 1), top=st.integers(1, 6), per_size=st.booleans(), forbidden=st.sampled_from([0.0, 0.3, 0.7]))
+@settings(max_examples=25)
+def test_top_k_of_one_round_equals_exhaustive(seed, top, per_size, forbidden, small_parts):
+    """With no more sequences than one round scores, top_k scores them all without bounds: the
+    same rows as the exhaustive ranking, unmatchable sequences (forbidden types) included."""
+    rng = np.random.default_rng(seed)
+    codes = rng.integers(0, 3, int(rng.integers(8, 17)))
+    model = random_model(seed, forbidden)
+    got = bulk.top_k(codes, small_parts, model, top=top, per_size=per_size, round_size=10**6)
+    assert [r[:6] for r in got.rows] == exhaustive_rows(codes, small_parts, model, top, per_size)
+    assert got.pruned == 0 and got.scored + got.unmatchable >= got.total
+
+
 def test_pruning_skips_most_of_the_catalogue(small_parts, fine):
     codes = annotate(load_shape(ROOT / "examples" / "lshape.json"), 24).codes
     got = bulk.top_k(codes, small_parts, fine, top=1, round_size=4)

@@ -161,11 +161,20 @@ edges of about the size) against each side's deviation from ``length / size`` (i
 # the user's sides
 
 
-def _side_frame(shape: Shape) -> list[tuple[int, bool]]:
+def _side_frame(shape: Shape) -> tuple[tuple[int, bool], ...]:
     """For each user side ``i``: ``(j, reversed)``, the ccw side ``j`` of ``shape`` (from
-    ``shape.corners[j]`` to ``corners[j + 1]``) it is, and whether the user runs it backwards.
+    ``shape.corners[j]`` to ``corners[j + 1]``) it is, and whether the user runs it backwards
+    (worked out once per shape object and kept on it: placement asks for every template).
 
     Raises :class:`InputError` when explicit corners are not listed in boundary order."""
+    frame = shape.__dict__.get("_side_frame")
+    if frame is None:
+        frame = shape.__dict__["_side_frame"] = tuple(_make_side_frame(shape))
+    return frame
+
+
+def _make_side_frame(shape: Shape) -> list[tuple[int, bool]]:
+    """:func:`_side_frame`, computed."""
     n = shape.n_corners
     if n == 0:
         return [(0, False)]

@@ -515,6 +515,21 @@ def top_k(
         if progress is not None:
             progress(st["done"], total)
 
+    fits = [p for p in parts if p.n <= codes.shape[0]]
+    if prune and sum(len(p.groups.seqs) for p in fits) <= max(int(round_size), 1):
+        # the first round would score every sequence whatever the bounds (no cut-off yet): score
+        # them without bounds; an unmatchable one (a vertex with no allowed point type) scores -inf
+        for p in parts:
+            if p.n > codes.shape[0]:  # longer than the shape: unmatchable, never scored
+                st["unmatchable"] += len(p.ids)
+                st["done"] += len(p.ids)
+        for p in fits:
+            score_some(p, np.arange(len(p.groups.seqs)), (min(block_size(p.n), batch), 1))
+        if progress is not None:
+            progress(total, total)
+        return TopK(st["rows"], total, st["scored"], total - st["done"], st["unmatchable"],
+                    sum(len(p.groups.seqs) for p in parts), st["seq_scored"])
+
     bounds = part_bounds(parts, codes, weights)
     hopeless = [b <= NEG / 2 for b in bounds]  # n > m, or a vertex with no allowed point type
     for p, h in zip(parts, hopeless):
