@@ -132,7 +132,7 @@ def spread_alignment(t: np.ndarray, perimeter: float, codes: np.ndarray, alignme
     for j in range(1, n):
         tot = D[:, None, :] + gap2[None, :, :]  # (S, i, i')
         arg = np.argmin(tot, axis=2)
-        D = np.take_along_axis(tot, arg[..., None], axis=2)[..., 0]
+        D = tot.min(axis=2)  # the values at arg (no NaN here: sums of finite gaps and inf)
         D[:, ~ok[j]] = inf
         back[j] = arg
     closing = (perimeter - tt[None, :] + tt[starts][:, None]) ** 2

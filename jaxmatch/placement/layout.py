@@ -513,7 +513,9 @@ def layout_sides(layout: Layout) -> Sides:
         if len(us) > 2:  # cannot happen after _check_segments
             raise InputError(f"side {names[sid]} is used by {len(us)} patches", where=layout.source)
         u[sid, : len(us)] = us
-    lengths = np.array([float(np.linalg.norm(np.diff(pts[c], axis=0), axis=1).sum()) for c in chains])
+    seg = np.linalg.norm(np.diff(pts[np.concatenate(chains)], axis=0), axis=1)  # the chains' segments, end to end
+    ends = np.cumsum([len(c) for c in chains])
+    lengths = np.array([float(seg[a:b - 1].sum()) for a, b in zip(np.concatenate([[0], ends[:-1]]), ends)])
     return Sides(tuple(chains), names, tuple(patch_sides), tuple(patch_rev), u, lengths)
 
 
