@@ -116,6 +116,24 @@ def test_spread_alignment_keeps_codes_and_matches_brute_force():
         assert gap_cost(t, per, out) == pytest.approx(brute_spread(t, per, codes, al))
 
 
+@pytest.mark.parametrize("codes, al", [([1, 0, 0, 1, 0, 1, 0, 0, 1, 0], [0, 3, 5, 8]),  # the four corners of a quad patch
+                                       ([1, 0, 2, 0, 1, 0], [0, 1, 2, 3, 4, 5]),  # every point
+                                       ([2, 0, 1, 0, 0, 1], [0, 2, 4, 5])])  # not forced: three s points, one s vertex
+def test_spread_alignment_when_the_codes_leave_one_alignment(codes, al):
+    """When a code's points are as many as the vertices that want it, for every wanted code, the
+    alignment is the only one with those codes: returned as given (brute force agrees)."""
+    codes, al = np.array(codes), np.array(al)
+    t = np.cumsum(np.r_[0.0, np.linspace(1.0, 2.0, len(codes) - 1)])
+    per = float(t[-1] + 1.5)
+    want = codes[al]
+    forced = all(np.sum(codes == v) == np.sum(want == v) for v in set(want.tolist()))
+    out = spread_alignment(t, per, codes, al)
+    assert np.array_equal(codes[out], want)
+    assert gap_cost(t, per, out) == pytest.approx(brute_spread(t, per, codes, al))
+    if forced:
+        assert out.tolist() == al.tolist()
+
+
 def test_spread_alignment_single_vertex_unchanged():
     assert spread_alignment(np.arange(5.0), 5.0, np.zeros(5, int), np.array([3])).tolist() == [3]
 

@@ -116,6 +116,8 @@ def spread_alignment(t: np.ndarray, perimeter: float, codes: np.ndarray, alignme
     if n < 2:
         return al.copy()
     want = c[al]  # (n,) code of each vertex's point
+    if np.array_equal(np.bincount(want, minlength=3), np.bincount(c[np.isin(c, want)], minlength=3)):
+        return al.copy()  # as many points of each wanted code as vertices want it: no other alignment
     ok = c[None, :] == want[:, None]  # (n, m) allowed points per vertex
     starts = np.flatnonzero(ok[0])
     if starts.size * m * m * n > SPREAD_MAX_WORK:
@@ -450,7 +452,7 @@ def corner_boundary(shape: Shape, annotation: Annotation, alignment: np.ndarray,
             u[js] = ta + (tb - ta) * (np.arange(1, r + 1) / (r + 1))
             if r and P.size > 1 and _straight(pts, cum, ta, tb, loop3):
                 groups.append((int(ja), int(jb), js.astype(np.int64)))
-    xy = shape_point_at(pts, u, cum)
+    xy = shape_point_at(pts, u, cum) if len(pin) < n else np.empty((n, 2))  # (every vertex pinned: all set below)
     for j, c in pin.items():
         xy[j] = annotation.positions[c]  # corners exactly
     return Boundary(u, xy, tuple(groups), missed_corners(annotation, xy))

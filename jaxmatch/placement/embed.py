@@ -763,9 +763,12 @@ def place(
     nb = (bxy - offset) / scale
     groups = [(int(ja), int(jb), np.asarray(js, np.int64)) for ja, jb, js in slide_groups if len(js)]
     slides = tuple(Slide(nb[ja], nb[jb], loop[js]) for ja, jb, js in groups)
-    x0 = tutte(quads, V, loop, nb)
-    xn = smooth(x0, quads, loop, iters=smooth_iters, slides=slides)
-    xy = to_user(xn, scale, offset)
+    if V == loop.shape[0] and not slides:  # nothing can move: every vertex is a boundary vertex
+        xy = np.empty((V, 2))
+    else:
+        x0 = tutte(quads, V, loop, nb)
+        xn = smooth(x0, quads, loop, iters=smooth_iters, slides=slides)
+        xy = to_user(xn, scale, offset)
     for ja, jb, js in groups:  # slid vertices: exactly on the user's segment
         d = nb[jb] - nb[ja]
         u = (xn[loop[js]] - nb[ja]) @ d / float(d @ d)
