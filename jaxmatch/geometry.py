@@ -40,17 +40,24 @@ def _loop(points) -> np.ndarray:
     return p
 
 
-def signed_area(points) -> float:
+def ring_is_simple(points) -> bool:
+    """Whether the closed loop ``(P, 2)``, ``P >= 3``, does not cross or touch itself
+    (``shapely.is_simple`` of its ring; the same answer for the loop reversed)."""
+    return bool(shapely.is_simple(shapely.LinearRing(_loop(points))))
+
+
+def signed_area(points, *, simple: bool | None = None) -> float:
     """Area enclosed by the loop ``(P, 2)``; positive when counter-clockwise (shoelace sign).
 
     For a self-crossing loop this is the shoelace sum (lobes of opposite turn cancel), as the
-    orientation of such a loop is not defined otherwise.
+    orientation of such a loop is not defined otherwise. ``simple``: :func:`ring_is_simple` of
+    the loop when the caller has it.
     """
     p = _loop(points)
     if p.shape[0] < 3:
         return 0.0
     ring = shapely.LinearRing(p)
-    if shapely.is_simple(ring):
+    if shapely.is_simple(ring) if simple is None else simple:
         area = float(shapely.Polygon(ring).area)
         return area if shapely.is_ccw(ring) else -area
     q = np.roll(p, -1, axis=0)  # GEOS has no signed area for a crossing ring
@@ -123,7 +130,7 @@ def sub_polyline(points, t0: float, t1: float, cum: np.ndarray | None = None) ->
     return np.concatenate([ends[:1], inner, ends[1:]])
 
 
-def first_crossing(points, tol: float = 0.0) -> tuple[int, int] | None:
+def first_crossing(points, tol: float = 0.0, *, simple: bool | None = None) -> tuple[int, int] | None:
     """First pair ``(i, j)``, ``i < j``, of loop segments ``i -> i+1`` and ``j -> j+1`` that
     meet where they must not, or None when the loop is simple.
 
@@ -134,11 +141,12 @@ def first_crossing(points, tol: float = 0.0) -> tuple[int, int] | None:
     the pair is found with an STR-tree query and GEOS's ``intersects`` predicate. ``tol``
     (length): a vertex nearer than it to a segment not its own touches it, so that a vertex
     exactly on another side is refused whatever rounding moving or scaling it brings.
+    ``simple``: :func:`ring_is_simple` of the loop when the caller has it.
     """
     p = _loop(points)
     n = p.shape[0]
     segs = shapely.linestrings(np.stack([p, np.roll(p, -1, axis=0)], axis=1))
-    if n >= 3 and shapely.is_simple(shapely.LinearRing(p)):  # GEOS's noding: fast, also on bad cases
+    if n >= 3 and (shapely.is_simple(shapely.LinearRing(p)) if simple is None else simple):  # GEOS's noding: fast, also on bad cases
         if not tol > 0:
             return None
         v, s = shapely.STRtree(segs).query(shapely.points(p), predicate="dwithin", distance=tol)

@@ -53,7 +53,7 @@ from typing import NamedTuple
 import numpy as np
 
 from jaxmatch.errors import InputError
-from jaxmatch.geometry import cumulative_length, first_crossing, point_at, signed_area, turning_angles
+from jaxmatch.geometry import cumulative_length, first_crossing, point_at, ring_is_simple, signed_area, turning_angles
 
 __all__ = [
     "scale_corners",
@@ -503,12 +503,13 @@ def _make_shape(points, corners, angle: float, source: str) -> Shape:
         raise InputError("coordinates cannot be normalised (extent too small)", where=source)
     repeated(unit, _TINY)
 
-    area = signed_area(unit)
+    simple = ring_is_simple(unit)  # (n >= 3 here) the same for the loop reversed below
+    area = signed_area(unit, simple=simple)
     index = np.arange(n)  # input index of each current point
     if area < 0:  # clockwise: reverse keeping point 0 first
         index = (-index) % n
         unit = unit[index]
-    hit = first_crossing(unit, tol=_TINY)
+    hit = first_crossing(unit, tol=_TINY, simple=simple)
     if not (abs(area) > _TINY) and (hit is None or _collinear(unit)):
         raise InputError("boundary has zero area (all points on one line)" if _collinear(unit) else "boundary has zero area", where=source)
     if hit is not None:

@@ -8,7 +8,7 @@ from itertools import combinations
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from jaxmatch.geometry import cumulative_length, first_crossing, point_at, signed_area, sub_polyline
@@ -105,3 +105,17 @@ def test_a_vertex_on_another_side_is_refused_at_every_scale(scale, shift):
     with pytest.raises(InputError, match="touches itself"):
         make_shape(pts * scale + np.array(shift) * 14 * scale)
     make_shape(np.array([[-4, 13], [-2, 8], [3, 11.5], [10, 11]]) * scale)  # just inside: a simple loop
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.tuples(st.integers(0, 6), st.integers(0, 6)), min_size=3, max_size=9))
+def test_ring_is_simple_ignores_orientation(pts):
+    """``ring_is_simple`` answers the same for a loop and for it reversed from its first point
+    (make_shape asks once, before it orients the loop), and agrees with first_crossing."""
+    from jaxmatch.geometry import first_crossing, ring_is_simple
+
+    p = np.asarray(pts, np.float64) * 0.37
+    assume(not np.any(np.all(np.roll(p, -1, axis=0) == p, axis=1)))  # no repeated consecutive points
+    rev = p[(-np.arange(len(p))) % len(p)]
+    assert ring_is_simple(p) == ring_is_simple(rev)
+    assert (first_crossing(rev, simple=ring_is_simple(p)) is None) == (first_crossing(rev) is None)
