@@ -684,3 +684,27 @@ def test_conforming_search_through_the_lazy_templates_is_the_plain_search(cat, l
     np.testing.assert_array_equal(a.mesh.counts, b.mesh.counts)
     np.testing.assert_array_equal(a.mesh.xy, b.mesh.xy)
     R.clear_template_cache(cat)
+
+
+@pytest.mark.parametrize("reflected", [False, True])
+def test_kept_chord_topology_gives_the_chords_of_a_fresh_count(cat, reflected):
+    """The chord topology kept on a catalogue mesh gives ``_chords`` the answer it computes
+    from scratch, for every rotation and numbering order, and it cannot be written to."""
+    from jaxmatch.placement.embed import oriented_boundary
+
+    rng = np.random.default_rng(3)
+    ids = [i for b in cat.buckets([0, 1, 2, 3]) for i in b.ids.tolist()]
+    for mesh_id in rng.choice(ids, 12, replace=False).tolist():
+        mesh = cat.mesh(mesh_id)
+        for rotation in range(0, len(mesh.boundary), 3):
+            om, loop = oriented_boundary(mesh, rotation, reflected)
+            lp = np.asarray(loop, np.int64)
+            first = [(int(a), int(b)) for a, b in zip(lp, np.roll(lp, -1))]
+            first = [first[k] for k in rng.permutation(len(first))]
+            fresh = R._chords(om.quads, lp, first)
+            kept = R._chords(om.quads, lp, first, R._kept_topology(mesh, reflected))
+            for a, b in zip(fresh, kept):
+                assert np.array_equal(a, b)
+    topo = R._kept_topology(cat.mesh(ids[-1]), reflected)
+    with pytest.raises(ValueError):
+        topo.edges[0, 0] = 0

@@ -328,39 +328,80 @@ def _components(n: int, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.asarray([root(x) for x in range(int(n))], np.int64)
 
 
-def _chords(quads: np.ndarray, boundary: np.ndarray, first_edges: Sequence[tuple[int, int]]):
-    """Chords of a quad mesh of a disk.
+class _ChordTopology(NamedTuple):
+    """What :func:`_chords` needs of a quad mesh whatever the numbering: ``edges (E, 2) int64``
+    (sorted pairs, each once), ``key (E,)`` their sorted codes ``a * V + b``, ``V``, ``quad_edges
+    (F, 4)`` each quad's edge ids, ``label (E,)`` each edge's chord in ``0 .. n - 1`` (by smallest
+    root edge) and ``n``."""
 
-    quads: (F, 4) ccw; first_edges: boundary edges ``(u, w)`` in the order chords should be
-    numbered by (a chord's number is the position of its first boundary edge in this order;
-    closed chords follow, by their smallest edge). Returns ``(edge_list (E, 2), edge_chord
-    (E,), quad_chords (F, 2), n_chords)``."""
+    edges: np.ndarray
+    key: np.ndarray
+    V: int
+    quad_edges: np.ndarray
+    label: np.ndarray
+    n: int
+
+
+def _chord_topology(quads: np.ndarray) -> _ChordTopology:
+    """:class:`_ChordTopology` of ``quads (F, 4)``."""
     q = np.asarray(quads, np.int64)
     e = edges(q).astype(np.int64)
     V = int(q.max()) + 1
     key = e[:, 0] * V + e[:, 1]
-
-    def edge_id(a, b):
-        lo, hi = np.minimum(a, b), np.maximum(a, b)
-        return np.searchsorted(key, lo * V + hi)
-
-    qe = np.stack([edge_id(q[:, k], q[:, (k + 1) % 4]) for k in range(4)], axis=1)  # (F, 4)
-    E = e.shape[0]
-    label = _components(E, np.concatenate([qe[:, 0], qe[:, 1]]), np.concatenate([qe[:, 2], qe[:, 3]]))
+    qe = np.stack([_edge_id(key, V, q[:, k], q[:, (k + 1) % 4]) for k in range(4)], axis=1)  # (F, 4)
+    label = _components(e.shape[0], np.concatenate([qe[:, 0], qe[:, 1]]), np.concatenate([qe[:, 2], qe[:, 3]]))
     roots, label = np.unique(label, return_inverse=True)  # components 0 .. ncomp - 1
-    ncomp = int(roots.size)
+    return _ChordTopology(e, key, V, qe, label, int(roots.size))
+
+
+def _edge_id(key: np.ndarray, V: int, a, b):
+    """Ids of the edges ``a-b`` (either order) among the sorted edge codes ``key``."""
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    return np.searchsorted(key, lo * V + hi)
+
+
+def _kept_topology(mesh, reflected: bool) -> _ChordTopology:
+    """:func:`_chord_topology` of catalogue ``mesh`` as matched (quads mirrored when
+    ``reflected``, as :func:`~jaxmatch.placement.embed.oriented_boundary` does; a rotation keeps
+    the quads), kept on the mesh object, read-only, when its quads are read-only (the catalogue's:
+    a template scan fits a hundred matches of a few dozen meshes)."""
+    kept = mesh.__dict__.get("_chord_topology")
+    if kept is not None and kept[bool(reflected)] is not None:
+        return kept[bool(reflected)]
+    q = np.asarray(mesh.quads)
+    topo = _chord_topology(q[:, ::-1] if reflected else q)
+    if not q.flags.writeable:
+        for a in (topo.edges, topo.key, topo.quad_edges, topo.label):
+            a.setflags(write=False)
+        kept = list(kept) if kept is not None else [None, None]
+        kept[bool(reflected)] = topo
+        object.__setattr__(mesh, "_chord_topology", tuple(kept))
+    return topo
+
+
+def _chords(quads: np.ndarray, boundary: np.ndarray, first_edges: Sequence[tuple[int, int]],
+            topology: _ChordTopology | None = None):
+    """Chords of a quad mesh of a disk.
+
+    quads: (F, 4) ccw; first_edges: boundary edges ``(u, w)`` in the order chords should be
+    numbered by (a chord's number is the position of its first boundary edge in this order;
+    closed chords follow, by their smallest edge); topology: :func:`_chord_topology` of
+    ``quads`` when the caller has it. Returns ``(edge_list (E, 2), edge_chord (E,), quad_chords
+    (F, 2), n_chords)``."""
+    t = _chord_topology(quads) if topology is None else topology
+    E = t.edges.shape[0]
     # renumber: by first boundary edge along the sides, then the rest by smallest edge
-    rename = np.full(ncomp, -1, np.int64)
+    rename = np.full(t.n, -1, np.int64)
     nxt = 0
     fe = np.asarray(first_edges, np.int64).reshape(-1, 2)
-    order = np.concatenate([edge_id(fe[:, 0], fe[:, 1]), np.arange(E)])
+    order = np.concatenate([_edge_id(t.key, t.V, fe[:, 0], fe[:, 1]), np.arange(E)])
     for eid in order.tolist():
-        c = label[eid]
+        c = t.label[eid]
         if rename[c] < 0:
             rename[c] = nxt
             nxt += 1
-    chord = rename[label]
-    return e, chord, np.stack([chord[qe[:, 0]], chord[qe[:, 1]]], axis=1), int(ncomp)
+    chord = rename[t.label]
+    return t.edges, chord, np.stack([chord[t.quad_edges[:, 0]], chord[t.quad_edges[:, 1]]], axis=1), int(t.n)
 
 
 def _corner_positions(shape: Shape, annotation, alignment: np.ndarray) -> np.ndarray | None:
@@ -404,13 +445,9 @@ def _fit(shape: Shape, annotation, match: "Match", catalogue: "Catalogue", rank:
             path = loop[np.arange(a, stop + 1) % nb]
             paths.append(path[::-1].copy() if rev else path)
     first = [(int(p[k]), int(p[k + 1])) for p in paths for k in range(p.shape[0] - 1)]
-    e, chord, qc, nc = _chords(om.quads, loop, first)
-    V = int(np.asarray(om.quads).max()) + 1
-    key = e[:, 0] * V + e[:, 1]
-    side_chords = []
-    for p in paths:
-        lo, hi = np.minimum(p[:-1], p[1:]), np.maximum(p[:-1], p[1:])
-        side_chords.append(chord[np.searchsorted(key, lo * V + hi)].astype(np.int64))
+    topo = _kept_topology(catalogue.mesh(match.mesh_id), match.reflected)
+    e, chord, qc, nc = _chords(om.quads, loop, first, topo)
+    side_chords = [chord[_edge_id(topo.key, topo.V, p[:-1], p[1:])].astype(np.int64) for p in paths]
     return PatchTemplate(shape, match.mesh_id, tuple(side_chords), nc, match, rank, None, qc, e, chord,
                          tuple(p.astype(np.int64) for p in paths))
 
