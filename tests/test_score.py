@@ -490,3 +490,22 @@ def test_a_second_backend_plugs_into_the_exact_host(skip):
     for s, codes in enumerate(shapes):
         expect = [reference.dp_reference(codes, v, model.table_inf(), model.skip_inf()) for v in vals]
         np.testing.assert_array_equal(got[s].max(axis=1), np.array(expect, np.float32))
+
+
+def test_lazy_matches_head_without_making_the_match():
+    """``LazyMatches.head(i)`` names the i-th match (in a reordered view too) as the made match
+    does, and makes nothing; ``match_head`` reads a plain list the same way."""
+    from jaxmatch.scoring.rank import LazyMatches, Match, match_head
+
+    made = []
+
+    def make(row):
+        made.append(row)
+        return Match(row[3], row[1], row[2], row[0], row[4], row[5], np.arange(row[2]), np.zeros((row[2], 3)), 0.0, 0.0)
+
+    rows = [(3.0, 1, 6, "b", 2, True, None), (5.0, 0, 4, "a", 0, False, None), (4.0, 2, 8, "c", 5, False, None)]
+    lm = LazyMatches(rows, make).reordered(lambda r: -r[0])
+    heads = [lm.head(i) for i in range(len(lm))]
+    assert not made and heads == [("a", 0, 0, False), ("c", 2, 5, False), ("b", 1, 2, True)]
+    assert heads == [(m.mesh_id, m.internal_vertices, m.rotation, m.reflected) for m in lm]
+    assert [match_head(list(lm), i) for i in range(3)] == heads

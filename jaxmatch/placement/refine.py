@@ -529,16 +529,20 @@ def _iter_templates(shape, catalogue, lattice, *, limit: int, internal=None, rej
     size. ``check(unplaced template)``: a reason to skip it before placing (None: go on).
     Skipped candidates are appended to ``rejected`` as ``(rank, mesh_id, reason)``. ``memo``:
     fits and placements shared with other walks of the shape (without ``check``)."""
+    from jaxmatch.scoring.rank import match_head
+
     taken: dict[int, int] = {}
     seen: set = set()
     for scan in SCAN_PER_LIMIT:
         if scan > SCAN_PER_LIMIT[0] and sum(taken.values()) >= limit:
             break  # the deeper scan only when the first found fewer than `limit` templates
         ann, ms = _candidates(shape, catalogue, lattice, limit=scan * max(int(limit), 1), internal=internal)
-        for r, m in enumerate(ms, start=1):
-            key = (m.mesh_id, m.rotation, m.reflected)
-            if taken.get(m.internal_vertices, 0) >= limit or key in seen:
+        for r in range(1, len(ms) + 1):
+            mid, k, rot, refl = match_head(ms, r - 1)  # skipped ones are not aligned
+            key = (mid, rot, refl)
+            if taken.get(k, 0) >= limit or key in seen:
                 continue
+            m = ms[r - 1]
             seen.add(key)
             if memo is not None and check is None:
                 t, reason = memo.place(shape, ann, m, catalogue, r)
@@ -561,6 +565,8 @@ def _iter_checked(shape, catalogue, lattice, *, limit: int, internal, check: Cal
     (the per-size ``limit``, and whether the deeper scan runs); until then it waits in its
     size's queue. The refused are appended to ``passed`` as ``(rank, mesh_id, reason)`` when
     met (also those that, placed, would have folded: not templates at all)."""
+    from jaxmatch.scoring.rank import match_head
+
     limit = int(limit)
     sure: dict[int, int] = {}  # per size: candidates known to be templates
     waiting: dict[int, list] = {}  # per size: refused candidates not yet placed, in order
@@ -593,11 +599,12 @@ def _iter_checked(shape, catalogue, lattice, *, limit: int, internal, check: Cal
         if scan > SCAN_PER_LIMIT[0] and at_least_limit():
             break
         ann, ms = _candidates(shape, catalogue, lattice, limit=scan * max(limit, 1), internal=internal)
-        for r, m in enumerate(ms, start=1):
-            key = (m.mesh_id, m.rotation, m.reflected)
-            k = m.internal_vertices
+        for r in range(1, len(ms) + 1):
+            mid, k, rot, refl = match_head(ms, r - 1)  # skipped ones are not aligned
+            key = (mid, rot, refl)
             if key in seen or sure.get(k, 0) >= limit:
                 continue
+            m = ms[r - 1]
             t = memo.fit(shape, ann, m, catalogue, r)
             if t is None:  # leaves a corner without a vertex: never a template
                 seen.add(key)
@@ -632,6 +639,8 @@ def _iter_by_size(shape, catalogue, lattice, *, limit: int, internal: Sequence[i
     scan of :data:`SCAN_PER_LIMIT` when all sizes kept fewer than ``limit`` in all. A size no
     catalogue mesh can match is passed over, and so is one whose boundary loops are all shorter
     than the shape's corners (none of its meshes could keep every corner: not ranked at all)."""
+    from jaxmatch.scoring.rank import match_head
+
     kept: dict[int, int] = {}
     seen: set = set()
     for scan in SCAN_PER_LIMIT:
@@ -644,10 +653,12 @@ def _iter_by_size(shape, catalogue, lattice, *, limit: int, internal: Sequence[i
                 ann, ms = _candidates(shape, catalogue, lattice, limit=scan * max(int(limit), 1), internal=[k])
             except UnmatchableError:
                 continue
-            for r, m in enumerate(ms, start=1):
-                key = (m.mesh_id, m.rotation, m.reflected)
+            for r in range(1, len(ms) + 1):
+                mid, _, rot, refl = match_head(ms, r - 1)  # skipped ones are not aligned
+                key = (mid, rot, refl)
                 if key in seen:
                     continue
+                m = ms[r - 1]
                 seen.add(key)
                 t, reason = _try_candidate(shape, ann, m, catalogue, r)
                 if reason is None:

@@ -100,6 +100,12 @@ class LazyMatches(Sequence):
     def __len__(self) -> int:
         return len(self.rows)
 
+    def head(self, i: int) -> tuple[str, int, int, bool]:
+        """``(mesh_id, internal_vertices, rotation, reflected)`` of the ``i``-th match (``i >= 0``),
+        without making it (a scan skips most matches on these alone)."""
+        r = self.rows[i if self._order is None else self._order[i]]
+        return r[3], r[1], r[4], r[5]
+
     def __getitem__(self, i):
         if isinstance(i, slice):
             return [self[j] for j in range(*i.indices(len(self)))]
@@ -110,6 +116,15 @@ class LazyMatches(Sequence):
             m = self._made[j] = self._make(self.rows[j])
         return m
 
+
+
+def match_head(matches: Sequence[Match], i: int) -> tuple[str, int, int, bool]:
+    """``(mesh_id, internal_vertices, rotation, reflected)`` of ``matches[i]`` (``i >= 0``): of
+    a :class:`LazyMatches` without making the match."""
+    if isinstance(matches, LazyMatches):
+        return matches.head(i)
+    m = matches[i]
+    return m.mesh_id, m.internal_vertices, m.rotation, m.reflected
 
 RANK_MEMO_SIZE = 4096
 """Rankings kept per catalogue by :func:`rank` (per size, ``"id"`` ties, pruned: the template
