@@ -979,16 +979,17 @@ def _reachable(A: np.ndarray, target: np.ndarray) -> bool | None:
         return None
     reach = np.zeros(dims, bool)
     reach[(0,) * len(dims)] = True
-    for a in np.asarray(A, np.int64).T:
-        if not a.any():
-            continue
-        step = a.copy()
-        while np.all(step <= t):
-            dst = tuple(slice(int(k), None) for k in step)
-            src = tuple(slice(0, d - int(k)) for d, k in zip(dims, step))
+    goal = tuple(t.tolist())
+    for a in np.asarray(A, np.int64).T.tolist():  # Python ints: a few steps of tiny boxes
+        step = a
+        while any(step) and all(s <= g for s, g in zip(step, goal)):
+            dst = tuple(slice(s, None) for s in step)
+            src = tuple(slice(0, d - s) for d, s in zip(dims, step))
             reach[dst] |= reach[src]
-            step = 2 * step
-    return bool(reach[tuple(t.tolist())])
+            step = [2 * s for s in step]
+        if reach[goal]:  # marks are only ever added
+            return True
+    return bool(reach[goal])
 
 
 def feasible(template: PatchTemplate, counts) -> bool:
