@@ -724,3 +724,30 @@ def test_c_and_numba_alignment_kernels_agree(seed):
         args = (st.c, seqs, st.table, st.between, st.prefix, st.suffix, st.gq, st.tt, per, st.unit, MAX_TIED_ALIGNMENTS)
         for x, y in zip(kernels.candidates(*args), _numba_spread.candidates(*args)):
             np.testing.assert_array_equal(x, y)
+
+
+@pytest.mark.skipif(__import__("jaxmatch.placement.kernels", fromlist=["BACKEND"]).BACKEND != "c",
+                    reason="the C placement library is not built")
+@settings(max_examples=300, deadline=None)
+@given(st.integers(0, 2**32 - 1))
+def test_spread_alignment_in_c_equals_numpy(seed):
+    """The compiled spread programme gives numpy's alignment, ties included (integer
+    parameters make many)."""
+    from jaxmatch.placement import kernels
+
+    rng = np.random.default_rng(seed)
+    m = int(rng.integers(3, 14))
+    n = int(rng.integers(2, min(m, 7) + 1))
+    t = np.cumsum(rng.integers(1, 4, m)).astype(float) if seed % 2 else np.sort(rng.uniform(0, 10, m))
+    t -= t[0]
+    per = float(t[-1] + rng.integers(1, 4))
+    codes = rng.choice(3, m, p=[0.6, 0.25, 0.15])
+    al = np.sort(rng.choice(m, n, replace=False))
+    c_out = spread_alignment(t, per, codes, al)
+    backend = kernels.BACKEND
+    try:
+        kernels.BACKEND = "numpy"
+        np_out = spread_alignment(t, per, codes, al)
+    finally:
+        kernels.BACKEND = backend
+    assert c_out.tolist() == np_out.tolist()

@@ -702,6 +702,62 @@ void jm_sj_inverted(const double *xy, const i64 *quads, i64 F, double *sj, uint8
 }
 
 /* ------------------------------------------------------------------------------------------ */
+/* choose.spread_alignment's dynamic programme: its numpy operations in the same order */
+
+/* tt (m,): the points' arc-length parameters; ok (n, m): vertex j may take point i; starts (S,):
+ * the first vertex's points. D[s][i] = 0 at starts[s], inf elsewhere; for j = 1 .. n-1:
+ * D'[s][i] = min over i' of D[s][i'] + g(i, i') with g = (tt[i] - tt[i'])^2 for i' < i, inf
+ * otherwise (the first i' on ties, as np.argmin; i' = 0 when every term is inf), set to inf where
+ * !ok[j][i]. Then total[s][i] = D[s][i] + ((per - tt[i]) + tt[starts[s]])^2, its first minimum
+ * over (s, i) in row-major order, and the walk back. Returns 0 with out (n,) filled, 1 when the
+ * minimum is not finite (the caller keeps its alignment), -1 out of memory. */
+int jm_spread(const double *tt, i64 m, double per, const uint8_t *ok, i64 n, const i64 *starts, i64 S, i64 *out) {
+    const double inf = INFINITY;
+    double *D = malloc(sizeof(double) * (size_t)(2 * S * m));
+    int32_t *back = malloc(sizeof(int32_t) * (size_t)(n * S * m));
+    if (!D || !back) { free(D); free(back); return -1; }
+    double *Dn = D + S * m;
+    for (i64 k = 0; k < S * m; k++) D[k] = inf;
+    for (i64 s = 0; s < S; s++) D[s * m + starts[s]] = 0.0;
+    for (i64 j = 1; j < n; j++) {
+        for (i64 s = 0; s < S; s++) {
+            const double *d = D + s * m;
+            for (i64 i = 0; i < m; i++) {
+                double best = d[0] + (0 < i ? (tt[i] - tt[0]) * (tt[i] - tt[0]) : inf);
+                i64 arg = 0;
+                for (i64 q = 1; q < m; q++) {
+                    double v = d[q] + (q < i ? (tt[i] - tt[q]) * (tt[i] - tt[q]) : inf);
+                    if (v < best) { best = v; arg = q; }
+                }
+                back[(j * S + s) * m + i] = (int32_t)arg;
+                Dn[s * m + i] = ok[j * m + i] ? best : inf;
+            }
+        }
+        double *tmp = D; D = Dn; Dn = tmp;
+    }
+    double best = inf;
+    i64 flat = 0;
+    for (i64 s = 0; s < S; s++)
+        for (i64 i = 0; i < m; i++) {
+            double c = (per - tt[i]) + tt[starts[s]];
+            double v = D[s * m + i] + c * c;
+            if ((s == 0 && i == 0) || v < best) { best = v; flat = s * m + i; }
+        }
+    int rc = 1;
+    if (isfinite(best)) {
+        i64 s = flat / m, i = flat % m;
+        for (i64 j = n - 1; j >= 0; j--) {
+            out[j] = i;
+            if (j > 0) i = back[(j * S + s) * m + i];
+        }
+        rc = 0;
+    }
+    free(D < Dn ? D : Dn);
+    free(back);
+    return rc;
+}
+
+/* ------------------------------------------------------------------------------------------ */
 
 static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_ckernels",
                                     "jaxmatch's compiled placement kernels (called through ctypes)", -1, NULL};

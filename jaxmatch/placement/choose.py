@@ -124,6 +124,11 @@ def spread_alignment(t: np.ndarray, perimeter: float, codes: np.ndarray, alignme
         keep = max(SPREAD_MAX_WORK // (m * m * n), 1)
         starts = starts[np.argsort(np.abs(starts - al[0]), kind="stable")[:keep]]
         starts = np.union1d(starts, al[:1])
+    from jaxmatch.placement import kernels
+
+    if kernels.BACKEND == "c":  # the same programme compiled (the same doubles, the same ties)
+        out = kernels.spread(tt, float(perimeter), ok, starts)
+        return al.copy() if out is None else out
     S = starts.size
     inf = np.inf
     gap2 = (tt[:, None] - tt[None, :]) ** 2  # [i, i']

@@ -19,6 +19,8 @@ Functions (arrays C-contiguous; ``float64`` or ``int64``):
 * :func:`orientation_utilities` ``(codes (m,), vals (n,), table (3, 64), skip (3,)) -> (2n,)``;
 * :func:`sj_inverted` ``(xy (V, 2), quads (F, 4)) -> (sj (F,), inverted (F,) bool)``: C only (no numba
   version: ``embed.sj_inverted`` computes it in numpy when the library is absent, the same values);
+* :func:`spread` ``(tt (m,), perimeter, ok (n, m) bool, starts (S,)) -> (n,) int64 or None``:
+  ``choose.spread_alignment``'s programme, C only (numpy there when the library is absent);
 * :func:`candidates` ``(codes, seqs (O, n), table, between (m, m), prefix, suffix (m,), gq (m, m),
   tt (m,), perimeter, unit, limit) -> (utility (O,), gap (O,), orientation (K,), alignments (K, n))``.
 """
@@ -66,6 +68,7 @@ def _load_c():
         "jm_orientation_utilities": (None, [P, L, P, L, P, P, P]),
         "jm_candidates": (L, [P, L, P, L, L, P, P, P, P, P, P, D, D, L, P, P, P, P]),
         "jm_sj_inverted": (None, [P, P, L, P, P]),
+        "jm_spread": (ctypes.c_int, [P, L, D, P, L, P, L, P]),
     }
     for name, (res, args) in sig.items():
         fn = getattr(lib, name)
@@ -153,6 +156,17 @@ if _C is not None:
         if K < 0:
             raise MemoryError("placement kernel: out of memory")
         return util, gap, own[:K].copy(), A[:K].copy()
+
+    def spread(tt, perimeter, ok, starts):
+        """``choose.spread_alignment``'s programme: ``(n,) int64``, or None when its minimum is
+        not finite."""
+        tt, st = _f(tt), _i(starts)
+        okb = np.ascontiguousarray(ok, dtype=np.uint8)
+        out = np.empty(okb.shape[0], np.int64)
+        rc = _C.jm_spread(_p(tt), tt.shape[0], float(perimeter), _p(okb), okb.shape[0], _p(st), st.shape[0], _p(out))
+        if rc < 0:
+            raise MemoryError("placement kernel: out of memory")
+        return out if rc == 0 else None
 
     def sj_inverted(xy, quads):
         xy, q = _f(xy), _i(quads)
