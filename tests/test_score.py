@@ -509,3 +509,17 @@ def test_lazy_matches_head_without_making_the_match():
     assert not made and heads == [("a", 0, 0, False), ("c", 2, 5, False), ("b", 1, 2, True)]
     assert heads == [(m.mesh_id, m.internal_vertices, m.rotation, m.reflected) for m in lm]
     assert [match_head(list(lm), i) for i in range(3)] == heads
+
+
+@given(st.lists(st.integers(2, 5), min_size=1, max_size=24), st.integers(-50, 50), st.booleans())
+def test_oriented_sequence_and_triples_are_the_rolls(vals, rotation, reflected):
+    """``oriented_sequence`` is ``np.roll(vals[::-1] if reflected else vals, -rotation)`` and
+    ``triples`` stacks its rolls ``[next, self, previous]`` (both without ``np.roll``)."""
+    from jaxmatch.catalogue.mesh import triples
+    from jaxmatch.scoring.exact import oriented_sequence
+
+    v = np.asarray(vals, np.int32)
+    seq = oriented_sequence(v, rotation, reflected)
+    assert seq.tolist() == np.roll(v[::-1] if reflected else v, -rotation).tolist()
+    t = triples(seq)
+    assert t.dtype == np.int32 and t.tolist() == np.stack([np.roll(seq, -1), seq, np.roll(seq, 1)], axis=-1).tolist()

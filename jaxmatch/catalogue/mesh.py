@@ -155,8 +155,13 @@ def triples(boundary_vals) -> np.ndarray:
     boundary_vals: (n,) ints (ccw). Returns (n, 3) int32 where row i is
     ``[val[i+1], val[i], val[i-1]]`` (ccw neighbour, vertex, clockwise neighbour).
     """
-    b = np.asarray(boundary_vals, dtype=np.int32)
-    return np.stack([np.roll(b, -1), b, np.roll(b, 1)], axis=-1)
+    b = np.asarray(boundary_vals, dtype=np.int32).reshape(-1)
+    out = np.empty((b.shape[0], 3), np.int32)  # np.stack of np.roll(b, -1), b, np.roll(b, 1), without np.roll
+    if b.shape[0]:
+        out[:-1, 0], out[-1, 0] = b[1:], b[0]
+        out[:, 1] = b
+        out[1:, 2], out[0, 2] = b[:-1], b[-1]
+    return out
 
 
 def validate(mesh: QuadMesh, max_valence: int = MAX_VALENCE, invariant_i: bool = True) -> list[str]:

@@ -152,7 +152,8 @@ def oriented_sequence(vals_one, rotation: int, reflected: bool) -> np.ndarray:
     s = np.asarray(vals_one, dtype=np.int32).reshape(-1)
     if reflected:
         s = s[::-1]
-    return np.roll(s, -int(rotation))
+    r = int(rotation) % s.shape[0] if s.shape[0] else 0
+    return np.concatenate([s[r:], s[:r]])  # np.roll(s, -rotation)
 
 
 # --------------------------------------------------------------------------- the CPU kernel
