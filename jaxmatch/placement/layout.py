@@ -446,11 +446,12 @@ def _check_cover(pts, loops, polys, tol: float, source: str):
             count[key] = count.get(key, 0) + 1
             owner[key] = p
     ring = union.boundary  # the outer ring and the holes' rings
-    for (a, b), c in count.items():
-        if c != 1:
-            continue
-        mid = shapely.Point(0.5 * (pts[a] + pts[b]))
-        if ring.distance(mid) > 10 * tol:
+    lone = [ab for ab, c in count.items() if c == 1]
+    if lone:
+        ab = np.asarray(lone, np.int64)
+        far = np.flatnonzero(shapely.distance(ring, shapely.points(0.5 * (pts[ab[:, 0]] + pts[ab[:, 1]]))) > 10 * tol)
+        if far.size:
+            a, b = lone[int(far[0])]
             raise InputError(f"segment {a}-{b} of patch {owner[(a, b)]} lies inside the region but no other patch uses it "
                              "(patches meet there without sharing their points: a hanging node, or a gap)", where=source)
     return union
