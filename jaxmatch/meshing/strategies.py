@@ -61,8 +61,8 @@ def try_strategies(shape: Shape, names, cat, lat, h: float, corners: np.ndarray,
     for i, name in enumerate(names):
         try:
             how = None if name == SINGLE else same_cuts(shape, name)
-            if how not in made:
-                made[how] = single_patch(shape) if how is None else decompose(shape, how)
+            if how not in made:  # the first strategy of its kind names the layout (its messages' source)
+                made[how] = single_patch(shape) if name == SINGLE else decompose(shape, name)
             lay = made[how]
         except FAILED as e:
             tried[i] = Candidate(name + suffix, None, _why_not(e))
