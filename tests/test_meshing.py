@@ -85,14 +85,16 @@ def test_l_shape_names_the_rule_and_the_runner_up(cat):
     m = jaxmatch.mesh(shp, size=0.25, catalogue=cat)
     check_mesh(shp, m)
     assert [c.name for c in m.tried] == list(strategy_names())
-    # the recursive cut meshes the L as two grids (min scaled Jacobian 1); the single template and
-    # the bisectors have 45-degree corners; the continuations' three patches cannot beat two
-    # perfect ones, so they are not meshed
-    assert m.chosen == "recursive" and m.n_patches == 2 and m.rule == "min scaled Jacobian"
+    # the recursive cut meshes the L as two grids (min scaled Jacobian 1); the bisectors have
+    # 45-degree corners and a side off the size; the continuations' three patches cannot beat two
+    # perfect ones, and no template of the single patch's sizes refines into a grid (its min
+    # scaled Jacobian is at most 0.96), so neither is meshed
+    assert m.chosen == "recursive" and m.n_patches == 2 and m.rule == "size conformity"
     runner_up = next(c.mesh for c in m.tried if c.name == m.runner_up)
-    assert runner_up.min_scaled_jacobian < 0.9 and len(m.irregular) == 0
+    assert m.runner_up == "bisectors" and runner_up.min_scaled_jacobian < 0.9 and len(m.irregular) == 0
     notes = {c.name: c.note for c in m.tried}
     assert "cannot beat recursive" in notes["continuations"]
+    assert "cannot beat recursive" in notes["single"] and "grid" in notes["single"]
 
 
 @pytest.mark.parametrize("name,div", [("L", 16), ("T", 32), ("U", 16), ("plus", 32), ("stairs", 16),
@@ -112,6 +114,48 @@ def test_candidates_not_meshed_could_not_have_won(cat, name, div):
     every = choose(alone)
     assert m.chosen == every.chosen
     assert mesh_key(m)[:-1] == mesh_key(every)[:-1]
+
+
+@pytest.mark.parametrize("path", list(CONCAVE.values()) + [EX / "square.json", EX / "hexagon.json"], ids=lambda p: p.stem)
+@pytest.mark.parametrize("div", [16, 32])
+def test_single_sj_bound_holds(cat, path, div):
+    """Where ``single_sj_bound`` claims less than 1, the single patch meshed alone has a min
+    scaled Jacobian at most that (measured on its mesh), so skipping it loses nothing."""
+    from jaxmatch.geometry import cumulative_length
+    from jaxmatch.inputs import _lattice
+    from jaxmatch.meshing.region import canonical
+    from jaxmatch.placement.decompose import single_patch
+    from jaxmatch.placement.layout import ALL_SIZES, single_sj_bound
+    from jaxmatch.shape import DEFAULT_CORNER_ANGLE
+
+    shp = jaxmatch.load_shape(path)
+    h = float(cumulative_length(shp.input_points)[-1]) / div
+    bound = single_sj_bound(single_patch(canonical(shp, h, DEFAULT_CORNER_ANGLE)), cat, _lattice("fine"), sizes=ALL_SIZES)
+    one = jaxmatch.mesh(shp, size=h, catalogue=cat, strategies=["single"])
+    m = next(c.mesh for c in one.tried if c.name == "single")  # not a larger template tried after it
+    assert m.inverted > 0 or m.min_scaled_jacobian <= bound
+
+
+@pytest.mark.parametrize("ks", [(0, 1), (2, 3), (4, 5)])
+@pytest.mark.parametrize("convex, concave", [(4, 0), (5, 1), (6, 2), (8, 4)])
+def test_grid_templates_exist_against_a_scan(cat, ks, convex, concave):
+    """``grid_templates_exist`` agrees with a plain scan of every catalogue mesh of those sizes:
+    all internal valences 4, boundary valences 2 (``convex``), 4 (``concave``), 3 elsewhere."""
+    from jaxmatch.catalogue.mesh import valences
+    from jaxmatch.placement.layout import grid_templates_exist
+
+    want = False
+    for b in cat.buckets(list(ks)):
+        for mesh_id in b.ids.tolist():
+            mesh = cat.mesh(mesh_id)
+            val = valences(np.asarray(mesh.quads, np.int64), mesh.n_vertices)
+            on = np.zeros(mesh.n_vertices, bool)
+            on[np.asarray(mesh.boundary)] = True
+            bv = val[on]
+            if (np.all(val[~on] == 4) and np.sum(bv == 2) == convex and np.sum(bv == 4) == concave
+                    and np.sum(bv == 3) == bv.size - convex - concave):
+                want = True
+    assert grid_templates_exist(cat, ks, convex, concave) == want
 
 
 @pytest.mark.slow
@@ -411,8 +455,9 @@ def test_cli_mesh_reports_the_choice(cli, tmp_path):
     out, png = tmp_path / "l.msh", tmp_path / "l.png"
     code, stdout, err = cli("mesh", EX / "lshape.json", "--size", "0.25", "--out", out, "--png", png)
     assert code == 0, err
-    assert "chosen: recursive (rule that decided: min scaled Jacobian; runner-up single)" in stdout
+    assert "chosen: recursive (rule that decided: size conformity; runner-up bisectors)" in stdout
     assert "continuations: not meshed (3 patches cannot beat recursive)" in stdout
+    assert "single: not meshed (min scaled Jacobian at most 0.96 cannot beat recursive; no template of its sizes" in stdout
     assert out.exists() and png.read_bytes().startswith(b"\x89PNG")
 
 
@@ -475,8 +520,11 @@ def test_cli_many_regions_with_one_bad(cli, tmp_path):
 def test_time_budget_keeps_the_best_valid_mesh_so_far(cat):
     m = jaxmatch.mesh(EX / "lshape.json", size=0.25, catalogue=cat, budget_s=1e-9)
     notes = {c.name: c.note for c in m.tried}
-    assert m.chosen == "single" and m.valid
-    assert all("time budget" in notes[n] for n in ("continuations", "bisectors", "recursive"))
+    meshed = [c.name for c in m.tried if c.mesh is not None]
+    # the first candidate tried (the cuts of fewest patches; the single patch of a concave region
+    # comes last) is kept, every other one is skipped for time
+    assert meshed == [m.chosen] == ["bisectors"] and m.valid
+    assert all("time budget" in notes[n] for n in ("continuations", "single", "recursive"))
 
 
 def test_pipeline_warm_up_meshes_with_the_defaults_and_with_given_models():

@@ -19,7 +19,8 @@
 11. the order tried (single template first).
 
 :func:`choose` names the first rule on which the winner beats the runner-up;
-:func:`cannot_win` tells, before a candidate is meshed, that it cannot beat a given key.
+:func:`cannot_win` tells, before a candidate is meshed, that it cannot beat a given key (from its
+patch count, and an upper bound on its min scaled Jacobian when one is known).
 """
 
 from __future__ import annotations
@@ -60,19 +61,19 @@ def mesh_key(m: QuadMesh, order: int = 0, quality: Quality = QUALITY) -> tuple:
     )
 
 
-def best_possible_key(n_patches: int, order: int) -> tuple:
-    """The smallest :func:`mesh_key` any mesh of ``n_patches`` patches tried at ``order`` can
-    have: no fold, every corner, the area, every side at the size, no irregular vertex beyond the
-    bound, min and mean scaled Jacobian 1."""
-    return (False, False, False, False, 0, False, 0, -math.floor(1.0 / SJ_STEP + 1e-9), int(n_patches), -1.0,
-            int(order))
+def best_possible_key(n_patches: int, order: int, max_sj: float = 1.0, quality: Quality = QUALITY) -> tuple:
+    """The smallest :func:`mesh_key` any mesh of ``n_patches`` patches tried at ``order`` whose
+    min scaled Jacobian is at most ``max_sj`` can have: no fold, every corner, the area, every
+    side at the size, no irregular vertex beyond the bound, min scaled Jacobian ``max_sj``, mean 1."""
+    return (False, False, False, not (max_sj >= quality.good_sj), 0, not (max_sj >= quality.high_sj), 0,
+            -math.floor(max_sj / SJ_STEP + 1e-9), int(n_patches), -1.0, int(order))
 
 
-def cannot_win(best_key: tuple, n_patches: int, order: int) -> bool:
-    """Whether a candidate of ``n_patches`` patches tried at ``order`` loses to a mesh of key
-    ``best_key`` whatever its mesh (so it need not be meshed): ``best_key`` is smaller than
-    :func:`best_possible_key`."""
-    return best_key < best_possible_key(n_patches, order)
+def cannot_win(best_key: tuple, n_patches: int, order: int, max_sj: float = 1.0, quality: Quality = QUALITY) -> bool:
+    """Whether a candidate of ``n_patches`` patches tried at ``order``, whose min scaled Jacobian
+    cannot exceed ``max_sj``, loses to a mesh of key ``best_key`` whatever its mesh (so it need
+    not be meshed): ``best_key`` is smaller than :func:`best_possible_key`."""
+    return best_key < best_possible_key(n_patches, order, max_sj, quality)
 
 
 def choose(candidates: Sequence[Candidate], quality: Quality = QUALITY) -> QuadMesh:

@@ -48,12 +48,15 @@ def try_strategies(shape: Shape, names, cat, lat, h: float, corners: np.ndarray,
                     progress, suffix: str = "", quality: Quality = QUALITY) -> list[Candidate]:
     """Each strategy of ``names`` (one :class:`Candidate` each, in the order of ``names``, with its
     mesh or the reason it has none): every strategy's layout is cut first, then meshed by the same
-    solve (:func:`~jaxmatch.placement.layout.mesh_layout`), fewest patches first. A layout that
-    cannot beat the best mesh so far whatever its mesh (:func:`~jaxmatch.meshing.choose.cannot_win`)
-    is not meshed, so the choice is the one meshing all of them would give. A strategy whose cuts
-    or solve fail for any reason is skipped with that reason."""
+    solve (:func:`~jaxmatch.placement.layout.mesh_layout`), fewest patches first (the single patch
+    of a region with a concave corner last). A layout that cannot beat the best mesh so far
+    whatever its mesh (:func:`~jaxmatch.meshing.choose.cannot_win`: by its patch count, and for the
+    single patch by :func:`~jaxmatch.placement.layout.single_sj_bound`, an upper bound on its min
+    scaled Jacobian from its template sizes) is not meshed, so the choice is the one meshing all
+    of them would give. A strategy whose cuts or solve fail for any reason is skipped with that
+    reason."""
     from jaxmatch.placement.decompose import _same, decompose, same_cuts, single_patch
-    from jaxmatch.placement.layout import ALL_SIZES, TEMPLATE_SIZES, mesh_layout
+    from jaxmatch.placement.layout import ALL_SIZES, TEMPLATE_SIZES, mesh_layout, single_sj_bound
 
     tried: list[Candidate | None] = [None] * len(names)
     layouts: list[tuple[int, object]] = []
@@ -72,16 +75,26 @@ def try_strategies(shape: Shape, names, cat, lat, h: float, corners: np.ndarray,
             continue
         layouts.append((i, lay))
     best: tuple | None = None
-    for done, (i, lay) in enumerate(sorted(layouts, key=lambda il: (il[1].n_patches, il[0])), start=1):
+    concave = bool(np.any(~np.asarray(shape.convex, bool)))
+    late = {i for i, _ in layouts if names[i] == SINGLE and concave}  # after the cuts: a grid they make may rule it out
+    for done, (i, lay) in enumerate(sorted(layouts, key=lambda il: (il[0] in late, il[1].n_patches, il[0])), start=1):
         label = names[i] + suffix
-        if best is not None and cannot_win(best[0], lay.n_patches, i):
-            tried[i] = Candidate(label, None, f"{lay.n_patches} patches cannot beat {best[1]}")
+        sizes = ALL_SIZES if names[i] == SINGLE else TEMPLATE_SIZES
+        bound = 1.0
+        if best is not None and names[i] == SINGLE and not cannot_win(best[0], lay.n_patches, i, quality=quality):
+            try:
+                bound = single_sj_bound(lay, cat, lat, sizes=sizes, template_cache=cache)
+            except FAILED:  # no templates: the solve below says why
+                bound = 1.0
+        if best is not None and cannot_win(best[0], lay.n_patches, i, bound, quality):
+            why = "; no template of its sizes refines into a grid" if bound < 1 else ""
+            what = f"min scaled Jacobian at most {bound:.2f}" if bound < 1 else f"{lay.n_patches} patches"
+            tried[i] = Candidate(label, None, f"{what} cannot beat {best[1]}{why}")
         elif budget_s is not None and time.perf_counter() - t0 > budget_s and best is not None and best[2]:
             tried[i] = Candidate(label, None, f"not tried: time budget of {budget_s:g} s spent")
         else:
             try:
-                lm = mesh_layout(lay, cat, lat, size=h, smooth_cuts=lay.n_patches > 1,
-                                 sizes=ALL_SIZES if names[i] == SINGLE else TEMPLATE_SIZES, template_cache=cache)
+                lm = mesh_layout(lay, cat, lat, size=h, smooth_cuts=lay.n_patches > 1, sizes=sizes, template_cache=cache)
             except FAILED as e:
                 tried[i] = Candidate(label, None, _why_not(e))
             else:

@@ -807,6 +807,102 @@ def _templates(shape: Shape, catalogue, lattice, limit: int, sizes=TEMPLATE_SIZE
     return []
 
 
+def _patch_templates(layout: Layout, p: int, shp: Shape, catalogue, lattice, templates_per_patch: int, sizes,
+                     template_cache: dict | None):
+    """:func:`_templates` of patch ``p`` (its shape ``shp``), from ``template_cache`` when there
+    (keyed by the patch's points, corners, ``sizes`` and ``templates_per_patch``), put there
+    otherwise."""
+    key = (layout.points[layout.patches[p]].tobytes(), layout.corner[layout.patches[p]].tobytes(), sizes,
+           templates_per_patch)
+    if template_cache is not None and key in template_cache:
+        return template_cache[key]
+    t = _templates(shp, catalogue, lattice, templates_per_patch, sizes)
+    if template_cache is not None:
+        template_cache[key] = t
+    return t
+
+
+def grid_templates_exist(catalogue: Catalogue, ks: Sequence[int], convex: int, concave: int) -> bool:
+    """Whether a catalogue mesh with ``k`` in ``ks`` internal vertices could mesh, refined, a region
+    with ``convex`` corners of 90 degrees and ``concave`` of 270 degrees and straight sides as a
+    grid of rectangles: every internal vertex of valence 4, and boundary valences 2 (as many as
+    ``convex``), 4 (as many as ``concave``) and 3 (all the others). Kept per catalogue."""
+    from jaxmatch.catalogue.mesh import mesh_valences
+
+    key = ("grid templates", tuple(sorted(int(k) for k in ks)), int(convex), int(concave))
+    cache = getattr(catalogue, "_cache", None)
+    if isinstance(cache, dict) and key in cache:
+        return cache[key]
+    found = False
+    for b in catalogue.buckets(list(key[1])):
+        v = np.asarray(b.valences)
+        fit = ((v == 2).sum(axis=1) == convex) & ((v == 4).sum(axis=1) == concave) & ((v == 3).sum(axis=1) == b.n - convex - concave)
+        for mesh_id in np.asarray(b.ids)[fit].tolist():
+            mesh = catalogue.mesh(mesh_id)
+            inner = np.ones(mesh.n_vertices, bool)
+            inner[np.asarray(mesh.boundary)] = False
+            if np.all(mesh_valences(mesh)[inner] == 4):
+                found = True
+                break
+        if found:
+            break
+    if isinstance(cache, dict):
+        cache[key] = found
+    return found
+
+
+NO_GRID_SJ = 0.96
+"""An upper bound on the min scaled Jacobian of a mesh of straight-sided right-angled corners
+that is no grid of rectangles: around an internal vertex of valence 3 or 5 some quad's angle is
+at most 120 or 72 degrees (scaled Jacobian at most sin 72 = 0.951); at a corner of 90 or 270
+degrees or a side point whose quads are too many or too few, some angle is at most 112.5 or at
+least 135 degrees (at most 0.924); with a margin for corners up to 1e-3 rad off."""
+
+OFF_RIGHT_ANGLE_SJ = 1.0 - 1e-8
+"""An upper bound on the min scaled Jacobian of any mesh (valences <= 5) of a region with a
+corner more than 1e-3 rad off every multiple of 90 degrees: the quads at that corner split its
+angle (plus whole turns) into at most 4 angles, one of them at least 2.5e-4 rad off 90 degrees
+(scaled Jacobian at most cos 2.5e-4 = 1 - 3.1e-8)."""
+
+
+def single_sj_bound(layout: Layout, catalogue: Catalogue, lattice, *, templates_per_patch: int = TEMPLATES_PER_PATCH,
+                    sizes=TEMPLATE_SIZES, template_cache: dict | None = None) -> float:
+    """An upper bound on the min scaled Jacobian of :func:`mesh_layout` of a one-patch ``layout``
+    with these options (a mesh that does not fold; one that folds loses on that first), from its
+    template sizes alone: 1 unless the region has straight sides and right-angled corners and no
+    catalogue mesh of the template group that :func:`mesh_layout` would use (found as it finds
+    it, the templates kept in ``template_cache`` for it) can be refined into a grid of rectangles
+    (:func:`grid_templates_exist`, :data:`NO_GRID_SJ`), or a corner is off every multiple of
+    90 degrees (:data:`OFF_RIGHT_ANGLE_SJ`). Refinement keeps a template vertex's valence and
+    makes every new vertex regular, so the refined mesh is a grid only if its template is one.
+    Without templates (the layout cannot be meshed): 1."""
+    from jaxmatch.geometry import turning_angles
+
+    if layout.n_patches != 1:
+        return 1.0
+    shp = _lru_get(_SHAPES, _layout_key(layout), lambda: patch_shapes(layout))[0]
+    turn = turning_angles(shp.points)
+    is_corner = np.zeros(shp.n_points, bool)
+    is_corner[shp.corners] = True
+    if np.any(np.abs(turn[~is_corner]) > 1e-9):  # a side that bends: no claim
+        return 1.0
+    angle = math.pi - turn[shp.corners]  # interior angles (the loop runs ccw)
+    quarters = np.rint(angle / (math.pi / 2))
+    if np.any(np.abs(angle - quarters * (math.pi / 2)) > 1e-3):
+        return OFF_RIGHT_ANGLE_SJ
+    t = _patch_templates(layout, 0, shp, catalogue, lattice, templates_per_patch, sizes, template_cache)
+    if not t:
+        return 1.0
+    k0 = t[0].match.internal_vertices
+    group = next(g for g in sizes if k0 in g)
+    ks = [k for k in group if k in catalogue.internal]
+    if np.any((quarters != 1) & (quarters != 3)):  # a corner of 0 or 180 degrees (not a corner)
+        return 1.0
+    if grid_templates_exist(catalogue, ks, int(np.sum(quarters == 1)), int(np.sum(quarters == 3))):
+        return 1.0
+    return NO_GRID_SJ
+
+
 def _has(templates, j: int) -> bool:
     """Whether a patch has a ``j``-th candidate template (placing no more than that one)."""
     try:
@@ -1070,14 +1166,7 @@ def _mesh_layout(layout: Layout, catalogue: Catalogue, lattice: Lattice, *, size
     shapes = _lru_get(_SHAPES, lkey, lambda: patch_shapes(layout))
     cands = []
     for p, shp in enumerate(shapes):
-        key = (layout.points[layout.patches[p]].tobytes(), layout.corner[layout.patches[p]].tobytes(), sizes,
-               templates_per_patch)
-        if template_cache is not None and key in template_cache:
-            t = template_cache[key]
-        else:
-            t = _templates(shp, catalogue, lattice, templates_per_patch, sizes)
-            if template_cache is not None:
-                template_cache[key] = t
+        t = _patch_templates(layout, p, shp, catalogue, lattice, templates_per_patch, sizes, template_cache)
         if not t:
             ks = sorted({k for g in sizes for k in g if k in catalogue.internal})
             raise InputError(f"patch {p}: no catalogue template with {ks[0]}..{ks[-1]} internal vertices keeps its "
