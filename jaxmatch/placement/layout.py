@@ -822,23 +822,30 @@ def _patch_templates(layout: Layout, p: int, shp: Shape, catalogue, lattice, tem
     return t
 
 
-def grid_templates_exist(catalogue: Catalogue, ks: Sequence[int], convex: int, concave: int) -> bool:
+def grid_templates_exist(catalogue: Catalogue, ks: Sequence[int], corners: Sequence[int]) -> bool:
     """Whether a catalogue mesh with ``k`` in ``ks`` internal vertices could mesh, refined, a region
-    with ``convex`` corners of 90 degrees and ``concave`` of 270 degrees and straight sides as a
-    grid of rectangles: every internal vertex of valence 4, and boundary valences 2 (as many as
-    ``convex``), 4 (as many as ``concave``) and 3 (all the others). Kept per catalogue."""
+    with straight sides whose corners, in ccw order, are right angles (``corners``: ``1`` for 90
+    degrees, ``3`` for 270) as a grid of rectangles: every internal vertex of valence 4, and
+    along its boundary (either way round, from any vertex) valence ``1 + corners[i]`` at the
+    corners in that order and 3 at every vertex between them. Kept per catalogue."""
     from jaxmatch.catalogue.mesh import mesh_valences
 
-    key = ("grid templates", tuple(sorted(int(k) for k in ks)), int(convex), int(concave))
+    want = [1 + int(q) for q in corners]
+    key = ("grid templates", tuple(sorted(int(k) for k in ks)), tuple(want))
     cache = getattr(catalogue, "_cache", None)
     if isinstance(cache, dict) and key in cache:
         return cache[key]
+    n2, n4 = want.count(2), want.count(4)
+    turns = {tuple(want[r:] + want[:r]) for r in range(len(want))}
+    turns |= {t[::-1] for t in turns}
     found = False
     for b in catalogue.buckets(list(key[1])):
         v = np.asarray(b.valences)
-        fit = ((v == 2).sum(axis=1) == convex) & ((v == 4).sum(axis=1) == concave) & ((v == 3).sum(axis=1) == b.n - convex - concave)
-        for mesh_id in np.asarray(b.ids)[fit].tolist():
-            mesh = catalogue.mesh(mesh_id)
+        fit = ((v == 2).sum(axis=1) == n2) & ((v == 4).sum(axis=1) == n4) & ((v == 3).sum(axis=1) == b.n - n2 - n4)
+        for row in np.flatnonzero(fit).tolist():
+            if tuple(int(x) for x in v[row] if x != 3) not in turns:
+                continue
+            mesh = catalogue.mesh(str(b.ids[row]))
             inner = np.ones(mesh.n_vertices, bool)
             inner[np.asarray(mesh.boundary)] = False
             if np.all(mesh_valences(mesh)[inner] == 4):
@@ -872,7 +879,8 @@ def single_sj_bound(layout: Layout, catalogue: Catalogue, lattice, *, templates_
     template sizes alone: 1 unless the region has straight sides and right-angled corners and no
     catalogue mesh of the template group that :func:`mesh_layout` would use (found as it finds
     it, the templates kept in ``template_cache`` for it) can be refined into a grid of rectangles
-    (:func:`grid_templates_exist`, :data:`NO_GRID_SJ`), or a corner is off every multiple of
+    with the region's corners in their order (:func:`grid_templates_exist`, :data:`NO_GRID_SJ`),
+    or a corner is off every multiple of
     90 degrees (:data:`OFF_RIGHT_ANGLE_SJ`). Refinement keeps a template vertex's valence and
     makes every new vertex regular, so the refined mesh is a grid only if its template is one.
     Without templates (the layout cannot be meshed): 1."""
@@ -898,7 +906,7 @@ def single_sj_bound(layout: Layout, catalogue: Catalogue, lattice, *, templates_
     ks = [k for k in group if k in catalogue.internal]
     if np.any((quarters != 1) & (quarters != 3)):  # a corner of 0 or 180 degrees (not a corner)
         return 1.0
-    if grid_templates_exist(catalogue, ks, int(np.sum(quarters == 1)), int(np.sum(quarters == 3))):
+    if grid_templates_exist(catalogue, ks, quarters.astype(int).tolist()):
         return 1.0
     return NO_GRID_SJ
 
