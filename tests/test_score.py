@@ -494,8 +494,8 @@ def test_a_second_backend_plugs_into_the_exact_host(skip):
 
 def test_lazy_matches_head_without_making_the_match():
     """``LazyMatches.head(i)`` names the i-th match (in a reordered view too) as the made match
-    does, and makes nothing; ``match_head`` reads a plain list the same way."""
-    from jaxmatch.scoring.rank import LazyMatches, Match, match_head
+    does, and makes nothing."""
+    from jaxmatch.scoring.rank import LazyMatches, Match
 
     made = []
 
@@ -508,7 +508,6 @@ def test_lazy_matches_head_without_making_the_match():
     heads = [lm.head(i) for i in range(len(lm))]
     assert not made and heads == [("a", 0, 0, False), ("c", 2, 5, False), ("b", 1, 2, True)]
     assert heads == [(m.mesh_id, m.internal_vertices, m.rotation, m.reflected) for m in lm]
-    assert [match_head(list(lm), i) for i in range(3)] == heads
 
 
 @given(st.lists(st.integers(2, 5), min_size=1, max_size=24), st.integers(-50, 50), st.booleans())

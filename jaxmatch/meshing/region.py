@@ -89,7 +89,6 @@ def canonical(shape: Shape, size: float | None = None, corner_angle: float = DEF
     (:func:`jaxmatch.shape.scale_corners`: wiggles shorter than about ``size`` are no corners);
     explicit corners are kept. Meshing the canonical shape makes the mesh
     independent of where the user's loop starts and which way it runs."""
-    from jaxmatch.placement.decompose import _xy
     from jaxmatch.shape import make_shape
 
     def first(ring: np.ndarray) -> int:
@@ -104,7 +103,7 @@ def canonical(shape: Shape, size: float | None = None, corner_angle: float = DEF
             return np.asarray(given, np.int64)
         return scale_corners(ring, size, corner_angle, held_angle=held_angle)
 
-    pts = _xy(shape)
+    pts = shape.given_points
     tol = DEDUPE * float(np.ptp(pts, axis=0).max())
     holes, hole_corners = [], []
     for ring, hc in sorted(zip(shape.holes, shape.hole_corners), key=lambda rc: tuple(rc[0][first(rc[0])])):

@@ -81,15 +81,15 @@ def try_strategies(shape: Shape, names, cat, lat, h: float, corners: np.ndarray,
         label = names[i] + suffix
         sizes = ALL_SIZES if names[i] == SINGLE else TEMPLATE_SIZES
         bound = 1.0
-        if best is not None and names[i] == SINGLE and not cannot_win(best[0], lay.n_patches, i, quality=quality):
+        if best is not None and names[i] == SINGLE:  # (one patch: only a cap on its quality can rule it out)
             try:
                 bound = single_sj_bound(lay, cat, lat, sizes=sizes, template_cache=cache)
             except FAILED:  # no templates: the solve below says why
-                bound = 1.0
+                pass
         if best is not None and cannot_win(best[0], lay.n_patches, i, bound, quality):
-            why = "; no template of its sizes refines into a grid" if bound < 1 else ""
-            what = f"min scaled Jacobian at most {bound:.2f}" if bound < 1 else f"{lay.n_patches} patches"
-            tried[i] = Candidate(label, None, f"{what} cannot beat {best[1]}{why}")
+            tried[i] = Candidate(label, None, f"min scaled Jacobian at most {bound:.2f} cannot beat {best[1]}; no template "
+                                 "of its sizes refines into a grid" if bound < 1 else
+                                 f"{lay.n_patches} patches cannot beat {best[1]}")
         elif budget_s is not None and time.perf_counter() - t0 > budget_s and best is not None and best[2]:
             tried[i] = Candidate(label, None, f"not tried: time budget of {budget_s:g} s spent")
         else:

@@ -40,21 +40,16 @@ holes: ``radial`` cuts each hole to the outer loop's convex corners and to its n
 
 
 
-def _xy(shape: Shape) -> np.ndarray:
-    """``(P, 2)`` the shape's points in user coordinates, exactly as given when known."""
-    return shape.given_points
-
-
 def _rings(shape: Shape) -> list[np.ndarray]:
     """The region's boundary loops, user coordinates: the outer loop (ccw) then each hole (cw);
     the region lies on the left of every loop."""
-    return [_xy(shape)] + [np.asarray(h, np.float64) for h in shape.holes]
+    return [shape.given_points] + [np.asarray(h, np.float64) for h in shape.holes]
 
 
 def _reflex_corners(shape: Shape) -> list[tuple[np.ndarray, int]]:
     """``(ring points, index)`` of every corner where the region's angle exceeds 180 degrees:
     the outer loop's concave corners and the holes' corners where the hole is convex."""
-    out = [(_xy(shape), int(c)) for c, convex in zip(shape.corners.tolist(), shape.convex.tolist()) if not convex]
+    out = [(shape.given_points, int(c)) for c, convex in zip(shape.corners.tolist(), shape.convex.tolist()) if not convex]
     for ring, corners in zip(shape.holes, shape.hole_corners):
         ring = np.asarray(ring, np.float64)
         e_in = ring - np.roll(ring, 1, axis=0)
@@ -232,7 +227,7 @@ def _radial_hits(shape: Shape) -> tuple[list[np.ndarray], list]:
 
 def _rays_continuations(shape: Shape) -> list[tuple[np.ndarray, np.ndarray]]:
     """The continuation rays of the outer loop's concave corners only."""
-    pts = _xy(shape)
+    pts = shape.given_points
     P = pts.shape[0]
     out = []
     for c, convex in zip(shape.corners.tolist(), shape.convex.tolist()):
@@ -273,7 +268,7 @@ def single_patch(shape: Shape) -> Layout:
     if shape.n_corners < 2:
         raise InputError(f"the shape has {shape.n_corners} corner(s); a patch needs at least 2 (a shape without "
                          "concave corners is meshed whole by 'jaxmatch mesh --size')", where=shape.source)
-    pts = _xy(shape)
+    pts = shape.given_points
     return make_layout(pts.tolist(), [list(range(pts.shape[0]))], shape.corners.tolist(), source=shape.source)
 
 
@@ -307,7 +302,7 @@ def _faces(rings: list[np.ndarray], cuts: list[np.ndarray], inserts: list, overs
 
 def _corner_points(shape: Shape) -> np.ndarray:
     """``(C, 2)`` the region's corners in user coordinates: the outer loop's, then the holes'."""
-    parts = [_xy(shape)[shape.corners]] + [np.asarray(h, np.float64)[c] for h, c in zip(shape.holes, shape.hole_corners)]
+    parts = [shape.given_points[shape.corners]] + [np.asarray(h, np.float64)[c] for h, c in zip(shape.holes, shape.hole_corners)]
     return np.concatenate(parts) if parts else np.zeros((0, 2))
 
 
@@ -344,7 +339,7 @@ def _recursive(shape: Shape) -> Layout:
     concave corner."""
     import shapely
 
-    pts = _xy(shape)
+    pts = shape.given_points
     ring = shapely.LinearRing(pts)
     extent = float(np.max(pts.max(axis=0) - pts.min(axis=0)))
     tol = 1e-9 * extent
@@ -444,7 +439,7 @@ def disk_layout(shape: Shape) -> Layout:
     outline points are inserted exactly on the outline."""
     import shapely
 
-    pts = _xy(shape)
+    pts = shape.given_points
     poly = shapely.Polygon(pts)
     c = np.asarray(poly.centroid.coords[0])
     d = pts - c

@@ -880,10 +880,9 @@ def single_sj_bound(layout: Layout, catalogue: Catalogue, lattice, *, templates_
     catalogue mesh of the template group that :func:`mesh_layout` would use (found as it finds
     it, the templates kept in ``template_cache`` for it) can be refined into a grid of rectangles
     with the region's corners in their order (:func:`grid_templates_exist`, :data:`NO_GRID_SJ`),
-    or a corner is off every multiple of
-    90 degrees (:data:`OFF_RIGHT_ANGLE_SJ`). Refinement keeps a template vertex's valence and
-    makes every new vertex regular, so the refined mesh is a grid only if its template is one.
-    Without templates (the layout cannot be meshed): 1."""
+    or a corner is off every multiple of 90 degrees (:data:`OFF_RIGHT_ANGLE_SJ`). Refinement keeps
+    a template vertex's valence and makes every new vertex regular, so the refined mesh is a grid
+    only if its template is one. Without templates (the layout cannot be meshed): 1."""
     from jaxmatch.geometry import turning_angles
 
     if layout.n_patches != 1:
@@ -898,14 +897,13 @@ def single_sj_bound(layout: Layout, catalogue: Catalogue, lattice, *, templates_
     quarters = np.rint(angle / (math.pi / 2))
     if np.any(np.abs(angle - quarters * (math.pi / 2)) > 1e-3):
         return OFF_RIGHT_ANGLE_SJ
+    if np.any((quarters != 1) & (quarters != 3)):  # a corner of 0 or 180 degrees (not a corner)
+        return 1.0
     t = _patch_templates(layout, 0, shp, catalogue, lattice, templates_per_patch, sizes, template_cache)
     if not t:
         return 1.0
     k0 = t[0].match.internal_vertices
-    group = next(g for g in sizes if k0 in g)
-    ks = [k for k in group if k in catalogue.internal]
-    if np.any((quarters != 1) & (quarters != 3)):  # a corner of 0 or 180 degrees (not a corner)
-        return 1.0
+    ks = [k for k in next(g for g in sizes if k0 in g) if k in catalogue.internal]
     if grid_templates_exist(catalogue, ks, quarters.astype(int).tolist()):
         return 1.0
     return NO_GRID_SJ

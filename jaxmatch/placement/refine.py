@@ -54,7 +54,7 @@ if TYPE_CHECKING:  # pragma: no cover
 
     from jaxmatch.catalogue.store import Catalogue
     from jaxmatch.scoring.lattice import Lattice
-    from jaxmatch.scoring.rank import Match
+    from jaxmatch.scoring.rank import LazyMatches, Match
 
 __all__ = [
     "DEFAULT_LIMIT",
@@ -192,16 +192,11 @@ def _make_side_frame(shape: Shape) -> list[tuple[int, bool]]:
     return [(int(order[(i + 1) % n]), True) for i in range(n)]
 
 
-def _user_xy(shape: Shape) -> np.ndarray:
-    """``(P, 2)`` the shape's points in user coordinates, exactly as given when known."""
-    return shape.given_points
-
-
 def side_polylines(shape: Shape) -> tuple[np.ndarray, ...]:
     """The user's sides as polylines of input points, ``(k_i, 2) float64`` user coordinates,
     from corner ``i`` to corner ``i + 1`` inclusive (without corners: one closed polyline from
     ``points[0]`` around to ``points[0]``)."""
-    xy = _user_xy(shape)
+    xy = shape.given_points
     P = xy.shape[0]
     n = shape.n_corners
     if n == 0:
@@ -453,9 +448,10 @@ def _fit(shape: Shape, annotation, match: "Match", catalogue: "Catalogue", rank:
 
 
 def _candidates(shape: Shape, catalogue: "Catalogue", lattice: "Lattice", *, limit: int,
-                internal=None) -> tuple[object, list["Match"]]:
+                internal=None) -> tuple[object, "LazyMatches"]:
     """(annotation, matches): the best ``limit`` matches of every selected size (k), merged
-    best utility first (then fewer internal vertices, then id)."""
+    best utility first (then fewer internal vertices, then id); each match aligned when first
+    asked for (:class:`~jaxmatch.scoring.rank.LazyMatches`, whose ``head`` names it without that)."""
     from jaxmatch.scoring.rank import rank
 
     ranking = rank(shape, catalogue, lattice, internal=internal, top=max(int(limit), 1), per_size=True, prune=True,
@@ -529,7 +525,6 @@ def _iter_templates(shape, catalogue, lattice, *, limit: int, internal=None, rej
     size. ``check(unplaced template)``: a reason to skip it before placing (None: go on).
     Skipped candidates are appended to ``rejected`` as ``(rank, mesh_id, reason)``. ``memo``:
     fits and placements shared with other walks of the shape (without ``check``)."""
-    from jaxmatch.scoring.rank import match_head
 
     taken: dict[int, int] = {}
     seen: set = set()
@@ -538,7 +533,7 @@ def _iter_templates(shape, catalogue, lattice, *, limit: int, internal=None, rej
             break  # the deeper scan only when the first found fewer than `limit` templates
         ann, ms = _candidates(shape, catalogue, lattice, limit=scan * max(int(limit), 1), internal=internal)
         for r in range(1, len(ms) + 1):
-            mid, k, rot, refl = match_head(ms, r - 1)  # skipped ones are not aligned
+            mid, k, rot, refl = ms.head(r - 1)  # skipped ones are not aligned
             key = (mid, rot, refl)
             if taken.get(k, 0) >= limit or key in seen:
                 continue
@@ -565,7 +560,6 @@ def _iter_checked(shape, catalogue, lattice, *, limit: int, internal, check: Cal
     (the per-size ``limit``, and whether the deeper scan runs); until then it waits in its
     size's queue. The refused are appended to ``passed`` as ``(rank, mesh_id, reason)`` when
     met (also those that, placed, would have folded: not templates at all)."""
-    from jaxmatch.scoring.rank import match_head
 
     limit = int(limit)
     sure: dict[int, int] = {}  # per size: candidates known to be templates
@@ -600,7 +594,7 @@ def _iter_checked(shape, catalogue, lattice, *, limit: int, internal, check: Cal
             break
         ann, ms = _candidates(shape, catalogue, lattice, limit=scan * max(limit, 1), internal=internal)
         for r in range(1, len(ms) + 1):
-            mid, k, rot, refl = match_head(ms, r - 1)  # skipped ones are not aligned
+            mid, k, rot, refl = ms.head(r - 1)  # skipped ones are not aligned
             key = (mid, rot, refl)
             if key in seen or sure.get(k, 0) >= limit:
                 continue
@@ -639,7 +633,6 @@ def _iter_by_size(shape, catalogue, lattice, *, limit: int, internal: Sequence[i
     scan of :data:`SCAN_PER_LIMIT` when all sizes kept fewer than ``limit`` in all. A size no
     catalogue mesh can match is passed over, and so is one whose boundary loops are all shorter
     than the shape's corners (none of its meshes could keep every corner: not ranked at all)."""
-    from jaxmatch.scoring.rank import match_head
 
     kept: dict[int, int] = {}
     seen: set = set()
@@ -654,7 +647,7 @@ def _iter_by_size(shape, catalogue, lattice, *, limit: int, internal: Sequence[i
             except UnmatchableError:
                 continue
             for r in range(1, len(ms) + 1):
-                mid, _, rot, refl = match_head(ms, r - 1)  # skipped ones are not aligned
+                mid, _, rot, refl = ms.head(r - 1)  # skipped ones are not aligned
                 key = (mid, rot, refl)
                 if key in seen:
                     continue

@@ -118,14 +118,6 @@ class LazyMatches(Sequence):
 
 
 
-def match_head(matches: Sequence[Match], i: int) -> tuple[str, int, int, bool]:
-    """``(mesh_id, internal_vertices, rotation, reflected)`` of ``matches[i]`` (``i >= 0``): of
-    a :class:`LazyMatches` without making the match."""
-    if isinstance(matches, LazyMatches):
-        return matches.head(i)
-    m = matches[i]
-    return m.mesh_id, m.internal_vertices, m.rotation, m.reflected
-
 RANK_MEMO_SIZE = 4096
 """Rankings kept per catalogue by :func:`rank` (per size, ``"id"`` ties, pruned: the template
 scan's calls), keyed on the annotation's point types, the sizes, the lattice and ``top``: with
