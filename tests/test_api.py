@@ -35,7 +35,7 @@ def test_readme_python_example_runs(tmp_path, monkeypatch, capsys):
     exec(compile(readme_example(), "README.md", "exec"), {})
     lines = capsys.readouterr().out.splitlines()
     assert len(lines) == 3
-    assert lines[0] == "recursive size conformity bisectors"  # what the README's comment says
+    assert lines[0] == "recursive fewer patches continuations"  # what the README's comment says
     assert lines[1].startswith("(48, 4) 1.0 0 0")
     assert lines[2].startswith("[('k4-")
     import meshio

@@ -637,3 +637,111 @@ def test_coincident_points_are_the_brute_force_pairs(seed, n, tol):
         return
     with pytest.raises(InputError, match=rf"points {close[0][0]} and {close[0][1]} are at the same place"):
         _check_coincident(pts, tol, "<test>")
+
+
+# ---------------------------------------------------------------------------------------------
+# the bound from a layout's nodes (node_sj_bound): what lets the pipeline skip a layout unmeshed
+
+
+def _split_sj_plain(lo: float, hi: float, q0: int) -> float:
+    """The best worst-quad scaled Jacobian at a vertex, searched: q from q0 to 40 quads, angles
+    sampled densely in [lo, hi] (and the multiples of 90 degrees there), equal split."""
+    angles = np.concatenate([np.linspace(lo, hi, 2001), [a for a in np.pi / 2 * np.arange(1, 200) if lo <= a <= hi]])
+    best = -1.0
+    for q in range(q0, 41):
+        a = angles / q
+        best = max(best, float(np.max(np.where((a > 0) & (a < np.pi), np.sin(a), 0.0))))
+    return best
+
+
+@settings(max_examples=200, deadline=None)
+@given(lo=st.floats(0.05, 7.0), width=st.floats(0.0, 0.5), q0=st.integers(1, 8))
+def test_split_sj_is_the_searched_best(lo, width, q0):
+    from jaxmatch.placement.layout import _split_sj
+
+    assert _split_sj(lo, lo + width, q0) == pytest.approx(_split_sj_plain(lo, lo + width, q0), abs=2e-6)
+
+
+@settings(max_examples=100, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), n_a=st.integers(1, 6), n_b=st.integers(1, 6), t=st.floats(0.0, 1.0))
+def test_outline_angle_holds_every_first_edge(seed, n_a, n_b, t):
+    """A boundary edge from an outline point ends anywhere on the outline up to the next patch
+    corner: the angle between such edges lies in the range ``_outline_angle`` gives."""
+    from jaxmatch.placement.layout import _outline_angle
+
+    rng = np.random.default_rng(seed)
+    # a corner at the origin, its sides bending gently: ahead along +x, back along a direction at 40-140 degrees
+    turn = rng.uniform(np.radians(40), np.radians(140))
+    ahead = np.cumsum(np.stack([np.cos(rng.uniform(-0.4, 0.4, n_a)), np.sin(rng.uniform(-0.4, 0.4, n_a))], 1), 0)
+    dirs = turn + rng.uniform(-0.4, 0.4, n_b)
+    behind = np.cumsum(np.stack([np.cos(dirs), np.sin(dirs)], 1), 0)
+    pts = np.concatenate([[[0.0, 0.0]], ahead, behind])
+    a_ids, b_ids = list(range(1, n_a + 1)), list(range(n_a + 1, n_a + n_b + 1))
+    lo, hi = _outline_angle(pts, 0, a_ids, b_ids)
+    ia, ib = rng.integers(0, n_a), rng.integers(0, n_b)
+    pa = pts[a_ids[ia]] if ia == 0 else (1 - t) * pts[a_ids[ia - 1]] + t * pts[a_ids[ia]]
+    pb = pts[b_ids[ib]] if ib == 0 else (1 - t) * pts[b_ids[ib - 1]] + t * pts[b_ids[ib]]
+    angle = (np.arctan2(pb[1], pb[0]) - np.arctan2(pa[1], pa[0])) % (2 * np.pi)
+    assert lo - 1e-12 <= angle <= hi + 1e-12
+    if n_a == n_b == 1:
+        assert lo == pytest.approx(hi) == pytest.approx(angle)
+
+
+def test_node_sj_bound_of_plain_layouts():
+    from jaxmatch.placement.layout import node_sj_bound
+
+    square = make_layout([[0, 0], [1, 0], [1, 1], [0, 1]], [[0, 1, 2, 3]])
+    assert node_sj_bound(square) == 1.0
+    # the square cut along its diagonal: two patches split a right angle at both ends
+    diagonal = make_layout([[0, 0], [1, 0], [1, 1], [0, 1]], [[0, 1, 2], [0, 2, 3]])
+    assert node_sj_bound(diagonal) == pytest.approx(np.sin(np.pi / 4), abs=1e-6)
+    # five patches around a point inside a pentagon: some angle there is at most 72 degrees
+    ring = [[np.cos(a), np.sin(a)] for a in np.linspace(0, 2 * np.pi, 11)[:-1]]
+    pts = ring + [[0.0, 0.0]]
+    fan = [[10, 2 * i, 2 * i + 1, (2 * i + 2) % 10] for i in range(5)]
+    assert node_sj_bound(make_layout(pts, fan, corners=[10] + list(range(0, 10, 2)))) == pytest.approx(np.sin(np.radians(72)), abs=1e-6)
+    # a T-junction on a straight side (three patches, 180 degrees): q = 2 reaches 90 degrees
+    assert node_sj_bound(make_layout(TJ["points"], TJ["patches"])) == 1.0
+
+
+BOUND_SHAPES = [ROOT / "examples" / n for n in ("lshape.json", "tshape.json", "plus.json", "hexagon.json",
+                                                "triangle.json", "curved.json", "holes/plate-bolt.json",
+                                                "holes/frame.json")] + \
+    [ROOT / "examples" / "labels" / "shapes" / f"{n}.json" for n in ("ushape", "zshape", "stairs", "cross",
+                                                                     "notched-rectangle", "chevron", "trapezoid",
+                                                                     "quarter-disk", "arch")]
+
+
+@pytest.mark.parametrize("path", BOUND_SHAPES, ids=lambda p: p.stem)
+def test_node_sj_bound_holds_on_every_strategys_mesh(cat, lat, path):
+    """Every strategy's layout of the example regions at two sizes, meshed as the pipeline meshes
+    it: its min scaled Jacobian (measured on the mesh here) is at most ``node_sj_bound``, unless a
+    quad is inverted."""
+    import jaxmatch
+    from jaxmatch.geometry import cumulative_length
+    from jaxmatch.meshing.pipeline import strategy_names
+    from jaxmatch.meshing.region import canonical
+    from jaxmatch.placement.decompose import decompose, single_patch
+    from jaxmatch.placement.layout import ALL_SIZES, TEMPLATE_SIZES, node_sj_bound
+    from jaxmatch.shape import DEFAULT_CORNER_ANGLE
+
+    shp0 = jaxmatch.load_shape(path)
+    claims = 0
+    for div in (16, 32):
+        h = float(cumulative_length(shp0.input_points)[-1]) / div
+        shp = canonical(shp0, h, DEFAULT_CORNER_ANGLE)
+        for name in strategy_names():
+            try:
+                lay = single_patch(shp) if name == "single" else decompose(shp, name)
+                lm = mesh_layout(lay, cat, lat, size=h, smooth_cuts=lay.n_patches > 1,
+                                 sizes=ALL_SIZES if name == "single" else TEMPLATE_SIZES)
+            except (InputError, ValueError, ArithmeticError, IndexError):
+                continue
+            bound = node_sj_bound(lay)
+            p = lm.xy[lm.quads]
+            a, b = np.roll(p, -1, axis=1) - p, np.roll(p, 1, axis=1) - p
+            sj = (a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]) / (np.linalg.norm(a, axis=2) * np.linalg.norm(b, axis=2))
+            assert sj.min() <= 0 or sj.min() <= bound + 1e-9, (name, div, sj.min(), bound)
+            claims += bound < 1
+    if path.stem in ("lshape", "ushape", "zshape", "hexagon", "trapezoid"):
+        assert claims > 0  # the bound says something on these

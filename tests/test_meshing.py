@@ -85,16 +85,20 @@ def test_l_shape_names_the_rule_and_the_runner_up(cat):
     m = jaxmatch.mesh(shp, size=0.25, catalogue=cat)
     check_mesh(shp, m)
     assert [c.name for c in m.tried] == list(strategy_names())
-    # the recursive cut meshes the L as two grids (min scaled Jacobian 1); the bisectors have
-    # 45-degree corners and a side off the size; the continuations' three patches cannot beat two
-    # perfect ones, and no template of the single patch's sizes refines into a grid (its min
-    # scaled Jacobian is at most 0.96), so neither is meshed
-    assert m.chosen == "recursive" and m.n_patches == 2 and m.rule == "size conformity"
-    runner_up = next(c.mesh for c in m.tried if c.name == m.runner_up)
-    assert m.runner_up == "bisectors" and runner_up.min_scaled_jacobian < 0.9 and len(m.irregular) == 0
+    # the recursive cut meshes the L as two grids (min scaled Jacobian 1); the bisectors split a
+    # right-angled corner between two patches (some quad's angle there at most 45 degrees), the
+    # continuations' three patches cannot beat two perfect ones, and no template of the single
+    # patch's sizes refines into a grid (its min scaled Jacobian is at most 0.96): none of them is
+    # meshed, and the runner-up is the one whose best possible mesh comes closest
+    assert m.chosen == "recursive" and m.n_patches == 2 and m.min_scaled_jacobian == pytest.approx(1.0)
+    assert [c.name for c in m.tried if c.mesh is not None] == ["recursive"]
+    assert m.rule == "fewer patches" and m.runner_up == "continuations"
     notes = {c.name: c.note for c in m.tried}
-    assert "cannot beat recursive" in notes["continuations"]
+    assert "3 patches cannot beat recursive" in notes["continuations"]
+    assert "at most 0.71 cannot beat recursive" in notes["bisectors"] and "splits its angle" in notes["bisectors"]
     assert "cannot beat recursive" in notes["single"] and "grid" in notes["single"]
+    bisectors = jaxmatch.mesh(shp, size=0.25, catalogue=cat, strategies=["bisectors"])
+    assert bisectors.min_scaled_jacobian <= np.sin(np.pi / 4) + 1e-9  # the claim, on its mesh
 
 
 @pytest.mark.parametrize("name,div", [("L", 16), ("T", 32), ("U", 16), ("plus", 32), ("stairs", 16),
@@ -461,7 +465,8 @@ def test_cli_mesh_reports_the_choice(cli, tmp_path):
     out, png = tmp_path / "l.msh", tmp_path / "l.png"
     code, stdout, err = cli("mesh", EX / "lshape.json", "--size", "0.25", "--out", out, "--png", png)
     assert code == 0, err
-    assert "chosen: recursive (rule that decided: size conformity; runner-up bisectors)" in stdout
+    assert "chosen: recursive (rule that decided: fewer patches; runner-up continuations)" in stdout
+    assert "bisectors: not meshed (min scaled Jacobian at most 0.71 cannot beat recursive; a node splits" in stdout
     assert "continuations: not meshed (3 patches cannot beat recursive)" in stdout
     assert "single: not meshed (min scaled Jacobian at most 0.96 cannot beat recursive; no template of its sizes" in stdout
     assert out.exists() and png.read_bytes().startswith(b"\x89PNG")
@@ -524,13 +529,16 @@ def test_cli_many_regions_with_one_bad(cli, tmp_path):
 
 
 def test_time_budget_keeps_the_best_valid_mesh_so_far(cat):
-    m = jaxmatch.mesh(EX / "lshape.json", size=0.25, catalogue=cat, budget_s=1e-9)
+    m = jaxmatch.mesh(CONCAVE["Z"], divisions=16, catalogue=cat, budget_s=1e-9)
     notes = {c.name: c.note for c in m.tried}
     meshed = [c.name for c in m.tried if c.mesh is not None]
-    # the first candidate tried (the cuts of fewest patches; the single patch of a concave region
-    # comes last) is kept, every other one is skipped for time
-    assert meshed == [m.chosen] == ["bisectors"] and m.valid
-    assert all("time budget" in notes[n] for n in ("continuations", "single", "recursive"))
+    # the first candidate tried (the cuts of fewest patches, the one whose nodes allow the best
+    # quality first; the single patch of a concave region comes last) is kept; the single patch
+    # could still have won (one patch, and a grid template of its sizes exists) but is skipped for
+    # time; the others could not have won
+    assert meshed == [m.chosen] == ["recursive"] and m.valid
+    assert "time budget" in notes["single"]
+    assert all("cannot beat" in notes[n] for n in ("continuations", "bisectors"))
 
 
 def test_pipeline_warm_up_meshes_with_the_defaults_and_with_given_models():

@@ -79,12 +79,17 @@ def cannot_win(best_key: tuple, n_patches: int, order: int, max_sj: float = 1.0,
 def choose(candidates: Sequence[Candidate], quality: Quality = QUALITY) -> QuadMesh:
     """The best mesh of ``candidates`` by :func:`mesh_key`, labelled with the rule that decided
     (the first rule on which it beats the runner-up), the runner-up's name and every candidate.
+    A candidate not meshed because it could not win takes part with its ``bound`` (the best key
+    its mesh could have had): as the runner-up, the winner beats it on that rule at the latest.
     Raises ValueError when no candidate has a mesh."""
     scored = [(mesh_key(c.mesh, i, quality), c) for i, c in enumerate(candidates) if c.mesh is not None]
     if not scored:
         raise ValueError("no candidate has a mesh")
+    scored += [(c.bound, c) for c in candidates if c.mesh is None and c.bound is not None]
     scored.sort(key=lambda t: t[0])
     best_key, best = scored[0]
+    if best.mesh is None:  # pragma: no cover - a bound is above a key meshed before it
+        raise ValueError(f"candidate {best.name} was skipped but could have won")
     if len(scored) == 1:
         return best.mesh.with_choice(best.name, "", None, candidates)
     second_key, second = scored[1]

@@ -26,11 +26,13 @@ _KEPT = ("_sj_inverted", "_edges", "_edge_lengths", "_valences", "_loops", "_mis
 class Candidate(NamedTuple):
     """One candidate the pipeline tried: ``name`` (``"single"``, a decomposition strategy,
     ``"template"``, ``"layout"``), its ``mesh`` (a :class:`QuadMesh`) or None, and ``note``:
-    why it has no mesh (empty when it has one)."""
+    why it has no mesh (empty when it has one). ``bound``: for one not meshed because it could
+    not win, the smallest :func:`~jaxmatch.meshing.choose.mesh_key` its mesh could have had."""
 
     name: str
     mesh: "QuadMesh | None"
     note: str = ""
+    bound: tuple | None = None
 
 
 def boundary_loops(quads: np.ndarray) -> list[np.ndarray]:

@@ -12,7 +12,7 @@ import numpy as np
 from jaxmatch.defaults import QUALITY, Quality
 from jaxmatch.errors import InputError, SolverError
 from jaxmatch.meshing.build import from_layout, from_refined
-from jaxmatch.meshing.choose import cannot_win, choose, mesh_key
+from jaxmatch.meshing.choose import best_possible_key, cannot_win, choose, mesh_key
 from jaxmatch.meshing.region import corner_points
 from jaxmatch.meshing.result import Candidate, QuadMesh
 from jaxmatch.shape import Shape
@@ -48,15 +48,16 @@ def try_strategies(shape: Shape, names, cat, lat, h: float, corners: np.ndarray,
                     progress, suffix: str = "", quality: Quality = QUALITY) -> list[Candidate]:
     """Each strategy of ``names`` (one :class:`Candidate` each, in the order of ``names``, with its
     mesh or the reason it has none): every strategy's layout is cut first, then meshed by the same
-    solve (:func:`~jaxmatch.placement.layout.mesh_layout`), fewest patches first (the single patch
-    of a region with a concave corner last). A layout that cannot beat the best mesh so far
-    whatever its mesh (:func:`~jaxmatch.meshing.choose.cannot_win`: by its patch count, and for the
-    single patch by :func:`~jaxmatch.placement.layout.single_sj_bound`, an upper bound on its min
-    scaled Jacobian from its template sizes) is not meshed, so the choice is the one meshing all
-    of them would give. A strategy whose cuts or solve fail for any reason is skipped with that
-    reason."""
+    solve (:func:`~jaxmatch.placement.layout.mesh_layout`), fewest patches first, and among those
+    the one whose quality can be highest first (the single patch of a region with a concave corner
+    last). A layout that cannot beat the best mesh so far whatever its mesh
+    (:func:`~jaxmatch.meshing.choose.cannot_win`: by its patch count and an upper bound on its min
+    scaled Jacobian: :func:`~jaxmatch.placement.layout.node_sj_bound` from the angles its nodes
+    split, and for the single patch :func:`~jaxmatch.placement.layout.single_sj_bound` from its
+    template sizes) is not meshed, so the choice is the one meshing all of them would give. A
+    strategy whose cuts or solve fail for any reason is skipped with that reason."""
     from jaxmatch.placement.decompose import _same, decompose, same_cuts, single_patch
-    from jaxmatch.placement.layout import ALL_SIZES, TEMPLATE_SIZES, mesh_layout, single_sj_bound
+    from jaxmatch.placement.layout import ALL_SIZES, TEMPLATE_SIZES, mesh_layout, node_sj_bound, single_sj_bound
 
     tried: list[Candidate | None] = [None] * len(names)
     layouts: list[tuple[int, object]] = []
@@ -77,19 +78,24 @@ def try_strategies(shape: Shape, names, cat, lat, h: float, corners: np.ndarray,
     best: tuple | None = None
     concave = bool(np.any(~np.asarray(shape.convex, bool)))
     late = {i for i, _ in layouts if names[i] == SINGLE and concave}  # after the cuts: a grid they make may rule it out
-    for done, (i, lay) in enumerate(sorted(layouts, key=lambda il: (il[0] in late, il[1].n_patches, il[0])), start=1):
+    caps = {i: node_sj_bound(lay) for i, lay in layouts}
+    order = sorted(layouts, key=lambda il: (il[0] in late, il[1].n_patches, -caps[il[0]], il[0]))
+    for done, (i, lay) in enumerate(order, start=1):
         label = names[i] + suffix
         sizes = ALL_SIZES if names[i] == SINGLE else TEMPLATE_SIZES
-        bound = 1.0
-        if best is not None and names[i] == SINGLE:  # (one patch: only a cap on its quality can rule it out)
-            try:
-                bound = single_sj_bound(lay, cat, lat, sizes=sizes, template_cache=cache)
+        bound, why = caps[i], "a node splits its angle"
+        if best is not None and names[i] == SINGLE and not cannot_win(best[0], 1, i, bound, quality):
+            try:  # (one patch: only a cap on its quality can rule it out)
+                grid = single_sj_bound(lay, cat, lat, sizes=sizes, template_cache=cache)
             except FAILED:  # no templates: the solve below says why
-                pass
+                grid = 1.0
+            if grid < bound:
+                bound, why = grid, "no template of its sizes refines into a grid"
         if best is not None and cannot_win(best[0], lay.n_patches, i, bound, quality):
-            tried[i] = Candidate(label, None, f"min scaled Jacobian at most {bound:.2f} cannot beat {best[1]}; no template "
-                                 "of its sizes refines into a grid" if bound < 1 else
-                                 f"{lay.n_patches} patches cannot beat {best[1]}")
+            tried[i] = Candidate(label, None, f"min scaled Jacobian at most {bound:.2f} cannot beat {best[1]}; {why}"
+                                 if not cannot_win(best[0], lay.n_patches, i, 1.0, quality) else
+                                 f"{lay.n_patches} patches cannot beat {best[1]}",
+                                 best_possible_key(lay.n_patches, i, bound, quality))
         elif budget_s is not None and time.perf_counter() - t0 > budget_s and best is not None and best[2]:
             tried[i] = Candidate(label, None, f"not tried: time budget of {budget_s:g} s spent")
         else:

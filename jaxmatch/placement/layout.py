@@ -879,8 +879,9 @@ def single_sj_bound(layout: Layout, catalogue: Catalogue, lattice, *, templates_
     template sizes alone: 1 unless the region has straight sides and right-angled corners and no
     catalogue mesh of the template group that :func:`mesh_layout` would use (found as it finds
     it, the templates kept in ``template_cache`` for it) can be refined into a grid of rectangles
-    with the region's corners in their order (:func:`grid_templates_exist`, :data:`NO_GRID_SJ`),
-    or a corner is off every multiple of 90 degrees (:data:`OFF_RIGHT_ANGLE_SJ`). Refinement keeps
+    with the region's corners in their order (:func:`grid_templates_exist`, :data:`NO_GRID_SJ`;
+    when none of any size of ``sizes`` can, the group is not looked for), or a corner is off
+    every multiple of 90 degrees (:data:`OFF_RIGHT_ANGLE_SJ`). Refinement keeps
     a template vertex's valence and makes every new vertex regular, so the refined mesh is a grid
     only if its template is one. Without templates (the layout cannot be meshed): 1."""
     from jaxmatch.geometry import turning_angles
@@ -899,14 +900,108 @@ def single_sj_bound(layout: Layout, catalogue: Catalogue, lattice, *, templates_
         return OFF_RIGHT_ANGLE_SJ
     if np.any((quarters != 1) & (quarters != 3)):  # a corner of 0 or 180 degrees (not a corner)
         return 1.0
+    corners = quarters.astype(int).tolist()
+    if not grid_templates_exist(catalogue, [k for g in sizes for k in g if k in catalogue.internal], corners):
+        return NO_GRID_SJ  # none of any size: which group mesh_layout takes does not matter
     t = _patch_templates(layout, 0, shp, catalogue, lattice, templates_per_patch, sizes, template_cache)
     if not t:
         return 1.0
     k0 = t[0].match.internal_vertices
     ks = [k for k in next(g for g in sizes if k0 in g) if k in catalogue.internal]
-    if grid_templates_exist(catalogue, ks, quarters.astype(int).tolist()):
+    if grid_templates_exist(catalogue, ks, corners):
         return 1.0
     return NO_GRID_SJ
+
+
+NODE_ANGLE_TOL = 1e-6
+"""Slack (radians) on the angle at a node, for boundary vertices placed on the outline's
+segments up to rounding (:func:`node_sj_bound`)."""
+
+
+def node_sj_bound(layout: Layout) -> float:
+    """An upper bound on the min scaled Jacobian of any mesh of ``layout`` that does not fold (one
+    that folds loses on that first), from its patch corners alone: a patch corner is a mesh
+    vertex, every patch that contains it has a quad there, and the ``q`` quads at a vertex split
+    its angle (2 pi inside; between the first boundary edges on the outline) into ``q`` angles,
+    one of them at least 1 / q-th of it apart from 90 degrees, so some quad's scaled Jacobian there
+    is at most ``max(sin(angle / q))`` over ``q`` >= the patches at the vertex
+    (:func:`_split_sj`). A boundary edge from a patch corner ends on the outline before the next
+    patch corner: the angle lies between the extreme directions to the outline's points up to it
+    (:func:`_outline_angle`). E.g. a cut from a right-angled corner (two patches there): sin 45
+    degrees; five patches meeting inside: sin 72 degrees. 1 when no corner limits it.
+
+    (With no quad inverted and the boundary running once round the outline, the mesh covers the
+    region once, so the angles of a vertex's quads add up to its angle.)"""
+    pts = layout.points
+    n = pts.shape[0]
+    loops = layout.patches
+    flat = np.concatenate(loops)
+    nxt = np.concatenate([np.roll(p, -1) for p in loops])
+    uses = np.bincount(flat, minlength=n)
+    und = np.minimum(flat, nxt) * n + np.maximum(flat, nxt)
+    _, inv, cnt = np.unique(und, return_inverse=True, return_counts=True)
+    once = cnt[inv] == 1  # outline segments, each in its patch's (ccw) direction
+    ahead = dict(zip(flat[once].tolist(), nxt[once].tolist()))
+    back = {b: a for a, b in ahead.items()}
+    corner = np.zeros(n, bool)
+    for p, pc in zip(loops, layout.patch_corner):
+        corner[p[pc]] = True
+    bound = 1.0
+    for v in np.flatnonzero(corner).tolist():
+        if v in ahead:
+            lo, hi = _outline_angle(pts, v, _walk(ahead, corner, v), _walk(back, corner, v))
+        else:  # inside the region
+            lo = hi = 2 * math.pi
+        bound = min(bound, _split_sj(lo - NODE_ANGLE_TOL, hi + NODE_ANGLE_TOL, int(uses[v])))
+    return bound
+
+
+def _walk(step: dict, stop: np.ndarray, v: int) -> list[int]:
+    """The outline points after ``v`` by ``step`` (a point -> the next), up to and including the
+    first where ``stop`` is true."""
+    out = [step[v]]
+    while not stop[out[-1]] and out[-1] != v:
+        out.append(step[out[-1]])
+    return out
+
+
+def _outline_angle(pts: np.ndarray, v: int, ahead: list[int], behind: list[int]) -> tuple[float, float]:
+    """The range ``(lo, hi)`` (radians) of the region's angle at outline point ``v``: from the
+    direction to a point of the outline ``ahead`` (in order) counter-clockwise to the direction to
+    a point of the outline ``behind`` (going back), each direction within the extreme directions
+    to the chain's points (unwrapped along the chain: the segments between them are seen from
+    ``v`` under less than pi)."""
+    x, y = float(pts[v, 0]), float(pts[v, 1])
+
+    def spread(chain):
+        if len(chain) == 1:
+            u, w = float(pts[chain[0], 0]) - x, float(pts[chain[0], 1]) - y
+            t = math.atan2(w, u)
+            return t, 0.0, 0.0
+        d = pts[chain] - pts[v]
+        t = np.unwrap(np.arctan2(d[:, 1], d[:, 0]))
+        return float(t[0]), float(t.min() - t[0]), float(t.max() - t[0])
+
+    a0, a_lo, a_hi = spread(ahead)
+    b0, b_lo, b_hi = spread(behind)
+    base = (b0 - a0) % (2 * math.pi)
+    return base + b_lo - a_hi, base + b_hi - a_lo
+
+
+def _split_sj(lo: float, hi: float, q0: int) -> float:
+    """The largest scaled Jacobian the worst of ``q`` >= ``q0`` convex quads at a vertex can have
+    when their angles there add up to an angle in ``[lo, hi]``: ``sin(angle / q)``, 0 (no convex
+    quad) when ``angle / q >= pi``."""
+    best = -1.0
+    q = max(q0, 1)
+    while True:
+        if lo / q <= math.pi / 2 <= hi / q:
+            return 1.0
+        for a in (lo / q, hi / q):
+            best = max(best, math.sin(a) if 0.0 < a < math.pi else 0.0)
+        if hi / q < math.pi / 2:  # smaller angles only from here on
+            return best
+        q += 1
 
 
 def _has(templates, j: int) -> bool:
