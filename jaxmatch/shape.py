@@ -53,7 +53,7 @@ from typing import NamedTuple
 import numpy as np
 
 from jaxmatch.errors import InputError
-from jaxmatch.geometry import cumulative_length, first_crossing, point_at, ring_is_simple, signed_area, turning_angles
+from jaxmatch.geometry import cumulative_length, first_crossing, point_at, ring_is_simple, roll, signed_area, turning_angles
 
 __all__ = [
     "scale_corners",
@@ -366,8 +366,8 @@ def scale_corners(points, h: float, corner_angle: float = DEFAULT_CORNER_ANGLE, 
         peer = rest[near(i, rest, w) & (wide[rest] >= wide[i] - PEAK_BAND)]
         keep.append(int(peer[np.argmax(local[peer])]))
     run = STRAIGHT_RUN * float(h)
-    e_in = np.linalg.norm(p - np.roll(p, 1, axis=0), axis=1)  # the edge arriving at each point
-    e_out = np.roll(e_in, -1)
+    e_in = np.linalg.norm(p - roll(p, 1), axis=1)  # the edge arriving at each point
+    e_out = roll(e_in, -1)
     straight = np.flatnonzero((np.minimum(e_in, e_out) >= run) & (local > MIN_STRAIGHT_TURN))
     return np.unique(np.concatenate([np.asarray(keep, np.int64), straight.astype(np.int64)]))
 
@@ -475,9 +475,9 @@ def _make_shape(points, corners, angle: float, source: str) -> Shape:
 
     def repeated(q, tol):
         if tol == 0:
-            same = np.all(np.roll(q, -1, axis=0) == q, axis=1)
+            same = np.all(roll(q, -1) == q, axis=1)
         else:
-            same = ~(np.linalg.norm(np.roll(q, -1, axis=0) - q, axis=1) > tol)
+            same = ~(np.linalg.norm(roll(q, -1) - q, axis=1) > tol)
         hit = np.flatnonzero(same)
         if hit.size:
             i = int(hit[0])
@@ -528,11 +528,11 @@ def _make_shape(points, corners, angle: float, source: str) -> Shape:
         is_corner[inverse[corner_idx]] = True
     found = np.flatnonzero(is_corner)
     # rotate so that points[0] is the first corner (without corners: the lowest point)
-    roll = int(found[0]) if found.size else _lowest(unit)
-    unit = np.roll(unit, -roll, axis=0)
-    turn = np.roll(turn, -roll)
-    found = found - roll
-    index = np.roll(index, -roll)  # input index of each point, in the final order
+    start = int(found[0]) if found.size else _lowest(unit)
+    unit = roll(unit, -start)
+    turn = roll(turn, -start)
+    found = found - start
+    index = roll(index, -start)  # input index of each point, in the final order
     position = np.empty(n, np.int64)  # input index -> final point index
     position[index] = np.arange(n)
     corner_of_point = np.full(n, -1, np.int64)
@@ -635,7 +635,7 @@ def annotate(shape: Shape, m: int) -> Annotation:
         lengths = np.diff(np.concatenate([tc, [per]]))
         corner_xy = shape.points[shape.corners]
         low = _lowest(corner_xy)  # ties broken from here
-        counts = np.roll(largest_remainder(np.roll(lengths, -low), m - c), low)
+        counts = roll(largest_remainder(roll(lengths, -low), m - c), low)
         per_side = counts + 1  # the corner plus its s points
         side = np.repeat(np.arange(c), per_side).astype(np.int32)
         first = np.concatenate([[0], np.cumsum(per_side)[:-1]])

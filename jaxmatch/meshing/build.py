@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from jaxmatch.geometry import roll
+
 from jaxmatch.meshing.result import QuadMesh
 from jaxmatch.shape import Shape
 
@@ -18,7 +20,7 @@ __all__ = ["from_layout", "from_placement", "from_refined"]
 
 def _loop_edges(loop: np.ndarray) -> np.ndarray:
     loop = np.asarray(loop, np.int64)
-    return np.stack([loop, np.roll(loop, -1)], axis=1)
+    return np.stack([loop, roll(loop, -1)], axis=1)
 
 
 def _shape_corners(shape: Shape) -> np.ndarray:

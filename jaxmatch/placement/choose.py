@@ -33,6 +33,7 @@ import numpy as np
 
 from jaxmatch.defaults import QUALITY
 from jaxmatch.errors import InputError
+from jaxmatch.geometry import roll
 from jaxmatch.catalogue.mesh import boundary_valences, mesh_valences
 from jaxmatch.placement.embed import Placement, edge_ratios, exact_paths, inverted_mask, oriented_boundary, place, quality
 from jaxmatch.shape import S as S_CODE
@@ -183,7 +184,7 @@ def lattice_weights(lattice) -> tuple[np.ndarray, np.ndarray]:
 
 def _pair_weights(codes: np.ndarray, seq: np.ndarray, table: np.ndarray) -> np.ndarray:
     """``(..., n, m)``: weight of oriented vertex ``j`` (valences ``seq (..., n)``) on point ``i``."""
-    t = np.stack([np.roll(seq, -1, axis=-1), seq, np.roll(seq, 1, axis=-1)], axis=-1) - 2
+    t = np.stack([roll(seq, -1, axis=-1), seq, roll(seq, 1, axis=-1)], axis=-1) - 2
     flat = t[..., 0] * 16 + t[..., 1] * 4 + t[..., 2]  # (..., n)
     return table[codes[None, :], flat[..., None]]
 
@@ -594,7 +595,7 @@ def match_candidates(annotation: Annotation, vals: np.ndarray, lattice, utility:
     orients = np.flatnonzero(ut == best) if min_utility is None else np.flatnonzero(ut >= float(min_utility))
     if orients.size == 0 or n == 0 or n > len(annotation.codes):
         return []
-    seqs = np.stack([np.roll(v[::-1] if o >= n else v, -int(o % n)) for o in orients]).astype(np.int64)
+    seqs = np.stack([roll(v[::-1] if o >= n else v, -int(o % n)) for o in orients]).astype(np.int64)
     if reference:
         cands = []
         for o, seq in zip(orients, seqs):

@@ -28,6 +28,7 @@ import math
 import numpy as np
 
 from jaxmatch.errors import InputError
+from jaxmatch.geometry import roll
 from jaxmatch.placement.layout import Layout, make_layout
 from jaxmatch.shape import Shape
 
@@ -52,8 +53,8 @@ def _reflex_corners(shape: Shape) -> list[tuple[np.ndarray, int]]:
     out = [(shape.given_points, int(c)) for c, convex in zip(shape.corners.tolist(), shape.convex.tolist()) if not convex]
     for ring, corners in zip(shape.holes, shape.hole_corners):
         ring = np.asarray(ring, np.float64)
-        e_in = ring - np.roll(ring, 1, axis=0)
-        e_out = np.roll(ring, -1, axis=0) - ring
+        e_in = ring - roll(ring, 1)
+        e_out = roll(ring, -1) - ring
         cross = e_in[:, 0] * e_out[:, 1] - e_in[:, 1] * e_out[:, 0]
         out += [(ring, int(c)) for c in corners if cross[c] < 0]  # a right turn with the region on the left
     return out
@@ -102,7 +103,7 @@ def _snap(rings: list[np.ndarray], end: np.ndarray, tol: float, inserts: list) -
         j = int(np.argmin(near))
         if near[j] <= tol:
             return pts[j]
-        a, b = pts, np.roll(pts, -1, axis=0)
+        a, b = pts, roll(pts, -1)
         ab = b - a
         f = np.clip(np.sum((end - a) * ab, axis=1) / np.sum(ab * ab, axis=1), 0.0, 1.0)
         d = np.linalg.norm(a + f[:, None] * ab - end, axis=1)
@@ -352,7 +353,7 @@ def _recursive(shape: Shape) -> Layout:
         for f in faces:
             f = shapely.orient_polygons(f) if hasattr(shapely, "orient_polygons") else shapely.geometry.polygon.orient(f)
             xy = np.asarray(f.exterior.coords)[:-1]
-            e_in, e_out = xy - np.roll(xy, 1, axis=0), np.roll(xy, -1, axis=0) - xy
+            e_in, e_out = xy - roll(xy, 1), roll(xy, -1) - xy
             turn = np.arctan2(e_in[:, 0] * e_out[:, 1] - e_in[:, 1] * e_out[:, 0], np.sum(e_in * e_out, axis=1))
             reflex = np.flatnonzero(turn < -1e-9)
             if reflex.size:
@@ -378,7 +379,7 @@ def _recursive(shape: Shape) -> Layout:
         if near[j] <= tol:
             end, on_cut = pts[j], False
         elif ring.distance(shapely.Point(end)) <= tol:
-            a, b = pts, np.roll(pts, -1, axis=0)
+            a, b = pts, roll(pts, -1)
             ab = b - a
             fr = np.clip(np.sum((end - a) * ab, axis=1) / np.sum(ab * ab, axis=1), 0.0, 1.0)
             k = int(np.argmin(np.linalg.norm(a + fr[:, None] * ab - end, axis=1)))

@@ -49,7 +49,7 @@ from typing import NamedTuple
 import numpy as np
 
 from jaxmatch.catalogue.mesh import QuadMesh, edges, mesh_valences
-from jaxmatch.geometry import VERTEX_SNAP, cumulative_length, point_at, signed_area, sub_polyline
+from jaxmatch.geometry import VERTEX_SNAP, cumulative_length, point_at, roll, signed_area, sub_polyline
 
 __all__ = [
     "Placement",
@@ -171,7 +171,7 @@ def oriented_boundary(mesh: QuadMesh, rotation: int, reflected: bool) -> tuple[Q
         quads = quads[:, ::-1]
         s = s[::-1]
     n = s.shape[0]
-    loop = np.roll(s, -(int(rotation) % n if n else 0)).astype(np.int32)
+    loop = roll(s, -(int(rotation) % n if n else 0)).astype(np.int32)
     return QuadMesh(quads=np.ascontiguousarray(quads), boundary=loop), loop
 
 
@@ -198,7 +198,7 @@ def boundary_paths(points: np.ndarray, t_aligned: np.ndarray, cum: np.ndarray | 
     ta = np.asarray(t_aligned, dtype=np.float64).ravel()
     n = ta.shape[0]
     t0 = ta
-    t1 = np.roll(ta, -1)
+    t1 = roll(ta, -1)
     t1 = np.where(t1 <= t0, t1 + per, t1)
     P = p.shape[0]
     if n * 3 * P > 4_000_000:  # one piece at a time: bounded memory
@@ -399,7 +399,7 @@ def _energy(pos, quads, delta, power):
         g_a = -dk * k / r  # dk/dh = -k/h, dh/da = h/r
     g_e1 = 2.0 * g_N[..., None] * e1 + g_a[..., None] * np.stack([e2[..., 1], -e2[..., 0]], axis=-1)
     g_e2 = 2.0 * g_N[..., None] * e2 + g_a[..., None] * np.stack([-e1[..., 1], e1[..., 0]], axis=-1)
-    G = -(g_e1 + g_e2) + np.roll(g_e1, 1, axis=1) + np.roll(g_e2, -1, axis=1)
+    G = -(g_e1 + g_e2) + roll(g_e1, 1, axis=1) + roll(g_e2, -1, axis=1)
     flat = quads.ravel()
     gx = np.bincount(flat, weights=G[..., 0].ravel(), minlength=pos.shape[0])
     gy = np.bincount(flat, weights=G[..., 1].ravel(), minlength=pos.shape[0])

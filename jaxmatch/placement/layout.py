@@ -52,6 +52,7 @@ import numpy as np
 from jaxmatch.defaults import QUALITY
 from jaxmatch.errors import InputError
 from jaxmatch.files import read_limited
+from jaxmatch.geometry import roll
 from jaxmatch.placement.refine import _array_key
 from jaxmatch.placement.milp import CHORD_WEIGHT, LayoutInfeasible, solve_counts  # noqa: F401 (public here)
 from jaxmatch.placement.embed import (inverted_mask, polygon_area, quad_areas, quality, sj_inverted, smooth_in_frame,
@@ -362,8 +363,8 @@ def make_layout(points, patches, corners=None, sides=None, *, source: str = "<la
         cpos = np.flatnonzero(pc)
         if cpos.size < 2:
             raise InputError(f"patch {p} has {cpos.size} corner(s); a patch needs at least 2", where=source)
-        loops.append(np.roll(ids, -int(cpos[0])))
-        pcorners.append(np.roll(pc, -int(cpos[0])))
+        loops.append(roll(ids, -int(cpos[0])))
+        pcorners.append(roll(pc, -int(cpos[0])))
         polys.append(poly)
 
     _check_segments(loops, source)
@@ -380,8 +381,8 @@ def make_layout(points, patches, corners=None, sides=None, *, source: str = "<la
 
 def _straight(loop_xy: np.ndarray) -> np.ndarray:
     """``(k,) bool``: the closed loop goes straight on at the point (turn below 1e-9 rad)."""
-    e_in = loop_xy - np.roll(loop_xy, 1, axis=0)
-    e_out = np.roll(loop_xy, -1, axis=0) - loop_xy
+    e_in = loop_xy - roll(loop_xy, 1)
+    e_out = roll(loop_xy, -1) - loop_xy
     cross = e_in[:, 0] * e_out[:, 1] - e_in[:, 1] * e_out[:, 0]
     dot = np.sum(e_in * e_out, axis=1)
     return (np.abs(np.arctan2(cross, dot)) <= 1e-9)
@@ -403,7 +404,7 @@ def _check_coincident(pts: np.ndarray, tol: float, source: str) -> None:
 
 def _segments(loop: np.ndarray) -> np.ndarray:
     """``(k, 2) int64`` directed segments of a closed loop."""
-    return np.stack([loop, np.roll(loop, -1)], axis=1)
+    return np.stack([loop, roll(loop, -1)], axis=1)
 
 
 def _check_segments(loops: Sequence[np.ndarray], source: str) -> None:
@@ -598,7 +599,7 @@ def chord_area_error(polyline: np.ndarray, n: int) -> float:
             continue
         ring = np.vstack([q[i], inner, q[i + 1]])
         x, y = ring[:, 0], ring[:, 1]
-        total += abs(0.5 * float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y)))
+        total += abs(0.5 * float(np.sum(x * roll(y, -1) - roll(x, -1) * y)))
     return total
 
 
@@ -936,7 +937,7 @@ def node_sj_bound(layout: Layout) -> float:
     n = pts.shape[0]
     loops = layout.patches
     flat = np.concatenate(loops)
-    nxt = np.concatenate([np.roll(p, -1) for p in loops])
+    nxt = np.concatenate([roll(p, -1) for p in loops])
     uses = np.bincount(flat, minlength=n)
     und = np.minimum(flat, nxt) * n + np.maximum(flat, nxt)
     _, inv, cnt = np.unique(und, return_inverse=True, return_counts=True)

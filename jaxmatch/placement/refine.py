@@ -44,6 +44,7 @@ import numpy as np
 from jaxmatch.catalogue.mesh import edges
 from jaxmatch.defaults import QUALITY
 from jaxmatch.errors import InputError, UnmatchableError
+from jaxmatch.geometry import roll
 from jaxmatch.placement.milp import LayoutInfeasible, one_patch_sides, solve_counts
 from jaxmatch.placement.embed import (DENSE_TUTTE, Placement, quad_areas, quality, sj_inverted,
                                       smooth_in_frame, smooth_near, tutte)
@@ -179,7 +180,7 @@ def _make_side_frame(shape: Shape) -> list[tuple[int, bool]]:
     if n == 0:
         return [(0, False)]
     order = np.arange(n) if shape.corner_order is None else np.asarray(shape.corner_order, np.int64)
-    step = (np.roll(order, -1) - order) % n
+    step = (roll(order, -1) - order) % n
     forward = bool(np.all(step == 1 % n))
     backward = bool(np.all(step == (n - 1) % n))
     if forward and backward:  # n <= 2: the file's orientation decides
