@@ -50,8 +50,11 @@ def scaled_jacobian(xy: np.ndarray, quads: np.ndarray) -> np.ndarray:
     return s.min(axis=1)
 
 
-def measure(xy: np.ndarray, quads: np.ndarray, corners: np.ndarray, outline: np.ndarray, h: float) -> dict:
-    """Figures of one mesh from its points and quads and the input outline/corners only."""
+def measure(xy: np.ndarray, quads: np.ndarray, corners: np.ndarray, outline: np.ndarray, h: float,
+            holes=()) -> dict:
+    """Figures of one mesh from its points and quads and the input outline/corners (and holes:
+    loops ``(H_k, 2)`` cut out of the region, their corners among ``corners``) only. Euler's
+    bound on irregular vertices: ``|4 (1 - holes) - sum over boundary vertices (3 - valence)|``."""
     import shapely
 
     quads = np.asarray(quads, np.int64)
@@ -65,10 +68,10 @@ def measure(xy: np.ndarray, quads: np.ndarray, corners: np.ndarray, outline: np.
     used = np.zeros(len(xy), bool)
     used[quads.ravel()] = True
     irregular = int(np.sum(used & ~bnd & (val != 4)))
-    bound = abs(4 - int(np.sum(3 - val[bnd])))
+    bound = abs(4 * (1 - len(holes)) - int(np.sum(3 - val[bnd])))
     p = xy[quads]
     area = 0.5 * np.sum(p[:, :, 0] * np.roll(p[:, :, 1], -1, 1) - np.roll(p[:, :, 0], -1, 1) * p[:, :, 1])
-    region = shapely.Polygon(outline).area
+    region = shapely.Polygon(outline, holes=[np.asarray(r) for r in holes]).area
     ext = float(np.ptp(outline, axis=0).max())
     miss = 0
     for c in corners:

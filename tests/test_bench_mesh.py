@@ -28,6 +28,32 @@ def square(bench):
     return bench.bench_mesh(["square"], [16], reps=1)
 
 
+@pytest.fixture(scope="module")
+def frame(bench):
+    return bench.bench_mesh(["square", "holes/frame"], [16], reps=1)
+
+
+def test_the_regions_are_the_shapes_then_the_regions_with_holes(bench):
+    names = bench.mesh_regions()
+    shapes = bench.mesh_regions(holes=False)
+    assert names[: len(shapes)] == shapes and "square" in shapes
+    assert sorted(names[len(shapes):]) == sorted(f"holes/{p.stem}" for p in (ROOT / "examples" / "holes").glob("*.json"))
+
+
+def test_a_region_with_holes_is_measured_with_its_holes(frame):
+    c = frame["cases"][1]
+    assert (c["shape"], c["div"], c["holes"]) == ("holes/frame", 16, 1)
+    for who in ("jaxmatch", "gmsh"):
+        m = c[who]
+        assert m["valid"] and m["missed_corners"] == 0
+        assert m["area_ratio"] == pytest.approx(1.0, abs=0.01)  # the hole's area left out of the region's
+    assert c["jaxmatch"]["irregular_bound"] == 0  # a frame: 4 (1 - 1 hole) - sum (3 - valence) = 0 for a grid
+    assert c["comparable"] == (0.5 <= c["gmsh"]["mean_edge_over_h"] <= 2.0)
+    assert frame["cases_shapes"] == 1 and frame["cases_holes"] == 1
+    assert frame["mesh_vs_gmsh_holes"] == pytest.approx(c["ratio_first"])
+    assert frame["mesh_vs_gmsh_shapes"] == pytest.approx(frame["cases"][0]["ratio_first"])
+
+
 def test_the_result_is_one_json_object_with_the_summary_keys(square):
     r = json.loads(json.dumps(square))
     assert {"cases", "mesh_vs_gmsh", "mesh_vs_gmsh_catalogue", "quality", "peak_rss_mb"} <= set(r)
