@@ -168,6 +168,35 @@ def test_bad_layouts_get_one_line_errors(doc, words):
     assert words in msg
 
 
+@pytest.mark.parametrize("doc,words", [b for b in BAD if "sides" not in b[0] and set(b[0]) == {"points", "patches"}],
+                         ids=lambda x: x if isinstance(x, str) else "")
+def test_checks_left_to_check_layout_give_the_same_line(doc, words):
+    """``make_layout(..., check=False)`` (the pipeline's cuts, checked only when meshed) and then
+    ``check_layout`` refuse a bad layout with the line ``make_layout`` gives."""
+    from jaxmatch.placement.layout import check_layout
+
+    with pytest.raises(InputError) as whole:
+        make_layout(doc["points"], doc["patches"], source="bad.json")
+    try:
+        lay = make_layout(doc["points"], doc["patches"], source="bad.json", check=False)
+    except InputError as e:  # a structural fault: found before the geometric checks either way
+        assert str(e) == str(whole.value)
+        return
+    with pytest.raises(InputError) as later:
+        check_layout(lay)
+    assert str(later.value) == str(whole.value) and words in str(later.value)
+
+
+def test_check_layout_accepts_what_make_layout_accepts():
+    from jaxmatch.placement.layout import check_layout
+
+    lay = make_layout(TJ["points"], TJ["patches"], check=False)
+    check_layout(lay)
+    full = make_layout(TJ["points"], TJ["patches"])
+    assert all(np.array_equal(a, b) for a, b in zip(lay.patches, full.patches))
+    assert all(np.array_equal(a, b) for a, b in zip(lay.patch_corner, full.patch_corner))
+
+
 def test_not_json_names_file():
     with pytest.raises(InputError, match=r"^x\.json: not valid JSON"):
         parse_layout("{nope", "x.json")

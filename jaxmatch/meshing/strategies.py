@@ -57,7 +57,8 @@ def try_strategies(shape: Shape, names, cat, lat, h: float, corners: np.ndarray,
     template sizes) is not meshed, so the choice is the one meshing all of them would give. A
     strategy whose cuts or solve fail for any reason is skipped with that reason."""
     from jaxmatch.placement.decompose import _same, decompose, same_cuts, single_patch
-    from jaxmatch.placement.layout import ALL_SIZES, TEMPLATE_SIZES, mesh_layout, node_sj_bound, single_sj_bound
+    from jaxmatch.placement.layout import (ALL_SIZES, TEMPLATE_SIZES, check_layout, mesh_layout, node_sj_bound,
+                                           single_sj_bound)
 
     tried: list[Candidate | None] = [None] * len(names)
     layouts: list[tuple[int, object]] = []
@@ -66,7 +67,7 @@ def try_strategies(shape: Shape, names, cat, lat, h: float, corners: np.ndarray,
         try:
             how = None if name == SINGLE else same_cuts(shape, name)
             if how not in made:  # the first strategy of its kind names the layout (its messages' source)
-                made[how] = single_patch(shape) if name == SINGLE else decompose(shape, name)
+                made[how] = single_patch(shape) if name == SINGLE else decompose(shape, name, check=False)
             lay = made[how]
         except FAILED as e:
             tried[i] = Candidate(name + suffix, None, _why_not(e))
@@ -100,6 +101,7 @@ def try_strategies(shape: Shape, names, cat, lat, h: float, corners: np.ndarray,
             tried[i] = Candidate(label, None, f"not tried: time budget of {budget_s:g} s spent")
         else:
             try:
+                check_layout(lay)  # (the cuts' layouts are checked only when meshed)
                 lm = mesh_layout(lay, cat, lat, size=h, smooth_cuts=lay.n_patches > 1, sizes=sizes, template_cache=cache)
             except FAILED as e:
                 tried[i] = Candidate(label, None, _why_not(e))

@@ -307,9 +307,9 @@ def _corner_points(shape: Shape) -> np.ndarray:
     return np.concatenate(parts) if parts else np.zeros((0, 2))
 
 
-def _layout(shape: Shape, faces: list, name: str) -> Layout:
+def _layout(shape: Shape, faces: list, name: str, check: bool = True) -> Layout:
     """A :class:`Layout` of the pieces: corners are the shape's corners and every point where
-    three or more piece edges meet."""
+    three or more piece edges meet (``check``: as :func:`~jaxmatch.placement.layout.make_layout`'s)."""
     index: dict[tuple[float, float], int] = {}
     points: list[tuple[float, float]] = []
     loops: list[list[int]] = []
@@ -331,10 +331,10 @@ def _layout(shape: Shape, faces: list, name: str) -> Layout:
             nbrs[v] += 1
     shape_corners = {tuple(p) for p in _corner_points(shape).tolist()}
     corners = [i for i, p in enumerate(points) if p in shape_corners or nbrs[i] >= 3]
-    return make_layout([list(p) for p in points], loops, corners, source=f"{shape.source} ({name} cuts)")
+    return make_layout([list(p) for p in points], loops, corners, source=f"{shape.source} ({name} cuts)", check=check)
 
 
-def _recursive(shape: Shape) -> Layout:
+def _recursive(shape: Shape, check: bool = True) -> Layout:
     """Cut one concave corner at a time, along the shorter continuation of its two sides to the
     boundary of the piece it is in (an earlier cut, or the outline), until no piece has a
     concave corner."""
@@ -389,7 +389,7 @@ def _recursive(shape: Shape) -> Layout:
             on_cut = True
         cuts.append(np.array([v, end]))
         over.append(on_cut)
-    return _layout(shape, _faces([pts], cuts, inserts, over), "recursive")
+    return _layout(shape, _faces([pts], cuts, inserts, over), "recursive", check)
 
 
 def same_cuts(shape: Shape, strategy: str) -> str | None:
@@ -406,22 +406,23 @@ def same_cuts(shape: Shape, strategy: str) -> str | None:
     return strategy
 
 
-def decompose(shape: Shape, strategy: str = "continuations") -> Layout:
+def decompose(shape: Shape, strategy: str = "continuations", *, check: bool = True) -> Layout:
     """Split ``shape`` into a :class:`Layout`: by the cuts of ``strategy`` (:func:`cut_segments`,
     all at once), or, for ``"recursive"``, one concave corner at a time along the shorter
     continuation of its sides to the piece's boundary (later cuts may end on earlier ones:
     T-junctions). A shape without concave corners gives one patch. Raises
-    :class:`InputError` when the pieces do not make a valid layout."""
+    :class:`InputError` when the pieces do not make a valid layout (``check=False``: the
+    geometric checks are left to :func:`~jaxmatch.placement.layout.check_layout`)."""
     if strategy == "recursive":
         if shape.holes:
             raise InputError("recursive cuts are for regions without holes", where=shape.source)
         if not (~shape.convex).any():
             return single_patch(shape)
-        return _recursive(shape)
+        return _recursive(shape, check)
     cuts, inserts = _radial_hits(shape) if strategy == "radial" else _hits(shape, strategy)
     if not cuts:
         return single_patch(shape)
-    return _layout(shape, _faces(_rings(shape), cuts, inserts, [False] * len(cuts)), strategy)
+    return _layout(shape, _faces(_rings(shape), cuts, inserts, [False] * len(cuts)), strategy, check)
 
 
 DISK_BLOCK = 0.5

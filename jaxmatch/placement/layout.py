@@ -72,6 +72,7 @@ __all__ = [
     "TEMPLATE_SIZES",
     "CHORD_WEIGHT",
     "boundary_edges",
+    "check_layout",
     "draw_meshes",
     "fit_sides",
     "layout_panel",
@@ -296,16 +297,17 @@ def _int(value, what: str, source: str) -> int:
     return int(value)
 
 
-def make_layout(points, patches, corners=None, sides=None, *, source: str = "<layout>") -> Layout:
+def make_layout(points, patches, corners=None, sides=None, *, source: str = "<layout>", check: bool = True) -> Layout:
     """Validate a layout (see the module docstring for the rules) and normalise it: patches
     counter-clockwise, each starting at its first corner.
 
     points: ``(P, 2)`` numbers; patches: lists of point indices; corners: point indices (None:
     every point is a corner); sides: ``{name: count}`` (None: none requested).
     Raises :class:`InputError` (``where=source``) with one line naming the patch, point or side.
+    check: False leaves the geometric checks (coincident points, simple patches, segments, cover:
+    :func:`check_layout`) to the caller, for layouts made by code that may be dropped unmeshed
+    (the pipeline's decompositions: a skipped layout is not checked).
     """
-    import shapely
-
     try:
         pts = np.array(points, dtype=np.float64)
     except (TypeError, ValueError, OverflowError):
@@ -322,7 +324,8 @@ def make_layout(points, patches, corners=None, sides=None, *, source: str = "<la
     if not extent > 0:
         raise InputError("all points are at the same place", where=source)
     tol = _TOL * extent
-    _check_coincident(pts, tol, source)
+    if check:
+        _check_coincident(pts, tol, source)
 
     if not isinstance(patches, list) or not patches:
         raise InputError('"patches" must be a non-empty list of point-index loops', where=source)
@@ -354,9 +357,8 @@ def make_layout(points, patches, corners=None, sides=None, *, source: str = "<la
         area = polygon_area(pts[ids])
         if not abs(area) > tol * extent:
             raise InputError(f"patch {p} has zero area", where=source)
-        poly = shapely.Polygon(pts[ids])
-        if not poly.is_valid:
-            raise InputError(f"patch {p} crosses or touches itself ({shapely.is_valid_reason(poly)})", where=source)
+        if check:
+            polys.append(_simple_patch(pts, ids, p, source))
         if area < 0:
             ids = ids[::-1]
         pc = corner[ids] & ~_straight(pts[ids])
@@ -365,10 +367,10 @@ def make_layout(points, patches, corners=None, sides=None, *, source: str = "<la
             raise InputError(f"patch {p} has {cpos.size} corner(s); a patch needs at least 2", where=source)
         loops.append(roll(ids, -int(cpos[0])))
         pcorners.append(roll(pc, -int(cpos[0])))
-        polys.append(poly)
 
-    _check_segments(loops, source)
-    _check_cover(pts, loops, polys, tol, source)
+    if check:
+        _check_segments(loops, source)
+        _check_cover(pts, loops, polys, tol, source)
     layout = Layout(points=pts, patches=tuple(loops), corner=corner, patch_corner=tuple(pcorners), requested={},
                     source=source)
     if sides is None:
@@ -377,6 +379,29 @@ def make_layout(points, patches, corners=None, sides=None, *, source: str = "<la
     requested = parse_counts(sides, sd, source)
     return Layout(points=pts, patches=tuple(loops), corner=corner, patch_corner=tuple(pcorners),
                   requested={sd.names[s]: c for s, c in requested.items()}, source=source)
+
+
+def check_layout(layout: Layout) -> None:
+    """The geometric checks :func:`make_layout` leaves out with ``check=False`` (the same
+    :class:`InputError` lines): no two points at the same place, simple patches, no segment used
+    by three patches or twice in the same direction, no overlap, one region, no hanging node."""
+    pts, source = layout.points, layout.source
+    tol = _TOL * float(np.max(pts.max(axis=0) - pts.min(axis=0)))
+    _check_coincident(pts, tol, source)
+    polys = [_simple_patch(pts, loop, p, source) for p, loop in enumerate(layout.patches)]
+    _check_segments(list(layout.patches), source)
+    _check_cover(pts, list(layout.patches), polys, tol, source)
+
+
+def _simple_patch(pts: np.ndarray, ids: np.ndarray, p: int, source: str):
+    """Patch ``p`` (points ``ids``) as a shapely Polygon; InputError when it crosses or touches
+    itself."""
+    import shapely
+
+    poly = shapely.Polygon(pts[ids])
+    if not poly.is_valid:
+        raise InputError(f"patch {p} crosses or touches itself ({shapely.is_valid_reason(poly)})", where=source)
+    return poly
 
 
 def _straight(loop_xy: np.ndarray) -> np.ndarray:
