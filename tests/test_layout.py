@@ -774,3 +774,12 @@ def test_node_sj_bound_holds_on_every_strategys_mesh(cat, lat, path):
             claims += bound < 1
     if path.stem in ("lshape", "ushape", "zshape", "hexagon", "trapezoid"):
         assert claims > 0  # the bound says something on these
+
+
+def test_node_sj_bound_claims_nothing_where_the_outline_is_not_one_loop():
+    """Layouts made without their checks (the pipeline's cuts before meshing) may be broken: two
+    squares touching at a corner (the outline touches itself) get no claim, not an error."""
+    from jaxmatch.placement.layout import node_sj_bound
+
+    lay = make_layout([[0, 0], [1, 0], [1, 1], [0, 1], [2, 1], [2, 2], [1, 2]], [[0, 1, 2, 3], [2, 4, 5, 6]], check=False)
+    assert node_sj_bound(lay) == 1.0

@@ -79,7 +79,12 @@ def try_strategies(shape: Shape, names, cat, lat, h: float, corners: np.ndarray,
     best: tuple | None = None
     concave = bool(np.any(~np.asarray(shape.convex, bool)))
     late = {i for i, _ in layouts if names[i] == SINGLE and concave}  # after the cuts: a grid they make may rule it out
-    caps = {i: node_sj_bound(lay) for i, lay in layouts}
+    caps = {}
+    for i, lay in layouts:
+        try:
+            caps[i] = node_sj_bound(lay)
+        except FAILED:  # (a layout its checks refuse: the solve below says why)
+            caps[i] = 1.0
     order = sorted(layouts, key=lambda il: (il[0] in late, il[1].n_patches, -caps[il[0]], il[0]))
     for done, (i, lay) in enumerate(order, start=1):
         label = names[i] + suffix

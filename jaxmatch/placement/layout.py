@@ -967,28 +967,34 @@ def node_sj_bound(layout: Layout) -> float:
     und = np.minimum(flat, nxt) * n + np.maximum(flat, nxt)
     _, inv, cnt = np.unique(und, return_inverse=True, return_counts=True)
     once = cnt[inv] == 1  # outline segments, each in its patch's (ccw) direction
-    ahead = dict(zip(flat[once].tolist(), nxt[once].tolist()))
-    back = {b: a for a, b in ahead.items()}
+    a, b = flat[once], nxt[once]
+    if np.unique(a).size < a.size or np.unique(b).size < b.size:  # the outline touches itself: no claim
+        return 1.0
+    ahead = dict(zip(a.tolist(), b.tolist()))
+    back = dict(zip(b.tolist(), a.tolist()))
     corner = np.zeros(n, bool)
     for p, pc in zip(loops, layout.patch_corner):
         corner[p[pc]] = True
     bound = 1.0
     for v in np.flatnonzero(corner).tolist():
         if v in ahead:
-            lo, hi = _outline_angle(pts, v, _walk(ahead, corner, v), _walk(back, corner, v))
+            after, before = _walk(ahead, corner, v), _walk(back, corner, v)
+            if after is None or before is None:  # not a closed outline (a layout that fails its checks)
+                continue
+            lo, hi = _outline_angle(pts, v, after, before)
         else:  # inside the region
             lo = hi = 2 * math.pi
         bound = min(bound, _split_sj(lo - NODE_ANGLE_TOL, hi + NODE_ANGLE_TOL, int(uses[v])))
     return bound
 
 
-def _walk(step: dict, stop: np.ndarray, v: int) -> list[int]:
+def _walk(step: dict, stop: np.ndarray, v: int) -> list[int] | None:
     """The outline points after ``v`` by ``step`` (a point -> the next), up to and including the
-    first where ``stop`` is true."""
-    out = [step[v]]
-    while not stop[out[-1]] and out[-1] != v:
-        out.append(step[out[-1]])
-    return out
+    first where ``stop`` is true (or ``v`` again); None when the outline breaks off first."""
+    out = [step.get(v)]
+    while out[-1] is not None and not stop[out[-1]] and out[-1] != v and len(out) <= len(step):
+        out.append(step.get(out[-1]))
+    return out if out[-1] is not None and len(out) <= len(step) else None
 
 
 def _outline_angle(pts: np.ndarray, v: int, ahead: list[int], behind: list[int]) -> tuple[float, float]:
