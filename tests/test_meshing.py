@@ -313,6 +313,22 @@ def test_choose_takes_the_smallest_key(specs):
     assert picked.chosen == cands[keys.index(min(keys))].name
 
 
+@pytest.mark.parametrize("inserted", [0, 1, 3])
+def test_a_skipped_candidate_never_wins_and_keeps_its_place(inserted):
+    """A candidate skipped because it could not win (``Candidate.bound``: its best possible key,
+    tied with the winner's but for the order tried) stays behind the winner when the pipeline
+    inserts more candidates after the single template (the order is their place in the list)."""
+    perfect = grid_mesh(2, 2, fold=False, patches=1)
+    order = 1
+    best = Candidate("a", perfect)
+    skipped = Candidate("b", None, "1 patches cannot beat a", best_possible_key(perfect.n_patches, order + 1))
+    assert cannot_win(mesh_key(perfect, order), perfect.n_patches, order + 1)
+    extra = [Candidate(f"single x{j}", grid_mesh(2, 2, fold=True, patches=1)) for j in range(inserted)]
+    first = Candidate("single", grid_mesh(2, 2, fold=True, patches=1))
+    picked = choose([first] + extra + [best, skipped])
+    assert picked.chosen == "a" and picked.runner_up == "b" and picked.rule == "order tried"
+
+
 def test_every_result_writes_with_groups(cat, tmp_path):
     import meshio
 

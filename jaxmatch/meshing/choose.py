@@ -80,12 +80,14 @@ def choose(candidates: Sequence[Candidate], quality: Quality = QUALITY) -> QuadM
     """The best mesh of ``candidates`` by :func:`mesh_key`, labelled with the rule that decided
     (the first rule on which it beats the runner-up), the runner-up's name and every candidate.
     A candidate not meshed because it could not win takes part with its ``bound`` (the best key
-    its mesh could have had): as the runner-up, the winner beats it on that rule at the latest.
-    Raises ValueError when no candidate has a mesh."""
+    its mesh could have had, its place among ``candidates`` taken as the order tried, as for the
+    meshed ones: candidates inserted after the single template keep the others' order): as the
+    runner-up, the winner beats it on that rule at the latest. Raises ValueError when no
+    candidate has a mesh."""
     scored = [(mesh_key(c.mesh, i, quality), c) for i, c in enumerate(candidates) if c.mesh is not None]
     if not scored:
         raise ValueError("no candidate has a mesh")
-    scored += [(c.bound, c) for c in candidates if c.mesh is None and c.bound is not None]
+    scored += [(tuple(c.bound[:-1]) + (i,), c) for i, c in enumerate(candidates) if c.mesh is None and c.bound is not None]
     scored.sort(key=lambda t: t[0])
     best_key, best = scored[0]
     if best.mesh is None:  # pragma: no cover - a bound is above a key meshed before it
