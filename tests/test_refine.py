@@ -708,3 +708,27 @@ def test_kept_chord_topology_gives_the_chords_of_a_fresh_count(cat, reflected):
     topo = R._kept_topology(cat.mesh(ids[-1]), reflected)
     with pytest.raises(ValueError):
         topo.edges[0, 0] = 0
+
+
+def test_a_size_whose_matches_a_scan_went_through_is_not_ranked_again(cat, lat, monkeypatch):
+    """The Z's single patch: its k = 1 ranking holds fewer matches than the first scan asked
+    for, and none of them is a template; the deeper scan would rank the same matches again
+    (checked here), so the walk of sizes 0 and 1 ranks k = 1 once and ends without a template
+    (the pipeline then walks sizes 2 and 3)."""
+    from jaxmatch.meshing.region import canonical
+    from jaxmatch.placement.decompose import single_patch
+    from jaxmatch.placement.layout import patch_shapes
+    from jaxmatch.shape import DEFAULT_CORNER_ANGLE
+
+    shp = load_shape(EXAMPLES / "labels" / "shapes" / "zshape.json")
+    patch = patch_shapes(single_patch(canonical(shp, 0.5, DEFAULT_CORNER_ANGLE)))[0]
+    R.clear_template_cache(cat)
+    first, deep = (R._candidates(patch, cat, lat, limit=s * 3, internal=[1])[1] for s in R.SCAN_PER_LIMIT)
+    assert len(first) < R.SCAN_PER_LIMIT[0] * 3
+    assert [first.head(i) for i in range(len(first))] == [deep.head(i) for i in range(len(deep))]
+    asked = []
+    real = R._candidates
+    monkeypatch.setattr(R, "_candidates", lambda *a, **kw: asked.append((kw["limit"], tuple(kw["internal"]))) or real(*a, **kw))
+    R.clear_template_cache(cat)
+    assert list(R._iter_by_size(patch, cat, lat, limit=3, internal=[0, 1])) == []
+    assert [k for _, (k,) in asked] == [1]

@@ -637,16 +637,19 @@ def _iter_by_size(shape, catalogue, lattice, *, limit: int, internal: Sequence[i
 
     kept: dict[int, int] = {}
     seen: set = set()
+    whole: set = set()  # sizes whose every match a scan has gone through (a deeper one finds no other)
     for scan in SCAN_PER_LIMIT:
         if scan > SCAN_PER_LIMIT[0] and sum(kept.values()) >= limit:
             break  # the deeper scan only when the first found fewer than `limit` templates
         for k in sorted(int(k) for k in internal):
-            if kept.get(k, 0) >= limit or _longest_boundary(catalogue, k) < shape.n_corners:
+            if kept.get(k, 0) >= limit or k in whole or _longest_boundary(catalogue, k) < shape.n_corners:
                 continue  # (every corner needs its own boundary vertex: no mesh of size k keeps them all)
             try:
                 ann, ms = _candidates(shape, catalogue, lattice, limit=scan * max(int(limit), 1), internal=[k])
             except UnmatchableError:
                 continue
+            if len(ms) < scan * max(int(limit), 1):
+                whole.add(k)
             for r in range(1, len(ms) + 1):
                 mid, _, rot, refl = ms.head(r - 1)  # skipped ones are not aligned
                 key = (mid, rot, refl)
