@@ -153,6 +153,30 @@ def test_frame_and_annulus_are_structured(cat, region):
         assert irregular_plain(m) == 0
 
 
+@pytest.mark.parametrize("name", ["frame", "window"])
+def test_cuts_that_split_right_angles_are_not_meshed_after_a_grid(cat, name):
+    """The continuations of a frame or a window make grids (min scaled Jacobian 1); the
+    bisectors (and the window's radial cuts) split right-angled corners, so their min scaled
+    Jacobian is at most sin 45 degrees whatever their mesh: tried after the grids, they are not
+    meshed, and the choice is the one meshing every strategy gives."""
+    from jaxmatch.meshing.choose import choose
+    from jaxmatch.meshing.pipeline import strategy_names
+
+    shp = jaxmatch.load_shape(HOLES / f"{name}.json")
+    m = jaxmatch.mesh(shp, divisions=16, catalogue=cat)
+    notes = {c.name: c.note for c in m.tried}
+    assert m.chosen == "continuations" and m.min_scaled_jacobian == pytest.approx(1.0)
+    assert "at most 0.71 cannot beat continuations" in notes["bisectors"]
+    alone = []
+    for n in strategy_names():
+        one = jaxmatch.mesh(shp, divisions=16, catalogue=cat, strategies=[n]) if n in ("continuations", "bisectors") else None
+        if one is not None:
+            alone.append(next(c for c in one.tried if c.name == n))
+            if n == "bisectors":
+                assert alone[-1].mesh.min_scaled_jacobian <= np.sin(np.pi / 4) + 1e-9
+    assert choose(alone).chosen == m.chosen
+
+
 @pytest.mark.parametrize("name", ["plate-bolt", "window", "triangle-hole", "letter-O"])
 def test_example_regions_mesh_validly(cat, name):
     shp = jaxmatch.load_shape(HOLES / f"{name}.json")

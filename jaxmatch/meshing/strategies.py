@@ -48,9 +48,10 @@ def try_strategies(shape: Shape, names, cat, lat, h: float, corners: np.ndarray,
                     progress, suffix: str = "", quality: Quality = QUALITY) -> list[Candidate]:
     """Each strategy of ``names`` (one :class:`Candidate` each, in the order of ``names``, with its
     mesh or the reason it has none): every strategy's layout is cut first, then meshed by the same
-    solve (:func:`~jaxmatch.placement.layout.mesh_layout`), fewest patches first, and among those
-    the one whose quality can be highest first (the single patch of a region with a concave corner
-    last). A layout that cannot beat the best mesh so far whatever its mesh
+    solve (:func:`~jaxmatch.placement.layout.mesh_layout`), the most promising first: by the best
+    key its mesh could have (:func:`~jaxmatch.meshing.choose.best_possible_key`: the quality its
+    bound allows, then fewest patches; the single patch of a region with a concave corner last).
+    A layout that cannot beat the best mesh so far whatever its mesh
     (:func:`~jaxmatch.meshing.choose.cannot_win`: by its patch count and an upper bound on its min
     scaled Jacobian: :func:`~jaxmatch.placement.layout.node_sj_bound` from the angles its nodes
     split, and for the single patch :func:`~jaxmatch.placement.layout.single_sj_bound` from its
@@ -85,7 +86,7 @@ def try_strategies(shape: Shape, names, cat, lat, h: float, corners: np.ndarray,
             caps[i] = node_sj_bound(lay)
         except FAILED:  # (a layout its checks refuse: the solve below says why)
             caps[i] = 1.0
-    order = sorted(layouts, key=lambda il: (il[0] in late, il[1].n_patches, -caps[il[0]], il[0]))
+    order = sorted(layouts, key=lambda il: (il[0] in late, best_possible_key(il[1].n_patches, il[0], caps[il[0]], quality)))
     for done, (i, lay) in enumerate(order, start=1):
         label = names[i] + suffix
         sizes = ALL_SIZES if names[i] == SINGLE else TEMPLATE_SIZES
