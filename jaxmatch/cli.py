@@ -620,7 +620,9 @@ def _print_mesh(path: Path, m, rec: dict, defaulted: bool) -> None:
                 f"{c['sides_off_size']} sides off the size")
         else:
             say(f"{c['name']}: not meshed ({c['note']})")
-    decided = f" (rule that decided: {m.rule}; runner-up {m.runner_up})" if m.rule else ""
+    unmeshed = any(c.name == m.runner_up and c.mesh is None for c in m.tried)
+    decided = (f" (rule that decided: {m.rule}; runner-up {m.runner_up}"
+               f"{', not meshed: at its best' if unmeshed else ''})") if m.rule else ""
     say(f"chosen: {m.chosen}{decided}")
     if m.size:
         how = " (default: perimeter / 32)" if defaulted else ""

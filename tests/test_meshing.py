@@ -481,7 +481,7 @@ def test_cli_mesh_reports_the_choice(cli, tmp_path):
     out, png = tmp_path / "l.msh", tmp_path / "l.png"
     code, stdout, err = cli("mesh", EX / "lshape.json", "--size", "0.25", "--out", out, "--png", png)
     assert code == 0, err
-    assert "chosen: recursive (rule that decided: fewer patches; runner-up continuations)" in stdout
+    assert "chosen: recursive (rule that decided: fewer patches; runner-up continuations, not meshed: at its best)" in stdout
     assert "bisectors: not meshed (min scaled Jacobian at most 0.71 cannot beat recursive; a node splits" in stdout
     assert "continuations: not meshed (3 patches cannot beat recursive)" in stdout
     assert "single: not meshed (min scaled Jacobian at most 0.96 cannot beat recursive; no template of its sizes" in stdout
