@@ -18,10 +18,11 @@ from __future__ import annotations
 import numpy as np
 import shapely
 
+from jaxmatch.arrays import roll
+
 __all__ = [
     "VERTEX_SNAP",
     "cumulative_length",
-    "roll",
     "first_crossing",
     "point_at",
     "signed_area",
@@ -32,24 +33,6 @@ __all__ = [
 VERTEX_SNAP = 1e-9
 """Relative tolerance (times the perimeter): parameters this close to a loop vertex give the
 vertex exactly (so corners and annotated points land on input vertices without round-off)."""
-
-
-def roll(a: np.ndarray, shift: int, axis: int = 0) -> np.ndarray:
-    """``np.roll(a, shift, axis=axis)`` (the same values, a new array) by two slices joined:
-    a fifth of ``np.roll``'s time on the short loops of patches and templates (1 us against
-    6 us), which the meshing path rolls some 300 times per call (docs/perf.md, "Seventh pass")."""
-    a = np.asarray(a)
-    n = a.shape[axis]
-    s = (-int(shift)) % n if n else 0
-    if s == 0:
-        return a.copy()
-    if axis == 0:
-        return np.concatenate((a[s:], a[:s]))
-    ix = [slice(None)] * a.ndim
-    ix[axis] = slice(s, None)
-    head = a[tuple(ix)]
-    ix[axis] = slice(None, s)
-    return np.concatenate((head, a[tuple(ix)]), axis=axis)
 
 
 def _loop(points) -> np.ndarray:

@@ -53,7 +53,8 @@ from typing import NamedTuple
 import numpy as np
 
 from jaxmatch.errors import InputError
-from jaxmatch.geometry import cumulative_length, first_crossing, point_at, ring_is_simple, roll, signed_area, turning_angles
+from jaxmatch.arrays import roll
+from jaxmatch.geometry import cumulative_length, first_crossing, point_at, ring_is_simple, signed_area, turning_angles
 
 __all__ = [
     "scale_corners",

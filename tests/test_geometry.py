@@ -119,16 +119,3 @@ def test_ring_is_simple_ignores_orientation(pts):
     rev = p[(-np.arange(len(p))) % len(p)]
     assert ring_is_simple(p) == ring_is_simple(rev)
     assert (first_crossing(rev, simple=ring_is_simple(p)) is None) == (first_crossing(rev) is None)
-
-
-@settings(max_examples=200, deadline=None)
-@given(n=st.integers(0, 9), cols=st.sampled_from([None, 1, 2, 4]), shift=st.integers(-20, 20), axis=st.sampled_from([0, 1, -1]))
-def test_roll_is_numpys(n, cols, shift, axis):
-    from jaxmatch.geometry import roll
-
-    a = np.arange(n * (cols or 1), dtype=np.float64).reshape((n,) if cols is None else (n, cols))
-    if a.ndim == 1 and axis != 0:
-        axis = 0
-    out = roll(a, shift, axis=axis)
-    assert out.dtype == a.dtype and np.array_equal(out, np.roll(a, shift, axis=axis))
-    assert out is not a and not np.shares_memory(out, a)

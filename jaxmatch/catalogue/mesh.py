@@ -23,7 +23,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-_NEXT = np.array([1, 2, 3, 0])  # the next corner of a quad: q[:, _NEXT] = np.roll(q, -1, axis=1), faster
+QUAD_NEXT = np.array([1, 2, 3, 0])
+"""The next corner of each quad corner: ``q[:, QUAD_NEXT]`` is ``np.roll(q, -1, axis=1)`` (same values, faster)."""
 
 MAX_VALENCE = 5
 
@@ -59,7 +60,7 @@ class QuadMesh:
 def edges(quads: np.ndarray) -> np.ndarray:
     """Undirected edges, ``(E, 2) int`` sorted pairs, each once."""
     q = np.asarray(quads)
-    d = np.sort(np.stack([q, q[:, _NEXT]], axis=-1).reshape(-1, 2), axis=1)
+    d = np.sort(np.stack([q, q[:, QUAD_NEXT]], axis=-1).reshape(-1, 2), axis=1)
     if d.size == 0 or d.dtype.kind not in "iu" or d.min() < 0:
         return np.unique(d, axis=0)
     # one int64 key per pair, a * base + b: its order is the pairs' lexicographic order, so this
@@ -76,7 +77,7 @@ def boundary_edges(quads: np.ndarray) -> np.ndarray:
     the region's boundary runs counter-clockwise along them). One int64 key per undirected edge
     (as :func:`edges`), not ``np.unique(..., axis=0)``: the same edges, ~10x faster on large meshes."""
     q = np.asarray(quads, dtype=np.int64)
-    d = np.stack([q, q[:, _NEXT]], axis=-1).reshape(-1, 2)
+    d = np.stack([q, q[:, QUAD_NEXT]], axis=-1).reshape(-1, 2)
     if d.size == 0:
         return d
     base = int(d.max()) + 1

@@ -10,8 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from jaxmatch.geometry import roll
-
+from jaxmatch.arrays import roll
 from jaxmatch.meshing.result import QuadMesh
 from jaxmatch.shape import Shape
 

@@ -33,7 +33,7 @@ import numpy as np
 
 from jaxmatch.defaults import QUALITY
 from jaxmatch.errors import InputError
-from jaxmatch.geometry import roll
+from jaxmatch.arrays import roll
 from jaxmatch.catalogue.mesh import boundary_valences, mesh_valences
 from jaxmatch.placement.embed import Placement, edge_ratios, exact_paths, inverted_mask, oriented_boundary, place, quality
 from jaxmatch.shape import S as S_CODE

@@ -28,7 +28,7 @@ import math
 import numpy as np
 
 from jaxmatch.errors import InputError
-from jaxmatch.geometry import roll
+from jaxmatch.arrays import roll
 from jaxmatch.placement.layout import Layout, make_layout
 from jaxmatch.shape import Shape
 

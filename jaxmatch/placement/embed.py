@@ -48,8 +48,9 @@ from typing import NamedTuple
 
 import numpy as np
 
-from jaxmatch.catalogue.mesh import QuadMesh, edges, mesh_valences
-from jaxmatch.geometry import VERTEX_SNAP, cumulative_length, point_at, roll, signed_area, sub_polyline
+from jaxmatch.catalogue.mesh import QUAD_NEXT as _NEXT, QuadMesh, edges, mesh_valences
+from jaxmatch.arrays import roll
+from jaxmatch.geometry import VERTEX_SNAP, cumulative_length, point_at, signed_area, sub_polyline
 
 __all__ = [
     "Placement",
@@ -232,7 +233,6 @@ def to_user(xy: np.ndarray, scale: float, offset) -> np.ndarray:
 # quality
 
 
-_NEXT = np.array([1, 2, 3, 0])
 _PREV = np.array([3, 0, 1, 2])
 _TINY = np.finfo(np.float64).tiny
 

@@ -52,7 +52,7 @@ import numpy as np
 from jaxmatch.defaults import QUALITY
 from jaxmatch.errors import InputError
 from jaxmatch.files import read_limited
-from jaxmatch.geometry import roll
+from jaxmatch.arrays import roll
 from jaxmatch.placement.refine import _array_key
 from jaxmatch.placement.milp import CHORD_WEIGHT, LayoutInfeasible, solve_counts  # noqa: F401 (public here)
 from jaxmatch.placement.embed import (inverted_mask, polygon_area, quad_areas, quality, sj_inverted, smooth_in_frame,
@@ -891,13 +891,6 @@ at most 120 or 72 degrees (scaled Jacobian at most sin 72 = 0.951); at a corner 
 degrees or a side point whose quads are too many or too few, some angle is at most 112.5 or at
 least 135 degrees (at most 0.924); with a margin for corners up to 1e-3 rad off."""
 
-OFF_RIGHT_ANGLE_SJ = 1.0 - 1e-8
-"""An upper bound on the min scaled Jacobian of any mesh (valences <= 5) of a region with a
-corner more than 1e-3 rad off every multiple of 90 degrees: the quads at that corner split its
-angle (plus whole turns) into at most 4 angles, one of them at least 2.5e-4 rad off 90 degrees
-(scaled Jacobian at most cos 2.5e-4 = 1 - 3.1e-8)."""
-
-
 def single_sj_bound(layout: Layout, catalogue: Catalogue, lattice, *, templates_per_patch: int = TEMPLATES_PER_PATCH,
                     sizes=TEMPLATE_SIZES, template_cache: dict | None = None) -> float:
     """An upper bound on the min scaled Jacobian of :func:`mesh_layout` of a one-patch ``layout``
@@ -906,8 +899,8 @@ def single_sj_bound(layout: Layout, catalogue: Catalogue, lattice, *, templates_
     catalogue mesh of the template group that :func:`mesh_layout` would use (found as it finds
     it, the templates kept in ``template_cache`` for it) can be refined into a grid of rectangles
     with the region's corners in their order (:func:`grid_templates_exist`, :data:`NO_GRID_SJ`;
-    when none of any size of ``sizes`` can, the group is not looked for), or a corner is off
-    every multiple of 90 degrees (:data:`OFF_RIGHT_ANGLE_SJ`). Refinement keeps
+    when none of any size of ``sizes`` can, the group is not looked for). A corner off every
+    multiple of 90 degrees gives 1 here: :func:`node_sj_bound` caps that closer. Refinement keeps
     a template vertex's valence and makes every new vertex regular, so the refined mesh is a grid
     only if its template is one. Without templates (the layout cannot be meshed): 1."""
     from jaxmatch.geometry import turning_angles
@@ -922,10 +915,8 @@ def single_sj_bound(layout: Layout, catalogue: Catalogue, lattice, *, templates_
         return 1.0
     angle = math.pi - turn[shp.corners]  # interior angles (the loop runs ccw)
     quarters = np.rint(angle / (math.pi / 2))
-    if np.any(np.abs(angle - quarters * (math.pi / 2)) > 1e-3):
-        return OFF_RIGHT_ANGLE_SJ
-    if np.any((quarters != 1) & (quarters != 3)):  # a corner of 0 or 180 degrees (not a corner)
-        return 1.0
+    if np.any(np.abs(angle - quarters * (math.pi / 2)) > 1e-3) or np.any((quarters != 1) & (quarters != 3)):
+        return 1.0  # not right angles (node_sj_bound's cap), or a corner of 0 or 180 degrees
     corners = quarters.astype(int).tolist()
     if not grid_templates_exist(catalogue, [k for g in sizes for k in g if k in catalogue.internal], corners):
         return NO_GRID_SJ  # none of any size: which group mesh_layout takes does not matter

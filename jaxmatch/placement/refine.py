@@ -44,7 +44,7 @@ import numpy as np
 from jaxmatch.catalogue.mesh import edges
 from jaxmatch.defaults import QUALITY
 from jaxmatch.errors import InputError, UnmatchableError
-from jaxmatch.geometry import roll
+from jaxmatch.arrays import roll
 from jaxmatch.placement.milp import LayoutInfeasible, one_patch_sides, solve_counts
 from jaxmatch.placement.embed import (DENSE_TUTTE, Placement, quad_areas, quality, sj_inverted,
                                       smooth_in_frame, smooth_near, tutte)
@@ -526,7 +526,6 @@ def _iter_templates(shape, catalogue, lattice, *, limit: int, internal=None, rej
     size. ``check(unplaced template)``: a reason to skip it before placing (None: go on).
     Skipped candidates are appended to ``rejected`` as ``(rank, mesh_id, reason)``. ``memo``:
     fits and placements shared with other walks of the shape (without ``check``)."""
-
     taken: dict[int, int] = {}
     seen: set = set()
     for scan in SCAN_PER_LIMIT:
@@ -561,7 +560,6 @@ def _iter_checked(shape, catalogue, lattice, *, limit: int, internal, check: Cal
     (the per-size ``limit``, and whether the deeper scan runs); until then it waits in its
     size's queue. The refused are appended to ``passed`` as ``(rank, mesh_id, reason)`` when
     met (also those that, placed, would have folded: not templates at all)."""
-
     limit = int(limit)
     sure: dict[int, int] = {}  # per size: candidates known to be templates
     waiting: dict[int, list] = {}  # per size: refused candidates not yet placed, in order
@@ -634,7 +632,6 @@ def _iter_by_size(shape, catalogue, lattice, *, limit: int, internal: Sequence[i
     scan of :data:`SCAN_PER_LIMIT` when all sizes kept fewer than ``limit`` in all. A size no
     catalogue mesh can match is passed over, and so is one whose boundary loops are all shorter
     than the shape's corners (none of its meshes could keep every corner: not ranked at all)."""
-
     kept: dict[int, int] = {}
     seen: set = set()
     whole: set = set()  # sizes whose every match a scan has gone through (a deeper one finds no other)

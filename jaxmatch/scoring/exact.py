@@ -86,6 +86,7 @@ from typing import NamedTuple, Sequence
 
 import numpy as np
 
+from jaxmatch.arrays import roll
 from jaxmatch.errors import UnmatchableError
 from jaxmatch.scoring.backends import c_kernel, default_backend
 from jaxmatch.scoring.model import NEG, SkipFrame, skip_frame, skip_offset, weights_of  # noqa: F401 (SkipFrame re-exported)
@@ -152,8 +153,7 @@ def oriented_sequence(vals_one, rotation: int, reflected: bool) -> np.ndarray:
     s = np.asarray(vals_one, dtype=np.int32).reshape(-1)
     if reflected:
         s = s[::-1]
-    r = int(rotation) % s.shape[0] if s.shape[0] else 0
-    return np.concatenate([s[r:], s[:r]])  # np.roll(s, -rotation)
+    return roll(s, -int(rotation))
 
 
 # --------------------------------------------------------------------------- the CPU kernel

@@ -117,7 +117,6 @@ class LazyMatches(Sequence):
         return m
 
 
-
 RANK_MEMO_SIZE = 4096
 """Rankings kept per catalogue by :func:`rank` (per size, ``"id"`` ties, pruned: the template
 scan's calls), keyed on the annotation's point types, the sizes, the lattice and ``top``: with
