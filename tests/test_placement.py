@@ -751,3 +751,49 @@ def test_spread_alignment_in_c_equals_numpy(seed):
     finally:
         kernels.BACKEND = backend
     assert c_out.tolist() == np_out.tolist()
+
+
+# ---------------------------------------------------------------------------------------------
+# a mesh whose every vertex stands on a corner
+
+
+def _same_placement(a, b) -> bool:
+    for f in dataclasses.fields(a):
+        x, y = getattr(a, f.name), getattr(b, f.name)
+        if isinstance(x, tuple):
+            ok = len(x) == len(y) and all(np.array_equal(p, q) for p, q in zip(x, y))
+        elif isinstance(x, np.ndarray):
+            ok = x.shape == y.shape and np.array_equal(x, y, equal_nan=True)
+        elif hasattr(x, "quads"):
+            ok = np.array_equal(x.quads, y.quads) and np.array_equal(x.boundary, y.boundary)
+        else:
+            ok = x == y or (x != x and y != y)
+        if not ok:
+            return False
+    return True
+
+
+@settings(max_examples=25, deadline=None)
+@given(corners=st.lists(st.tuples(st.floats(0.3, 1.0), st.floats(-0.25, 0.25)), min_size=4, max_size=5),
+       scale=st.floats(0.01, 100.0), start=st.integers(0, 4))
+def test_pinned_placement_is_the_general_one(cat, lat, corners, scale, start):
+    """A mesh with no internal vertex whose boundary vertices all take corners (the one-quad
+    template on a four-cornered patch) is placed without the candidate search; the placement is
+    the one the search gives, field for field."""
+    from jaxmatch.placement import choose as pc
+
+    n = len(corners)
+    ang = 2 * np.pi * (np.arange(n) / n + np.array([d for _, d in corners]) / n)
+    pts = scale * np.array([r for r, _ in corners])[:, None] * np.stack([np.cos(ang), np.sin(ang)], axis=1)
+    pts = np.roll(pts, start % n, axis=0)
+    shp = make_shape(pts, corners=list(range(n)))
+    r = rank(shp, cat, lat, top=4, internal=[0], tie_break="id")
+    pinned = [m for m in r.results if pc._all_pinned(r.annotation, cat.mesh(m.mesh_id), np.asarray(m.alignment))]
+    if n == 4:
+        assert pinned  # the single quad on the four corners
+    for m in pinned:
+        fast = place_match(shp, r.annotation, cat, m)
+        with pytest.MonkeyPatch.context() as mp:
+            mp.setattr(pc, "_all_pinned", lambda *a: False)
+            slow = place_match(shp, r.annotation, cat, m)
+        assert _same_placement(fast, slow)

@@ -653,7 +653,9 @@ def place_match(shape: Shape, annotation: Annotation, catalogue: Catalogue, matc
         return placements[cache_key]
     mesh = catalogue.mesh(match.mesh_id)
     given = np.asarray(match.alignment, dtype=np.int64)
-    if not spread:
+    if spread and lattice is None and _all_pinned(annotation, mesh, given):
+        user = _place_pinned(shape, annotation, mesh, match, given, smooth_iters)
+    elif not spread:
         pl = place(shape.points, annotation.t, given, mesh, match.rotation, match.reflected,
                    positions=annotation.positions, smooth_iters=smooth_iters)
         miss = missed_corners(annotation, annotation.positions[given])
@@ -698,6 +700,31 @@ def place_match(shape: Shape, annotation: Annotation, catalogue: Catalogue, matc
     if placements is not None:
         placements[cache_key] = user
     return user
+
+
+def _all_pinned(annotation: Annotation, mesh, alignment: np.ndarray) -> bool:
+    """Whether every vertex of ``mesh`` is a boundary vertex and the alignment ``(n,)`` matches
+    them one to one to the annotation's corner points (every corner taken): the placement is
+    then the corner points themselves (:func:`_place_pinned`)."""
+    corner = np.asarray(annotation.codes) != S_CODE
+    n = alignment.shape[0]
+    return int(mesh.n_vertices) == n and int(corner.sum()) == n and bool(np.all(corner[alignment]))
+
+
+def _place_pinned(shape: Shape, annotation: Annotation, mesh, match: Match, al: np.ndarray, smooth_iters: int) -> Placement:
+    """:func:`place_match` (``spread``, no ``lattice``) of a mesh whose every vertex stands on a
+    corner, every corner taken (:func:`_all_pinned`), without its candidate search: the spread
+    alignment is the match's own (no other has the same codes: :func:`spread_alignment`), the boundary the
+    corner points (:func:`corner_boundary` with every vertex pinned and no run between them),
+    and nothing slides or is smoothed; the same :class:`Placement`, computed the same way."""
+    u = np.asarray(annotation.t, dtype=np.float64)[al]
+    bxy = np.asarray(annotation.positions)[al]
+    pl = place(shape.points, annotation.t, al, mesh, match.rotation, match.reflected, boundary_xy=bxy,
+               smooth_iters=smooth_iters, paths=False, region_area=shape.area)
+    pl = dataclasses.replace(pl, missed_corners=missed_corners(annotation, bxy), corners=shape.n_corners)
+    u = np.mod(u, float(shape.arc_length[-1]))
+    pl = dataclasses.replace(pl, boundary_paths=exact_paths(shape.points, u, pl.xy[pl.mesh.boundary], shape.arc_length))
+    return to_user_placement(shape, pl)
 
 
 def _pin_keys(annotation: Annotation, alignments: Sequence[np.ndarray]) -> list[bytes]:

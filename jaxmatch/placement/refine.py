@@ -828,6 +828,7 @@ def clear_template_cache(catalogue: "Catalogue") -> None:
     catalogue.__dict__.pop("_mesh_layout_cache", None)
     clear_memo(catalogue)
     _REFINED.clear()
+    _TOPOLOGY.clear()
 
 
 # ---------------------------------------------------------------------------------------------
@@ -1183,6 +1184,43 @@ def _refine_topology(quads: np.ndarray, edge_list: np.ndarray, edge_chord: np.nd
     return base, np.concatenate(out_quads), along, np.concatenate(w_rows), np.concatenate(v_rows)
 
 
+TOPOLOGY_CACHE_SIZE = 256
+"""Refined topologies (:func:`_refined_topology`) kept between calls (least recently used dropped)."""
+
+_TOPOLOGY: dict = {}
+
+
+def _refined_topology(tq: np.ndarray, template: PatchTemplate, m: np.ndarray):
+    """:func:`_refine_topology` of the oriented template quads ``tq (F, 4)`` at multiplicities
+    ``m (C,)``, and the refined vertices of each template side ``(counts[i] + 1,) int64`` in
+    the side's order: ``(n_vertices, quads (Q, 4), weights (V', 4), corners (V', 4),
+    side_vertices)``. A function of the template's combinatorics alone, kept in
+    :data:`_TOPOLOGY` (patches of one layout often share it: the arrays are shared, not to be
+    written to)."""
+    key = (_array_key(tq), _array_key(template.edge_list), _array_key(template.edge_chord),
+           _array_key(template.quad_chords), tuple(_array_key(np.asarray(p)) for p in template.side_path), _array_key(m))
+    hit = _TOPOLOGY.pop(key, None)
+    if hit is None:
+        nv, quads, along, W, VV = _refine_topology(tq, template.edge_list, template.edge_chord, template.quad_chords, m)
+        V0 = int(tq.max()) + 1
+        ekey = template.edge_list[:, 0] * V0 + template.edge_list[:, 1]
+        side_vertices = []
+        for path in template.side_path:
+            ids = []
+            for a, b in zip(path[:-1].tolist(), path[1:].tolist()):
+                lo, hi = min(a, b), max(a, b)
+                eid = int(np.searchsorted(ekey, lo * V0 + hi))
+                me = int(m[template.edge_chord[eid]])
+                ids.extend(along(np.int64(a), np.int64(b), np.arange(me), me).tolist())
+            ids.append(int(path[-1]))
+            side_vertices.append(np.asarray(ids, np.int64))
+        hit = (nv, quads, W, VV, tuple(side_vertices))
+        while len(_TOPOLOGY) >= TOPOLOGY_CACHE_SIZE:
+            _TOPOLOGY.pop(next(iter(_TOPOLOGY)))
+    _TOPOLOGY[key] = hit
+    return hit
+
+
 def _laplacian(quads: np.ndarray, nv: int) -> scipy.sparse.csr_matrix:
     """``(nv, nv)`` uniform-weight graph Laplacian of the edges of ``quads (Q, 4)``: degree on
     the diagonal, -1 per edge; built in one go (canonical CSR: sorted indices, no duplicates, the
@@ -1258,7 +1296,7 @@ def _refine_and_place(template: PatchTemplate, mult, *, smooth_iters: int | None
                          "(ask for fewer edges or a larger size)", template.shape.source)
     pl = template.placement
     tq = np.asarray(pl.mesh.quads, np.int64)
-    nv, quads, along, W, VV = _refine_topology(tq, template.edge_list, template.edge_chord, template.quad_chords, m)
+    nv, quads, W, VV, side_vertices = _refined_topology(tq, template, m)
     V0 = int(tq.max()) + 1
     xy = np.empty((nv, 2))
     xy[:V0] = pl.xy[:V0]
@@ -1266,19 +1304,6 @@ def _refine_and_place(template: PatchTemplate, mult, *, smooth_iters: int | None
     # boundary
     counts = template.side_matrix() @ m
     polys = side_polylines(template.shape)
-    side_vertices = []
-    target = {}
-    for i, path in enumerate(template.side_path):
-        ids = []
-        for a, b in zip(path[:-1].tolist(), path[1:].tolist()):
-            lo, hi = min(a, b), max(a, b)
-            eid = int(np.searchsorted(template.edge_list[:, 0] * V0 + template.edge_list[:, 1], lo * V0 + hi))
-            me = int(m[template.edge_chord[eid]])
-            ids.extend(along(np.int64(a), np.int64(b), np.arange(me), me).tolist())
-        ids.append(int(path[-1]))
-        sv = np.asarray(ids, np.int64)
-        assert sv.shape[0] == counts[i] + 1
-        side_vertices.append(sv)
     bpos = [side_points(p, int(c)) for p, c in zip(polys, counts)]
     bverts = np.concatenate([sv[:-1] for sv in side_vertices])
     bxy = np.concatenate([bp[:-1] for bp in bpos])
