@@ -783,3 +783,43 @@ def test_node_sj_bound_claims_nothing_where_the_outline_is_not_one_loop():
 
     lay = make_layout([[0, 0], [1, 0], [1, 1], [0, 1], [2, 1], [2, 2], [1, 2]], [[0, 1, 2, 3], [2, 4, 5, 6]], check=False)
     assert node_sj_bound(lay) == 1.0
+
+
+# ---------------------------------------------------------------------------------------------
+# translated patches share their templates and refinements
+
+
+@pytest.mark.parametrize("dx", [1.0, 0.37, 1e3 + 0.1])
+def test_translated_patches_mesh_as_if_meshed_alone(cat, lat, monkeypatch, dx):
+    """A row of three slanted quads, each a translate of the first: they are found as such, and
+    the mesh is the one meshing every patch on its own gives (up to round-off), with shared
+    sides bit-identical."""
+    from jaxmatch.placement import layout as lay_mod
+
+    pts = [[k * dx, 0.0] for k in range(4)] + [[k * dx + 0.2, 1.0] for k in range(4)]
+    patches = [[k, k + 1, 5 + k, 4 + k] for k in range(3)]
+    layout = make_layout(pts, patches)  # (k * dx + 0.2 - k * dx is 0.2 only up to round-off)
+    rep, shift = lay_mod._translates(layout)
+    assert rep == [0, 0, 0] and np.allclose(shift[2], [2 * dx, 0.0])
+    shared = mesh_layout(layout, cat, lat, size=dx / 3)
+    lay_mod.clear_caches()
+    monkeypatch.setattr(lay_mod, "_translates", lambda lay: (list(range(lay.n_patches)), [np.zeros(2)] * lay.n_patches))
+    alone = lay_mod._mesh_layout(layout, cat, lat, size=dx / 3, counts=None, templates_per_patch=lay_mod.TEMPLATES_PER_PATCH,
+                                 sizes=lay_mod.TEMPLATE_SIZES, smooth_cuts=True, template_cache={}, progress=None,
+                                 first_templates=None)
+    assert np.array_equal(shared.quads, alone.quads) and shared.counts.tolist() == alone.counts.tolist()
+    assert np.allclose(shared.xy, alone.xy, atol=1e-12 * (1 + 3 * dx))
+    assert shared.shared_gap == 0.0 and shared.inverted == 0
+    check_conforming(shared.xy, shared.quads, outline_of(layout))
+
+
+def test_translates_need_the_same_corners_and_exact_offsets():
+    from jaxmatch.placement import layout as lay_mod
+
+    pts = [[0, 0], [1, 0], [2, 0], [2, 1], [1, 1], [0, 1]]
+    layout = make_layout(pts, [[0, 1, 4, 5], [1, 2, 3, 4]])
+    assert lay_mod._translates(layout)[0] == [0, 0]
+    bent = make_layout([[0, 0], [1, 0], [2, 0], [2, 1.5], [1, 1], [0, 1]], [[0, 1, 4, 5], [1, 2, 3, 4]])
+    assert lay_mod._translates(bent)[0] == [0, 1]
+    near = make_layout([[0, 0], [1, 0], [2, 0], [2, 1 + 1e-9], [1, 1], [0, 1]], [[0, 1, 4, 5], [1, 2, 3, 4]])
+    assert lay_mod._translates(near)[0] == [0, 1]

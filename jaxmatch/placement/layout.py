@@ -1027,6 +1027,42 @@ def _split_sj(lo: float, hi: float, q0: int) -> float:
         q += 1
 
 
+TRANSLATE_TOL = 1e-12
+"""Patches whose points relative to their first point agree to this fraction of the layout's
+extent are translates of each other (:func:`_translates`)."""
+
+
+def _translates(layout: Layout) -> tuple[list[int], list[np.ndarray]]:
+    """Per patch, the first patch of which it is a translate (itself when none: the same
+    corners, and the same points relative to its first one up to :data:`TRANSLATE_TOL` of the
+    layout's extent), and the translation ``(2,) float64`` from that patch's points to its own.
+    Such a patch has the same templates, and its refinement at the same multiplicities is that
+    patch's moved (:func:`_translated`)."""
+    unit = TRANSLATE_TOL * max(float(np.max(np.ptp(layout.points, axis=0))), np.finfo(float).tiny)
+    first: dict = {}
+    rep, shift = [], []
+    for p, (loop, pc) in enumerate(zip(layout.patches, layout.patch_corner)):
+        pts = layout.points[loop]
+        rel = np.rint((pts - pts[0]) / unit).astype(np.int64)
+        q = first.setdefault((rel.tobytes(), np.asarray(pc).tobytes()), p)
+        rep.append(q)
+        shift.append(pts[0] - layout.points[layout.patches[q][0]])
+    return rep, shift
+
+
+def _translated(rm, d: np.ndarray, shape: Shape):
+    """Refined patch ``rm`` moved by ``d (2,)`` onto ``shape`` (a translate of its own): the
+    boundary vertices exactly where the refinement of ``shape`` puts them
+    (:func:`jaxmatch.placement.refine.side_points` on its sides, so shared sides stay
+    bit-identical), the others moved by ``d``; its quality figures are the original's."""
+    from jaxmatch.placement.refine import side_points, side_polylines
+
+    xy = rm.xy + d
+    for sv, poly, c in zip(rm.side_vertices, side_polylines(shape), rm.counts.tolist()):
+        xy[sv] = side_points(poly, int(c))
+    return rm._replace(xy=xy, template=rm.template._replace(shape=shape))
+
+
 def _has(templates, j: int) -> bool:
     """Whether a patch has a ``j``-th candidate template (placing no more than that one)."""
     try:
@@ -1288,8 +1324,14 @@ def _mesh_layout(layout: Layout, catalogue: Catalogue, lattice: Lattice, *, size
     want = {s: c for s, c in parse_counts(dict(layout.requested), sides, layout.source).items()}
     want.update(counts or {})
     shapes = _lru_get(_SHAPES, lkey, lambda: patch_shapes(layout))
+    rep, shift = _translates(layout)
     cands = []
     for p, shp in enumerate(shapes):
+        if rep[p] != p:  # a translate of an earlier patch: its templates
+            cands.append(cands[rep[p]])
+            if progress:
+                progress(p + 1, len(shapes))
+            continue
         t = _patch_templates(layout, p, shp, catalogue, lattice, templates_per_patch, sizes, template_cache)
         if not t:
             ks = sorted({k for g in sizes for k in g if k in catalogue.internal})
@@ -1317,10 +1359,12 @@ def _mesh_layout(layout: Layout, catalogue: Catalogue, lattice: Lattice, *, size
             continue
         refined = []
         for p, (t, m) in enumerate(zip(tmpl, mults)):
-            key = (p, choice[p], tuple(m.tolist()))
+            key = (rep[p], choice[p], tuple(m.tolist()))
             if key not in cache:
                 cache[key] = _refine_cached(t, m)
             rm = cache[key]
+            if rep[p] != p:
+                rm = _translated(rm, shift[p], shapes[p])
             if any(len(parts) > 1 for parts in sides.patch_sides[p]):  # neighbours meet along a side
                 rm = _fitted(rm, fit_sides(layout, sides, p, rm, n))
             refined.append(rm)
