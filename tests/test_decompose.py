@@ -137,12 +137,15 @@ def test_same_cuts_names_a_strategy_with_the_same_patches(path):
 
 
 @settings(max_examples=200, deadline=None)
-@given(st.lists(st.floats(-10, 10), min_size=4, max_size=4), st.lists(st.floats(-1e-4, 1e-4), min_size=4, max_size=4),
-       st.floats(0, 1e-4))
-def test_close_is_allclose(a, d, tol):
-    """The cut dedup's ``_close`` answers as ``np.allclose(a, b, atol=tol)``."""
-    from jaxmatch.placement.decompose import _close
+@given(st.lists(st.floats(-10, 10), min_size=4, max_size=4),
+       st.lists(st.lists(st.floats(-1e-4, 1e-4), min_size=4, max_size=4), min_size=0, max_size=3),
+       st.floats(0, 1e-4), st.lists(st.booleans(), min_size=3, max_size=3))
+def test_close_to_any_is_allclose_to_one_either_way(a, ds, tol, flips):
+    """The cut dedup's ``_close_to_any`` answers as ``np.allclose(seg, cut, atol=tol)`` tried
+    against every cut and every cut reversed."""
+    from jaxmatch.placement.decompose import _close_to_any
 
-    a = np.array(a).reshape(2, 2)
-    b = a + np.array(d).reshape(2, 2)
-    assert _close(a, b, tol) == np.allclose(a, b, atol=tol)
+    seg = np.array(a).reshape(2, 2)
+    cuts = [(seg + np.array(d).reshape(2, 2))[::-1 if f else 1] for d, f in zip(ds, flips)]
+    plain = any(np.allclose(seg, c, atol=tol) or np.allclose(seg, c[::-1], atol=tol) for c in cuts)
+    assert _close_to_any(seg, cuts, tol) == plain

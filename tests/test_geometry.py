@@ -75,6 +75,20 @@ def test_signed_area_is_the_shoelace_sum_on_simple_loops(pts):
     assert signed_area(p[::-1]) == pytest.approx(-shoelace, rel=1e-9, abs=1e-6)
 
 
+@settings(max_examples=100, deadline=None)
+@given(pts=st.lists(st.tuples(st.floats(-1e3, 1e3), st.floats(-1e3, 1e3)), min_size=3, max_size=12),
+       shift=st.floats(-1e6, 1e6))
+def test_signed_area_is_geos_area_with_its_orientation(pts, shift):
+    import shapely
+
+    p = np.array(pts, float) + shift
+    ring = shapely.LinearRing(p)
+    if not shapely.is_simple(ring):
+        return
+    area = shapely.Polygon(ring).area * (1.0 if shapely.is_ccw(ring) else -1.0)
+    assert signed_area(p) == pytest.approx(area, rel=1e-9, abs=1e-9 * (1 + abs(shift)) ** 2)
+
+
 L_SHAPE = np.array([[0, 0], [2, 0], [2, 1], [1, 1], [1, 2], [0, 2]], float)
 
 

@@ -115,12 +115,6 @@ def _snap(rings: list[np.ndarray], end: np.ndarray, tol: float, inserts: list) -
     return end
 
 
-def _close(a: np.ndarray, b: np.ndarray, tol: float) -> bool:
-    """``np.allclose(a, b, atol=tol)`` for finite arrays (its default ``rtol`` 1e-5 kept), without
-    its per-call overhead (the cut dedup calls it for every pair of cuts)."""
-    return bool(np.all(np.abs(a - b) <= tol + 1e-5 * np.abs(b)))
-
-
 def _hits(shape: Shape, strategy: str) -> tuple[list[np.ndarray], list[tuple[int, int, float, np.ndarray]]]:
     """Cuts (``(2, 2)`` segments) and where they end on a boundary loop: ``(ring, segment index,
     fraction along it, point)`` for ends inside a loop segment (ends within ``1e-9`` of the
@@ -135,8 +129,13 @@ def _hits(shape: Shape, strategy: str) -> tuple[list[np.ndarray], list[tuple[int
     far = 4.0 * extent
     cuts: list[np.ndarray] = []
     inserts: list[tuple[int, int, float, np.ndarray]] = []
-    for v, d in _rays(shape, strategy):
-        hit = boundary.intersection(shapely.LineString([v, v + far * d]))
+    rays = _rays(shape, strategy)
+    if not rays:
+        return cuts, inserts
+    starts = np.array([v for v, _ in rays])
+    dirs = np.array([d for _, d in rays])
+    hits = shapely.intersection(boundary, shapely.linestrings(np.stack([starts, starts + far * dirs], axis=1)))
+    for v, d, hit in zip(starts, dirs, hits):
         coords = shapely.get_coordinates(hit)
         dist = (coords - v) @ d
         ok = dist > tol
@@ -144,10 +143,20 @@ def _hits(shape: Shape, strategy: str) -> tuple[list[np.ndarray], list[tuple[int
             continue
         end = _snap(rings, coords[ok][np.argmin(dist[ok])], tol, inserts)
         seg = np.array([v, end])
-        if any(_close(seg, c[::-1], tol) or _close(seg, c, tol) for c in cuts):
-            continue
-        cuts.append(seg)
+        if not _close_to_any(seg, cuts, tol):  # (the same cut found twice, or from its other end)
+            cuts.append(seg)
     return cuts, inserts
+
+
+def _close_to_any(seg: np.ndarray, cuts: list[np.ndarray], tol: float) -> bool:
+    """Whether the cut ``seg (2, 2)`` is ``np.allclose`` (``atol=tol``, its default ``rtol``
+    1e-5) to one of ``cuts`` (each ``(2, 2)``) or to one reversed: all pairs at once, without
+    ``np.allclose``'s per-call overhead."""
+    if not cuts:
+        return False
+    C = np.asarray(cuts)
+    return any(bool((np.abs(seg - other) <= tol + 1e-5 * np.abs(other)).all(axis=(1, 2)).any())
+               for other in (C, C[:, ::-1]))
 
 
 def _toward(ring: np.ndarray, corners: np.ndarray, target: np.ndarray) -> np.ndarray:
@@ -298,7 +307,9 @@ def _faces(rings: list[np.ndarray], cuts: list[np.ndarray], inserts: list, overs
         lines.append(shapely.LineString([a, b]))
     noded = shapely.union_all(lines)
     region = shapely.Polygon(rings[0], holes=rings[1:])
-    return [f for f in polygonize(shapely.get_parts(noded)) if region.contains(f.representative_point())]
+    faces = list(polygonize(shapely.get_parts(noded)))
+    inside = shapely.contains(region, shapely.point_on_surface(np.array(faces, dtype=object))) if faces else []
+    return [f for f, ok in zip(faces, inside) if ok]
 
 
 def _corner_points(shape: Shape) -> np.ndarray:
@@ -347,6 +358,7 @@ def _recursive(shape: Shape, check: bool = True) -> Layout:
     cuts: list[np.ndarray] = []
     inserts: list = []
     over: list[bool] = []
+    faces = None  # the pieces of the cuts so far (None: not yet cut into them)
     for _ in range(int((~shape.convex).sum()) + 1):
         faces = _faces([pts], cuts, inserts, over)
         found = None
@@ -389,7 +401,10 @@ def _recursive(shape: Shape, check: bool = True) -> Layout:
             on_cut = True
         cuts.append(np.array([v, end]))
         over.append(on_cut)
-    return _layout(shape, _faces([pts], cuts, inserts, over), "recursive", check)
+        faces = None
+    if faces is None:  # (the loop ran out with a cut made after its last pieces)
+        faces = _faces([pts], cuts, inserts, over)
+    return _layout(shape, faces, "recursive", check)
 
 
 def same_cuts(shape: Shape, strategy: str) -> str | None:

@@ -347,12 +347,15 @@ def make_layout(points, patches, corners=None, sides=None, *, source: str = "<la
     for p, loop in enumerate(patches):
         if not isinstance(loop, list) or len(loop) < 3:
             raise InputError(f"patch {p} must be a list of at least 3 point indices", where=source)
-        ids = np.array([_int(v, f"patch {p} entry {i}", source) for i, v in enumerate(loop)], dtype=np.int64)
+        if all(type(v) is int for v in loop):  # (the common case, without a call per entry)
+            ids = np.array(loop, dtype=np.int64)
+        else:
+            ids = np.array([_int(v, f"patch {p} entry {i}", source) for i, v in enumerate(loop)], dtype=np.int64)
         out = ids[(ids < 0) | (ids >= P)]
         if out.size:
             raise InputError(f"patch {p}: point index {int(out[0])} is out of range (there are {P} points)", where=source)
-        uniq, cnt = np.unique(ids, return_counts=True)
-        if (cnt > 1).any():
+        if len(set(ids.tolist())) < ids.size:
+            uniq, cnt = np.unique(ids, return_counts=True)
             raise InputError(f"patch {p} lists point {int(uniq[cnt > 1][0])} twice", where=source)
         area = polygon_area(pts[ids])
         if not abs(area) > tol * extent:
@@ -788,7 +791,8 @@ def fit_sides(layout: Layout, sides: Sides, p: int, refined, counts: np.ndarray,
 
 def _boundary_loops(layout: Layout, sides: Sides, side_ids, xy: np.ndarray) -> list[np.ndarray]:
     """Vertex ids of every boundary loop (in the patches' direction: the outer loop ccw, holes
-    cw), from the sides one patch uses; the outer loop (largest signed area) first."""
+    cw), from the sides one patch uses; the outer loop (largest signed area) first, then the holes
+    by signed area (ties to 1e-9 of the largest in the order found: by their smallest vertex id)."""
     nxt: dict[int, np.ndarray] = {}
     for p in range(layout.n_patches):
         for s, rev in zip(np.concatenate(sides.patch_sides[p]), np.concatenate(sides.patch_reversed[p])):
@@ -807,8 +811,10 @@ def _boundary_loops(layout: Layout, sides: Sides, side_ids, xy: np.ndarray) -> l
             seen.update(int(i) for i in ids[1:-1])
             v = int(ids[-1])
         loops.append(np.concatenate(out))
-    if len(loops) > 1:
-        loops.sort(key=lambda lp: -polygon_area(xy[lp]))
+    if len(loops) > 1:  # (loops of the same area up to round-off, e.g. two equal holes, in the order found)
+        area = np.array([polygon_area(xy[lp]) for lp in loops])
+        key = np.round(area / np.abs(area).max(), 9)
+        loops = [loops[i] for i in sorted(range(len(loops)), key=lambda i: (-key[i], i))]
     return loops
 
 
