@@ -35,7 +35,7 @@ from jaxmatch.defaults import QUALITY
 from jaxmatch.errors import InputError
 from jaxmatch.arrays import roll
 from jaxmatch.catalogue.mesh import boundary_valences, mesh_valences
-from jaxmatch.placement.embed import Placement, edge_ratios, exact_paths, inverted_mask, oriented_boundary, place, quality
+from jaxmatch.placement.embed import Placement, edge_ratios, exact_paths, inverted_mask, oriented_boundary, place, quad_areas, quality
 from jaxmatch.shape import S as S_CODE
 from jaxmatch.shape import point_at as shape_point_at
 from jaxmatch.scoring.model import weights_of
@@ -716,14 +716,19 @@ def _place_pinned(shape: Shape, annotation: Annotation, mesh, match: Match, al: 
     corner, every corner taken (:func:`_all_pinned`), without its candidate search: the spread
     alignment is the match's own (no other has the same codes: :func:`spread_alignment`), the boundary the
     corner points (:func:`corner_boundary` with every vertex pinned and no run between them),
-    and nothing slides or is smoothed; the same :class:`Placement`, computed the same way."""
-    u = np.asarray(annotation.t, dtype=np.float64)[al]
-    bxy = np.asarray(annotation.positions)[al]
-    pl = place(shape.points, annotation.t, al, mesh, match.rotation, match.reflected, boundary_xy=bxy,
-               smooth_iters=smooth_iters, paths=False, region_area=shape.area)
-    pl = dataclasses.replace(pl, missed_corners=missed_corners(annotation, bxy), corners=shape.n_corners)
-    u = np.mod(u, float(shape.arc_length[-1]))
-    pl = dataclasses.replace(pl, boundary_paths=exact_paths(shape.points, u, pl.xy[pl.mesh.boundary], shape.arc_length))
+    and nothing slides or is smoothed; the same :class:`Placement`, its figures computed as
+    :func:`place` and :func:`to_user_placement` compute them (without the unit-box quality
+    that the latter measures again)."""
+    u = np.mod(np.asarray(annotation.t, dtype=np.float64)[al], float(shape.arc_length[-1]))
+    om, loop = oriented_boundary(mesh, match.rotation, match.reflected)
+    xy = np.empty((om.n_vertices, 2))
+    xy[loop] = np.asarray(annotation.positions)[al]  # (what place() puts there: no vertex is free)
+    none = np.zeros(0)  # the quality figures: to_user_placement measures them in user coordinates
+    pl = Placement(mesh=om, xy=xy, scaled_jacobian=none, min_angle=none, max_angle=none, inverted=0,
+                   irregular=np.zeros(0, np.int64), alignment=al, region_area=float(shape.area),
+                   mesh_area=float(quad_areas(xy, om.quads).sum()), rotation=int(match.rotation),
+                   reflected=bool(match.reflected), missed_corners=missed_corners(annotation, xy[loop]),
+                   corners=shape.n_corners, boundary_paths=exact_paths(shape.points, u, xy[loop], shape.arc_length))
     return to_user_placement(shape, pl)
 
 
