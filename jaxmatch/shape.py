@@ -390,7 +390,7 @@ def check_corner_angle(corner_angle) -> float:
 
 
 def make_shape(points, corners=None, *, corner_angle: float = DEFAULT_CORNER_ANGLE, source: str = "<shape>",
-               holes=None, hole_corners=None) -> Shape:
+               holes=None, hole_corners=None, checked: bool = False) -> Shape:
     """Validate and normalise a loop into a :class:`Shape` (see the module docstring).
 
     points: ``(P, 2)`` numbers in user coordinates, a loop in either orientation; a closed
@@ -401,12 +401,15 @@ def make_shape(points, corners=None, *, corner_angle: float = DEFAULT_CORNER_ANG
     holes: optional list of loops ``(H_k, 2)`` (either orientation, closed rings allowed), each
         checked like the outer loop and against it: inside it, not touching it or another hole.
     hole_corners: optional list (one entry per hole, each None or indices into that hole).
+    checked: the loop is known to be simple, of distinct points and non-zero area (a patch of a
+        checked :class:`~jaxmatch.placement.layout.Layout`): its crossing and repeated-point
+        checks are left out (a third of the time of a small loop).
     Raises :class:`InputError` (``where=source``) for any problem; indices in messages refer
     to the input order.
     """
     angle = check_corner_angle(corner_angle)
     with np.errstate(over="ignore", invalid="ignore", divide="ignore", under="ignore"):
-        shape = _make_shape(points, corners, angle, str(source))
+        shape = _make_shape(points, corners, angle, str(source), checked)
         if holes is None or len(holes) == 0:
             return shape
         return _with_holes(shape, holes, hole_corners, angle, str(source))
@@ -450,7 +453,7 @@ def _with_holes(shape: Shape, holes, hole_corners, angle: float, source: str) ->
     return replace(shape, holes=tuple(rings), hole_corners=tuple(corner_lists))
 
 
-def _make_shape(points, corners, angle: float, source: str) -> Shape:
+def _make_shape(points, corners, angle: float, source: str, checked: bool = False) -> Shape:
     try:
         p = np.array(points, dtype=np.float64)
     except (TypeError, ValueError, OverflowError) as err:
@@ -467,7 +470,7 @@ def _make_shape(points, corners, angle: float, source: str) -> Shape:
     corner_idx = None
     if corners is not None:
         corner_idx = _check_corners(corners, n, source)
-    if n >= 3 and _closes(p):  # closed ring (last point = first): drop the repeated point
+    if n >= 3 and not checked and _closes(p):  # closed ring (last point = first): drop the repeated point
         p, n = p[:-1], n - 1
         if corner_idx is not None:
             corner_idx = np.unique(np.where(corner_idx == n, 0, corner_idx))
@@ -486,7 +489,8 @@ def _make_shape(points, corners, angle: float, source: str) -> Shape:
                 raise InputError(f"the first point is repeated more than once at the end (point {n - 1} equals point 0)", where=source)
             raise InputError(f"repeated consecutive points {i} and {i + 1}", where=source)
 
-    repeated(p, 0.0)
+    if not checked:
+        repeated(p, 0.0)
     offset = p.min(axis=0)
     extent = p.max(axis=0) - offset
     scale = float(extent.max())
@@ -502,15 +506,15 @@ def _make_shape(points, corners, angle: float, source: str) -> Shape:
     unit = (p - offset) / scale
     if not np.isfinite(unit).all():
         raise InputError("coordinates cannot be normalised (extent too small)", where=source)
-    repeated(unit, _TINY)
-
-    simple = ring_is_simple(unit)  # (n >= 3 here) the same for the loop reversed below
+    if not checked:
+        repeated(unit, _TINY)
+    simple = True if checked else ring_is_simple(unit)  # (n >= 3 here) the same for the loop reversed below
     area = signed_area(unit, simple=simple)
     index = np.arange(n)  # input index of each current point
     if area < 0:  # clockwise: reverse keeping point 0 first
         index = (-index) % n
         unit = unit[index]
-    hit = first_crossing(unit, tol=_TINY, simple=simple)
+    hit = None if checked else first_crossing(unit, tol=_TINY, simple=simple)
     if not (abs(area) > _TINY) and (hit is None or _collinear(unit)):
         raise InputError("boundary has zero area (all points on one line)" if _collinear(unit) else "boundary has zero area", where=source)
     if hit is not None:

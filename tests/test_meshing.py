@@ -566,3 +566,35 @@ def test_pipeline_warm_up_meshes_with_the_defaults_and_with_given_models():
 
     warm_up()
     warm_up(jaxmatch.load_catalogue(), load_lattice("coarse"))
+
+
+def _dedupe_plain(ring, corners, tol):
+    """Points within ``tol`` of the previous kept one merged (the last onto the first), corners
+    moved onto the point that absorbed them: a plain loop."""
+    keep, owner = [0], [0]
+    for i in range(1, len(ring)):
+        if np.hypot(*(ring[i] - ring[keep[-1]])) > tol:
+            keep.append(i)
+        owner.append(len(keep) - 1)
+    if len(keep) > 1 and np.hypot(*(ring[keep[-1]] - ring[0])) <= tol:
+        owner = [0 if o == len(keep) - 1 else o for o in owner]
+        keep.pop()
+    return ring[keep], sorted({owner[c] for c in corners})
+
+
+@settings(max_examples=60, deadline=None)
+@given(n=st.integers(3, 12), dup=st.lists(st.integers(0, 11), max_size=4), seed=st.integers(0, 10**6))
+def test_dedupe_merges_near_points_as_a_plain_loop(n, dup, seed):
+    """``canonical``'s merge of near points: the same points and corners as a plain loop, with
+    nothing to merge (its shortcut) and with points a hair from the previous one."""
+    from jaxmatch.meshing.region import _dedupe
+
+    rng = np.random.default_rng(seed)
+    ang = np.sort(rng.uniform(0, 2 * np.pi, n))
+    ring = np.stack([np.cos(ang), np.sin(ang)], axis=1)
+    for d in sorted({d % n for d in dup if d % n}, reverse=True):  # a copy a hair after point d - 1
+        ring = np.insert(ring, d, ring[d - 1] + 1e-12, axis=0)
+    corners = sorted(set(rng.integers(0, len(ring), 3).tolist()))
+    got_ring, got_corners = _dedupe(ring, np.array(corners), 1e-9)
+    want_ring, want_corners = _dedupe_plain(ring, corners, 1e-9)
+    assert np.array_equal(got_ring, want_ring) and list(got_corners) == want_corners

@@ -66,6 +66,9 @@ before meshing (a corner among them stays, at the first point): layouts need dis
 def _dedupe(ring: np.ndarray, corners: np.ndarray, tol: float) -> tuple[np.ndarray, np.ndarray]:
     """``ring (P, 2)`` without points within ``tol`` of the previous kept point, and ``corners``
     (indices) mapped onto the kept points."""
+    step = np.hypot(*(np.roll(ring, -1, axis=0) - ring).T)  # to the next point, the last to the first
+    if np.all(step > tol):  # (the common case: nothing to merge, no loop over the points)
+        return ring, np.asarray(corners, np.int64)
     keep = [0]
     owner = np.zeros(len(ring), np.int64)
     for i in range(1, len(ring)):

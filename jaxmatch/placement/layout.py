@@ -594,10 +594,12 @@ def load_counts(path, sides: Sides) -> dict[int, int]:
 def patch_shapes(layout: Layout) -> list[Shape]:
     """One :class:`Shape` per patch, with the patch's corners (:attr:`Layout.patch_corner`) as
     explicit corners in loop order, so that the shape's side ``i`` is the patch's side ``i``
-    (:attr:`Sides.patch_sides`)."""
+    (:attr:`Sides.patch_sides`). The layout is taken as checked (:func:`make_layout`,
+    :func:`check_layout`): its patches are simple loops of distinct points."""
     out = []
     for p, (loop, pc) in enumerate(zip(layout.patches, layout.patch_corner)):
-        out.append(make_shape(layout.points[loop], corners=np.flatnonzero(pc).tolist(), source=f"{layout.source} patch {p}"))
+        out.append(make_shape(layout.points[loop], corners=np.flatnonzero(pc).tolist(), source=f"{layout.source} patch {p}",
+                              checked=True))
     return out
 
 
@@ -722,7 +724,8 @@ def merge_patches(layout: Layout, sides: Sides, refined: Sequence, counts: np.nd
             pos = np.asarray(rm.xy, dtype=np.float64)[sv]
             have = ~np.isnan(xy_side[g, 0])
             if have.any():
-                gap = max(gap, float(np.max(np.linalg.norm(xy_side[g][have] - pos[have], axis=1))))
+                d = xy_side[g[have]] - pos[have]
+                gap = max(gap, math.sqrt(float(np.max(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1]))))
             xy_side[g[~have]] = pos[~have]
         inner = np.flatnonzero(local < 0)
         local[inner] = nxt + np.arange(inner.size)
