@@ -401,9 +401,10 @@ def make_shape(points, corners=None, *, corner_angle: float = DEFAULT_CORNER_ANG
     holes: optional list of loops ``(H_k, 2)`` (either orientation, closed rings allowed), each
         checked like the outer loop and against it: inside it, not touching it or another hole.
     hole_corners: optional list (one entry per hole, each None or indices into that hole).
-    checked: the loop is known to be simple, of distinct points and non-zero area (a patch of a
-        checked :class:`~jaxmatch.placement.layout.Layout`): its crossing and repeated-point
-        checks are left out (a third of the time of a small loop).
+    checked: the outer loop is known to be simple, of distinct points and non-zero area (a patch
+        of a checked :class:`~jaxmatch.placement.layout.Layout`, or a shape's own loop listed
+        from another point): its crossing and repeated-point checks are left out (a third of
+        the time of a small loop). Holes are checked all the same.
     Raises :class:`InputError` (``where=source``) for any problem; indices in messages refer
     to the input order.
     """

@@ -119,7 +119,8 @@ def canonical(shape: Shape, size: float | None = None, corner_angle: float = DEF
     if start == 0 and shape.corner_order is None and not holes and len(pts2) == len(pts) \
             and np.array_equal(outer, shape.corners):
         return shape
+    same_points = len(pts2) == len(pts)  # the checked loop from another point: simple, distinct points
     pts = pts2
     corners = sorted(int(c) for c in (outer - start) % len(pts))
     return make_shape(np.roll(pts, -start, axis=0), corners=corners, source=shape.source, holes=holes or None,
-                      hole_corners=hole_corners or None)
+                      hole_corners=hole_corners or None, checked=same_points)

@@ -278,8 +278,9 @@ def single_patch(shape: Shape) -> Layout:
     if shape.n_corners < 2:
         raise InputError(f"the shape has {shape.n_corners} corner(s); a patch needs at least 2 (a shape without "
                          "concave corners is meshed whole by 'jaxmatch mesh --size')", where=shape.source)
-    pts = shape.given_points
-    return make_layout(pts.tolist(), [list(range(pts.shape[0]))], shape.corners.tolist(), source=shape.source)
+    pts = shape.given_points  # (a Shape's loop: simple, of distinct points; make_layout's geometric checks would pass)
+    return make_layout(pts.tolist(), [list(range(pts.shape[0]))], shape.corners.tolist(), source=shape.source,
+                       check=False)
 
 
 def _faces(rings: list[np.ndarray], cuts: list[np.ndarray], inserts: list, overshoot: list[bool]) -> list:
