@@ -789,6 +789,35 @@ def test_node_sj_bound_claims_nothing_where_the_outline_is_not_one_loop():
 # translated patches share their templates and refinements
 
 
+def _alone(monkeypatch, lay_mod):
+    """Every patch its own (no patch taken for a translate of another)."""
+    monkeypatch.setattr(lay_mod, "_translates",
+                        lambda lay: [lay_mod.Translate(p, np.zeros(2), 0) for p in range(lay.n_patches)])
+
+
+def _quad_set(xy, quads, digits=9) -> list:
+    """The quads as corner coordinates (rounded), each from its smallest corner in its own
+    order, sorted: the mesh whatever its vertex numbering."""
+    out = []
+    for q in np.asarray(quads).tolist():
+        c = [tuple(np.round(xy[v], digits) + 0.0) for v in q]
+        k = c.index(min(c))
+        out.append(tuple(c[k:] + c[:k]))
+    return sorted(out)
+
+
+def _mesh_both(cat, lat, monkeypatch, layout, size):
+    from jaxmatch.placement import layout as lay_mod
+
+    shared = mesh_layout(layout, cat, lat, size=size)
+    with monkeypatch.context() as mp:
+        _alone(mp, lay_mod)
+        alone = lay_mod._mesh_layout(layout, cat, lat, size=size, counts=None,
+                                     templates_per_patch=lay_mod.TEMPLATES_PER_PATCH, sizes=lay_mod.TEMPLATE_SIZES,
+                                     smooth_cuts=True, template_cache={}, progress=None, first_templates=None)
+    return shared, alone
+
+
 @pytest.mark.parametrize("dx", [1.0, 0.37, 1e3 + 0.1])
 def test_translated_patches_mesh_as_if_meshed_alone(cat, lat, monkeypatch, dx):
     """A row of three slanted quads, each a translate of the first: they are found as such, and
@@ -799,27 +828,46 @@ def test_translated_patches_mesh_as_if_meshed_alone(cat, lat, monkeypatch, dx):
     pts = [[k * dx, 0.0] for k in range(4)] + [[k * dx + 0.2, 1.0] for k in range(4)]
     patches = [[k, k + 1, 5 + k, 4 + k] for k in range(3)]
     layout = make_layout(pts, patches)  # (k * dx + 0.2 - k * dx is 0.2 only up to round-off)
-    rep, shift = lay_mod._translates(layout)
-    assert rep == [0, 0, 0] and np.allclose(shift[2], [2 * dx, 0.0])
-    shared = mesh_layout(layout, cat, lat, size=dx / 3)
-    lay_mod.clear_caches()
-    monkeypatch.setattr(lay_mod, "_translates", lambda lay: (list(range(lay.n_patches)), [np.zeros(2)] * lay.n_patches))
-    alone = lay_mod._mesh_layout(layout, cat, lat, size=dx / 3, counts=None, templates_per_patch=lay_mod.TEMPLATES_PER_PATCH,
-                                 sizes=lay_mod.TEMPLATE_SIZES, smooth_cuts=True, template_cache={}, progress=None,
-                                 first_templates=None)
+    moved = lay_mod._translates(layout)
+    assert [t.of for t in moved] == [0, 0, 0] and np.allclose(moved[2].shift, [2 * dx, 0.0])
+    shared, alone = _mesh_both(cat, lat, monkeypatch, layout, dx / 3)
     assert np.array_equal(shared.quads, alone.quads) and shared.counts.tolist() == alone.counts.tolist()
     assert np.allclose(shared.xy, alone.xy, atol=1e-12 * (1 + 3 * dx))
     assert shared.shared_gap == 0.0 and shared.inverted == 0
     check_conforming(shared.xy, shared.quads, outline_of(layout))
 
 
-def test_translates_need_the_same_corners_and_exact_offsets():
+@pytest.mark.parametrize("start", [0, 1, 2, 3])
+def test_translate_listed_from_another_corner(cat, lat, monkeypatch, start):
+    """Two congruent rectangles side by side, the second's loop listed from another corner (so
+    its sides are the first's turned), with a third patch across both to tie their counts: the
+    second takes the first's templates and refinement turned, and the mesh is the one meshing
+    each patch alone gives."""
     from jaxmatch.placement import layout as lay_mod
 
+    pts = [[0, 0], [1.5, 0], [3, 0], [3, 1], [1.5, 1], [0, 1], [0, 2.25], [3, 2.25]]
+    second = [1, 2, 3, 4]
+    second = second[start:] + second[:start]
+    layout = make_layout(pts, [[0, 1, 4, 5], second, [5, 4, 3, 7, 6]])  # (4: a T-junction on the third)
+    moved = lay_mod._translates(layout)
+    assert moved[1].of == 0 and np.allclose(moved[1].shift, [1.5, 0.0]) and moved[2].of == 2
+    shared, alone = _mesh_both(cat, lat, monkeypatch, layout, 0.3)
+    assert shared.counts.tolist() == alone.counts.tolist()  # (the vertices may be numbered otherwise)
+    assert _quad_set(shared.xy, shared.quads) == _quad_set(alone.xy, alone.quads)
+    assert shared.shared_gap == 0.0 and shared.inverted == 0
+    check_conforming(shared.xy, shared.quads, outline_of(layout))
+
+
+def test_translates_need_the_same_corners_and_offsets():
+    from jaxmatch.placement import layout as lay_mod
+
+    def of(lay):
+        return [t.of for t in lay_mod._translates(lay)]
+
     pts = [[0, 0], [1, 0], [2, 0], [2, 1], [1, 1], [0, 1]]
-    layout = make_layout(pts, [[0, 1, 4, 5], [1, 2, 3, 4]])
-    assert lay_mod._translates(layout)[0] == [0, 0]
-    bent = make_layout([[0, 0], [1, 0], [2, 0], [2, 1.5], [1, 1], [0, 1]], [[0, 1, 4, 5], [1, 2, 3, 4]])
-    assert lay_mod._translates(bent)[0] == [0, 1]
-    near = make_layout([[0, 0], [1, 0], [2, 0], [2, 1 + 1e-9], [1, 1], [0, 1]], [[0, 1, 4, 5], [1, 2, 3, 4]])
-    assert lay_mod._translates(near)[0] == [0, 1]
+    assert of(make_layout(pts, [[0, 1, 4, 5], [1, 2, 3, 4]])) == [0, 0]
+    assert of(make_layout(pts, [[0, 1, 4, 5], [4, 1, 2, 3]])) == [0, 0]  # listed from another corner
+    bent = [[0, 0], [1, 0], [2, 0], [2, 1.5], [1, 1], [0, 1]]
+    assert of(make_layout(bent, [[0, 1, 4, 5], [1, 2, 3, 4]])) == [0, 1]
+    near = [[0, 0], [1, 0], [2, 0], [2, 1 + 1e-9], [1, 1], [0, 1]]
+    assert of(make_layout(near, [[0, 1, 4, 5], [1, 2, 3, 4]])) == [0, 1]

@@ -1037,39 +1037,86 @@ def _split_sj(lo: float, hi: float, q0: int) -> float:
 
 
 TRANSLATE_TOL = 1e-12
-"""Patches whose points relative to their first point agree to this fraction of the layout's
-extent are translates of each other (:func:`_translates`)."""
+"""Patches whose points, relative to their lowest-leftmost point, agree to this fraction of the
+layout's extent are translates of each other (:func:`_translates`)."""
 
 
-def _translates(layout: Layout) -> tuple[list[int], list[np.ndarray]]:
-    """Per patch, the first patch of which it is a translate (itself when none: the same
-    corners, and the same points relative to its first one up to :data:`TRANSLATE_TOL` of the
-    layout's extent), and the translation ``(2,) float64`` from that patch's points to its own.
-    Such a patch has the same templates, and its refinement at the same multiplicities is that
-    patch's moved (:func:`_translated`)."""
+class Translate(NamedTuple):
+    """Patch ``of`` (an earlier patch) moved by ``shift (2,) float64`` is this patch, its loop
+    listed from another corner: this patch's side ``i`` is that patch's side ``i + turn`` (mod
+    its number of sides)."""
+
+    of: int
+    shift: np.ndarray
+    turn: int
+
+
+def _translates(layout: Layout) -> list[Translate]:
+    """Per patch, the first patch of which it is a translate (itself, ``turn`` 0, when none):
+    the same corners and the same points relative to the lowest-leftmost one, up to
+    :data:`TRANSLATE_TOL` of the layout's extent, whichever corner each loop starts from. Such a
+    patch has the same templates, its sides turned (:class:`_Turned`), and its refinement at the
+    same multiplicities is that patch's moved (:func:`_translated`)."""
     unit = TRANSLATE_TOL * max(float(np.max(np.ptp(layout.points, axis=0))), np.finfo(float).tiny)
     first: dict = {}
-    rep, shift = [], []
+    out = []
     for p, (loop, pc) in enumerate(zip(layout.patches, layout.patch_corner)):
-        pts = layout.points[loop]
-        rel = np.rint((pts - pts[0]) / unit).astype(np.int64)
-        q = first.setdefault((rel.tobytes(), np.asarray(pc).tobytes()), p)
-        rep.append(q)
-        shift.append(pts[0] - layout.points[layout.patches[q][0]])
-    return rep, shift
+        rel = np.rint((layout.points[loop] - layout.points[loop].min(axis=0)) / unit).astype(np.int64)
+        low = int(np.lexsort((rel[:, 1], rel[:, 0]))[0])  # lowest x, then lowest y (exact on the grid)
+        key = (roll(rel, -low).tobytes(), roll(np.asarray(pc), -low).tobytes())
+        q, qlow = first.setdefault(key, (p, low))
+        n = len(loop)
+        offset = (qlow - low) % n  # point i of this loop is point i + offset of patch q's
+        qloop, qpc = layout.patches[q], np.asarray(layout.patch_corner[q])
+        turn = int(np.count_nonzero(qpc[:offset]))  # this patch's corner 0 (loop point 0) is q's corner `turn`
+        out.append(Translate(q, layout.points[loop[0]] - layout.points[qloop[offset]], turn))
+    return out
 
 
-def _translated(rm, d: np.ndarray, shape: Shape):
-    """Refined patch ``rm`` moved by ``d (2,)`` onto ``shape`` (a translate of its own): the
-    boundary vertices exactly where the refinement of ``shape`` puts them
-    (:func:`jaxmatch.placement.refine.side_points` on its sides, so shared sides stay
-    bit-identical), the others moved by ``d``; its quality figures are the original's."""
+def _turned_sides(items: tuple, turn: int) -> tuple:
+    """Per-side ``items`` of a patch as seen from a translate whose side ``i`` is side ``i + turn``."""
+    return tuple(items[turn:]) + tuple(items[:turn])
+
+
+class _Turned(Sequence):
+    """The templates of a patch (a sequence of :class:`~jaxmatch.placement.refine.PatchTemplate`,
+    placed as asked for) as templates of its translate ``shape`` whose side ``i`` is its side
+    ``i + turn``: the per-side fields turned, ``shape`` replaced (the placement stays the
+    original's: only its edge lengths, which a translation keeps, are read)."""
+
+    def __init__(self, templates, turn: int, shape: Shape):
+        self._templates, self._turn, self._shape = templates, int(turn), shape
+
+    def __getitem__(self, j):
+        if isinstance(j, slice):
+            return [self._one(t) for t in self._templates[j]]
+        return self._one(self._templates[j])
+
+    def _one(self, t):
+        return t._replace(shape=self._shape, side_chords=_turned_sides(t.side_chords, self._turn),
+                          side_path=_turned_sides(t.side_path, self._turn))
+
+    def __len__(self) -> int:
+        return len(self._templates)
+
+    def __bool__(self) -> bool:
+        return bool(self._templates)
+
+
+def _translated(rm, tr: Translate, shape: Shape, template):
+    """Refined patch ``rm`` (of patch ``tr.of``) moved onto its translate ``shape`` (refined from
+    ``template``, the turned one): the boundary vertices exactly where the refinement of
+    ``shape`` puts them (:func:`jaxmatch.placement.refine.side_points` on its sides, so shared
+    sides stay bit-identical), the others moved by ``tr.shift``; the sides turned; its quality
+    figures are the original's."""
     from jaxmatch.placement.refine import side_points, side_polylines
 
-    xy = rm.xy + d
-    for sv, poly, c in zip(rm.side_vertices, side_polylines(shape), rm.counts.tolist()):
+    xy = rm.xy + tr.shift
+    side_vertices = _turned_sides(rm.side_vertices, tr.turn)
+    counts = np.asarray(_turned_sides(tuple(rm.counts.tolist()), tr.turn), np.int64)
+    for sv, poly, c in zip(side_vertices, side_polylines(shape), counts.tolist()):
         xy[sv] = side_points(poly, int(c))
-    return rm._replace(xy=xy, template=rm.template._replace(shape=shape))
+    return rm._replace(xy=xy, side_vertices=side_vertices, counts=counts, template=template)
 
 
 def _has(templates, j: int) -> bool:
@@ -1333,11 +1380,11 @@ def _mesh_layout(layout: Layout, catalogue: Catalogue, lattice: Lattice, *, size
     want = {s: c for s, c in parse_counts(dict(layout.requested), sides, layout.source).items()}
     want.update(counts or {})
     shapes = _lru_get(_SHAPES, lkey, lambda: patch_shapes(layout))
-    rep, shift = _translates(layout)
+    moved = _translates(layout)
     cands = []
     for p, shp in enumerate(shapes):
-        if rep[p] != p:  # a translate of an earlier patch: its templates
-            cands.append(cands[rep[p]])
+        if moved[p].of != p:  # a translate of an earlier patch: its templates, turned
+            cands.append(_Turned(cands[moved[p].of], moved[p].turn, shp) if moved[p].turn else cands[moved[p].of])
             if progress:
                 progress(p + 1, len(shapes))
             continue
@@ -1368,12 +1415,13 @@ def _mesh_layout(layout: Layout, catalogue: Catalogue, lattice: Lattice, *, size
             continue
         refined = []
         for p, (t, m) in enumerate(zip(tmpl, mults)):
-            key = (rep[p], choice[p], tuple(m.tolist()))
+            q = moved[p].of
+            key = (q, choice[p], tuple(m.tolist()))
             if key not in cache:
-                cache[key] = _refine_cached(t, m)
+                cache[key] = _refine_cached(cands[q][choice[p]] if q != p else t, m)
             rm = cache[key]
-            if rep[p] != p:
-                rm = _translated(rm, shift[p], shapes[p])
+            if q != p:
+                rm = _translated(rm, moved[p], shapes[p], t)
             if any(len(parts) > 1 for parts in sides.patch_sides[p]):  # neighbours meet along a side
                 rm = _fitted(rm, fit_sides(layout, sides, p, rm, n))
             refined.append(rm)
