@@ -708,20 +708,23 @@ def merge_patches(layout: Layout, sides: Sides, refined: Sequence, counts: np.nd
     xy_side = np.full((nxt, 2), np.nan)
     gap = 0.0
     xy_parts, quad_parts, patch_parts = [], [], []
+    cl = [int(c) for c in np.asarray(counts).tolist()]
     for p, rm in enumerate(refined):
-        local = np.full(rm.xy.shape[0], -1, np.int64)
+        rxy = np.asarray(rm.xy, dtype=np.float64)
+        local = np.full(rxy.shape[0], -1, np.int64)
         for i, (parts, revs) in enumerate(zip(sides.patch_sides[p], sides.patch_reversed[p])):
             sv = np.asarray(rm.side_vertices[i], dtype=np.int64)
-            want = int(sum(int(counts[s]) for s in parts))
+            parts, revs = parts.tolist(), revs.tolist()
+            want = sum(cl[s] for s in parts)
             if sv.size != want + 1:
                 raise ValueError(f"patch {p} side {i} has {sv.size - 1} edges, the program chose {want}")
-            g = np.concatenate([(side_ids[s][::-1] if r else side_ids[s])[:-1] for s, r in zip(parts, revs)]
-                               + [[(side_ids[parts[-1]][::-1] if revs[-1] else side_ids[parts[-1]])[-1]]])
-            clash = (local[sv] >= 0) & (local[sv] != g)
-            if clash.any():
+            ids = [side_ids[s][::-1] if r else side_ids[s] for s, r in zip(parts, revs)]
+            g = ids[0] if len(ids) == 1 else np.concatenate([x[:-1] for x in ids] + [ids[-1][-1:]])
+            old = local[sv]
+            if np.any((old >= 0) & (old != g)):
                 raise ValueError(f"patch {p}: a vertex is on two sides at different places")
             local[sv] = g
-            pos = np.asarray(rm.xy, dtype=np.float64)[sv]
+            pos = rxy[sv]
             have = ~np.isnan(xy_side[g, 0])
             if have.any():
                 d = xy_side[g[have]] - pos[have]
@@ -730,7 +733,7 @@ def merge_patches(layout: Layout, sides: Sides, refined: Sequence, counts: np.nd
         inner = np.flatnonzero(local < 0)
         local[inner] = nxt + np.arange(inner.size)
         nxt += inner.size
-        xy_parts.append(np.asarray(rm.xy, dtype=np.float64)[inner])
+        xy_parts.append(rxy[inner])
         quad_parts.append(local[np.asarray(rm.quads, dtype=np.int64)])
         patch_parts.append(np.full(len(rm.quads), p, np.int64))
     xy = np.concatenate([xy_side] + xy_parts)
