@@ -774,12 +774,12 @@ def _same_placement(a, b) -> bool:
 
 
 @settings(max_examples=25, deadline=None)
-@given(corners=st.lists(st.tuples(st.floats(0.3, 1.0), st.floats(-0.25, 0.25)), min_size=4, max_size=5),
+@given(corners=st.lists(st.tuples(st.floats(0.3, 1.0), st.floats(-0.25, 0.25)), min_size=4, max_size=6),
        scale=st.floats(0.01, 100.0), start=st.integers(0, 4))
 def test_pinned_placement_is_the_general_one(cat, lat, corners, scale, start):
-    """A mesh with no internal vertex whose boundary vertices all take corners (the one-quad
-    template on a four-cornered patch) is placed without the candidate search; the placement is
-    the one the search gives, field for field."""
+    """A mesh whose boundary vertices all take the corners (the one-quad template on a
+    four-cornered patch; a mesh with an internal vertex on a six-cornered one) is placed without
+    the candidate search; the placement is the one the search gives, field for field."""
     from jaxmatch.placement import choose as pc
 
     n = len(corners)
@@ -787,10 +787,10 @@ def test_pinned_placement_is_the_general_one(cat, lat, corners, scale, start):
     pts = scale * np.array([r for r, _ in corners])[:, None] * np.stack([np.cos(ang), np.sin(ang)], axis=1)
     pts = np.roll(pts, start % n, axis=0)
     shp = make_shape(pts, corners=list(range(n)))
-    r = rank(shp, cat, lat, top=4, internal=[0], tie_break="id")
-    pinned = [m for m in r.results if pc._all_pinned(r.annotation, cat.mesh(m.mesh_id), np.asarray(m.alignment))]
-    if n == 4:
-        assert pinned  # the single quad on the four corners
+    r = rank(shp, cat, lat, top=4, internal=[0, 1], tie_break="id")
+    pinned = [m for m in r.results if pc._all_pinned(r.annotation, np.asarray(m.alignment))]
+    if n in (4, 6):
+        assert pinned  # the single quad on the four corners; a mesh of one internal vertex on six
     for m in pinned:
         fast = place_match(shp, r.annotation, cat, m)
         with pytest.MonkeyPatch.context() as mp:

@@ -653,7 +653,7 @@ def place_match(shape: Shape, annotation: Annotation, catalogue: Catalogue, matc
         return placements[cache_key]
     mesh = catalogue.mesh(match.mesh_id)
     given = np.asarray(match.alignment, dtype=np.int64)
-    if spread and lattice is None and _all_pinned(annotation, mesh, given):
+    if spread and lattice is None and _all_pinned(annotation, given):
         user = _place_pinned(shape, annotation, mesh, match, given, smooth_iters)
     elif not spread:
         pl = place(shape.points, annotation.t, given, mesh, match.rotation, match.reflected,
@@ -702,33 +702,40 @@ def place_match(shape: Shape, annotation: Annotation, catalogue: Catalogue, matc
     return user
 
 
-def _all_pinned(annotation: Annotation, mesh, alignment: np.ndarray) -> bool:
-    """Whether every vertex of ``mesh`` is a boundary vertex and the alignment ``(n,)`` matches
-    them one to one to the annotation's corner points (every corner taken): the placement is
-    then the corner points themselves (:func:`_place_pinned`)."""
+def _all_pinned(annotation: Annotation, alignment: np.ndarray) -> bool:
+    """Whether the alignment ``(n,)`` matches the mesh's boundary vertices one to one to the
+    annotation's corner points (every corner taken): their placement is then the corner points
+    themselves (:func:`_place_pinned`)."""
     corner = np.asarray(annotation.codes) != S_CODE
-    n = alignment.shape[0]
-    return int(mesh.n_vertices) == n and int(corner.sum()) == n and bool(np.all(corner[alignment]))
+    return int(corner.sum()) == alignment.shape[0] and bool(np.all(corner[alignment]))
 
 
 def _place_pinned(shape: Shape, annotation: Annotation, mesh, match: Match, al: np.ndarray, smooth_iters: int) -> Placement:
-    """:func:`place_match` (``spread``, no ``lattice``) of a mesh whose every vertex stands on a
-    corner, every corner taken (:func:`_all_pinned`), without its candidate search: the spread
-    alignment is the match's own (no other has the same codes: :func:`spread_alignment`), the boundary the
-    corner points (:func:`corner_boundary` with every vertex pinned and no run between them),
-    and nothing slides or is smoothed; the same :class:`Placement`, its figures computed as
-    :func:`place` and :func:`to_user_placement` compute them (without the unit-box quality
-    that the latter measures again)."""
+    """:func:`place_match` (``spread``, no ``lattice``) of a mesh whose boundary vertices stand on
+    the corners, every corner taken (:func:`_all_pinned`), without its candidate search: the
+    spread alignment is the match's own (no other has the same codes: :func:`spread_alignment`),
+    the boundary the corner points (:func:`corner_boundary` with every vertex pinned and no run
+    between them), and no boundary vertex slides (none lies between two corners); the same
+    :class:`Placement`, its figures computed as :func:`place` and :func:`to_user_placement`
+    compute them. Without internal vertices nothing is smoothed either: the placement is built
+    directly (without the unit-box quality that :func:`to_user_placement` measures again)."""
     u = np.mod(np.asarray(annotation.t, dtype=np.float64)[al], float(shape.arc_length[-1]))
-    om, loop = oriented_boundary(mesh, match.rotation, match.reflected)
-    xy = np.empty((om.n_vertices, 2))
-    xy[loop] = np.asarray(annotation.positions)[al]  # (what place() puts there: no vertex is free)
-    none = np.zeros(0)  # the quality figures: to_user_placement measures them in user coordinates
-    pl = Placement(mesh=om, xy=xy, scaled_jacobian=none, min_angle=none, max_angle=none, inverted=0,
-                   irregular=np.zeros(0, np.int64), alignment=al, region_area=float(shape.area),
-                   mesh_area=float(quad_areas(xy, om.quads).sum()), rotation=int(match.rotation),
-                   reflected=bool(match.reflected), missed_corners=missed_corners(annotation, xy[loop]),
-                   corners=shape.n_corners, boundary_paths=exact_paths(shape.points, u, xy[loop], shape.arc_length))
+    bxy = np.asarray(annotation.positions)[al]
+    miss = missed_corners(annotation, bxy)
+    if int(mesh.n_vertices) > al.shape[0]:  # internal vertices: placed and smoothed as the search places them
+        pl = place(shape.points, annotation.t, al, mesh, match.rotation, match.reflected, boundary_xy=bxy,
+                   smooth_iters=smooth_iters, paths=False, region_area=shape.area)
+        pl = dataclasses.replace(pl, missed_corners=miss, corners=shape.n_corners)
+    else:
+        om, loop = oriented_boundary(mesh, match.rotation, match.reflected)
+        xy = np.empty((om.n_vertices, 2))
+        xy[loop] = bxy  # (what place() puts there: no vertex is free)
+        none = np.zeros(0)  # the quality figures: to_user_placement measures them in user coordinates
+        pl = Placement(mesh=om, xy=xy, scaled_jacobian=none, min_angle=none, max_angle=none, inverted=0,
+                       irregular=np.zeros(0, np.int64), alignment=al, region_area=float(shape.area),
+                       mesh_area=float(quad_areas(xy, om.quads).sum()), rotation=int(match.rotation),
+                       reflected=bool(match.reflected), missed_corners=miss, corners=shape.n_corners)
+    pl = dataclasses.replace(pl, boundary_paths=exact_paths(shape.points, u, pl.xy[pl.mesh.boundary], shape.arc_length))
     return to_user_placement(shape, pl)
 
 
