@@ -283,7 +283,7 @@ def single_patch(shape: Shape) -> Layout:
                        check=False)
 
 
-def _faces(rings: list[np.ndarray], cuts: list[np.ndarray], inserts: list, overshoot: list[bool]) -> list:
+def _faces(rings: list[np.ndarray], cuts: list[np.ndarray], inserts: list, overshoot: list[bool], region=None) -> list:
     """The pieces (shapely Polygons) of the region bounded by ``rings`` (the outer loop, then the
     holes) cut by ``cuts``: cut ends listed in ``inserts`` (``(ring, segment, fraction, point)``)
     become loop points exactly; cuts flagged in ``overshoot`` (ending on an earlier cut) are
@@ -307,7 +307,8 @@ def _faces(rings: list[np.ndarray], cuts: list[np.ndarray], inserts: list, overs
             b = b + 1e-7 * extent * (b - a) / np.linalg.norm(b - a)
         lines.append(shapely.LineString([a, b]))
     noded = shapely.union_all(lines)
-    region = shapely.Polygon(rings[0], holes=rings[1:])
+    if region is None:  # (the region as a shapely Polygon, when the caller has it)
+        region = shapely.Polygon(rings[0], holes=rings[1:])
     faces = list(polygonize(shapely.get_parts(noded)))
     inside = shapely.contains(region, shapely.point_on_surface(np.array(faces, dtype=object))) if faces else []
     return [f for f, ok in zip(faces, inside) if ok]
@@ -360,8 +361,9 @@ def _recursive(shape: Shape, check: bool = True) -> Layout:
     inserts: list = []
     over: list[bool] = []
     faces = None  # the pieces of the cuts so far (None: not yet cut into them)
+    region = shapely.Polygon(pts)
     for _ in range(int((~shape.convex).sum()) + 1):
-        faces = _faces([pts], cuts, inserts, over)
+        faces = _faces([pts], cuts, inserts, over, region)
         found = None
         for f in faces:
             f = shapely.orient_polygons(f) if hasattr(shapely, "orient_polygons") else shapely.geometry.polygon.orient(f)
@@ -404,7 +406,7 @@ def _recursive(shape: Shape, check: bool = True) -> Layout:
         over.append(on_cut)
         faces = None
     if faces is None:  # (the loop ran out with a cut made after its last pieces)
-        faces = _faces([pts], cuts, inserts, over)
+        faces = _faces([pts], cuts, inserts, over, region)
     return _layout(shape, faces, "recursive", check)
 
 

@@ -335,11 +335,14 @@ def make_layout(points, patches, corners=None, sides=None, *, source: str = "<la
         if not isinstance(corners, list):
             raise InputError('"corners" must be a list of point indices', where=source)
         corner = np.zeros(P, bool)
-        for j, c in enumerate(corners):
-            c = _int(c, f"corners[{j}]", source)
-            if not 0 <= c < P:
-                raise InputError(f"corners[{j}] = {c} is out of range (there are {P} points)", where=source)
-            corner[c] = True
+        if all(type(c) is int and 0 <= c < P for c in corners):  # (the common case, without a call per entry)
+            corner[corners] = True
+        else:
+            for j, c in enumerate(corners):
+                c = _int(c, f"corners[{j}]", source)
+                if not 0 <= c < P:
+                    raise InputError(f"corners[{j}] = {c} is out of range (there are {P} points)", where=source)
+                corner[c] = True
 
     loops: list[np.ndarray] = []
     pcorners: list[np.ndarray] = []
