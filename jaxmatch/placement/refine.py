@@ -1185,7 +1185,8 @@ def _refine_topology(quads: np.ndarray, edge_list: np.ndarray, edge_chord: np.nd
 
 
 TOPOLOGY_CACHE_SIZE = 256
-"""Refined topologies (:func:`_refined_topology`) kept between calls (least recently used dropped)."""
+"""Refined topologies (:func:`_refined_topology`) kept between calls (least recently used
+dropped; only those of at most :data:`REFINED_CACHE_QUADS` quads)."""
 
 _TOPOLOGY: dict = {}
 
@@ -1217,8 +1218,10 @@ def _refined_topology(tq: np.ndarray, template: PatchTemplate, m: np.ndarray):
             ids.append(int(path[-1]))
             side_vertices.append(np.asarray(ids, np.int64))
         hit = (nv, quads, W, VV, tuple(side_vertices))
-        while len(_TOPOLOGY) >= TOPOLOGY_CACHE_SIZE:
-            _TOPOLOGY.pop(next(iter(_TOPOLOGY)))
+    if hit[1].shape[0] > REFINED_CACHE_QUADS:  # a large mesh is not asked twice: not kept
+        return hit
+    while len(_TOPOLOGY) >= TOPOLOGY_CACHE_SIZE:
+        _TOPOLOGY.pop(next(iter(_TOPOLOGY)))
     _TOPOLOGY[key] = hit
     return hit
 
