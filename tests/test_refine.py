@@ -278,31 +278,14 @@ def test_refined_topology_is_a_disk_without_new_irregular_vertices(cat, data):
     assert np.allclose(W.sum(axis=1), 1.0)
 
 
-def _general_topology(tq, template, m):
-    """``_refined_topology``'s answer through the general ``_refine_topology`` (and the side
-    vertices walked edge by edge)."""
-    nv, quads, along, W, VV = R._refine_topology(tq, template.edge_list, template.edge_chord, template.quad_chords, m)
-    V0 = int(tq.max()) + 1
-    ekey = template.edge_list[:, 0] * V0 + template.edge_list[:, 1]
-    sides = []
-    for path in template.side_path:
-        ids = []
-        for a, b in zip(path[:-1].tolist(), path[1:].tolist()):
-            e = int(np.searchsorted(ekey, min(a, b) * V0 + max(a, b)))
-            me = int(m[template.edge_chord[e]])
-            ids.extend(along(np.int64(a), np.int64(b), np.arange(me), me).tolist())
-        sides.append(np.asarray(ids + [int(path[-1])], np.int64))
-    return nv, quads, W, VV, tuple(sides)
-
-
 @settings(max_examples=40, deadline=None)
 @given(start=st.integers(0, 3), clockwise=st.booleans(), kind=st.sampled_from(["quad", "side points"]),
        ma=st.integers(1, 5), mb=st.integers(1, 5))
 def test_one_quad_topology_is_the_general_one(cat, lat, start, clockwise, kind, ma, mb):
     """A template of one quad is refined by its own short routine (``_one_quad_topology``):
     the same vertex numbering, quads, interpolation weights and side vertices as the general
-    ``_refine_topology``, whatever corner the patch's loop starts from, its direction, or
-    points on its sides that are not corners."""
+    ``_refine_topology`` (``_general_topology``), whatever corner the patch's loop starts from,
+    its direction, or points on its sides that are not corners."""
     quad = np.array([[0, 0], [2, 0], [2.5, 1.2], [0.3, 1]])
     if kind == "side points":
         pts, cs = np.array([quad[0], [1, 0.0001], quad[1], quad[2], quad[3], [0.15, 0.5]]), [0, 2, 3, 4]
@@ -320,7 +303,7 @@ def test_one_quad_topology_is_the_general_one(cat, lat, start, clockwise, kind, 
     m = np.ones(t.n_chords, np.int64)
     m[t.quad_chords[0, 0]], m[t.quad_chords[0, 1]] = ma, mb
     fast = R._one_quad_topology(tq[0], t, m)
-    slow = _general_topology(tq, t, m)
+    slow = R._general_topology(tq, t, m)
     assert fast[0] == slow[0]
     for x, y in zip(fast[1:4], slow[1:4]):
         assert x.dtype == y.dtype and np.array_equal(x, y)

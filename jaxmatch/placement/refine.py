@@ -1204,20 +1204,7 @@ def _refined_topology(tq: np.ndarray, template: PatchTemplate, m: np.ndarray):
     if hit is None and tq.shape[0] == 1 and int(tq.max()) == 3 and all(len(p) == 2 for p in template.side_path):
         hit = _one_quad_topology(tq[0], template, m)
     elif hit is None:
-        nv, quads, along, W, VV = _refine_topology(tq, template.edge_list, template.edge_chord, template.quad_chords, m)
-        V0 = int(tq.max()) + 1
-        ekey = template.edge_list[:, 0] * V0 + template.edge_list[:, 1]
-        side_vertices = []
-        for path in template.side_path:
-            ids = []
-            for a, b in zip(path[:-1].tolist(), path[1:].tolist()):
-                lo, hi = min(a, b), max(a, b)
-                eid = int(np.searchsorted(ekey, lo * V0 + hi))
-                me = int(m[template.edge_chord[eid]])
-                ids.extend(along(np.int64(a), np.int64(b), np.arange(me), me).tolist())
-            ids.append(int(path[-1]))
-            side_vertices.append(np.asarray(ids, np.int64))
-        hit = (nv, quads, W, VV, tuple(side_vertices))
+        hit = _general_topology(tq, template, m)
     if hit[1].shape[0] > REFINED_CACHE_QUADS:  # a large mesh is not asked twice: not kept
         return hit
     while len(_TOPOLOGY) >= TOPOLOGY_CACHE_SIZE:
@@ -1226,11 +1213,31 @@ def _refined_topology(tq: np.ndarray, template: PatchTemplate, m: np.ndarray):
     return hit
 
 
+def _general_topology(tq: np.ndarray, template: PatchTemplate, m: np.ndarray):
+    """:func:`_refined_topology` of any template (its arrays, not kept): :func:`_refine_topology`,
+    and each side's vertices walked template edge by template edge."""
+    nv, quads, along, W, VV = _refine_topology(tq, template.edge_list, template.edge_chord, template.quad_chords, m)
+    V0 = int(tq.max()) + 1
+    ekey = template.edge_list[:, 0] * V0 + template.edge_list[:, 1]
+    side_vertices = []
+    for path in template.side_path:
+        ids = []
+        for a, b in zip(path[:-1].tolist(), path[1:].tolist()):
+            lo, hi = min(a, b), max(a, b)
+            eid = int(np.searchsorted(ekey, lo * V0 + hi))
+            me = int(m[template.edge_chord[eid]])
+            ids.extend(along(np.int64(a), np.int64(b), np.arange(me), me).tolist())
+        ids.append(int(path[-1]))
+        side_vertices.append(np.asarray(ids, np.int64))
+    return nv, quads, W, VV, tuple(side_vertices)
+
+
 def _one_quad_topology(quad: np.ndarray, template: PatchTemplate, m: np.ndarray):
     """:func:`_refined_topology` of a template of one quad (vertices 0-3, ``quad (4,)`` in its
-    oriented order) whose every side is one template edge, numbered as :func:`_refine_topology` numbers it (the edges' inner points in
-    ``template.edge_list`` order, then the grid's inner points row by row): the same arrays
-    (tested), without its general machinery (a third of a small patch's refinement)."""
+    oriented order) whose every side is one template edge, numbered as :func:`_general_topology`
+    numbers it (the edges' inner points in ``template.edge_list`` order, then the grid's inner
+    points row by row): the same arrays (tested), without its general machinery (a third of a
+    small patch's refinement)."""
     a, b, c, d = (int(v) for v in quad)
     me = np.asarray(m, np.int64)[template.edge_chord]  # (4,) edges of each template edge
     ma, mb = int(m[template.quad_chords[0, 0]]), int(m[template.quad_chords[0, 1]])
