@@ -47,15 +47,14 @@ def ring_is_simple(points) -> bool:
     return bool(shapely.is_simple(shapely.LinearRing(_loop(points))))
 
 
-def signed_area(points, *, simple: bool | None = None) -> float:
+def signed_area(points) -> float:
     """Area enclosed by the loop ``(P, 2)``; positive when counter-clockwise (shoelace sign).
 
     The shoelace sum, taken from the first point: for a simple loop GEOS's area with the sign of
     its orientation (``shapely`` ``Polygon.area`` and ``is_ccw``, which this was: 13-17 us a
     loop of 4 to 200 points against 3-4 us, and it runs for every patch and shape made; the
     same figures to round-off, tested); for a self-crossing loop lobes of opposite turn cancel,
-    as its orientation is not defined otherwise. ``simple``: accepted for the callers that
-    know it (the sum does not depend on it).
+    as its orientation is not defined otherwise.
     """
     p = _loop(points)
     if p.shape[0] < 3:

@@ -510,7 +510,7 @@ def _make_shape(points, corners, angle: float, source: str, checked: bool = Fals
     if not checked:
         repeated(unit, _TINY)
     simple = True if checked else ring_is_simple(unit)  # (n >= 3 here) the same for the loop reversed below
-    area = signed_area(unit, simple=simple)
+    area = signed_area(unit)
     index = np.arange(n)  # input index of each current point
     if area < 0:  # clockwise: reverse keeping point 0 first
         index = (-index) % n

@@ -278,38 +278,6 @@ def test_refined_topology_is_a_disk_without_new_irregular_vertices(cat, data):
     assert np.allclose(W.sum(axis=1), 1.0)
 
 
-@settings(max_examples=40, deadline=None)
-@given(start=st.integers(0, 3), clockwise=st.booleans(), kind=st.sampled_from(["quad", "side points"]),
-       ma=st.integers(1, 5), mb=st.integers(1, 5))
-def test_one_quad_topology_is_the_general_one(cat, lat, start, clockwise, kind, ma, mb):
-    """A template of one quad is refined by its own short routine (``_one_quad_topology``):
-    the same vertex numbering, quads, interpolation weights and side vertices as the general
-    ``_refine_topology`` (``_general_topology``), whatever corner the patch's loop starts from,
-    its direction, or points on its sides that are not corners."""
-    quad = np.array([[0, 0], [2, 0], [2.5, 1.2], [0.3, 1]])
-    if kind == "side points":
-        pts, cs = np.array([quad[0], [1, 0.0001], quad[1], quad[2], quad[3], [0.15, 0.5]]), [0, 2, 3, 4]
-    else:
-        pts, cs = quad, [0, 1, 2, 3]
-    order = np.roll(np.arange(len(pts)), -start)
-    if clockwise:
-        order = order[::-1]
-    where = {int(v): i for i, v in enumerate(order)}
-    shp = make_shape(pts[order], corners=sorted(where[c] for c in cs))
-    t = R.patch_templates(shp, cat, lat, limit=1, internal=[0])[0]
-    tq = np.asarray(t.placement.mesh.quads, np.int64)
-    assert tq.shape == (1, 4)
-    assert all(len(p) == 2 for p in t.side_path)
-    m = np.ones(t.n_chords, np.int64)
-    m[t.quad_chords[0, 0]], m[t.quad_chords[0, 1]] = ma, mb
-    fast = R._one_quad_topology(tq[0], t, m)
-    slow = R._general_topology(tq, t, m)
-    assert fast[0] == slow[0]
-    for x, y in zip(fast[1:4], slow[1:4]):
-        assert x.dtype == y.dtype and np.array_equal(x, y)
-    assert len(fast[4]) == len(slow[4]) and all(np.array_equal(x, y) for x, y in zip(fast[4], slow[4]))
-
-
 # ---------------------------------------------------------------------------------------------
 # integer programs
 

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
+from jaxmatch.arrays import roll
 from jaxmatch.defaults import DEFAULT_DIVISIONS
 from jaxmatch.geometry import cumulative_length
 from jaxmatch.shape import DEFAULT_CORNER_ANGLE, Shape
@@ -66,7 +67,7 @@ before meshing (a corner among them stays, at the first point): layouts need dis
 def _dedupe(ring: np.ndarray, corners: np.ndarray, tol: float) -> tuple[np.ndarray, np.ndarray]:
     """``ring (P, 2)`` without points within ``tol`` of the previous kept point, and ``corners``
     (indices) mapped onto the kept points."""
-    step = np.hypot(*(np.roll(ring, -1, axis=0) - ring).T)  # to the next point, the last to the first
+    step = np.hypot(*(roll(ring, -1) - ring).T)  # to the next point, the last to the first
     if np.all(step > tol):  # (the common case: nothing to merge, no loop over the points)
         return ring, np.asarray(corners, np.int64)
     keep = [0]

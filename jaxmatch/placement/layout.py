@@ -1390,7 +1390,7 @@ def _mesh_layout(layout: Layout, catalogue: Catalogue, lattice: Lattice, *, size
     cands = []
     for p, shp in enumerate(shapes):
         if moved[p].of != p:  # a translate of an earlier patch: its templates, turned
-            cands.append(_Turned(cands[moved[p].of], moved[p].turn, shp) if moved[p].turn else cands[moved[p].of])
+            cands.append(_Turned(cands[moved[p].of], moved[p].turn, shp))
             if progress:
                 progress(p + 1, len(shapes))
             continue

@@ -1201,80 +1201,26 @@ def _refined_topology(tq: np.ndarray, template: PatchTemplate, m: np.ndarray):
     key = (_array_key(tq), _array_key(template.edge_list), _array_key(template.edge_chord),
            _array_key(template.quad_chords), tuple(_array_key(np.asarray(p)) for p in template.side_path), _array_key(m))
     hit = _TOPOLOGY.pop(key, None)
-    if hit is None and tq.shape[0] == 1 and int(tq.max()) == 3 and all(len(p) == 2 for p in template.side_path):
-        hit = _one_quad_topology(tq[0], template, m)
-    elif hit is None:
-        hit = _general_topology(tq, template, m)
+    if hit is None:
+        nv, quads, along, W, VV = _refine_topology(tq, template.edge_list, template.edge_chord, template.quad_chords, m)
+        V0 = int(tq.max()) + 1
+        ekey = template.edge_list[:, 0] * V0 + template.edge_list[:, 1]
+        side_vertices = []
+        for path in template.side_path:  # template edge by template edge
+            ids = []
+            for a, b in zip(path[:-1].tolist(), path[1:].tolist()):
+                eid = int(np.searchsorted(ekey, min(a, b) * V0 + max(a, b)))
+                me = int(m[template.edge_chord[eid]])
+                ids.extend(along(np.int64(a), np.int64(b), np.arange(me), me).tolist())
+            ids.append(int(path[-1]))
+            side_vertices.append(np.asarray(ids, np.int64))
+        hit = (nv, quads, W, VV, tuple(side_vertices))
     if hit[1].shape[0] > REFINED_CACHE_QUADS:  # a large mesh is not asked twice: not kept
         return hit
     while len(_TOPOLOGY) >= TOPOLOGY_CACHE_SIZE:
         _TOPOLOGY.pop(next(iter(_TOPOLOGY)))
     _TOPOLOGY[key] = hit
     return hit
-
-
-def _general_topology(tq: np.ndarray, template: PatchTemplate, m: np.ndarray):
-    """:func:`_refined_topology` of any template (its arrays, not kept): :func:`_refine_topology`,
-    and each side's vertices walked template edge by template edge."""
-    nv, quads, along, W, VV = _refine_topology(tq, template.edge_list, template.edge_chord, template.quad_chords, m)
-    V0 = int(tq.max()) + 1
-    ekey = template.edge_list[:, 0] * V0 + template.edge_list[:, 1]
-    side_vertices = []
-    for path in template.side_path:
-        ids = []
-        for a, b in zip(path[:-1].tolist(), path[1:].tolist()):
-            lo, hi = min(a, b), max(a, b)
-            eid = int(np.searchsorted(ekey, lo * V0 + hi))
-            me = int(m[template.edge_chord[eid]])
-            ids.extend(along(np.int64(a), np.int64(b), np.arange(me), me).tolist())
-        ids.append(int(path[-1]))
-        side_vertices.append(np.asarray(ids, np.int64))
-    return nv, quads, W, VV, tuple(side_vertices)
-
-
-def _one_quad_topology(quad: np.ndarray, template: PatchTemplate, m: np.ndarray):
-    """:func:`_refined_topology` of a template of one quad (vertices 0-3, ``quad (4,)`` in its
-    oriented order) whose every side is one template edge, numbered as :func:`_general_topology`
-    numbers it (the edges' inner points in ``template.edge_list`` order, then the grid's inner
-    points row by row): the same arrays (tested), without its general machinery (a third of a
-    small patch's refinement)."""
-    a, b, c, d = (int(v) for v in quad)
-    me = np.asarray(m, np.int64)[template.edge_chord]  # (4,) edges of each template edge
-    ma, mb = int(m[template.quad_chords[0, 0]]), int(m[template.quad_chords[0, 1]])
-    base = 4 + np.concatenate([[0], np.cumsum(me - 1)[:-1]])
-    nv = 4 + int((me - 1).sum())
-    edge_of = {(int(u), int(w)): e for e, (u, w) in enumerate(template.edge_list.tolist())}
-
-    def along(x: int, y: int, n: int) -> np.ndarray:
-        """The ``n + 1`` vertex ids from template vertex ``x`` to ``y`` along their edge."""
-        e = edge_of[(min(x, y), max(x, y))]
-        inner = base[e] + np.arange(n - 1)
-        return np.concatenate([[x], inner if x < y else inner[::-1], [y]])
-
-    G = np.empty((ma + 1, mb + 1), np.int64)
-    G[:, 0] = along(a, b, ma)
-    G[ma, :] = along(b, c, mb)
-    G[:, mb] = along(d, c, ma)
-    G[0, :] = along(a, d, mb)
-    ni = (ma - 1) * (mb - 1)
-    G[1:ma, 1:mb] = nv + np.arange(ni).reshape(ma - 1, mb - 1)
-    quads = np.stack([G[:-1, :-1], G[1:, :-1], G[1:, 1:], G[:-1, 1:]], axis=-1).reshape(-1, 4)
-    k = np.concatenate([np.arange(1, n) for n in me.tolist()])
-    eidx = np.repeat(np.arange(4), me - 1)
-    sk = k / me[eidx]
-    ends = template.edge_list[eidx]
-    W = [np.stack([1 - sk, sk, np.zeros_like(sk), np.zeros_like(sk)], axis=1)]
-    VV = [np.stack([ends[:, 0], ends[:, 1], ends[:, 0], ends[:, 1]], axis=1)]
-    if ni:
-        si = np.repeat(np.arange(1, ma) / ma, mb - 1)
-        tj = np.tile(np.arange(1, mb) / mb, ma - 1)
-        W.append(np.stack([(1 - si) * (1 - tj), si * (1 - tj), si * tj, (1 - si) * tj], axis=1))
-        VV.append(np.broadcast_to(np.array([a, b, c, d], np.int64), (ni, 4)))
-    side_vertices = []
-    for path in template.side_path:  # (each side one template edge)
-        x, y = int(path[0]), int(path[1])
-        side_vertices.append(along(x, y, int(me[edge_of[(min(x, y), max(x, y))]])))
-    return nv + ni, quads, np.concatenate(W), np.concatenate(VV), tuple(side_vertices)
 
 
 def _laplacian(quads: np.ndarray, nv: int) -> scipy.sparse.csr_matrix:
