@@ -187,6 +187,29 @@ class Shape:
     def n_corners(self) -> int:
         return int(self.corners.shape[0])
 
+    @cached_property
+    def side_frame(self) -> tuple[tuple[int, bool], ...]:
+        """For each user side ``i``: ``(j, reversed)``, the ccw side ``j`` (from ``corners[j]`` to
+        ``corners[j + 1]``) it is, and whether the user runs it backwards (computed once: template
+        placement asks for every template). Without corners: ``((0, False),)``.
+
+        Raises :class:`InputError` when explicit corners are not listed in boundary order."""
+        n = self.n_corners
+        if n == 0:
+            return ((0, False),)
+        order = np.arange(n) if self.corner_order is None else np.asarray(self.corner_order, np.int64)
+        step = (roll(order, -1) - order) % n
+        forward = bool(np.all(step == 1 % n))
+        backward = bool(np.all(step == (n - 1) % n))
+        if forward and backward:  # n <= 2: the file's orientation decides
+            forward = not self.input_clockwise
+        elif not (forward or backward):
+            raise InputError("corners are not listed in boundary order (side i must run from corner i to corner i + 1)",
+                             where=self.source)
+        if forward:
+            return tuple((int(order[i]), False) for i in range(n))
+        return tuple((int(order[(i + 1) % n]), True) for i in range(n))
+
     @property
     def perimeter(self) -> float:
         """Loop length in unit-box units."""

@@ -34,8 +34,7 @@ def collect(names) -> list[tuple]:
     import jaxmatch
     from jaxmatch.placement import layout, milp, refine
 
-    refine.clear_template_cache(jaxmatch.load_catalogue())  # every program solved again, as in a new process
-    layout.clear_caches()
+    jaxmatch.load_catalogue().cache.clear()  # every program solved again, as in a new process
     progs, real = [], milp._highs
 
     def record(*args, **kwargs):

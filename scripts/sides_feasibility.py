@@ -7,7 +7,7 @@
 Default shapes: the 3-, 4-, 5- and 6-sided convex shapes (examples/triangle, square, hexagon,
 labels/shapes/pentagon) and every labelled shape in examples/labels/shapes/.
 
-For each shape the templates are :func:`jaxmatch.placement.refine.patch_templates` (``--limit``
+For each shape the templates are :func:`jaxmatch.placement.templates.patch_templates` (``--limit``
 per size, by default the same as ``jaxmatch mesh --sides``, so the feasible requests counted here
 are those the command meets). Per request ``c`` in ``{1..MAX}^n``:
 
@@ -48,6 +48,7 @@ from jaxmatch.catalogue.store import default_catalogue  # noqa: E402
 from jaxmatch.cli import enable_compile_cache, run_typer  # noqa: E402
 from jaxmatch.files import write_text_atomic  # noqa: E402
 from jaxmatch.placement import refine as R  # noqa: E402
+from jaxmatch.placement import templates as T  # noqa: E402
 from jaxmatch.scoring.lattice import load_lattice  # noqa: E402
 from jaxmatch.io.readers import load_shape  # noqa: E402
 
@@ -81,7 +82,7 @@ def check_shape(path: Path, cat, lat, *, cap: int, limit: int, full_up_to: int, 
     t0 = time.perf_counter()
     shp = load_shape(path)
     n = max(shp.n_corners, 1)
-    ts = R.patch_templates(shp, cat, lat, limit=limit)
+    ts = T.patch_templates(shp, cat, lat, limit=limit)
     reach = [reachable(t.side_matrix(), cap) for t in ts]
     union = set().union(*reach) if reach else set()
     total = cap ** n

@@ -34,11 +34,12 @@ from jaxmatch.placement.layout import (
     load_layout,
     make_layout,
     merge_patches,
-    mesh_layout,
     parse_layout,
     solve_counts,
     write_layout_mesh,
 )
+from jaxmatch.placement import solve as lay_solve
+from jaxmatch.placement.solve import mesh_layout
 from jaxmatch.scoring.lattice import load_lattice
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -448,20 +449,19 @@ def test_t_junction_large_mesh_paths(cat, lat, monkeypatch):
     """fit_sides's path above SMOOTH_LOCAL quads (the solve's large ordering, smoothing only
     near the bad quads), forced on a small mesh with every quad "bad": the plain path's quads
     and boundary, conforming and valid."""
+    from jaxmatch.defaults import Quality
     from jaxmatch.placement import layout as LM
     from jaxmatch.placement import refine as R
 
-    def fresh():
-        LM.clear_caches()
-        R._REFINED.clear()
-        cat.__dict__.pop("_mesh_layout_cache", None)
+    def fresh(quality=Quality()):
+        cat.cache.clear()
         lay = make_layout(TJ["points"], TJ["patches"])
-        return lay, mesh_layout(lay, cat, lat, size=0.25)
+        return lay, mesh_layout(lay, cat, lat, size=0.25, quality=quality)
 
     _, plain = fresh()
     monkeypatch.setattr(R, "SMOOTH_LOCAL", 0)
-    monkeypatch.setattr(R, "SJ_FLOOR", 2.0)
-    lay, fast = fresh()
+    monkeypatch.setattr(LM, "SMOOTH_LOCAL", 0)
+    lay, fast = fresh(Quality(good_sj=2.0))
     np.testing.assert_array_equal(fast.quads, plain.quads)
     np.testing.assert_array_equal(fast.xy[plain.outer], plain.xy[plain.outer])
     check_conforming(fast.xy, fast.quads, outline_of(lay))
@@ -686,7 +686,7 @@ def _split_sj_plain(lo: float, hi: float, q0: int) -> float:
 @settings(max_examples=200, deadline=None)
 @given(lo=st.floats(0.05, 7.0), width=st.floats(0.0, 0.5), q0=st.integers(1, 8))
 def test_split_sj_is_the_searched_best(lo, width, q0):
-    from jaxmatch.placement.layout import _split_sj
+    from jaxmatch.placement.bounds import _split_sj
 
     assert _split_sj(lo, lo + width, q0) == pytest.approx(_split_sj_plain(lo, lo + width, q0), abs=2e-6)
 
@@ -696,7 +696,7 @@ def test_split_sj_is_the_searched_best(lo, width, q0):
 def test_outline_angle_holds_every_first_edge(seed, n_a, n_b, t):
     """A boundary edge from an outline point ends anywhere on the outline up to the next patch
     corner: the angle between such edges lies in the range ``_outline_angle`` gives."""
-    from jaxmatch.placement.layout import _outline_angle
+    from jaxmatch.placement.bounds import _outline_angle
 
     rng = np.random.default_rng(seed)
     # a corner at the origin, its sides bending gently: ahead along +x, back along a direction at 40-140 degrees
@@ -717,7 +717,7 @@ def test_outline_angle_holds_every_first_edge(seed, n_a, n_b, t):
 
 
 def test_node_sj_bound_of_plain_layouts():
-    from jaxmatch.placement.layout import node_sj_bound
+    from jaxmatch.placement.bounds import node_sj_bound
 
     square = make_layout([[0, 0], [1, 0], [1, 1], [0, 1]], [[0, 1, 2, 3]])
     assert node_sj_bound(square) == 1.0
@@ -751,7 +751,8 @@ def test_node_sj_bound_holds_on_every_strategys_mesh(cat, lat, path):
     from jaxmatch.meshing.pipeline import strategy_names
     from jaxmatch.meshing.region import canonical
     from jaxmatch.placement.decompose import decompose, single_patch
-    from jaxmatch.placement.layout import ALL_SIZES, TEMPLATE_SIZES, node_sj_bound
+    from jaxmatch.placement.bounds import node_sj_bound
+    from jaxmatch.placement.solve import ALL_SIZES, TEMPLATE_SIZES
     from jaxmatch.shape import DEFAULT_CORNER_ANGLE
 
     shp0 = jaxmatch.load_shape(path)
@@ -779,7 +780,7 @@ def test_node_sj_bound_holds_on_every_strategys_mesh(cat, lat, path):
 def test_node_sj_bound_claims_nothing_where_the_outline_is_not_one_loop():
     """Layouts made without their checks (the pipeline's cuts before meshing) may be broken: two
     squares touching at a corner (the outline touches itself) get no claim, not an error."""
-    from jaxmatch.placement.layout import node_sj_bound
+    from jaxmatch.placement.bounds import node_sj_bound
 
     lay = make_layout([[0, 0], [1, 0], [1, 1], [0, 1], [2, 1], [2, 2], [1, 2]], [[0, 1, 2, 3], [2, 4, 5, 6]], check=False)
     assert node_sj_bound(lay) == 1.0
@@ -807,14 +808,16 @@ def _quad_set(xy, quads, digits=9) -> list:
 
 
 def _mesh_both(cat, lat, monkeypatch, layout, size):
-    from jaxmatch.placement import layout as lay_mod
+    from jaxmatch.defaults import QUALITY
 
+    lay_mod = lay_solve
     shared = mesh_layout(layout, cat, lat, size=size)
     with monkeypatch.context() as mp:
         _alone(mp, lay_mod)
         alone = lay_mod._mesh_layout(layout, cat, lat, size=size, counts=None,
                                      templates_per_patch=lay_mod.TEMPLATES_PER_PATCH, sizes=lay_mod.TEMPLATE_SIZES,
-                                     smooth_cuts=True, template_cache={}, progress=None, first_templates=None)
+                                     smooth_cuts=True, progress=None, first_templates=None, quality=QUALITY,
+                                     lkey=lay_mod.layout_key(layout))
     return shared, alone
 
 
@@ -823,7 +826,7 @@ def test_translated_patches_mesh_as_if_meshed_alone(cat, lat, monkeypatch, dx):
     """A row of three slanted quads, each a translate of the first: they are found as such, and
     the mesh is the one meshing every patch on its own gives (up to round-off), with shared
     sides bit-identical."""
-    from jaxmatch.placement import layout as lay_mod
+    lay_mod = lay_solve
 
     pts = [[k * dx, 0.0] for k in range(4)] + [[k * dx + 0.2, 1.0] for k in range(4)]
     patches = [[k, k + 1, 5 + k, 4 + k] for k in range(3)]
@@ -843,7 +846,7 @@ def test_translate_listed_from_another_corner(cat, lat, monkeypatch, start):
     its sides are the first's turned), with a third patch across both to tie their counts: the
     second takes the first's templates and refinement turned, and the mesh is the one meshing
     each patch alone gives."""
-    from jaxmatch.placement import layout as lay_mod
+    lay_mod = lay_solve
 
     pts = [[0, 0], [1.5, 0], [3, 0], [3, 1], [1.5, 1], [0, 1], [0, 2.25], [3, 2.25]]
     second = [1, 2, 3, 4]
@@ -859,7 +862,7 @@ def test_translate_listed_from_another_corner(cat, lat, monkeypatch, start):
 
 
 def test_translates_need_the_same_corners_and_offsets():
-    from jaxmatch.placement import layout as lay_mod
+    lay_mod = lay_solve
 
     def of(lay):
         return [t.of for t in lay_mod._translates(lay)]

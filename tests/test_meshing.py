@@ -129,7 +129,8 @@ def test_single_sj_bound_holds(cat, path, div):
     from jaxmatch.inputs import _lattice
     from jaxmatch.meshing.region import canonical
     from jaxmatch.placement.decompose import single_patch
-    from jaxmatch.placement.layout import ALL_SIZES, single_sj_bound
+    from jaxmatch.placement.bounds import single_sj_bound
+    from jaxmatch.placement.solve import ALL_SIZES
     from jaxmatch.shape import DEFAULT_CORNER_ANGLE
 
     shp = jaxmatch.load_shape(path)
@@ -148,7 +149,7 @@ def test_grid_templates_exist_against_a_scan(cat, ks, corners):
     all internal valences 4, and the boundary valences read from some vertex, either way round,
     are ``1 + corners[i]`` at the corners in order with only 3s between them."""
     from jaxmatch.catalogue.mesh import valences
-    from jaxmatch.placement.layout import grid_templates_exist
+    from jaxmatch.placement.bounds import grid_templates_exist
 
     want = [1 + q for q in corners]
     expect = False
@@ -172,10 +173,9 @@ def test_grid_templates_exist_against_a_scan(cat, ks, corners):
 @pytest.mark.parametrize("name", list(CONCAVE))
 def test_concave_shapes_at_two_sizes(cat, name):
     shp = jaxmatch.load_shape(CONCAVE[name])
-    cache: dict = {}
     for size in (0.25, 0.125):
-        check_mesh(shp, jaxmatch.mesh(shp, size=size, catalogue=cat, template_cache=cache))
-    assert cache  # the second size reused the templates
+        check_mesh(shp, jaxmatch.mesh(shp, size=size, catalogue=cat))
+    assert cat.cache.size("templates")  # the second size reused the templates
 
 
 def test_tshape_at_a_quarter_meshes(cat):
@@ -395,8 +395,7 @@ def test_highs_directly_is_scipy_milp_to_the_bit(cat, monkeypatch, name, jump):
         return real(*args, **kw)
 
     monkeypatch.setattr(milp, "run_milp", spy)
-    refine.clear_template_cache(cat)
-    layout.clear_caches()
+    cat.cache.clear()
     shp = jaxmatch.load_shape(EX / name)
     jaxmatch.mesh(shp, catalogue=cat, divisions=24)
     assert programs

@@ -29,7 +29,10 @@ from hypothesis import strategies as st
 
 from jaxmatch.catalogue.mesh import QuadMesh, edges, from_quads, valences, validate
 from jaxmatch.errors import EXIT_BAD_INPUT, InputError
+from jaxmatch.cache import Cache
+from jaxmatch.defaults import Quality
 from jaxmatch.placement import refine as R
+from jaxmatch.placement import templates as T
 from jaxmatch.scoring.lattice import load_lattice
 from jaxmatch.io.readers import load_shape
 from jaxmatch.shape import make_shape
@@ -53,7 +56,7 @@ def templates(cat, lat):
         path = Path(path)
         if path not in _TEMPLATES:
             shp = load_shape(path)
-            _TEMPLATES[path] = (shp, R.patch_templates(shp, cat, lat, limit=4))
+            _TEMPLATES[path] = (shp, T.patch_templates(shp, cat, lat, limit=4))
         return _TEMPLATES[path]
 
     return get
@@ -213,7 +216,7 @@ def test_chords_equal_walked_strips(cat):
         mesh = cat.mesh(mid)
         loop = mesh.boundary.tolist()
         first = list(zip(loop, loop[1:] + loop[:1]))
-        e, chord, qc, nc = R._chords(mesh.quads, mesh.boundary, first)
+        e, chord, qc, nc = T._chords(mesh.quads, mesh.boundary, first)
         mine = {frozenset(tuple(x) for x in e[chord == c].tolist()) for c in range(nc)}
         assert mine == strips(mesh.quads), mid
         # quad_chords: chord of edges 0/2 and 1/3
@@ -249,7 +252,7 @@ def test_components_are_the_connected_components_of_a_plain_search(case):
                     if want[y] < 0:
                         want[y] = s
                         todo.append(y)
-    got = R._components(n, a, b)
+    got = T._components(n, a, b)
     assert got.dtype == np.int64 and got.tolist() == want
 
 
@@ -260,7 +263,7 @@ def test_refined_topology_is_a_disk_without_new_irregular_vertices(cat, data):
     mid = data.draw(st.sampled_from(ids))
     mesh = cat.mesh(mid)
     loop = mesh.boundary.tolist()
-    e, chord, qc, nc = R._chords(mesh.quads, mesh.boundary, list(zip(loop, loop[1:] + loop[:1])))
+    e, chord, qc, nc = T._chords(mesh.quads, mesh.boundary, list(zip(loop, loop[1:] + loop[:1])))
     mult = np.array(data.draw(st.lists(st.integers(1, 4), min_size=nc, max_size=nc)), np.int64)
     nv, quads, along, W, VV = R._refine_topology(np.asarray(mesh.quads, np.int64), e, chord, qc, mult)
     assert quads.shape[0] == int(np.sum(mult[qc[:, 0]] * mult[qc[:, 1]]))
@@ -525,7 +528,7 @@ def test_harmonic_solve_is_spsolve_and_keeps_one_factor(monkeypatch, solver):
         pytest.importorskip("qdldl")
     else:
         monkeypatch.setattr(R, "_large_solver", R._SuperLU)
-    monkeypatch.setattr(R, "_FACTORS", {})
+    cache = Cache()
     rng = np.random.default_rng(0)
 
     def case(k):
@@ -539,16 +542,18 @@ def test_harmonic_solve_is_spsolve_and_keeps_one_factor(monkeypatch, solver):
         return quads, nv, free, disp, want
 
     quads, nv, free, disp, want = case(12)
-    x = R._harmonic_solve(quads, nv, free, disp)
+    x = R._harmonic_solve(quads, nv, free, disp, cache)
     assert x.shape == (free.size, 2)
     np.testing.assert_allclose(x, want, rtol=0, atol=1e-12)
-    assert len(R._FACTORS) == 1
-    (kept,) = R._FACTORS.values()
-    np.testing.assert_array_equal(R._harmonic_solve(quads, nv, free, disp), x)
-    assert next(iter(R._FACTORS.values())) is kept  # the same topology: the kept factor
+    np.testing.assert_array_equal(R._harmonic_solve(quads, nv, free, disp), x)  # no cache: the plain path
+    assert cache.size("factors") == 1
+    (k,) = cache._stores["factors"]
+    kept = cache.lookup("factors", k)
+    np.testing.assert_array_equal(R._harmonic_solve(quads, nv, free, disp, cache), x)
+    assert cache.lookup("factors", k) is kept  # the same topology: the kept factor
     quads2, nv2, free2, disp2, want2 = case(10)
-    np.testing.assert_allclose(R._harmonic_solve(quads2, nv2, free2, disp2), want2, rtol=0, atol=1e-12)
-    assert len(R._FACTORS) == R.FACTOR_CACHE_SIZE and next(iter(R._FACTORS.values())) is not kept
+    np.testing.assert_allclose(R._harmonic_solve(quads2, nv2, free2, disp2, cache), want2, rtol=0, atol=1e-12)
+    assert cache.size("factors") == cache.sizes.factors == 1 and cache.lookup("factors", k) is None
 
 
 @pytest.mark.parametrize("k", [2, 5, 12, 17])
@@ -573,8 +578,8 @@ def test_harmonic_displacement_large_path_is_the_plain_one(monkeypatch):
     monkeypatch.setattr(R, "DENSE_TUTTE", 0)  # the sparse solve up to SMOOTH_LOCAL quads
     plain = R.harmonic_displacement(quads, xy.shape[0], boundary, bdisp)
     monkeypatch.setattr(R, "SMOOTH_LOCAL", 0)
-    monkeypatch.setattr(R, "_FACTORS", {})
-    np.testing.assert_allclose(R.harmonic_displacement(quads, xy.shape[0], boundary, bdisp), plain, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(R.harmonic_displacement(quads, xy.shape[0], boundary, bdisp, cache=Cache()), plain,
+                               rtol=0, atol=1e-12)
 
 
 def test_large_mesh_paths_keep_the_refined_mesh_valid(templates, monkeypatch):
@@ -587,10 +592,10 @@ def test_large_mesh_paths_keep_the_refined_mesh_valid(templates, monkeypatch):
     plain = R._refine_and_place(t, m)
     monkeypatch.setattr(R, "SMOOTH_ALWAYS", 0)
     monkeypatch.setattr(R, "SMOOTH_LOCAL", 0)
-    monkeypatch.setattr(R, "SJ_FLOOR", 2.0)  # every quad "bad": the local smoothing runs
-    a = R._refine_and_place(t, m)
+    every_bad = Quality(good_sj=2.0)  # every quad "bad": the local smoothing runs
+    a = R._refine_and_place(t, m, quality=every_bad)
     monkeypatch.setattr(R, "LARGE_ORDERING", "COLAMD")
-    b = R._refine_and_place(t, m)
+    b = R._refine_and_place(t, m, quality=every_bad)
     assert np.allclose(a.xy, b.xy, rtol=0, atol=1e-9)
     check_refined(a, shp)
     assert a.inverted == 0 and plain.inverted == 0
@@ -606,17 +611,17 @@ def test_sizes_too_short_for_the_corners_are_not_ranked_and_change_nothing(cat, 
     ks = (0, 1, 2, 3)
 
     def walk():
-        R.clear_template_cache(cat)
+        cat.cache.clear()
         return [(t.mesh_id, t.match.rotation, t.match.reflected, t.rank)
-                for t in R._iter_by_size(shp, cat, lat, limit=R.DEFAULT_LIMIT, internal=ks)]
+                for t in T._iter_by_size(shp, cat, lat, limit=R.DEFAULT_LIMIT, internal=ks)]
 
     ranked = []
-    real = R._candidates
-    monkeypatch.setattr(R, "_candidates", lambda *a, **k: ranked.append(k["internal"][0]) or real(*a, **k))
+    real = T._candidates
+    monkeypatch.setattr(T, "_candidates", lambda *a, **k: ranked.append(k["internal"][0]) or real(*a, **k))
     fast = walk()
-    short = [k for k in ks if R._longest_boundary(cat, k) < shp.n_corners]
+    short = [k for k in ks if T._longest_boundary(cat, k) < shp.n_corners]
     assert not set(short) & set(ranked)
-    monkeypatch.setattr(R, "_longest_boundary", lambda c, k: 10**9)  # every size ranked
+    monkeypatch.setattr(T, "_longest_boundary", lambda c, k: 10**9)  # every size ranked
     ranked.clear()
     assert walk() == fast
     assert set(short) <= set(ranked)
@@ -645,16 +650,16 @@ def test_checked_walk_is_the_filtered_walk_with_fewer_placements(cat, lat, monke
     counts[0] += counts.sum() % 2
     feasible_counts = lambda t: None if R.feasible(t, counts) else "cannot meet the counts"  # noqa: E731
     placed = []
-    real = R._try_candidate
-    monkeypatch.setattr(R, "_try_candidate", lambda *a, **k: placed.append(1) or real(*a, **k))
+    real = T._try_candidate
+    monkeypatch.setattr(T, "_try_candidate", lambda *a, **k: placed.append(1) or real(*a, **k))
     for check in (feasible_counts, _refuse_some):
         placed.clear()
-        whole = list(R._iter_templates(shp, cat, lat, limit=limit))
+        whole = list(T._iter_templates(shp, cat, lat, limit=limit))
         n_whole = len(placed)
         want = [t for t in whole if check(t) is None]
         placed.clear()
         passed: list = []
-        got = list(R._iter_checked(shp, cat, lat, limit=limit, internal=None, check=check, memo=R._Memo(),
+        got = list(T._iter_checked(shp, cat, lat, limit=limit, internal=None, check=check, memo=T._Memo(),
                                    passed=passed))
         assert [(t.mesh_id, t.match.rotation, t.match.reflected, t.rank) for t in got] == \
             [(t.mesh_id, t.match.rotation, t.match.reflected, t.rank) for t in want]
@@ -675,15 +680,15 @@ def test_conforming_search_through_the_lazy_templates_is_the_plain_search(cat, l
     h = float(R.side_lengths(shp).sum()) / 16
     counts = np.maximum(np.rint(R.side_lengths(shp) / h), 1).astype(np.int64)
     counts[0] += counts.sum() % 2
-    R.clear_template_cache(cat)
-    lazy = R.lazy_patch_templates(shp, cat, lat, limit=R.DEFAULT_LIMIT, by_size=False)
+    cat.cache.clear()
+    lazy = T.lazy_patch_templates(shp, cat, lat, limit=R.DEFAULT_LIMIT, by_size=False)
     a = R.refine_mesh(shp, cat, lat, sides=counts.tolist(), templates=lazy, explain=False)
-    plain = R.patch_templates(shp, cat, lat, limit=R.DEFAULT_LIMIT)
+    plain = T.patch_templates(shp, cat, lat, limit=R.DEFAULT_LIMIT)
     b = R.refine_mesh(shp, cat, lat, sides=counts.tolist(), templates=plain, explain=False)
     assert (a.template.mesh_id, a.template.rank) == (b.template.mesh_id, b.template.rank)
     np.testing.assert_array_equal(a.mesh.counts, b.mesh.counts)
     np.testing.assert_array_equal(a.mesh.xy, b.mesh.xy)
-    R.clear_template_cache(cat)
+    cat.cache.clear()
 
 
 @pytest.mark.parametrize("reflected", [False, True])
@@ -701,11 +706,11 @@ def test_kept_chord_topology_gives_the_chords_of_a_fresh_count(cat, reflected):
             lp = np.asarray(loop, np.int64)
             first = [(int(a), int(b)) for a, b in zip(lp, np.roll(lp, -1))]
             first = [first[k] for k in rng.permutation(len(first))]
-            fresh = R._chords(om.quads, lp, first)
-            kept = R._chords(om.quads, lp, first, R._kept_topology(mesh, reflected))
+            fresh = T._chords(om.quads, lp, first)
+            kept = T._chords(om.quads, lp, first, T._kept_topology(cat, mesh_id, reflected))
             for a, b in zip(fresh, kept):
                 assert np.array_equal(a, b)
-    topo = R._kept_topology(cat.mesh(ids[-1]), reflected)
+    topo = T._kept_topology(cat, ids[-1], reflected)
     with pytest.raises(ValueError):
         topo.edges[0, 0] = 0
 
@@ -722,13 +727,13 @@ def test_a_size_whose_matches_a_scan_went_through_is_not_ranked_again(cat, lat, 
 
     shp = load_shape(EXAMPLES / "labels" / "shapes" / "zshape.json")
     patch = patch_shapes(single_patch(canonical(shp, 0.5, DEFAULT_CORNER_ANGLE)))[0]
-    R.clear_template_cache(cat)
-    first, deep = (R._candidates(patch, cat, lat, limit=s * 3, internal=[1])[1] for s in R.SCAN_PER_LIMIT)
-    assert len(first) < R.SCAN_PER_LIMIT[0] * 3
+    cat.cache.clear()
+    first, deep = (T._candidates(patch, cat, lat, limit=s * 3, internal=[1])[1] for s in T.SCAN_PER_LIMIT)
+    assert len(first) < T.SCAN_PER_LIMIT[0] * 3
     assert [first.head(i) for i in range(len(first))] == [deep.head(i) for i in range(len(deep))]
     asked = []
-    real = R._candidates
-    monkeypatch.setattr(R, "_candidates", lambda *a, **kw: asked.append((kw["limit"], tuple(kw["internal"]))) or real(*a, **kw))
-    R.clear_template_cache(cat)
-    assert list(R._iter_by_size(patch, cat, lat, limit=3, internal=[0, 1])) == []
+    real = T._candidates
+    monkeypatch.setattr(T, "_candidates", lambda *a, **kw: asked.append((kw["limit"], tuple(kw["internal"]))) or real(*a, **kw))
+    cat.cache.clear()
+    assert list(T._iter_by_size(patch, cat, lat, limit=3, internal=[0, 1])) == []
     assert [k for _, (k,) in asked] == [1]

@@ -13,6 +13,8 @@ import pytest
 from jaxmatch.errors import UnmatchableError
 from jaxmatch.io.readers import load_shape
 from jaxmatch.placement import refine as R
+from jaxmatch.placement import solve as S
+from jaxmatch.placement import templates as T
 from jaxmatch.scoring.lattice import load_lattice
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -31,41 +33,41 @@ def _same_templates(a, b) -> None:
 def test_cached_templates_equal_fresh_ones_and_carry_the_callers_shape(cat):
     lat = load_lattice("fine")
     shp = load_shape(ROOT / "examples" / "tshape.json")
-    R.clear_template_cache(cat)
-    fresh = R.patch_templates(shp, cat, lat, limit=3, internal=[0, 1, 2])
+    cat.cache.clear()
+    fresh = T.patch_templates(shp, cat, lat, limit=3, internal=[0, 1, 2])
     other = dataclasses.replace(load_shape(ROOT / "examples" / "tshape.json"), source="elsewhere")
-    again = R.patch_templates(other, cat, load_lattice("fine"), limit=3, internal=[2, 1, 0])
+    again = T.patch_templates(other, cat, load_lattice("fine"), limit=3, internal=[2, 1, 0])
     _same_templates(fresh, again)
     assert all(t.shape is other for t in again)
-    R.clear_template_cache(cat)
-    _same_templates(fresh, R.patch_templates(shp, cat, lat, limit=3, internal=[0, 1, 2]))
+    cat.cache.clear()
+    _same_templates(fresh, T.patch_templates(shp, cat, lat, limit=3, internal=[0, 1, 2]))
 
 
 def test_a_different_request_is_not_answered_from_the_cache(cat):
     lat = load_lattice("fine")
     shp = load_shape(ROOT / "examples" / "lshape.json")
-    few = R.patch_templates(shp, cat, lat, limit=1, internal=[0, 1])
-    more = R.patch_templates(shp, cat, lat, limit=4, internal=[0, 1])
+    few = T.patch_templates(shp, cat, lat, limit=1, internal=[0, 1])
+    more = T.patch_templates(shp, cat, lat, limit=4, internal=[0, 1])
     assert len(more) >= len(few)
-    assert R.patch_templates(shp, cat, lat, limit=1, internal=[0, 1])[0].mesh_id == few[0].mesh_id
+    assert T.patch_templates(shp, cat, lat, limit=1, internal=[0, 1])[0].mesh_id == few[0].mesh_id
 
 
 def test_unmatchable_is_raised_again_from_the_cache(cat, monkeypatch):
     lat = load_lattice("fine")
     shp = load_shape(ROOT / "examples" / "square.json")
-    R.clear_template_cache(cat)
+    cat.cache.clear()
     calls = []
 
     def boom(*a, **k):
         calls.append(1)
         raise UnmatchableError("none")
 
-    monkeypatch.setattr(R, "_iter_templates", boom)
+    monkeypatch.setattr(T, "_iter_templates", boom)
     for _ in range(2):
         with pytest.raises(UnmatchableError):
-            R.patch_templates(shp, cat, lat, limit=2)
+            T.patch_templates(shp, cat, lat, limit=2)
     assert len(calls) == 1
-    R.clear_template_cache(cat)
+    cat.cache.clear()
 
 
 def _same_mesh(a, b) -> None:
@@ -81,14 +83,14 @@ def test_mesh_layout_from_its_caches_equals_a_fresh_one(cat, name, size):
 
     lat = load_lattice("fine")
     lay = L.load_layout(ROOT / "examples" / "layouts" / name)
-    L.clear_caches()
-    R.clear_template_cache(cat)
-    fresh = L.mesh_layout(lay, cat, lat, size=size)
-    again = L.mesh_layout(L.load_layout(ROOT / "examples" / "layouts" / name), cat, lat, size=size)
+    cat.cache.clear()
+    cat.cache.clear()
+    fresh = S.mesh_layout(lay, cat, lat, size=size)
+    again = S.mesh_layout(L.load_layout(ROOT / "examples" / "layouts" / name), cat, lat, size=size)
     _same_mesh(fresh, again)
-    other = L.mesh_layout(lay, cat, lat, size=size * 0.7)  # another program, same templates
-    L.clear_caches()
-    _same_mesh(other, L.mesh_layout(lay, cat, lat, size=size * 0.7))
+    other = S.mesh_layout(lay, cat, lat, size=size * 0.7)  # another program, same templates
+    cat.cache.clear()
+    _same_mesh(other, S.mesh_layout(lay, cat, lat, size=size * 0.7))
 
 
 def test_jaxmatch_mesh_twice_gives_the_same_mesh(cat):
@@ -96,8 +98,8 @@ def test_jaxmatch_mesh_twice_gives_the_same_mesh(cat):
     from jaxmatch.placement import layout as L
 
     shp = load_shape(ROOT / "examples" / "tshape.json")
-    L.clear_caches()
-    R.clear_template_cache(cat)
+    cat.cache.clear()
+    cat.cache.clear()
     a = jaxmatch.mesh(shp, size=0.1, catalogue=cat)
     b = jaxmatch.mesh(shp, size=0.1, catalogue=cat)
     assert a.chosen == b.chosen
@@ -117,8 +119,8 @@ def test_a_large_decomposition_is_smoothed_near_its_cuts_only(cat):
     lat = load_lattice("fine")
     lay = L.load_layout(ROOT / "examples" / "layouts" / "two-blocks.json")
     ext = float(np.ptp(lay.points, axis=0).max())
-    plain = L.mesh_layout(lay, cat, lat, size=ext / 70)
-    smoothed = L.mesh_layout(lay, cat, lat, size=ext / 70, smooth_cuts=True)
+    plain = S.mesh_layout(lay, cat, lat, size=ext / 70)
+    smoothed = S.mesh_layout(lay, cat, lat, size=ext / 70, smooth_cuts=True)
     assert smoothed.quads.shape[0] > SMOOTH_ALWAYS
     np.testing.assert_array_equal(plain.quads, smoothed.quads)
     assert not inverted_mask(smoothed.xy, smoothed.quads).any()
@@ -130,32 +132,32 @@ def test_a_large_decomposition_is_smoothed_near_its_cuts_only(cat):
 def test_the_refined_meshes_kept_stay_within_their_quad_budget(cat, monkeypatch):
     from jaxmatch.placement import layout as L
 
-    monkeypatch.setattr(R, "REFINED_CACHE_TOTAL_QUADS", 300)
-    R._REFINED.clear()
+    from jaxmatch.cache import Cache, CacheSizes
+
+    monkeypatch.setattr(cat, "cache", Cache(CacheSizes(total_quads=300)))
     lat = load_lattice("fine")
     lay = L.load_layout(ROOT / "examples" / "layouts" / "house.json")
     for size in (0.6, 0.5, 0.4, 0.3, 0.25):
-        L.mesh_layout(lay, cat, lat, size=size)
-        assert sum(r.quads.shape[0] for r in R._REFINED.values()) <= 300
-    R._REFINED.clear()
+        S.mesh_layout(lay, cat, lat, size=size)
+        assert 0 < cat.cache.quads("refined") <= 300
 
 
 def test_a_meshed_layout_from_the_cache_is_a_copy_for_the_callers_layout(cat):
     from jaxmatch.placement import layout as L
 
     lat = load_lattice("fine")
-    R.clear_template_cache(cat)
+    cat.cache.clear()
     lay = L.load_layout(ROOT / "examples" / "layouts" / "house.json")
-    a = L.mesh_layout(lay, cat, lat, size=0.5)
+    a = S.mesh_layout(lay, cat, lat, size=0.5)
     a.xy[:] = 0.0  # a caller writing to its answer does not change the next one
     other = L.load_layout(ROOT / "examples" / "layouts" / "house.json")  # another object, the same layout
     seen = []
-    b = L.mesh_layout(other, cat, lat, size=0.5, progress=lambda i, n: seen.append((i, n)))
+    b = S.mesh_layout(other, cat, lat, size=0.5, progress=lambda i, n: seen.append((i, n)))
     assert b.layout is other and np.ptp(b.xy) > 0
     assert seen == [(p + 1, lay.n_patches) for p in range(lay.n_patches)]
-    R.clear_template_cache(cat)
-    L.clear_caches()
-    _same_mesh(b, L.mesh_layout(other, cat, lat, size=0.5))
+    cat.cache.clear()
+    cat.cache.clear()
+    _same_mesh(b, S.mesh_layout(other, cat, lat, size=0.5))
 
 
 def _same_matches(a, b) -> None:
@@ -169,7 +171,7 @@ def _same_matches(a, b) -> None:
 def test_kept_rankings_equal_fresh_ones_for_shapes_of_the_same_point_types(cat, internal):
     """Two rectangles of one aspect ratio (annotated alike) share a ranking; a third of another
     aspect ratio does not; each answer equals a ranking computed with the memo cleared."""
-    from jaxmatch.scoring.rank import clear_memo, rank
+    from jaxmatch.scoring.rank import rank
     from jaxmatch.shape import make_shape
 
     lat = load_lattice("fine")
@@ -179,17 +181,17 @@ def test_kept_rankings_equal_fresh_ones_for_shapes_of_the_same_point_types(cat, 
     kw = dict(internal=internal, top=9, per_size=True, prune=True)
     fresh = {}
     for name, shp in (("a", a), ("b", b), ("c", c)):
-        clear_memo(cat)
+        cat.cache.clear("rankings")
         fresh[name] = rank(shp, cat, lat, **kw)
-    clear_memo(cat)
+    cat.cache.clear("rankings")
     kept = {name: rank(shp, cat, lat, **kw) for name, shp in (("a", a), ("b", b), ("c", c))}
     assert np.array_equal(kept["a"].annotation.codes, kept["b"].annotation.codes)
     assert not np.array_equal(kept["a"].annotation.codes, kept["c"].annotation.codes)
-    assert len(cat.__dict__["_rank_memo"]) == 2  # a and b share one ranking
+    assert cat.cache.size("rankings") == 2  # a and b share one ranking
     for name in fresh:
         _same_matches(fresh[name].results, kept[name].results)
         np.testing.assert_array_equal(kept[name].annotation.positions, fresh[name].annotation.positions)
-    clear_memo(cat)
+    cat.cache.clear("rankings")
 
 
 def test_lazy_templates_are_placed_once_and_as_far_as_asked(cat):
@@ -199,32 +201,32 @@ def test_lazy_templates_are_placed_once_and_as_far_as_asked(cat):
 
     lat = load_lattice("fine")
     shp = load_shape(ROOT / "examples" / "tshape.json")
-    R.clear_template_cache(cat)
-    lazy = R.lazy_patch_templates(shp, cat, lat, limit=2, internal=[0, 1, 2])
+    cat.cache.clear()
+    lazy = T.lazy_patch_templates(shp, cat, lat, limit=2, internal=[0, 1, 2])
     first = lazy[0]
     walk = lazy._walk
     assert len(walk.made) == 1  # only the first one placed
     with ThreadPoolExecutor(4) as pool:
-        lens = list(pool.map(lambda _: len(R.lazy_patch_templates(shp, cat, lat, limit=2, internal=[0, 1, 2])), range(8)))
+        lens = list(pool.map(lambda _: len(T.lazy_patch_templates(shp, cat, lat, limit=2, internal=[0, 1, 2])), range(8)))
     assert len(set(lens)) == 1 and lens[0] >= 1
-    plain = list(R._iter_by_size(shp, cat, lat, limit=2, internal=[0, 1, 2]))
+    plain = list(T._iter_by_size(shp, cat, lat, limit=2, internal=[0, 1, 2]))
     _same_templates(plain, lazy[:])
     assert lazy[0] is not first and lazy[0].mesh_id == first.mesh_id  # handed out with the caller's shape
     ks = [t.match.internal_vertices for t in lazy[:]]
     assert ks == sorted(ks)
-    R.clear_template_cache(cat)
+    cat.cache.clear()
 
 
 @pytest.mark.parametrize("internal", [[0, 1], [2, 3], None])
 def test_lazy_rankings_equal_eager_ones(cat, internal):
     """rank(lazy=True) aligns a match when first asked for; every match, and the template scan's
     reordering, equal the eager ranking's."""
-    from jaxmatch.scoring.rank import LazyMatches, clear_memo, rank
+    from jaxmatch.scoring.rank import LazyMatches, rank
 
     lat = load_lattice("fine")
     shp = load_shape(ROOT / "examples" / "lshape.json")
     kw = dict(internal=internal, top=6, per_size=True, prune=True)
-    clear_memo(cat)
+    cat.cache.clear("rankings")
     eager = rank(shp, cat, lat, **kw).results
     lazy = rank(shp, cat, lat, lazy=True, **kw).results
     assert isinstance(lazy, LazyMatches) and len(lazy) == len(eager) and not lazy._made
@@ -234,4 +236,4 @@ def test_lazy_rankings_equal_eager_ones(cat, internal):
     _same_matches(sorted(eager, key=lambda m: (-m.utility, m.internal_vertices, m.mesh_id)), merged[:])
     with pytest.raises(IndexError):
         lazy[len(lazy)]
-    clear_memo(cat)
+    cat.cache.clear("rankings")

@@ -30,6 +30,7 @@ from typing import Callable, Iterator, NamedTuple
 
 import numpy as np
 
+from jaxmatch.cache import Cache
 from jaxmatch.catalogue.canon import mesh_id, relabel
 from jaxmatch.errors import InputError
 from jaxmatch.files import atomic_path
@@ -158,6 +159,8 @@ class Catalogue:
     meta: dict
     _npz: object = field(repr=False)
     _cache: dict = field(default_factory=dict, repr=False)
+    cache: Cache = field(default_factory=Cache, repr=False)
+    """What is kept between calls for this catalogue's meshes (:mod:`jaxmatch.cache`)."""
 
     def reopen(self) -> None:
         """Open the file again for this process: a process forked from the one that opened it

@@ -286,16 +286,18 @@ class LabelSession:
         when this template cannot be refined (a corner without a mesh vertex, a fold)."""
         try:
             from jaxmatch.placement.choose import place_match
-            from jaxmatch.placement.refine import _fit, refine_and_place, solve_multiplicities
+            from jaxmatch.placement.refine import refine_and_place, solve_multiplicities
+            from jaxmatch.placement.templates import fit_template
 
-            template = _fit(shape, ann, match, self.catalogue, r)
+            template = fit_template(shape, ann, match, self.catalogue, r)
             if template is None:
                 return pl, "not refined: a corner has no mesh vertex"
             placed = place_match(shape, ann, self.catalogue, match)  # the ranked orientation, as refine_mesh places it
             if placed.inverted:
                 return pl, "not refined: the template folds"
             template = template._replace(placement=placed)
-            return refine_and_place(template, solve_multiplicities(template, size=self.size)).as_placement(), ""
+            refined = refine_and_place(template, solve_multiplicities(template, size=self.size), cache=self.catalogue.cache)
+            return refined.as_placement(), ""
         except InputError as e:
             return pl, f"not refined: {e.problem}"
         except Exception as e:  # noqa: BLE001 - the unrefined template is still worth showing

@@ -12,7 +12,7 @@ canonical loops, corners at the size), the candidates (:mod:`.strategies`), the 
 * a **shape** with a target edge length ``size`` (default: perimeter / :data:`DEFAULT_DIVISIONS`)
   is meshed as one template (``"single"``) and as each decomposition of
   :data:`~jaxmatch.placement.decompose.STRATEGIES`; every candidate is meshed by the same solve
-  (:func:`~jaxmatch.placement.layout.mesh_layout`: templates per patch, one integer program for
+  (:func:`~jaxmatch.placement.solve.mesh_layout`: templates per patch, one integer program for
   every side count, refinement, placement, merging, smoothing) and the best is kept by the one
   rule of :mod:`jaxmatch.meshing.choose`;
 * a shape with ``sides`` (edges per side) is meshed as one template meeting them exactly;
@@ -37,9 +37,15 @@ from jaxmatch.meshing.build import from_layout, from_placement, from_refined
 from jaxmatch.meshing.choose import choose
 from jaxmatch.meshing.region import canonical, corner_points, default_size, load_region
 from jaxmatch.meshing.result import Candidate, QuadMesh
-from jaxmatch.meshing.strategies import (FINER, SINGLE, conforming_templates, larger_templates, mesh_smooth,
-                                         try_strategies)
-from jaxmatch.shape import DEFAULT_CORNER_ANGLE, Shape
+from jaxmatch.meshing.strategies import (SINGLE, Bends, Conforming, Larger, Layouts, Request, Smooth, layout_strategies,
+                                         run)
+from jaxmatch.inputs import _lattice, check_sizes, load_catalogue
+from jaxmatch.placement.choose import choose_mesh
+from jaxmatch.placement.decompose import STRATEGIES, single_patch
+from jaxmatch.placement.layout import Layout, LayoutInfeasible, layout_sides
+from jaxmatch.placement.refine import InfeasibleRequest, _check_counts, refine_mesh
+from jaxmatch.placement.solve import ALL_SIZES, mesh_layout
+from jaxmatch.shape import DEFAULT_CORNER_ANGLE, Shape, make_shape
 
 __all__ = ["SINGLE", "canonical", "default_size", "load_region", "mesh", "strategy_names", "warm_up"]
 
@@ -47,8 +53,6 @@ __all__ = ["SINGLE", "canonical", "default_size", "load_region", "mesh", "strate
 
 def strategy_names() -> tuple[str, ...]:
     """Every candidate strategy, in the order tried: ``"single"``, then the decompositions."""
-    from jaxmatch.placement.decompose import STRATEGIES
-
     return (SINGLE,) + tuple(STRATEGIES)
 
 
@@ -65,14 +69,11 @@ def _check_size(size) -> float:
 def _side_ids(shape: Shape, layout) -> list[int]:
     """Layout side id of each user side ``i`` of ``shape`` (corner ``i`` to ``i + 1`` in the
     file's order) in :func:`~jaxmatch.placement.decompose.single_patch`'s layout."""
-    from jaxmatch.placement.layout import layout_sides
-    from jaxmatch.placement.refine import _side_frame
-
     sides = layout_sides(layout)
     ends = {(int(c[0]), int(c[-1])): s for s, c in enumerate(sides.chains)}
     c = shape.corners
     out = []
-    for j, _ in _side_frame(shape):
+    for j, _ in shape.side_frame:
         a, b = int(c[j]), int(c[(j + 1) % len(c)])
         s = ends.get((a, b), ends.get((b, a)))
         if s is None:  # pragma: no cover - single_patch keeps every corner as a node
@@ -85,8 +86,7 @@ def mesh(region, *, size: float | None = None, divisions: int | None = None, sid
          counts: Mapping[int, int] | None = None, template: bool = False,
          catalogue=None, lattice=DEFAULT_LATTICE, strategies: Sequence[str] | None = None,
          quality: Quality = QUALITY, corner_angle: float = DEFAULT_CORNER_ANGLE, budget_s: float | None = None,
-         progress: Callable[[int, int, str], None] | None = None, template_cache: dict | None = None,
-         **template_options) -> QuadMesh:
+         progress: Callable[[int, int, str], None] | None = None, **template_options) -> QuadMesh:
     """Mesh a region: the one front door.
 
     Args:
@@ -107,7 +107,6 @@ def mesh(region, *, size: float | None = None, divisions: int | None = None, sid
       quality: the policy (:class:`jaxmatch.defaults.Quality`).
       budget_s: stop trying further candidates after this many seconds once one valid mesh exists.
       progress: ``progress(done, total, name)`` after each candidate.
-      template_cache: dict shared between calls on the same shape (templates per patch).
 
     Returns:
       a :class:`~jaxmatch.meshing.result.QuadMesh`; ``chosen``, ``rule``, ``runner_up`` and
@@ -117,9 +116,6 @@ def mesh(region, *, size: float | None = None, divisions: int | None = None, sid
       InputError: a bad request (unreadable file, bad size, counts no template meets: the
         message names the nearest feasible counts), or no candidate could be meshed.
     """
-    from jaxmatch.inputs import _lattice, load_catalogue
-    from jaxmatch.placement.layout import Layout
-
     if isinstance(region, (str, os.PathLike)):
         region = load_region(region, corner_angle=corner_angle)
     if sides is not None and size is not None:
@@ -150,7 +146,7 @@ def mesh(region, *, size: float | None = None, divisions: int | None = None, sid
     if sides is not None:
         return _mesh_sides(region, cat, lat, sides)
     h = size if size is not None else default_size(region)
-    return _mesh_size(region, cat, lat, h, strategies, quality, budget_s, progress, template_cache, corner_angle)
+    return _mesh_size(region, cat, lat, h, strategies, quality, budget_s, progress, corner_angle)
 
 
 def warm_up(catalogue=None, lattice=DEFAULT_LATTICE) -> None:
@@ -158,14 +154,11 @@ def warm_up(catalogue=None, lattice=DEFAULT_LATTICE) -> None:
     compiled kernels, the solvers' modules) by meshing a unit square at 4 edges a side: about a
     tenth of a second, where a first real region can take three times that. For a parent that
     forks workers (``jaxmatch mesh`` of many regions): they inherit it all."""
-    from jaxmatch.shape import make_shape
-
     mesh(make_shape([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]]), divisions=16, catalogue=catalogue,
          lattice=lattice)
 
 
 def _mesh_layout_file(layout, cat, lat, size, sides, counts) -> QuadMesh:
-    from jaxmatch.placement.layout import mesh_layout
 
     if sides is not None:
         raise InputError("a layout takes edge counts per side in its file (\"sides\") or as counts=; not sides")
@@ -175,8 +168,6 @@ def _mesh_layout_file(layout, cat, lat, size, sides, counts) -> QuadMesh:
 
 
 def _mesh_template(shape, cat, lat, options) -> QuadMesh:
-    from jaxmatch.inputs import check_sizes
-    from jaxmatch.placement.choose import choose_mesh
 
     opts = dict(options)
     if "internal" in opts:
@@ -187,9 +178,6 @@ def _mesh_template(shape, cat, lat, options) -> QuadMesh:
 
 
 def _mesh_sides(shape, cat, lat, sides) -> QuadMesh:
-    from jaxmatch.placement.decompose import single_patch
-    from jaxmatch.placement.layout import ALL_SIZES, LayoutInfeasible, layout_sides, mesh_layout
-    from jaxmatch.placement.refine import InfeasibleRequest, _check_counts, refine_mesh
 
     n_sides = max(shape.n_corners, 1)
     counts = _check_counts(sides, n_sides, shape.source)
@@ -213,40 +201,27 @@ def _mesh_sides(shape, cat, lat, sides) -> QuadMesh:
     return m.with_choice(SINGLE, "", None, (Candidate(SINGLE, m),))
 
 
-def _mesh_size(shape, cat, lat, h, strategies, quality, budget_s, progress, template_cache, corner_angle) -> QuadMesh:
-    from jaxmatch.placement.decompose import single_patch
-
+def _mesh_size(shape, cat, lat, h, strategies, quality, budget_s, progress, corner_angle) -> QuadMesh:
     names = tuple(strategies) if strategies is not None else strategy_names()
     unknown = [n for n in names if n not in strategy_names()]
     if unknown:
         raise InputError(f"unknown strategy {unknown[0]!r} (expected {', '.join(strategy_names())})")
     region = canonical(shape, h, corner_angle)
+    req = Request(region, cat, lat, h, corner_points(region), quality, budget_s, time.perf_counter(), progress)
     if region.n_corners < 2 and not region.holes:
-        return mesh_smooth(region, cat, lat, h, quality, template_cache)
-    corners = corner_points(region)
-    cache = template_cache if template_cache is not None else {}
-    t0 = time.perf_counter()
-    tried = try_strategies(region, names, cat, lat, h, corners, cache, budget_s, t0, progress, quality=quality)
+        plan = (Smooth(),)
+    else:
+        layouts = Layouts(layout_strategies(names))
+
+        def rejudge():  # the bends of a curved outline as corners too (detected corners only)
+            if shape.explicit_corners:
+                return None
+            finer = canonical(shape, h, corner_angle, held_angle=corner_angle)
+            return None if np.array_equal(finer.corners, region.corners) else finer
+
+        plan = (layouts, Larger(), Conforming(), Bends(layouts, rejudge))
+    tried = run(plan, req)
     if not any(c.mesh is not None for c in tried):
         raise InputError("no candidate could be meshed: " + "; ".join(f"{c.name}: {c.note}" for c in tried),
                          where=region.source)
-    best = choose(tried, quality)
-    single = next((c.mesh for c in tried if c.name == SINGLE and c.mesh is not None), None)
-    if single is not None and not best.min_scaled_jacobian >= quality.good_sj:  # below the floor: larger templates
-        more = larger_templates(single_patch(region), cat, lat, h, corners, single, cache)
-        if more:
-            tried = tried[:1] + more + tried[1:]
-            best = choose(tried, quality)
-    if single is not None and best.sides_off_size(quality.size_tol):  # no candidate follows the size yet
-        more = conforming_templates(region, cat, lat, h, single, quality)
-        if more:
-            tried = tried[:1] + more + tried[1:]
-            best = choose(tried, quality)
-    if not best.valid and not shape.explicit_corners:  # every candidate folds: the bends become corners too
-        finer = canonical(shape, h, corner_angle, held_angle=corner_angle)
-        if not np.array_equal(finer.corners, region.corners):
-            more = try_strategies(finer, names, cat, lat, h, corner_points(finer), cache, budget_s, t0, progress,
-                                   suffix=FINER, quality=quality)
-            if any(c.mesh is not None for c in more):
-                best = choose(tried + more, quality)
-    return best
+    return choose(tried, quality)

@@ -6,19 +6,27 @@ block of a region without corners, the bends of a curved outline as corners)."""
 from __future__ import annotations
 
 import time
+from typing import NamedTuple, Sequence
 
 import numpy as np
 
 from jaxmatch.defaults import QUALITY, Quality
-from jaxmatch.errors import InputError, SolverError
+from jaxmatch.errors import InputError, SolverError, UnmatchableError
 from jaxmatch.meshing.build import from_layout, from_refined
-from jaxmatch.meshing.choose import best_possible_key, cannot_win, choose, mesh_key
+from jaxmatch.meshing.choose import best_possible_key, cannot_win, mesh_key
 from jaxmatch.meshing.region import corner_points
 from jaxmatch.meshing.result import Candidate, QuadMesh
+from jaxmatch.placement.bounds import node_sj_bound, single_sj_bound
+from jaxmatch.placement.decompose import _same, decompose, disk_layout, same_cuts, single_patch
+from jaxmatch.placement.layout import check_layout
+from jaxmatch.placement.refine import DEFAULT_LIMIT, InfeasibleRequest, refine_mesh, side_lengths
+from jaxmatch.placement.solve import ALL_SIZES, TEMPLATE_SIZES, mesh_layout
+from jaxmatch.placement.templates import walk
 from jaxmatch.shape import Shape
 
-__all__ = ["CONFORMING_TRIES", "DISK", "FINER", "SINGLE", "conforming_templates", "larger_templates", "mesh_smooth",
-           "try_strategies"]
+__all__ = ["CONFORMING_TRIES", "DISK", "FINER", "SINGLE", "Bends", "Conforming", "Larger", "LayoutStrategy", "Layouts",
+           "Request", "Single", "Smooth", "Split", "conforming_templates", "larger_templates", "layout_strategies", "run",
+           "smooth_candidates", "try_layouts"]
 
 SINGLE = "single"
 """Name of the one-template candidate."""
@@ -44,31 +52,28 @@ def _why_not(e: Exception) -> str:
     return f"skipped: {type(e).__name__}: {e}"
 
 
-def try_strategies(shape: Shape, names, cat, lat, h: float, corners: np.ndarray, cache: dict, budget_s, t0: float,
-                    progress, suffix: str = "", quality: Quality = QUALITY) -> list[Candidate]:
-    """Each strategy of ``names`` (one :class:`Candidate` each, in the order of ``names``, with its
+def try_layouts(shape: Shape, strategies: Sequence["LayoutStrategy"], cat, lat, h: float, corners: np.ndarray, budget_s,
+                t0: float, progress, suffix: str = "", quality: Quality = QUALITY) -> list[Candidate]:
+    """Each layout strategy of ``strategies`` (one :class:`Candidate` each, in their order, with its
     mesh or the reason it has none): every strategy's layout is cut first, then meshed by the same
-    solve (:func:`~jaxmatch.placement.layout.mesh_layout`), the most promising first: by the best
+    solve (:func:`~jaxmatch.placement.solve.mesh_layout`), the most promising first: by the best
     key its mesh could have (:func:`~jaxmatch.meshing.choose.best_possible_key`: the quality its
     bound allows, then fewest patches; the single patch of a region with a concave corner last).
     A layout that cannot beat the best mesh so far whatever its mesh
     (:func:`~jaxmatch.meshing.choose.cannot_win`: by its patch count and an upper bound on its min
-    scaled Jacobian: :func:`~jaxmatch.placement.layout.node_sj_bound` from the angles its nodes
-    split, and for the single patch :func:`~jaxmatch.placement.layout.single_sj_bound` from its
+    scaled Jacobian: :func:`~jaxmatch.placement.bounds.node_sj_bound` from the angles its nodes
+    split, and for the single patch :func:`~jaxmatch.placement.bounds.single_sj_bound` from its
     template sizes) is not meshed, so the choice is the one meshing all of them would give. A
     strategy whose cuts or solve fail for any reason is skipped with that reason."""
-    from jaxmatch.placement.decompose import _same, decompose, same_cuts, single_patch
-    from jaxmatch.placement.layout import (ALL_SIZES, TEMPLATE_SIZES, check_layout, mesh_layout, node_sj_bound,
-                                           single_sj_bound)
-
+    names = [st.name for st in strategies]
     tried: list[Candidate | None] = [None] * len(names)
     layouts: list[tuple[int, object]] = []
     made: dict = {}  # layouts by the strategy that gives them (same_cuts): each cut once
-    for i, name in enumerate(names):
+    for i, (name, st) in enumerate(zip(names, strategies)):
         try:
-            how = None if name == SINGLE else same_cuts(shape, name)
+            how = st.kind(shape)
             if how not in made:  # the first strategy of its kind names the layout (its messages' source)
-                made[how] = single_patch(shape) if name == SINGLE else decompose(shape, name, check=False)
+                made[how] = st.layout(shape)
             lay = made[how]
         except FAILED as e:
             tried[i] = Candidate(name + suffix, None, _why_not(e))
@@ -79,7 +84,7 @@ def try_strategies(shape: Shape, names, cat, lat, h: float, corners: np.ndarray,
         layouts.append((i, lay))
     best: tuple | None = None
     concave = bool(np.any(~np.asarray(shape.convex, bool)))
-    late = {i for i, _ in layouts if names[i] == SINGLE and concave}  # after the cuts: a grid they make may rule it out
+    late = {i for i, _ in layouts if strategies[i].single and concave}  # after the cuts: a grid they make may rule it out
     caps = {}
     for i, lay in layouts:
         try:
@@ -89,11 +94,11 @@ def try_strategies(shape: Shape, names, cat, lat, h: float, corners: np.ndarray,
     order = sorted(layouts, key=lambda il: (il[0] in late, best_possible_key(il[1].n_patches, il[0], caps[il[0]], quality)))
     for done, (i, lay) in enumerate(order, start=1):
         label = names[i] + suffix
-        sizes = ALL_SIZES if names[i] == SINGLE else TEMPLATE_SIZES
+        sizes = strategies[i].sizes
         bound, why = caps[i], "a node splits its angle"
-        if best is not None and names[i] == SINGLE and not cannot_win(best[0], 1, i, bound, quality):
+        if best is not None and strategies[i].single and not cannot_win(best[0], 1, i, bound, quality):
             try:  # (one patch: only a cap on its quality can rule it out)
-                grid = single_sj_bound(lay, cat, lat, sizes=sizes, template_cache=cache)
+                grid = single_sj_bound(lay, cat, lat, sizes=sizes)
             except FAILED:  # no templates: the solve below says why
                 grid = 1.0
             if grid < bound:
@@ -108,7 +113,7 @@ def try_strategies(shape: Shape, names, cat, lat, h: float, corners: np.ndarray,
         else:
             try:
                 check_layout(lay)  # (the cuts' layouts are checked only when meshed)
-                lm = mesh_layout(lay, cat, lat, size=h, smooth_cuts=lay.n_patches > 1, sizes=sizes, template_cache=cache)
+                lm = mesh_layout(lay, cat, lat, size=h, smooth_cuts=lay.n_patches > 1, sizes=sizes, quality=quality)
             except FAILED as e:
                 tried[i] = Candidate(label, None, _why_not(e))
             else:
@@ -122,16 +127,183 @@ def try_strategies(shape: Shape, names, cat, lat, h: float, corners: np.ndarray,
     return list(tried)
 
 
-def larger_templates(lay, cat, lat, h, corners, first: QuadMesh, cache) -> list[Candidate]:
-    """Single-patch candidates from the larger template sizes: the best template of each size
-    group of :data:`~jaxmatch.placement.layout.ALL_SIZES` after the first (the single candidate
-    takes the first group that has one), named ``"single <template id>"``."""
-    from jaxmatch.placement.layout import ALL_SIZES, mesh_layout
+# ---------------------------------------------------------------------------------------------
+# the strategies: each candidate kind one object, chosen once per request (:func:`plan`)
 
+
+class LayoutStrategy:
+    """A strategy that cuts the region into a layout (meshed by the one solve,
+    :func:`~jaxmatch.placement.solve.mesh_layout`, in :func:`try_layouts`)."""
+
+    name: str = ""
+    single: bool = False  # the region as one patch (only a cap on its quality can rule it out)
+    sizes: tuple = TEMPLATE_SIZES  # the template size groups its patches take
+
+    def kind(self, shape: Shape):
+        """What makes two strategies give the same layout (the layout is cut once)."""
+        return self.name
+
+    def layout(self, shape: Shape):
+        raise NotImplementedError
+
+
+class Single(LayoutStrategy):
+    """The region as one template (``"single"``; every template size group)."""
+
+    name, single, sizes = SINGLE, True, ALL_SIZES
+
+    def kind(self, shape: Shape):
+        return None
+
+    def layout(self, shape: Shape):
+        return single_patch(shape)
+
+
+class Split(LayoutStrategy):
+    """A decomposition at the concave corners or around the holes
+    (:func:`jaxmatch.placement.decompose.decompose`: ``"continuations"``, ``"bisectors"``,
+    ``"recursive"``, ``"radial"``)."""
+
+    def __init__(self, name: str):
+        self.name = name
+
+    def kind(self, shape: Shape):
+        return same_cuts(shape, self.name)
+
+    def layout(self, shape: Shape):
+        return decompose(shape, self.name, check=False)
+
+
+class Request(NamedTuple):
+    """What every strategy of one request sees: the region (corners judged at the size), the
+    catalogue, lattice, size ``h``, the region's corners ``(C, 2)``, the policy, the time budget
+    (seconds, from ``t0``) and the progress callback."""
+
+    region: Shape
+    cat: object
+    lat: object
+    h: float
+    corners: np.ndarray
+    quality: Quality
+    budget_s: float | None
+    t0: float
+    progress: object
+
+
+class Layouts:
+    """The layout strategies tried together, most promising first, a layout that cannot beat the
+    best mesh so far skipped (:func:`try_layouts`). Candidates go at the start."""
+
+    def __init__(self, strategies: Sequence[LayoutStrategy]):
+        self.strategies = tuple(strategies)
+
+    def wanted(self, best: QuadMesh | None, tried, req: Request) -> bool:
+        return True
+
+    def candidates(self, req: Request, tried) -> list[Candidate]:
+        return try_layouts(req.region, self.strategies, req.cat, req.lat, req.h, req.corners, req.budget_s, req.t0,
+                           req.progress, quality=req.quality)
+
+
+def _single(tried) -> QuadMesh | None:
+    return next((c.mesh for c in tried if c.name == SINGLE and c.mesh is not None), None)
+
+
+class Larger:
+    """Below the quality floor: the single patch with each larger template size group
+    (:func:`larger_templates`), after the single candidate."""
+
+    def wanted(self, best: QuadMesh | None, tried, req: Request) -> bool:
+        return _single(tried) is not None and not best.min_scaled_jacobian >= req.quality.good_sj
+
+    def candidates(self, req: Request, tried) -> list[Candidate]:
+        return larger_templates(single_patch(req.region), req.cat, req.lat, req.h, req.corners, _single(tried),
+                                req.quality)
+
+
+class Conforming:
+    """No candidate follows the size yet: single templates whose side counts do
+    (:func:`conforming_templates`), after the single candidate."""
+
+    def wanted(self, best: QuadMesh | None, tried, req: Request) -> bool:
+        return _single(tried) is not None and bool(best.sides_off_size(req.quality.size_tol))
+
+    def candidates(self, req: Request, tried) -> list[Candidate]:
+        return conforming_templates(req.region, req.cat, req.lat, req.h, _single(tried), req.quality)
+
+
+class Bends:
+    """Every candidate folds: the layout strategies again with the bends of a curved outline as
+    corners too (``" +bends"``; the region re-judged with ``held_angle``), kept when one meshes.
+    ``rejudge(held_angle)``: the region's corners re-judged (None when they are the same)."""
+
+    def __init__(self, layouts: Layouts, rejudge):
+        self.layouts, self.rejudge = layouts, rejudge
+
+    def wanted(self, best: QuadMesh | None, tried, req: Request) -> bool:
+        return not best.valid
+
+    def candidates(self, req: Request, tried) -> list[Candidate]:
+        finer = self.rejudge()
+        if finer is None:
+            return []
+        more = try_layouts(finer, self.layouts.strategies, req.cat, req.lat, req.h, corner_points(finer), req.budget_s,
+                           req.t0, req.progress, suffix=FINER, quality=req.quality)
+        return more if any(c.mesh is not None for c in more) else []
+
+
+class Smooth:
+    """A region with fewer than two corners: one refined template and the central block
+    (:func:`smooth_candidates`)."""
+
+    def wanted(self, best: QuadMesh | None, tried, req: Request) -> bool:
+        return True
+
+    def candidates(self, req: Request, tried) -> list[Candidate]:
+        return smooth_candidates(req.region, req.cat, req.lat, req.h, req.quality)
+
+
+def layout_strategies(names: Sequence[str]) -> tuple[LayoutStrategy, ...]:
+    """The layout strategy objects of ``names`` (``"single"`` and the decompositions)."""
+    return tuple(Single() if n == SINGLE else Split(n) for n in names)
+
+
+def _best(tried, quality: Quality) -> QuadMesh | None:
+    """The mesh of ``tried`` with the smallest :func:`~jaxmatch.meshing.choose.mesh_key`."""
+    keyed = [(mesh_key(c.mesh, i, quality), i) for i, c in enumerate(tried) if c.mesh is not None]
+    return tried[min(keyed)[1]].mesh if keyed else None
+
+
+def run(plan: Sequence, req: Request) -> list[Candidate]:
+    """Every strategy of ``plan`` whose condition on the best mesh so far holds
+    (``wanted(best, tried, req)``), in order; the candidates of :class:`Larger` and
+    :class:`Conforming` go right after the single candidate (single, conforming, larger, the
+    decompositions, the bends), the others at the end. Returns every candidate, for the one
+    choice (:func:`~jaxmatch.meshing.choose.choose`)."""
+    tried: list[Candidate] = []
+    for st in plan:
+        best = _best(tried, req.quality)
+        if tried and best is None:
+            break  # nothing meshed: no condition on a best mesh can be judged
+        if not st.wanted(best, tried, req):
+            continue
+        more = st.candidates(req, tried)
+        if isinstance(st, (Larger, Conforming)):
+            at = next((i + 1 for i, c in enumerate(tried) if c.name == SINGLE), 1)
+            tried = tried[:at] + list(more) + tried[at:]
+        else:
+            tried = tried + list(more)
+    return tried
+
+
+def larger_templates(lay, cat, lat, h, corners, first: QuadMesh, quality: Quality = QUALITY) -> list[Candidate]:
+    """Single-patch candidates from the larger template sizes: the best template of each size
+    group of :data:`~jaxmatch.placement.solve.ALL_SIZES` after the first (the single candidate
+    takes the first group that has one), named ``"single <template id>"``."""
     out, seen = [], {first.templates}
     for group in ALL_SIZES[1:]:
         try:
-            lm = mesh_layout(lay, cat, lat, size=h, sizes=(group,), template_cache=cache)
+            lm = mesh_layout(lay, cat, lat, size=h, sizes=(group,), quality=quality)
         except (InputError, SolverError, IndexError):
             continue
         m = from_layout(lm, size=h, corners=corners)
@@ -145,29 +317,23 @@ DISK = "disk"
 """Name of the central-block candidate of a region with fewer than two corners."""
 
 
-def mesh_smooth(shape: Shape, cat, lat, h: float, quality: Quality, cache) -> QuadMesh:
+def smooth_candidates(shape: Shape, cat, lat, h: float, quality: Quality) -> list[Candidate]:
     """A region with fewer than two corners (a disk, an ellipse, a teardrop): one template
     refined to the size (``"single"``), and a central block with four patches around it
-    (``"disk"``, :func:`jaxmatch.placement.decompose.disk_layout`); the better by the rule."""
-    from jaxmatch.placement.decompose import disk_layout
-    from jaxmatch.placement.layout import mesh_layout
-    from jaxmatch.placement.refine import refine_mesh
-
+    (``"disk"``, :func:`jaxmatch.placement.decompose.disk_layout`)."""
     corners = corner_points(shape)
     tried = []
     try:
-        tried.append(Candidate(SINGLE, from_refined(shape, refine_mesh(shape, cat, lat, size=h).mesh, size=h)))
+        tried.append(Candidate(SINGLE, from_refined(shape, refine_mesh(shape, cat, lat, size=h, quality=quality).mesh,
+                                                     size=h)))
     except (InputError, SolverError) as e:
         tried.append(Candidate(SINGLE, None, str(getattr(e, "problem", e))))
     try:
-        lm = mesh_layout(disk_layout(shape), cat, lat, size=h, smooth_cuts=True, template_cache=cache)
+        lm = mesh_layout(disk_layout(shape), cat, lat, size=h, smooth_cuts=True, quality=quality)
         tried.append(Candidate(DISK, from_layout(lm, size=h, corners=corners)))
     except (InputError, SolverError) as e:
         tried.append(Candidate(DISK, None, str(getattr(e, "problem", e))))
-    if not any(c.mesh is not None for c in tried):
-        raise InputError("no candidate could be meshed: " + "; ".join(f"{c.name}: {c.note}" for c in tried),
-                         where=shape.source)
-    return choose(tried, quality)
+    return tried
 
 
 CONFORMING_TRIES = 3
@@ -200,11 +366,7 @@ def conforming_templates(shape: Shape, cat, lat, h, first: QuadMesh, quality: Qu
     """A single-template candidate whose side counts follow ``h``: the nearest even counts
     (:func:`_target_counts`), each met exactly by the best template of the catalogue that can
     (:func:`jaxmatch.placement.refine.refine_mesh`), named ``"single <template id>"``."""
-    from jaxmatch.errors import UnmatchableError
-    from jaxmatch.placement.refine import (DEFAULT_LIMIT, InfeasibleRequest, lazy_patch_templates, refine_mesh,
-                                           side_lengths)
-
-    templates = lazy_patch_templates(shape, cat, lat, limit=DEFAULT_LIMIT, by_size=False)  # placed as far as used
+    templates = walk(shape, cat, lat, limit=DEFAULT_LIMIT)  # placed as far as used
     try:
         if not templates:
             return []
@@ -213,7 +375,8 @@ def conforming_templates(shape: Shape, cat, lat, h, first: QuadMesh, quality: Qu
     out, seen = [], {first.templates}
     for counts in _target_counts(side_lengths(shape), h, CONFORMING_TRIES):
         try:
-            choice = refine_mesh(shape, cat, lat, sides=counts.tolist(), templates=templates, explain=False)
+            choice = refine_mesh(shape, cat, lat, sides=counts.tolist(), templates=templates, explain=False,
+                                 quality=quality)
         except (InfeasibleRequest, SolverError):
             continue
         m = from_refined(shape, choice.mesh, size=h)

@@ -7,12 +7,12 @@ chord either runs from one boundary edge to another or closes on itself; it may 
 multiplicity ``mult[c] >= 1`` and splitting each quad whose chords are ``(a, b)`` into a
 ``mult[a] x mult[b]`` grid refines the mesh without new irregular vertices; side ``i`` of the
 shape then has ``sum_c A[i, c] * mult[c]`` edges, ``A`` the side matrix
-(:meth:`PatchTemplate.side_matrix`: how many template boundary edges of chord ``c`` lie on
+(:meth:`~jaxmatch.placement.templates.PatchTemplate.side_matrix`: how many template boundary edges of chord ``c`` lie on
 side ``i``). Every chord with boundary ends has two of them, so the total is always even.
 
 Pipeline (:func:`refine_mesh` runs it all):
 
-1. :func:`patch_templates`: ranked catalogue meshes fitted to the shape (placed by
+1. :func:`jaxmatch.placement.templates.patch_templates`: ranked catalogue meshes fitted to the shape (placed by
    :func:`jaxmatch.placement.choose.place_match`) with every corner on a template vertex and no
    folded quad, seen as chords with the template boundary edges of each side.
 2. :func:`solve_multiplicities`: the multiplicities, by an integer program
@@ -41,13 +41,15 @@ from typing import TYPE_CHECKING, Callable, Iterator, NamedTuple
 
 import numpy as np
 
-from jaxmatch.catalogue.mesh import edges
-from jaxmatch.defaults import QUALITY
-from jaxmatch.errors import InputError, UnmatchableError
-from jaxmatch.arrays import roll
+from jaxmatch.cache import Cache
+from jaxmatch.cache import key as cache_key
+from jaxmatch.catalogue.mesh import QuadMesh, edges, valences
+from jaxmatch.defaults import QUALITY, Quality
+from jaxmatch.errors import InputError
 from jaxmatch.placement.milp import LayoutInfeasible, one_patch_sides, solve_counts
 from jaxmatch.placement.embed import (DENSE_TUTTE, Placement, quad_areas, quality, sj_inverted,
                                       smooth_in_frame, smooth_near, tutte)
+from jaxmatch.placement.templates import LazyTemplates, PatchTemplate, walk
 from jaxmatch.shape import Shape
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -55,20 +57,16 @@ if TYPE_CHECKING:  # pragma: no cover
 
     from jaxmatch.catalogue.store import Catalogue
     from jaxmatch.scoring.lattice import Lattice
-    from jaxmatch.scoring.rank import LazyMatches, Match
 
 __all__ = [
     "DEFAULT_LIMIT",
     "InfeasibleRequest",
-    "PatchTemplate",
     "RefineChoice",
     "RefinedMesh",
     "SIZE_TOLERANCE",
-    "SJ_FLOOR",
     "SMOOTH_ALWAYS",
     "BAD_RINGS",
     "SMOOTH_LOCAL",
-    "patch_templates",
     "refine_and_place",
     "refine_mesh",
     "refined_json",
@@ -108,12 +106,12 @@ SMOOTH_ITERS = 200
 
 SMOOTH_ITERS_LARGE = 50
 """Iterations per round for larger meshes, which are smoothed only when the interpolated
-placement has an inverted quad or a scaled Jacobian below :data:`SJ_FLOOR` (each objective
+placement has an inverted quad or a scaled Jacobian below ``quality.good_sj`` (each objective
 evaluation costs about 1.5 ms per 1000 quads)."""
 
 SMOOTH_LOCAL = 20_000
 """Refined meshes with more quads are smoothed only near their bad quads (inverted or below
-:data:`SJ_FLOOR`): the vertices within :data:`BAD_RINGS` rings of them
+``quality.good_sj``): the vertices within :data:`BAD_RINGS` rings of them
 (:func:`jaxmatch.placement.embed.smooth_near`). Smoothing all 100,000 vertices of a refined
 L-shape took ~30 s and left 402 of its 2410 folded quads; the ~4,000 near them, ~1 s and 230
 left. Up to this size the whole mesh is smoothed (a curved side's distortion spreads
@@ -126,28 +124,8 @@ quads (minimum degree on the symmetric pattern: ~35% less factor time than the d
 on a 100,000-vertex grid Laplacian, whose pattern is symmetric; up to there the default, so
 small meshes come out as before to the last bit)."""
 
-FACTOR_CACHE_SIZE = 1
-"""Factorisations of the harmonic extension's system kept above :data:`SMOOTH_LOCAL` quads
-(:func:`_harmonic_solve`): the system depends on the refined topology only, and the patches of
-one decomposition (and the same patch in two decompositions) are often the same template at the
-same multiplicities (the L-shape at 100,000 quads: 5 of 10 solves). One: a 100,000-vertex
-factor is ~70 MB, and the one kept is dropped before the next is made."""
-
 BAD_RINGS = 6
 """Rings of quads around the bad quads smoothed above :data:`SMOOTH_LOCAL` quads."""
-
-SCAN_PER_LIMIT = (3, 30)
-"""Candidates per size scanned for templates, as multiples of ``limit``: a first scan, and a
-deeper one when the first finds fewer than ``limit`` templates in all (shapes with many corners,
-whose best-ranked meshes skip some)."""
-
-TEMPLATE_SJ_MIN = 0.01
-"""Templates whose placement has a quad with a smaller scaled Jacobian are not used: a corner of
-about 180 degrees (e.g. a valence-2 boundary vertex on a straight side) stays one in every
-refinement and ends up inverted or degenerate."""
-
-SJ_FLOOR = QUALITY.good_sj
-"""Minimum scaled Jacobian under which a large refined mesh is smoothed."""
 
 SIZE_ROUNDS = 6
 """Calibration rounds of a ``size`` request (see :func:`solve_multiplicities`)."""
@@ -162,37 +140,6 @@ edges of about the size) against each side's deviation from ``length / size`` (i
 # the user's sides
 
 
-def _side_frame(shape: Shape) -> tuple[tuple[int, bool], ...]:
-    """For each user side ``i``: ``(j, reversed)``, the ccw side ``j`` of ``shape`` (from
-    ``shape.corners[j]`` to ``corners[j + 1]``) it is, and whether the user runs it backwards
-    (worked out once per shape object and kept on it: placement asks for every template).
-
-    Raises :class:`InputError` when explicit corners are not listed in boundary order."""
-    frame = shape.__dict__.get("_side_frame")
-    if frame is None:
-        frame = shape.__dict__["_side_frame"] = tuple(_make_side_frame(shape))
-    return frame
-
-
-def _make_side_frame(shape: Shape) -> list[tuple[int, bool]]:
-    """:func:`_side_frame`, computed."""
-    n = shape.n_corners
-    if n == 0:
-        return [(0, False)]
-    order = np.arange(n) if shape.corner_order is None else np.asarray(shape.corner_order, np.int64)
-    step = (roll(order, -1) - order) % n
-    forward = bool(np.all(step == 1 % n))
-    backward = bool(np.all(step == (n - 1) % n))
-    if forward and backward:  # n <= 2: the file's orientation decides
-        forward = not shape.input_clockwise
-    elif not (forward or backward):
-        raise InputError("corners are not listed in boundary order (side i must run from corner i to corner i + 1)",
-                         where=shape.source)
-    if forward:
-        return [(int(order[i]), False) for i in range(n)]
-    return [(int(order[(i + 1) % n]), True) for i in range(n)]
-
-
 def side_polylines(shape: Shape) -> tuple[np.ndarray, ...]:
     """The user's sides as polylines of input points, ``(k_i, 2) float64`` user coordinates,
     from corner ``i`` to corner ``i + 1`` inclusive (without corners: one closed polyline from
@@ -203,7 +150,7 @@ def side_polylines(shape: Shape) -> tuple[np.ndarray, ...]:
     if n == 0:
         return (np.concatenate([xy, xy[:1]]),)
     out = []
-    for j, rev in _side_frame(shape):
+    for j, rev in shape.side_frame:
         a, b = int(shape.corners[j]), int(shape.corners[(j + 1) % n])
         stop = b if b > a else b + P
         idx = np.arange(a, stop + 1) % P
@@ -247,588 +194,6 @@ def side_points(polyline: np.ndarray, count: int) -> np.ndarray:
 
 # ---------------------------------------------------------------------------------------------
 # templates
-
-
-class PatchTemplate(NamedTuple):
-    """A catalogue mesh fitted to an n-sided shape with every corner on a template vertex,
-    seen as chords (strips of quads). Sides are in the USER's order: side i runs from the
-    user's corner i to corner i+1 (corners as listed in the input, also for clockwise input;
-    for a Shape made with explicit corners c_0..c_{n-1}, corner i is c_i).
-
-    shape: the shape it is fitted to; mesh_id: catalogue id of the template.
-    side_chords: side i: ``(e_i,) int64`` chord of each template boundary edge along side i,
-        from corner i to i+1.
-    n_chords: number of chords (closed chords included; they have no boundary edge).
-    match: the ranked :class:`~jaxmatch.scoring.rank.Match`; rank: its 1-based position in the
-        candidate order of :func:`patch_templates` (of the deeper scan, when one was needed).
-    placement: the template placed in the shape (user coordinates; ``placement.mesh`` is the
-        oriented mesh whose quads the chords refer to).
-    quad_chords: ``(F, 2) int64`` chord of edges 0/2 and of edges 1/3 of each quad.
-    edge_list: ``(E, 2) int64`` undirected edges (sorted pairs, :func:`edges` order);
-        edge_chord: ``(E,) int64`` chord of each.
-    side_path: side i: ``(e_i + 1,) int64`` template vertex ids from corner i to corner i+1.
-    """
-
-    shape: Shape
-    mesh_id: str
-    side_chords: tuple
-    n_chords: int
-    match: "Match"
-    rank: int
-    placement: Placement
-    quad_chords: np.ndarray
-    edge_list: np.ndarray
-    edge_chord: np.ndarray
-    side_path: tuple
-
-    def side_matrix(self) -> np.ndarray:
-        """``(n_sides, n_chords) int64``: ``A[i, c]`` = edges of chord ``c`` on side ``i``."""
-        A = np.zeros((len(self.side_chords), self.n_chords), np.int64)
-        for i, ch in enumerate(self.side_chords):
-            np.add.at(A[i], np.asarray(ch, np.int64), 1)
-        return A
-
-    @property
-    def n_sides(self) -> int:
-        return len(self.side_chords)
-
-    def chord_widths(self) -> np.ndarray:
-        """``(n_chords,) float64`` mean placed length of each chord's edges (user units): the
-        width of the strip, which multiplicity ``m`` splits into ``m`` edges."""
-        xy = self.placement.xy
-        ln = np.linalg.norm(xy[self.edge_list[:, 0]] - xy[self.edge_list[:, 1]], axis=1)
-        tot = np.bincount(self.edge_chord, weights=ln, minlength=self.n_chords)
-        cnt = np.bincount(self.edge_chord, minlength=self.n_chords)
-        return tot / np.maximum(cnt, 1)
-
-
-def _components(n: int, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Connected components of the undirected graph on ``n`` nodes with the edges ``a[i]-b[i]``
-    (``a``, ``b``: (m,) ints): ``(n,) int64``, each node's component named by its smallest node.
-
-    A union-find over the few hundred edges of a template (what :func:`_chords` joins: a quad's
-    opposite edges), rather than ``scipy.sparse.csgraph.connected_components``, whose import
-    (with ``scipy.sparse.linalg`` it loads) costs the command ~0.1 s (docs/perf.md, "Fourth pass")."""
-    parent = list(range(int(n)))
-
-    def root(x: int) -> int:
-        while parent[x] != x:
-            parent[x] = parent[parent[x]]  # path halving
-            x = parent[x]
-        return x
-
-    for x, y in zip(np.asarray(a).tolist(), np.asarray(b).tolist()):
-        rx, ry = root(x), root(y)
-        if rx != ry:
-            parent[max(rx, ry)] = min(rx, ry)  # the smaller node is the root
-    return np.asarray([root(x) for x in range(int(n))], np.int64)
-
-
-class _ChordTopology(NamedTuple):
-    """What :func:`_chords` needs of a quad mesh whatever the numbering: ``edges (E, 2) int64``
-    (sorted pairs, each once), ``key (E,)`` their sorted codes ``a * V + b``, ``V``, ``quad_edges
-    (F, 4)`` each quad's edge ids, ``label (E,)`` each edge's chord in ``0 .. n - 1`` (by smallest
-    root edge) and ``n``."""
-
-    edges: np.ndarray
-    key: np.ndarray
-    V: int
-    quad_edges: np.ndarray
-    label: np.ndarray
-    n: int
-
-
-def _chord_topology(quads: np.ndarray) -> _ChordTopology:
-    """:class:`_ChordTopology` of ``quads (F, 4)``."""
-    q = np.asarray(quads, np.int64)
-    e = edges(q).astype(np.int64)
-    V = int(q.max()) + 1
-    key = e[:, 0] * V + e[:, 1]
-    qe = np.stack([_edge_id(key, V, q[:, k], q[:, (k + 1) % 4]) for k in range(4)], axis=1)  # (F, 4)
-    label = _components(e.shape[0], np.concatenate([qe[:, 0], qe[:, 1]]), np.concatenate([qe[:, 2], qe[:, 3]]))
-    roots, label = np.unique(label, return_inverse=True)  # components 0 .. ncomp - 1
-    return _ChordTopology(e, key, V, qe, label, int(roots.size))
-
-
-def _edge_id(key: np.ndarray, V: int, a, b):
-    """Ids of the edges ``a-b`` (either order) among the sorted edge codes ``key``."""
-    lo, hi = np.minimum(a, b), np.maximum(a, b)
-    return np.searchsorted(key, lo * V + hi)
-
-
-def _kept_topology(mesh, reflected: bool) -> _ChordTopology:
-    """:func:`_chord_topology` of catalogue ``mesh`` as matched (quads mirrored when
-    ``reflected``, as :func:`~jaxmatch.placement.embed.oriented_boundary` does; a rotation keeps
-    the quads), kept on the mesh object, read-only, when its quads are read-only (the catalogue's:
-    a template scan fits a hundred matches of a few dozen meshes)."""
-    kept = mesh.__dict__.get("_chord_topology")
-    if kept is not None and kept[bool(reflected)] is not None:
-        return kept[bool(reflected)]
-    q = np.asarray(mesh.quads)
-    topo = _chord_topology(q[:, ::-1] if reflected else q)
-    if not q.flags.writeable:
-        for a in (topo.edges, topo.key, topo.quad_edges, topo.label):
-            a.setflags(write=False)
-        kept = list(kept) if kept is not None else [None, None]
-        kept[bool(reflected)] = topo
-        object.__setattr__(mesh, "_chord_topology", tuple(kept))
-    return topo
-
-
-def _chords(quads: np.ndarray, boundary: np.ndarray, first_edges: Sequence[tuple[int, int]],
-            topology: _ChordTopology | None = None):
-    """Chords of a quad mesh of a disk.
-
-    quads: (F, 4) ccw; first_edges: boundary edges ``(u, w)`` in the order chords should be
-    numbered by (a chord's number is the position of its first boundary edge in this order;
-    closed chords follow, by their smallest edge); topology: :func:`_chord_topology` of
-    ``quads`` when the caller has it. Returns ``(edge_list (E, 2), edge_chord (E,), quad_chords
-    (F, 2), n_chords)``."""
-    t = _chord_topology(quads) if topology is None else topology
-    E = t.edges.shape[0]
-    # renumber: by first boundary edge along the sides, then the rest by smallest edge
-    rename = np.full(t.n, -1, np.int64)
-    nxt = 0
-    fe = np.asarray(first_edges, np.int64).reshape(-1, 2)
-    order = np.concatenate([_edge_id(t.key, t.V, fe[:, 0], fe[:, 1]), np.arange(E)])
-    for eid in order.tolist():
-        c = t.label[eid]
-        if rename[c] < 0:
-            rename[c] = nxt
-            nxt += 1
-    chord = rename[t.label]
-    return t.edges, chord, np.stack([chord[t.quad_edges[:, 0]], chord[t.quad_edges[:, 1]]], axis=1), int(t.n)
-
-
-def _corner_positions(shape: Shape, annotation, alignment: np.ndarray) -> np.ndarray | None:
-    """Position in the matched boundary loop of each ccw shape corner, ``(c,) int64``, or None
-    when a corner has no template vertex."""
-    al = np.asarray(alignment, np.int64)
-    codes = np.asarray(annotation.codes)
-    side = np.asarray(annotation.side)
-    n = shape.n_corners
-    first = np.searchsorted(side, np.arange(n))  # annotation index of corner j
-    if n and np.any(codes[first] == 0):
-        return None
-    where = {int(a): j for j, a in enumerate(al.tolist())}
-    pos = [where.get(int(i)) for i in first]
-    if any(p is None for p in pos):
-        return None
-    return np.asarray(pos, np.int64)
-
-
-def _fit(shape: Shape, annotation, match: "Match", catalogue: "Catalogue", rank: int) -> PatchTemplate | None:
-    """An unplaced :class:`PatchTemplate` (``placement`` None) from a ranked match, or None when
-    a corner of the shape has no mesh vertex. The chords and sides do not depend on the
-    placement: :func:`~jaxmatch.placement.choose.place_match` re-spreads the alignment only over
-    points of the same type, and a match with every corner matched uses every corner point."""
-    from jaxmatch.placement.embed import oriented_boundary
-
-    om, loop32 = oriented_boundary(catalogue.mesh(match.mesh_id), match.rotation, match.reflected)
-    loop = np.asarray(loop32, np.int64)
-    nb = loop.shape[0]
-    if shape.n_corners == 0:
-        paths = [np.concatenate([loop, loop[:1]])]
-    else:
-        pos = _corner_positions(shape, annotation, match.alignment)
-        if pos is None:
-            return None
-        n = shape.n_corners
-        paths = []
-        for j, rev in _side_frame(shape):
-            a, b = int(pos[j]), int(pos[(j + 1) % n])
-            stop = b if b > a else b + nb
-            path = loop[np.arange(a, stop + 1) % nb]
-            paths.append(path[::-1].copy() if rev else path)
-    first = [(int(p[k]), int(p[k + 1])) for p in paths for k in range(p.shape[0] - 1)]
-    topo = _kept_topology(catalogue.mesh(match.mesh_id), match.reflected)
-    e, chord, qc, nc = _chords(om.quads, loop, first, topo)
-    side_chords = [chord[_edge_id(topo.key, topo.V, p[:-1], p[1:])].astype(np.int64) for p in paths]
-    return PatchTemplate(shape, match.mesh_id, tuple(side_chords), nc, match, rank, None, qc, e, chord,
-                         tuple(p.astype(np.int64) for p in paths))
-
-
-def _candidates(shape: Shape, catalogue: "Catalogue", lattice: "Lattice", *, limit: int,
-                internal=None) -> tuple[object, "LazyMatches"]:
-    """(annotation, matches): the best ``limit`` matches of every selected size (k), merged
-    best utility first (then fewer internal vertices, then id); each match aligned when first
-    asked for (:class:`~jaxmatch.scoring.rank.LazyMatches`, whose ``head`` names it without that)."""
-    from jaxmatch.scoring.rank import rank
-
-    ranking = rank(shape, catalogue, lattice, internal=internal, top=max(int(limit), 1), per_size=True, prune=True,
-                   lazy=True)  # a scan aligns only the matches it reaches
-    ms = ranking.results.reordered(lambda r: (-r[0], r[1], r[3]))  # utility, internal vertices, id
-    return ranking.annotation, ms
-
-
-_UNFITTED = object()
-
-
-def _try_candidate(shape, ann, m: "Match", catalogue, r: int,
-                   check: Callable[[PatchTemplate], str | None] | None = None,
-                   fitted=_UNFITTED) -> tuple[PatchTemplate | None, str | None]:
-    """``(template, None)``: ranked match ``m`` (at ``r``) fitted and placed on ``shape`` with
-    every corner a mesh vertex and no folded or degenerate quad; else ``(fitted or None,
-    reason)``. ``check(unplaced template)``: a reason to skip it before placing (None: go on).
-    ``fitted``: :func:`_fit`'s answer for ``m`` when the caller has it."""
-    from jaxmatch.placement.choose import place_match
-
-    t = _fit(shape, ann, m, catalogue, r) if fitted is _UNFITTED else fitted
-    if t is None:
-        return None, "leaves a corner without a mesh vertex"
-    reason = check(t) if check is not None else None
-    if reason is not None:
-        return t, reason
-    pl = place_match(shape, ann, catalogue, m)
-    if pl.inverted:
-        return t, f"folds when placed ({pl.inverted} inverted quads)"
-    if not pl.min_scaled_jacobian >= TEMPLATE_SJ_MIN:
-        return t, (f"has a degenerate quad when placed (min scaled Jacobian {pl.min_scaled_jacobian:.3f}: "
-                   "a straight angle, e.g. a valence-2 vertex on a side)")
-    return t._replace(placement=pl), None
-
-
-class _Memo:
-    """What the walks of one shape's templates share (:func:`lazy_patch_templates`): each
-    candidate's fit and placement, computed once whichever walk asks first (their rankings are
-    kept by :func:`jaxmatch.scoring.rank.rank`'s own memo). ``lock``: held while one is computed
-    (callers may share the template cache across threads)."""
-
-    def __init__(self):
-        import threading
-
-        self.lock = threading.RLock()
-        self.fits: dict = {}
-        self.placed: dict = {}
-
-    def fit(self, shape, ann, m: "Match", catalogue, r: int) -> PatchTemplate | None:
-        """:func:`_fit` of candidate ``m`` (ranked ``r``)."""
-        key = (m.mesh_id, m.rotation, m.reflected, r)
-        with self.lock:
-            if key not in self.fits:
-                self.fits[key] = _fit(shape, ann, m, catalogue, r)
-            return self.fits[key]
-
-    def place(self, shape, ann, m: "Match", catalogue, r: int) -> tuple[PatchTemplate | None, str | None]:
-        """:func:`_try_candidate` of candidate ``m`` (ranked ``r``), its fit from :meth:`fit`."""
-        key = (m.mesh_id, m.rotation, m.reflected, r)
-        with self.lock:
-            if key not in self.placed:
-                t = self.fit(shape, ann, m, catalogue, r)
-                self.placed[key] = _try_candidate(shape, ann, m, catalogue, r, fitted=t)
-            return self.placed[key]
-
-
-def _iter_templates(shape, catalogue, lattice, *, limit: int, internal=None, rejected: list | None = None,
-                    check: Callable[[PatchTemplate], str | None] | None = None,
-                    memo: _Memo | None = None) -> Iterator[PatchTemplate]:
-    """Placed templates in candidate order (see :func:`patch_templates`), at most ``limit`` per
-    size. ``check(unplaced template)``: a reason to skip it before placing (None: go on).
-    Skipped candidates are appended to ``rejected`` as ``(rank, mesh_id, reason)``. ``memo``:
-    fits and placements shared with other walks of the shape (without ``check``)."""
-    taken: dict[int, int] = {}
-    seen: set = set()
-    for scan in SCAN_PER_LIMIT:
-        if scan > SCAN_PER_LIMIT[0] and sum(taken.values()) >= limit:
-            break  # the deeper scan only when the first found fewer than `limit` templates
-        ann, ms = _candidates(shape, catalogue, lattice, limit=scan * max(int(limit), 1), internal=internal)
-        for r in range(1, len(ms) + 1):
-            mid, k, rot, refl = ms.head(r - 1)  # skipped ones are not aligned
-            key = (mid, rot, refl)
-            if taken.get(k, 0) >= limit or key in seen:
-                continue
-            m = ms[r - 1]
-            seen.add(key)
-            if memo is not None and check is None:
-                t, reason = memo.place(shape, ann, m, catalogue, r)
-            else:
-                t, reason = _try_candidate(shape, ann, m, catalogue, r, check)
-            if reason is not None:
-                if rejected is not None and (scan == SCAN_PER_LIMIT[0] or t is not None):  # not every corner-skipper twice
-                    rejected.append((r, m.mesh_id, reason))
-                continue
-            taken[m.internal_vertices] = taken.get(m.internal_vertices, 0) + 1
-            yield t
-
-
-def _iter_checked(shape, catalogue, lattice, *, limit: int, internal, check: Callable[[PatchTemplate], str | None],
-                  memo: _Memo, passed: list) -> Iterator[PatchTemplate]:
-    """The templates of :func:`_iter_templates` (same arguments, no ``check``) that pass
-    ``check``, in their order: what walking them all and skipping those ``check`` refuses gives
-    (:func:`_given`), with fewer placements. A candidate ``check`` refuses is never handed out,
-    so it is placed only when whether it folds decides which later candidates are templates
-    (the per-size ``limit``, and whether the deeper scan runs); until then it waits in its
-    size's queue. The refused are appended to ``passed`` as ``(rank, mesh_id, reason)`` when
-    met (also those that, placed, would have folded: not templates at all)."""
-    limit = int(limit)
-    sure: dict[int, int] = {}  # per size: candidates known to be templates
-    waiting: dict[int, list] = {}  # per size: refused candidates not yet placed, in order
-
-    def place_waiting(k: int, *, all_of_them: bool = False) -> None:
-        """Place size k's waiting candidates in order until the next candidate's fate no longer
-        depends on them (the limit reached, or out of reach of all of them together), or with
-        ``all_of_them`` until none waits (how many are templates); the rest are dropped once the
-        limit is reached (beyond it: not templates)."""
-        q = waiting.setdefault(k, [])
-        while q and sure.get(k, 0) < limit and (all_of_them or limit <= sure.get(k, 0) + len(q)):
-            ann, m, r = q.pop(0)
-            if memo.place(shape, ann, m, catalogue, r)[1] is None:
-                sure[k] = sure.get(k, 0) + 1
-        if sure.get(k, 0) >= limit:
-            q.clear()
-
-    def at_least_limit() -> bool:
-        """Whether the walk has ``limit`` templates in all sizes together (placing waiting
-        candidates only while that is undecided)."""
-        while True:
-            low = sum(sure.values())
-            high = low + sum(min(len(q), limit - sure.get(j, 0)) for j, q in waiting.items())
-            if low >= limit or high < limit:
-                return low >= limit
-            place_waiting(next(j for j, q in waiting.items() if q), all_of_them=True)
-
-    seen: set = set()
-    for scan in SCAN_PER_LIMIT:
-        if scan > SCAN_PER_LIMIT[0] and at_least_limit():
-            break
-        ann, ms = _candidates(shape, catalogue, lattice, limit=scan * max(limit, 1), internal=internal)
-        for r in range(1, len(ms) + 1):
-            mid, k, rot, refl = ms.head(r - 1)  # skipped ones are not aligned
-            key = (mid, rot, refl)
-            if key in seen or sure.get(k, 0) >= limit:
-                continue
-            m = ms[r - 1]
-            t = memo.fit(shape, ann, m, catalogue, r)
-            if t is None:  # leaves a corner without a vertex: never a template
-                seen.add(key)
-                continue
-            why = check(t)
-            if why is not None:
-                seen.add(key)
-                waiting.setdefault(k, []).append((ann, m, r))
-                passed.append((r, m.mesh_id, why))
-                continue
-            place_waiting(k)
-            if sure.get(k, 0) >= limit:
-                continue
-            seen.add(key)
-            placed, reason = memo.place(shape, ann, m, catalogue, r)
-            if reason is None:
-                sure[k] = sure.get(k, 0) + 1
-                yield placed._replace(shape=shape)
-
-
-def _longest_boundary(catalogue: "Catalogue", k: int) -> int:
-    """The longest boundary loop of the catalogue's meshes with ``k`` internal vertices (0: none)."""
-    from jaxmatch.scoring.bulk import prepared  # the grouping the ranking of size k uses, kept on the catalogue
-
-    return max((int(p.n) for p in prepared(catalogue, [int(k)])), default=0)
-
-
-def _iter_by_size(shape, catalogue, lattice, *, limit: int, internal: Sequence[int]) -> Iterator[PatchTemplate]:
-    """The templates of :func:`_iter_templates` fewest internal vertices first, made one at a
-    time: each size ``k`` of ``internal`` (ascending) is ranked alone and its candidates placed in
-    ranked order until ``limit`` are kept (``rank``: the place in that size's ranking); the deeper
-    scan of :data:`SCAN_PER_LIMIT` when all sizes kept fewer than ``limit`` in all. A size no
-    catalogue mesh can match is passed over, and so is one whose boundary loops are all shorter
-    than the shape's corners (none of its meshes could keep every corner: not ranked at all)."""
-    kept: dict[int, int] = {}
-    seen: set = set()
-    whole: set = set()  # sizes whose every match a scan has gone through (a deeper one finds no other)
-    for scan in SCAN_PER_LIMIT:
-        if scan > SCAN_PER_LIMIT[0] and sum(kept.values()) >= limit:
-            break  # the deeper scan only when the first found fewer than `limit` templates
-        for k in sorted(int(k) for k in internal):
-            if kept.get(k, 0) >= limit or k in whole or _longest_boundary(catalogue, k) < shape.n_corners:
-                continue  # (every corner needs its own boundary vertex: no mesh of size k keeps them all)
-            try:
-                ann, ms = _candidates(shape, catalogue, lattice, limit=scan * max(int(limit), 1), internal=[k])
-            except UnmatchableError:
-                continue
-            if len(ms) < scan * max(int(limit), 1):
-                whole.add(k)
-            for r in range(1, len(ms) + 1):
-                mid, _, rot, refl = ms.head(r - 1)  # skipped ones are not aligned
-                key = (mid, rot, refl)
-                if key in seen:
-                    continue
-                m = ms[r - 1]
-                seen.add(key)
-                t, reason = _try_candidate(shape, ann, m, catalogue, r)
-                if reason is None:
-                    kept[k] = kept.get(k, 0) + 1
-                    yield t
-                    if kept[k] >= limit:
-                        break
-
-
-class _Walk:
-    """A template walk and the templates it has made so far (shared by every
-    :class:`LazyTemplates` of one patch)."""
-
-    def __init__(self, start: Callable[[], Iterator[PatchTemplate]]):
-        import threading
-
-        self.start: Callable[[], Iterator[PatchTemplate]] | None = start  # called on the first ask
-        self.produce: Iterator[PatchTemplate] | None = None
-        self.made: list[PatchTemplate] = []
-        self.error: Exception | None = None
-        self.lock = threading.Lock()  # one thread advances the walk at a time (callers may share a cache)
-        self.checked: Callable | None = None  # (shape, check, passed) -> the templates passing check (_iter_checked)
-
-    def fill(self, n: float) -> None:
-        """Place candidates until ``n`` templates exist or none is left; an error of the walk
-        (e.g. :class:`~jaxmatch.errors.UnmatchableError`) is raised again on every later ask
-        beyond what was made before it."""
-        if len(self.made) >= n:
-            return
-        with self.lock:
-            while len(self.made) < n:
-                if self.error is not None:
-                    raise self.error
-                if self.produce is None and self.start is None:
-                    return
-                try:
-                    if self.start is not None:
-                        self.produce, self.start = self.start(), None
-                    self.made.append(next(self.produce))
-                except StopIteration:
-                    self.produce = None
-                except Exception as e:  # noqa: BLE001 - kept and raised again
-                    self.produce, self.error = None, e
-                    raise
-
-
-class LazyTemplates(Sequence):
-    """A patch's templates (:class:`PatchTemplate`), placed only when asked for: ``t[j]`` places
-    candidates until the ``j``-th template exists; ``len(t)`` places all, ``bool(t)`` the first.
-    Each template handed out carries ``shape`` (the caller's)."""
-
-    def __init__(self, walk: _Walk, shape: Shape):
-        self._walk = walk
-        self._shape = shape
-
-    def __getitem__(self, j):
-        whole = isinstance(j, slice) or j < 0
-        self._walk.fill(math.inf if whole else j + 1)
-        items = self._walk.made[j]
-        if isinstance(j, slice):
-            return [t._replace(shape=self._shape) for t in items]
-        return items._replace(shape=self._shape)
-
-    def __len__(self) -> int:
-        self._walk.fill(math.inf)
-        return len(self._walk.made)
-
-    def __bool__(self) -> bool:
-        self._walk.fill(1)
-        return bool(self._walk.made)
-
-    def checked(self, check: Callable[[PatchTemplate], str | None], passed: list) -> Iterator[PatchTemplate] | None:
-        """The templates that pass ``check(unplaced template)`` (None: go on) in order, each
-        refused one appended to ``passed`` as ``(rank, mesh_id, reason)``, placing as few
-        candidates as that allows (:func:`_iter_checked`); None for a walk by size."""
-        if self._walk.checked is None:
-            return None
-        return self._walk.checked(self._shape, check, passed)
-
-
-def lazy_patch_templates(shape: Shape, catalogue: "Catalogue", lattice: "Lattice", *, limit: int,
-                         internal: Sequence[int] | None = None, by_size: bool = True) -> LazyTemplates:
-    """The templates of :func:`patch_templates` placed only as far as they are used
-    (:class:`LazyTemplates`), kept per catalogue (:data:`TEMPLATE_CACHE_SIZE` shapes, an error
-    of the walk kept with them). ``by_size``: fewest internal vertices
-    first, then ranked (:func:`_iter_by_size`; ``internal`` required); else in the candidate
-    order of :func:`patch_templates` (:func:`_iter_templates`). A shape no mesh matches raises
-    :class:`~jaxmatch.errors.UnmatchableError` when the first template is asked for."""
-    ks = None if internal is None else tuple(sorted(int(k) for k in internal))
-    key = ("lazy", by_size, _shape_key(shape), lattice, int(limit), ks)
-    cache = _template_cache(catalogue)
-    hit = cache.get(key)
-    if hit is None:
-        if by_size:
-            hit = _Walk(lambda: _iter_by_size(shape, catalogue, lattice, limit=limit, internal=ks))
-        else:
-            memo = _Memo()
-            hit = _Walk(lambda: _iter_templates(shape, catalogue, lattice, limit=limit, internal=ks, memo=memo))
-            hit.checked = lambda caller, check, passed: _iter_checked(caller, catalogue, lattice, limit=limit,
-                                                                      internal=ks, check=check, memo=memo, passed=passed)
-        cache[key] = hit
-        while len(cache) > TEMPLATE_CACHE_SIZE:
-            cache.pop(next(iter(cache)))
-    else:
-        cache[key] = cache.pop(key, hit)  # most recently used last (another thread may have moved it)
-    return LazyTemplates(hit, shape)
-
-
-def catalogue_oriented_quads(catalogue: "Catalogue", match: "Match") -> np.ndarray:
-    """``(F, 4)`` quads of ``match``'s mesh oriented as matched (mirrored when reflected)."""
-    from jaxmatch.placement.embed import oriented_boundary
-
-    return oriented_boundary(catalogue.mesh(match.mesh_id), match.rotation, match.reflected)[0].quads
-
-
-def patch_templates(shape: Shape, catalogue: "Catalogue", lattice: "Lattice", *, limit: int = 20,
-                    internal=None) -> list[PatchTemplate]:
-    """Ranked templates (best first) whose placement keeps every corner and has no folded quad
-    (nor a degenerate one: min scaled Jacobian >= :data:`TEMPLATE_SJ_MIN`).
-
-    Candidates: the best ``3 * limit`` meshes of each size k (``internal``: the sizes; None:
-    every size of the catalogue; ``30 * limit`` when that finds fewer than ``limit`` templates,
-    see :data:`SCAN_PER_LIMIT`) by :func:`jaxmatch.scoring.rank.rank`, merged by utility (then
-    fewer internal vertices, then id); each is placed
-    (:func:`jaxmatch.placement.choose.place_match`) and kept when every corner of the shape is
-    a mesh vertex and no quad is inverted or degenerate; at most ``limit`` are kept per size. Sizes are mixed
-    because a request for few edges needs a small template and raw utilities favour large ones.
-    """
-    return lazy_patch_templates(shape, catalogue, lattice, limit=limit, internal=internal, by_size=False)[:]
-
-
-TEMPLATE_CACHE_SIZE = 512
-"""Shapes whose :func:`patch_templates` are kept per catalogue (least recently used dropped):
-ranking and placing candidates is most of a meshing call, and the same patch recurs across the
-pipeline's strategies, its size groups and across calls (a size slider, a batch of parts)."""
-
-
-def _array_key(a) -> tuple | None:
-    if a is None:
-        return None
-    a = np.ascontiguousarray(a)
-    return a.dtype.str, a.shape, a.tobytes()
-
-
-def _shape_key(shape: Shape) -> tuple:
-    """Everything of ``shape`` its templates depend on (all but ``source``: the cached templates
-    are given the caller's shape)."""
-    return (_array_key(shape.points), _array_key(shape.corners), _array_key(shape.convex), float(shape.scale),
-            _array_key(shape.offset), _array_key(shape.input_points), _array_key(shape.corner_order),
-            bool(shape.input_clockwise), tuple(_array_key(h) for h in shape.holes),
-            tuple(_array_key(c) for c in shape.hole_corners), bool(shape.explicit_corners))
-
-
-def _template_cache(catalogue: "Catalogue") -> dict:
-    """The catalogue's cache of :func:`patch_templates` (held by the catalogue object, so it
-    lives as long as the catalogue; the shipped catalogue is opened once per process)."""
-    cache = catalogue.__dict__.get("_patch_template_cache")
-    if cache is None:
-        cache = {}
-        catalogue.__dict__["_patch_template_cache"] = cache
-    return cache
-
-
-def clear_template_cache(catalogue: "Catalogue") -> None:
-    """Forget the templates :func:`patch_templates` cached for ``catalogue``, the layouts
-    :func:`jaxmatch.placement.layout.mesh_layout` meshed with it, the rankings
-    :func:`jaxmatch.scoring.rank.rank` kept for it and the refined meshes (for
-    timings of a first call on a shape; :func:`jaxmatch.placement.layout.clear_caches` forgets
-    the layouts' integer programs, sides and patch shapes)."""
-    from jaxmatch.scoring.rank import clear_memo
-
-    catalogue.__dict__.pop("_patch_template_cache", None)
-    catalogue.__dict__.pop("_mesh_layout_cache", None)
-    clear_memo(catalogue)
-    _REFINED.clear()
-    _TOPOLOGY.clear()
 
 
 # ---------------------------------------------------------------------------------------------
@@ -1101,8 +466,6 @@ class RefinedMesh(NamedTuple):
     def as_placement(self) -> Placement:
         """The mesh as a :class:`~jaxmatch.placement.embed.Placement` (for the mesh writers and
         pictures; no alignment, no boundary paths)."""
-        from jaxmatch.catalogue.mesh import QuadMesh, valences
-
         quads = np.ascontiguousarray(self.quads.astype(np.int32))
         sj, amin, amax = quality(self.xy, quads)
         internal = np.ones(self.xy.shape[0], bool)
@@ -1184,24 +547,22 @@ def _refine_topology(quads: np.ndarray, edge_list: np.ndarray, edge_chord: np.nd
     return base, np.concatenate(out_quads), along, np.concatenate(w_rows), np.concatenate(v_rows)
 
 
-TOPOLOGY_CACHE_SIZE = 256
-"""Refined topologies (:func:`_refined_topology`) kept between calls (least recently used
-dropped; only those of at most :data:`REFINED_CACHE_QUADS` quads)."""
-
-_TOPOLOGY: dict = {}
-
-
-def _refined_topology(tq: np.ndarray, template: PatchTemplate, m: np.ndarray):
+def _refined_topology(tq: np.ndarray, template: PatchTemplate, m: np.ndarray, cache: Cache | None = None):
     """:func:`_refine_topology` of the oriented template quads ``tq (F, 4)`` at multiplicities
     ``m (C,)``, and the refined vertices of each template side ``(counts[i] + 1,) int64`` in
     the side's order: ``(n_vertices, quads (Q, 4), weights (V', 4), corners (V', 4),
-    side_vertices)``. A function of the template's combinatorics alone, kept in
-    :data:`_TOPOLOGY` (patches of one layout often share it: the arrays are shared, not to be
+    side_vertices)``. A function of the template's combinatorics alone, kept in ``cache``
+    (store ``topology``; patches of one layout often share it: the arrays are shared, not to be
     written to)."""
-    key = (_array_key(tq), _array_key(template.edge_list), _array_key(template.edge_chord),
-           _array_key(template.quad_chords), tuple(_array_key(np.asarray(p)) for p in template.side_path), _array_key(m))
-    hit = _TOPOLOGY.pop(key, None)
-    if hit is None:
+    if cache is None:
+        return _make_refined_topology(tq, template, m)
+    k = cache_key(tq, template.edge_list, template.edge_chord, template.quad_chords, template.side_path, m)
+    return cache.get("topology", k, lambda: _make_refined_topology(tq, template, m), quads=lambda t: t[1].shape[0])
+
+
+def _make_refined_topology(tq: np.ndarray, template: PatchTemplate, m: np.ndarray):
+    """:func:`_refined_topology`, made."""
+    if True:
         nv, quads, along, W, VV = _refine_topology(tq, template.edge_list, template.edge_chord, template.quad_chords, m)
         V0 = int(tq.max()) + 1
         ekey = template.edge_list[:, 0] * V0 + template.edge_list[:, 1]
@@ -1214,13 +575,7 @@ def _refined_topology(tq: np.ndarray, template: PatchTemplate, m: np.ndarray):
                 ids.extend(along(np.int64(a), np.int64(b), np.arange(me), me).tolist())
             ids.append(int(path[-1]))
             side_vertices.append(np.asarray(ids, np.int64))
-        hit = (nv, quads, W, VV, tuple(side_vertices))
-    if hit[1].shape[0] > REFINED_CACHE_QUADS:  # a large mesh is not asked twice: not kept
-        return hit
-    while len(_TOPOLOGY) >= TOPOLOGY_CACHE_SIZE:
-        _TOPOLOGY.pop(next(iter(_TOPOLOGY)))
-    _TOPOLOGY[key] = hit
-    return hit
+        return nv, quads, W, VV, tuple(side_vertices)
 
 
 def _laplacian(quads: np.ndarray, nv: int) -> scipy.sparse.csr_matrix:
@@ -1240,39 +595,23 @@ def _laplacian(quads: np.ndarray, nv: int) -> scipy.sparse.csr_matrix:
     return L
 
 
-REFINED_CACHE_SIZE = 512
-"""Refined meshes of :func:`refine_and_place` kept between calls (least recently used dropped)."""
-
-REFINED_CACHE_QUADS = 20_000
-"""Only refined meshes of at most this many quads are kept (a large mesh is not asked twice)."""
-
-REFINED_CACHE_TOTAL_QUADS = 200_000
-"""At most this many quads in all the refined meshes kept (tens of MB), whatever their number."""
-
-_REFINED: dict = {}
-
-
-def refine_and_place(template: PatchTemplate, mult, *, smooth_iters: int | None = None) -> RefinedMesh:
-    """:func:`_refine_and_place`, answered from a cache when the same template (same shape,
-    match and placement) was refined at the same multiplicities before (the result names the
-    given template; its arrays are shared, not to be written to)."""
+def refine_and_place(template: PatchTemplate, mult, *, smooth_iters: int | None = None, quality: Quality = QUALITY,
+                     cache: Cache | None = None) -> RefinedMesh:
+    """:func:`_refine_and_place`, answered from ``cache`` (store ``refined``) when the same
+    template (same shape, match and placement) was refined at the same multiplicities before (the
+    result names the given template; its arrays are shared, not to be written to)."""
+    if cache is None:
+        return _refine_and_place(template, mult, smooth_iters=smooth_iters, quality=quality)
     m = template.match
-    key = (_shape_key(template.shape), template.mesh_id, int(m.rotation), bool(m.reflected),
-           _array_key(m.alignment), _array_key(template.placement.xy), _array_key(np.asarray(mult, np.int64)),
-           None if smooth_iters is None else int(smooth_iters))
-    rm = _REFINED.pop(key, None)
-    if rm is None:
-        rm = _refine_and_place(template, mult, smooth_iters=smooth_iters)
-        if rm.quads.shape[0] > REFINED_CACHE_QUADS:
-            return rm
-        total = sum(r.quads.shape[0] for r in _REFINED.values()) + rm.quads.shape[0]
-        while _REFINED and (len(_REFINED) >= REFINED_CACHE_SIZE or total > REFINED_CACHE_TOTAL_QUADS):
-            total -= _REFINED.pop(next(iter(_REFINED))).quads.shape[0]
-    _REFINED[key] = rm
+    k = cache_key(template.shape, template.mesh_id, int(m.rotation), bool(m.reflected), m.alignment,
+                  template.placement.xy, np.asarray(mult, np.int64), smooth_iters, quality.good_sj, ignore=("source",))
+    rm = cache.get("refined", k, lambda: _refine_and_place(template, mult, smooth_iters=smooth_iters, quality=quality,
+                                                            cache=cache), quads=lambda r: r.quads.shape[0])
     return rm._replace(template=template)
 
 
-def _refine_and_place(template: PatchTemplate, mult, *, smooth_iters: int | None = None) -> RefinedMesh:
+def _refine_and_place(template: PatchTemplate, mult, *, smooth_iters: int | None = None, quality: Quality = QUALITY,
+                      cache: Cache | None = None) -> RefinedMesh:
     """Split every quad by the multiplicities of its two chords, put the refined boundary
     vertices on the user's boundary by arc length, place and smooth the interior.
 
@@ -1286,7 +625,7 @@ def _refine_and_place(template: PatchTemplate, mult, *, smooth_iters: int | None
     in a normalised frame (``smooth_iters`` L-BFGS iterations per round; default:
     :data:`SMOOTH_ITERS` up to :data:`SMOOTH_ALWAYS` quads; above, :data:`SMOOTH_ITERS_LARGE`
     and only when the interpolated placement folds or has a scaled Jacobian below
-    :data:`SJ_FLOOR`; above :data:`SMOOTH_LOCAL` quads, only within :data:`BAD_RINGS` rings of
+    ``quality.good_sj``; above :data:`SMOOTH_LOCAL` quads, only within :data:`BAD_RINGS` rings of
     those quads).
     """
     m = np.asarray(mult, np.int64).ravel()
@@ -1298,7 +637,7 @@ def _refine_and_place(template: PatchTemplate, mult, *, smooth_iters: int | None
                          "(ask for fewer edges or a larger size)", template.shape.source)
     pl = template.placement
     tq = np.asarray(pl.mesh.quads, np.int64)
-    nv, quads, W, VV, side_vertices = _refined_topology(tq, template, m)
+    nv, quads, W, VV, side_vertices = _refined_topology(tq, template, m, cache)
     V0 = int(tq.max()) + 1
     xy = np.empty((nv, 2))
     xy[:V0] = pl.xy[:V0]
@@ -1312,10 +651,10 @@ def _refine_and_place(template: PatchTemplate, mult, *, smooth_iters: int | None
     # ccw loop
     loop = _ccw_loop(side_vertices, template)
     # harmonic extension of the boundary displacement
-    xy = xy + harmonic_displacement(quads, nv, bverts, bxy - xy[bverts])
+    xy = xy + harmonic_displacement(quads, nv, bverts, bxy - xy[bverts], cache=cache)
     xy[bverts] = bxy
     sj, inv = sj_inverted(xy, quads)
-    bad = bad_quads(sj, inv)
+    bad = bad_quads(sj, inv, quality.good_sj)
     local = smooth_iters is None and quads.shape[0] > SMOOTH_LOCAL
     if smooth_iters is not None:
         iters = int(smooth_iters)
@@ -1341,10 +680,10 @@ def _refine_and_place(template: PatchTemplate, mult, *, smooth_iters: int | None
     )
 
 
-def bad_quads(sj: np.ndarray, inverted: np.ndarray) -> np.ndarray:
+def bad_quads(sj: np.ndarray, inverted: np.ndarray, floor: float) -> np.ndarray:
     """``(Q,) bool``: the quads a large mesh smooths around: inverted, or a scaled Jacobian
-    below :data:`SJ_FLOOR` (``sj``, ``inverted``: :func:`~jaxmatch.placement.embed.sj_inverted`)."""
-    return inverted | (sj < SJ_FLOOR)
+    below ``quality.good_sj`` (``sj``, ``inverted``: :func:`~jaxmatch.placement.embed.sj_inverted`)."""
+    return inverted | (sj < floor)
 
 
 def smooth_near_bad(xy: np.ndarray, quads: np.ndarray, bad: np.ndarray, fixed: np.ndarray, *, frame: np.ndarray,
@@ -1356,7 +695,8 @@ def smooth_near_bad(xy: np.ndarray, quads: np.ndarray, bad: np.ndarray, fixed: n
     return smooth_near(xy, quads, quads[bad].ravel(), fixed, rings=BAD_RINGS, frame=frame, iters=iters)
 
 
-def harmonic_displacement(quads: np.ndarray, nv: int, bverts: np.ndarray, bdisp: np.ndarray) -> np.ndarray:
+def harmonic_displacement(quads: np.ndarray, nv: int, bverts: np.ndarray, bdisp: np.ndarray, *,
+                          cache: Cache | None = None) -> np.ndarray:
     """``(nv, 2) float64``: ``bdisp (b, 2)`` on the vertices ``bverts (b,)``, elsewhere its
     uniform-weight harmonic extension over ``quads (Q, 4)`` (one linear solve; user units).
 
@@ -1365,7 +705,7 @@ def harmonic_displacement(quads: np.ndarray, nv: int, bverts: np.ndarray, bdisp:
     ``scipy.sparse`` to import); beyond, one sparse solve: up to :data:`SMOOTH_ALWAYS` quads
     SuperLU's default ordering, then :data:`LARGE_ORDERING`;
     above :data:`SMOOTH_LOCAL` quads the Laplacian and its factorisation are kept for the next
-    solve on the same topology (:func:`_harmonic_solve`; also
+    solve on the same topology in ``cache`` (:func:`_harmonic_solve`; also
     :func:`jaxmatch.placement.layout.fit_sides`'s)."""
     is_free = np.ones(nv, bool)
     is_free[np.asarray(bverts, np.int64)] = False
@@ -1375,7 +715,7 @@ def harmonic_displacement(quads: np.ndarray, nv: int, bverts: np.ndarray, bdisp:
     if not free.size:
         return disp
     if quads.shape[0] > SMOOTH_LOCAL:
-        disp[free] = _harmonic_solve(quads, nv, free, disp)
+        disp[free] = _harmonic_solve(quads, nv, free, disp, cache)
         return disp
     if free.size <= DENSE_TUTTE:  # the Tutte embedding's system: its dense compiled solve
         return tutte(quads, nv, bverts, bdisp)
@@ -1388,9 +728,6 @@ def harmonic_displacement(quads: np.ndarray, nv: int, bverts: np.ndarray, bdisp:
     order = LARGE_ORDERING if quads.shape[0] > SMOOTH_ALWAYS else None  # None: SuperLU's default, COLAMD
     disp[free] = np.asarray(scipy.sparse.linalg.spsolve(Lf, rhs, permc_spec=order)).reshape(-1, 2)
     return disp
-
-
-_FACTORS: dict = {}
 
 
 class _SuperLU:
@@ -1429,34 +766,36 @@ def _large_solver(Lf):
     return _LDL(Lf) if importlib.util.find_spec("qdldl") is not None else _SuperLU(Lf)
 
 
-def _harmonic_solve(quads: np.ndarray, nv: int, free: np.ndarray, disp: np.ndarray) -> np.ndarray:
+def _harmonic_solve(quads: np.ndarray, nv: int, free: np.ndarray, disp: np.ndarray,
+                    cache: Cache | None = None) -> np.ndarray:
     """``(n, 2) float64`` the harmonic extension on the ``free (n,)`` vertices of a large refined
     mesh ``quads (Q, 4)`` of ``nv`` vertices, ``disp (nv, 2)`` given on the others (0 on ``free``):
     ``Lf^-1 (-(L disp)[free])``, ``L`` the uniform Laplacian (:func:`_laplacian`), ``Lf`` its rows and
     columns ``free``.
 
     ``L`` and the solver of ``Lf`` (:func:`_large_solver`: an LDL^T or SuperLU's factorisation)
-    depend on the topology alone and are kept for the next call on it (:data:`FACTOR_CACHE_SIZE`),
+    depend on the topology alone and are kept in ``cache`` for the next call on it (store ``factors``),
     so both coordinates and every patch of the same refinement share one."""
     import hashlib
 
-    key = hashlib.sha1(np.ascontiguousarray(quads, np.int64).tobytes()
-                       + np.ascontiguousarray(free, np.int64).tobytes()).digest()
-    kept = _FACTORS.pop(key, None)
-    if kept is None:
-        while len(_FACTORS) >= FACTOR_CACHE_SIZE and _FACTORS:  # dropped before the next is made (peak memory)
-            _FACTORS.pop(next(iter(_FACTORS)))
+    def make():
         L = _laplacian(quads, nv)
-        kept = (L, _large_solver(L[free][:, free].tocsc()))
-    if FACTOR_CACHE_SIZE > 0:
-        _FACTORS[key] = kept
-    L, solver = kept
+        return L, _large_solver(L[free][:, free].tocsc())
+
+    if cache is None:
+        L, solver = make()
+    else:
+        k = cache_key(hashlib.sha1(np.ascontiguousarray(quads, np.int64).tobytes()
+                                   + np.ascontiguousarray(free, np.int64).tobytes()).digest())
+        if cache.lookup("factors", k) is None:
+            cache.clear("factors")  # the one kept is dropped before the next is made (peak memory)
+        L, solver = cache.get("factors", k, make)
     return solver.solve(np.ascontiguousarray(-(L @ disp)[free], np.float64))
 
 
 def _ccw_loop(side_vertices, template: PatchTemplate) -> np.ndarray:
     """The refined boundary as one ccw loop, ``(n,) int64``."""
-    frame = _side_frame(template.shape)
+    frame = template.shape.side_frame
     parts = sorted(zip(frame, side_vertices), key=lambda t: t[0][0])
     loop = np.concatenate([(sv[::-1] if rev else sv)[:-1] for (_, rev), sv in parts])
     return loop.astype(np.int64)
@@ -1483,7 +822,7 @@ class RefineChoice(NamedTuple):
 
 def refine_mesh(shape: Shape, catalogue: "Catalogue" = None, lattice: "Lattice" = None, *, sides=None, size=None,
                 internal=None, limit: int = None, templates: Sequence[PatchTemplate] | None = None,
-                explain: bool = True) -> RefineChoice:
+                explain: bool = True, quality: Quality = QUALITY) -> RefineChoice:
     """A quad mesh of ``shape`` with the requested number of edges per side, or edges of about
     the requested length: the Python API of ``jaxmatch mesh --sides/--size``.
 
@@ -1492,11 +831,11 @@ def refine_mesh(shape: Shape, catalogue: "Catalogue" = None, lattice: "Lattice" 
     count), met exactly. size: target edge length in the shape's units: per-side counts
     closest to ``side length / size``. Exactly one of the two.
 
-    The templates (:func:`patch_templates`: ranked catalogue meshes of every size, ``limit``
+    The templates (:func:`jaxmatch.placement.templates.patch_templates`: ranked catalogue meshes of every size, ``limit``
     per size, default :data:`DEFAULT_LIMIT`, that keep every corner and place without folds)
     are tried best first; the first whose refinement meets the request
     (:func:`solve_multiplicities`) and places without inverted quads with a min scaled Jacobian
-    >= :data:`SJ_FLOOR` (:func:`refine_and_place`) is taken; better-ranked ones passed over are
+    >= ``quality.good_sj`` (:func:`refine_and_place`) is taken; better-ranked ones passed over are
     listed with the reason. When every refinement that meets the request is below that quality, the best of them is taken and ``note`` says
     so. For ``size``, "meets" means an estimated mean edge length (:func:`estimated_mean_edge`)
     within :data:`SIZE_TOLERANCE` of ``size``; when no template does, the closest is taken and
@@ -1506,7 +845,7 @@ def refine_mesh(shape: Shape, catalogue: "Catalogue" = None, lattice: "Lattice" 
     sides and the nearest feasible counts over all templates), :class:`InputError` for malformed
     requests, :class:`jaxmatch.errors.UnmatchableError` when no mesh matches the shape.
 
-    templates: already fitted templates of ``shape`` (e.g. from :func:`patch_templates`, to
+    templates: already fitted templates of ``shape`` (e.g. from :func:`jaxmatch.placement.templates.patch_templates`, to
     serve many requests); then ``catalogue``, ``lattice``, ``internal`` and ``limit`` are unused.
     explain: False skips the nearest feasible counts of each template that cannot meet ``sides``
     (one integer program each; :func:`feasible` decides without one): the reasons and the
@@ -1538,10 +877,13 @@ def refine_mesh(shape: Shape, catalogue: "Catalogue" = None, lattice: "Lattice" 
         return "cannot meet the counts: nearest feasible " + _fmt(near)
 
     if templates is None:
-        walk = _iter_templates(shape, catalogue, lattice, limit=limit, internal=internal, rejected=passed, check=check)
+        candidates = walk(shape, catalogue, lattice, limit=limit, internal=internal, check=check, passed=passed)
     else:
-        walk = _given(templates, passed, check, lazy=not explain)
-    for t in walk:
+        candidates = walk(shape, catalogue, lattice, limit=limit, templates=templates, check=check, passed=passed,
+                          lazy_check=not explain)
+    cache = catalogue.cache if catalogue is not None else None
+    floor = quality.good_sj
+    for t in candidates:
         mult = solve_multiplicities(t, counts=sides, size=size)
         if size is not None:
             est = estimated_mean_edge(t, mult)
@@ -1551,11 +893,11 @@ def refine_mesh(shape: Shape, catalogue: "Catalogue" = None, lattice: "Lattice" 
                     best_size = (dev, t, mult)
                 passed.append((t.rank, t.mesh_id, f"mean edge about {est:.4g}, {100 * dev:.0f}% from the size"))
                 continue
-        rm = refine_and_place(t, mult)
-        if rm.valid and rm.min_scaled_jacobian >= SJ_FLOOR:
+        rm = refine_and_place(t, mult, quality=quality, cache=cache)
+        if rm.valid and rm.min_scaled_jacobian >= floor:
             return RefineChoice(rm, t, _merge(passed, rejected, t.rank))
         why = (f"refined mesh folds ({rm.inverted} inverted quads)" if not rm.valid
-               else f"refined mesh has min scaled Jacobian {rm.min_scaled_jacobian:.3f} < {SJ_FLOOR}")
+               else f"refined mesh has min scaled Jacobian {rm.min_scaled_jacobian:.3f} < {floor}")
         key = (rm.inverted, -rm.min_scaled_jacobian)
         if fallback is None or key < fallback[0]:
             fallback = (key, t, rm, why)
@@ -1563,11 +905,11 @@ def refine_mesh(shape: Shape, catalogue: "Catalogue" = None, lattice: "Lattice" 
     if fallback is not None:
         _, t, rm, why = fallback
         return RefineChoice(rm, t, _merge([p for p in passed if p[0] != t.rank], rejected, t.rank),
-                            f"no refinement that meets the request has min scaled Jacobian >= {SJ_FLOOR} without "
+                            f"no refinement that meets the request has min scaled Jacobian >= {floor} without "
                             f"folds; kept the best, {t.mesh_id} ({why})")
     if size is not None and best_size is not None:
         _, t, mult = best_size
-        rm = refine_and_place(t, mult)
+        rm = refine_and_place(t, mult, quality=quality, cache=cache)
         note = (f"no template meets size {float(size):g} within {100 * SIZE_TOLERANCE:.0f}%; "
                 f"took the closest, {t.mesh_id} (mean edge {rm.mean_edge_length():.4g})")
         return RefineChoice(rm, t, _merge([p for p in passed if p[0] != t.rank], rejected, t.rank), note)
@@ -1585,22 +927,6 @@ def refine_mesh(shape: Shape, catalogue: "Catalogue" = None, lattice: "Lattice" 
                                 "templates that keep the corners", shape.source)
     raise InfeasibleRequest("no catalogue mesh keeps every corner of the shape without folding"
                             + (f" (tried {len(passed)})" if passed else ""), shape.source)
-
-
-def _given(templates, passed: list, check, *, lazy: bool = False) -> Iterator[PatchTemplate]:
-    """The given ``templates`` that pass ``check``, the others appended to ``passed`` with the
-    reason. ``lazy`` (a cheap ``check``, whose reasons need not be limited to templates):
-    lazily placed templates place only what that needs (:meth:`LazyTemplates.checked`)."""
-    walk = templates.checked(check, passed) if lazy and isinstance(templates, LazyTemplates) else None
-    if walk is not None:
-        yield from walk
-        return
-    for t in templates:
-        why = check(t)
-        if why is None:
-            yield t
-        else:
-            passed.append((t.rank, t.mesh_id, why))
 
 
 def _merge(passed: list, rejected: list, upto: int) -> list:

@@ -380,16 +380,13 @@ def prepare(buckets: Iterable) -> list[Part]:
 
 def prepared(catalogue, internal=None) -> list[Part]:
     """:func:`prepare` of ``catalogue.buckets(internal)``, computed once per catalogue object and
-    k selection and kept on the catalogue (its ``_cache``), so ranking many shapes against one
-    catalogue (``score-many``, the Python API) pays for the grouping only once."""
-    key = ("bulk.prepared", None if internal is None else tuple(sorted({int(k) for k in internal})))
-    cache = getattr(catalogue, "_cache", None)
-    if isinstance(cache, dict) and key in cache:
-        return cache[key]
-    parts = prepare(catalogue.buckets(internal))
-    if isinstance(cache, dict):
-        cache[key] = parts
-    return parts
+    k selection and kept in the catalogue's cache (store ``prepared``), so ranking many shapes
+    against one catalogue (``score-many``, the Python API) pays for the grouping only once."""
+    key = None if internal is None else tuple(sorted({int(k) for k in internal}))
+    cache = getattr(catalogue, "cache", None)
+    if cache is None:
+        return prepare(catalogue.buckets(internal))
+    return cache.get("prepared", key, lambda: prepare(catalogue.buckets(internal)))
 
 
 def _values(codes, seqs, weights, *, devices=None, plan=None, **kw) -> np.ndarray:

@@ -12,6 +12,7 @@ from typing import Callable, Iterator, NamedTuple
 
 import numpy as np
 
+from jaxmatch.cache import key as cache_key
 from jaxmatch.catalogue.store import Catalogue
 from jaxmatch.errors import UnmatchableError
 from jaxmatch.scoring.lattice import Lattice
@@ -117,27 +118,6 @@ class LazyMatches(Sequence):
         return m
 
 
-RANK_MEMO_SIZE = 4096
-"""Rankings kept per catalogue by :func:`rank` (per size, ``"id"`` ties, pruned: the template
-scan's calls), keyed on the annotation's point types, the sizes, the lattice and ``top``: with
-ties broken by id the matches depend on nothing else, and the patches of one region repeat
-their point types (about half of a concave region's rankings)."""
-
-
-def _memo(catalogue: Catalogue) -> dict:
-    """The catalogue's memo of :func:`rank` (held by the catalogue object, so it lives as long as
-    the catalogue)."""
-    memo = catalogue.__dict__.get("_rank_memo")
-    if memo is None:
-        memo = catalogue.__dict__["_rank_memo"] = {}
-    return memo
-
-
-def clear_memo(catalogue: Catalogue) -> None:
-    """Forget the rankings :func:`rank` kept for ``catalogue``."""
-    catalogue.__dict__.pop("_rank_memo", None)
-
-
 TIE_CAP = 64
 """Default largest number of meshes placed to break ties in one ranking."""
 
@@ -217,15 +197,13 @@ def rank(
         raise _unmatchable(f"the catalogue has no mesh with {internal_text(internal)}", "internal")
     m = points if points is not None else default_points(shape, max(lengths))
     ann = annotate(shape, m)
-    memo = _memo(catalogue) if (per_size and bulk_path and tie_break == "id" and progress is None
-                                and not (devices is not None and devices > 1)) else None
-    if memo is not None:
-        c = np.ascontiguousarray(ann.codes)
-        key = (c.dtype.str, c.shape, c.tobytes(), None if internal is None else tuple(internal), lattice,
-               int(top), bool(prune), bool(lazy))
-        hit = memo.get(key)
+    memo = (per_size and bulk_path and tie_break == "id" and progress is None
+            and not (devices is not None and devices > 1))
+    if memo:
+        key = cache_key(ann.codes, None if internal is None else tuple(internal), lattice, int(top), bool(prune),
+                        bool(lazy))
+        hit = catalogue.cache.lookup("rankings", key)
         if hit is not None:
-            memo[key] = memo.pop(key, hit)  # most recently used last (another thread may have moved it)
             return Ranking(ann, hit[0] if lazy else list(hit[0]), *hit[1:])
     weights = weights_of(lattice)
     buckets = [] if bulk_path else list(catalogue.buckets(internal))
@@ -282,11 +260,9 @@ def rank(
             results = []
             for k in sorted({r[1] for r in rows}):
                 results.extend(islice(ordered([r for r in rows if r[1] == k]), top))
-        if memo is not None:
-            memo[key] = (results if isinstance(results, LazyMatches) else tuple(results), total, unmatchable,
-                         placements, None, pruned)
-            while len(memo) > RANK_MEMO_SIZE:
-                memo.pop(next(iter(memo)))
+        if memo:  # with ties broken by id the matches depend on nothing else (the template scan's calls)
+            catalogue.cache.put("rankings", key, (results if isinstance(results, LazyMatches) else tuple(results),
+                                                  total, unmatchable, placements, None, pruned))
         return Ranking(ann, results, total, unmatchable, placements, None, pruned)
     it = ordered(rows)
     results = list(islice(it, top))

@@ -1,0 +1,379 @@
+"""The one solve: a :class:`~jaxmatch.placement.layout.Layout` meshed into one conforming quad mesh.
+
+:func:`mesh_layout` gives every patch its candidate templates
+(:func:`jaxmatch.placement.templates.first_group_templates`, fewest internal vertices first: a
+coarse template refined is better shaped than a fine one); ONE integer program
+(:func:`~jaxmatch.placement.milp.solve_counts`, HiGHS) chooses the chord multiplicities of all
+patches at once: each patch's side counts are its ``side_matrix @ multiplicities``, a shared side
+has one count, requested counts are met exactly, and without them the counts are closest to
+``side length / size``. Each patch is refined
+(:func:`jaxmatch.placement.refine.refine_and_place`), patch sides made of several sides are
+fitted to them (:func:`~jaxmatch.placement.layout.fit_sides`), and the patches are merged
+(:func:`~jaxmatch.placement.layout.merge_patches`). A patch whose refinement folds (or has a
+scaled Jacobian below ``quality.good_sj``) is given its next template and the program is solved
+again; the best round is kept (fewest inverted quads, then the highest minimum scaled Jacobian of
+the worst patch). A patch that is a translate of an earlier one takes that patch's templates and
+refinement, moved.
+
+Everything made is kept in the catalogue's cache (:mod:`jaxmatch.cache`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import TYPE_CHECKING, Mapping, NamedTuple, Sequence
+
+import numpy as np
+
+from jaxmatch.arrays import roll
+from jaxmatch.cache import Cache
+from jaxmatch.cache import key as cache_key
+from jaxmatch.defaults import QUALITY, Quality
+from jaxmatch.errors import InputError
+from jaxmatch.placement.embed import sj_inverted, smooth_in_frame, smooth_near
+from jaxmatch.placement.layout import (Layout, LayoutMesh, Sides, _boundary_loops, curve_floors, fit_sides,
+                                       layout_sides, merge_patches, parse_counts, patch_shapes, region_area)
+from jaxmatch.placement.milp import LayoutInfeasible, solve_counts
+from jaxmatch.placement.refine import SMOOTH_ALWAYS, SMOOTH_ITERS_LARGE, refine_and_place, side_points, side_polylines
+from jaxmatch.placement.templates import first_group_templates
+from jaxmatch.shape import Shape
+
+if TYPE_CHECKING:  # pragma: no cover
+    from jaxmatch.catalogue.store import Catalogue
+    from jaxmatch.scoring.lattice import Lattice
+
+__all__ = ["ALL_SIZES", "ROUNDS", "TEMPLATES_PER_PATCH", "TEMPLATE_SIZES", "layout_key", "layout_sides_kept",
+           "mesh_layout", "patch_shapes_kept"]
+
+TEMPLATE_SIZES = ((0, 1), (2, 3))
+"""Groups of internal-vertex counts tried for a patch's templates, in this order: the first
+group with a template that keeps the patch's corners gives the candidates (coarse templates
+refine into better-shaped meshes, and each size costs placements)."""
+
+ALL_SIZES = ((0, 1), (2, 3), (4, 5), (6, 7))
+"""The groups used for a shape meshed as one patch (it may need large templates)."""
+
+TEMPLATES_PER_PATCH = 3
+"""How many candidate templates of each size a patch keeps (tried in order when a refinement
+folds)."""
+
+ROUNDS = 8
+"""Largest number of (integer program, refine) rounds :func:`mesh_layout` runs."""
+
+
+def _has(templates, j: int) -> bool:
+    """Whether a patch has a ``j``-th candidate template (placing no more than that one)."""
+    try:
+        templates[j]
+    except IndexError:
+        return False
+    return True
+
+
+def _key(refined_mesh) -> tuple:
+    """``(inverted quads, -min scaled Jacobian to 3 decimals)`` of a refined patch, from its own
+    figures (which :func:`_fitted` keeps up to date when its sides move)."""
+    return (int(refined_mesh.inverted), -round(float(refined_mesh.scaled_jacobian.min()), 3))
+
+
+def _fitted(refined_mesh, xy: np.ndarray):
+    """``refined_mesh`` at positions ``xy (V, 2)`` (e.g. from :func:`fit_sides`), its scaled
+    Jacobians and inverted count measured there (the other figures are the refinement's)."""
+    sj, inv = sj_inverted(xy, refined_mesh.quads)
+    return refined_mesh._replace(xy=xy, scaled_jacobian=sj, inverted=int(inv.sum()))
+
+
+def mesh_layout(layout: Layout, catalogue: Catalogue, lattice: Lattice, *, size: float | None = None,
+                counts: Mapping[int, int] | None = None, templates_per_patch: int = TEMPLATES_PER_PATCH,
+                sizes=TEMPLATE_SIZES, smooth_cuts: bool = False, progress=None,
+                first_templates: Sequence[int] | None = None, quality: Quality = QUALITY) -> LayoutMesh:
+    """Mesh every patch of ``layout`` and merge them into one conforming :class:`LayoutMesh`.
+
+    size: target edge length (user units) for sides without a requested count; counts:
+    ``{side id: edges}`` requested (added to ``layout.requested``, which they override).
+    sizes: groups of template sizes (internal vertices) tried per patch, see :data:`TEMPLATE_SIZES`.
+    quality: the policy (:class:`~jaxmatch.defaults.Quality`): a refined patch below
+    ``quality.good_sj`` (or with inverted quads) gets its next template in the next round;
+    ``quality.area_tol`` bounds a curved side's chords.
+    first_templates: per patch, the index of the candidate template to start from (default 0,
+    the best-ranked; a patch with fewer candidates raises IndexError).
+    smooth_cuts: after merging, untangle/smooth all vertices except the outer boundary
+    (:func:`jaxmatch.placement.embed.smooth`; for decompositions, whose inner sides are not
+    the user's): it never lowers the minimum scaled Jacobian.
+
+    What is made is kept in the catalogue's cache (:mod:`jaxmatch.cache`: the meshed layout, its
+    sides, patch shapes, integer programs, templates and refined patches): the same layout meshed
+    again with the same options is not solved again.
+
+    Raises :class:`InputError` when a patch has no template that keeps its corners, and
+    :class:`LayoutInfeasible` when the requested counts cannot be met.
+    """
+    return _mesh_layout_cached(layout, catalogue, lattice, size=size, counts=counts,
+                               templates_per_patch=templates_per_patch, sizes=sizes, smooth_cuts=smooth_cuts,
+                               progress=progress, first_templates=first_templates, quality=quality)
+
+
+def _advance_for_feasibility(sides, cands, choice, want, size, source) -> bool:
+    """Switch one patch to another template so that the program becomes feasible; True when
+    one was found (``choice`` is changed in place)."""
+    for p in range(len(cands)):
+        for j in range(len(cands[p])):
+            if j == choice[p]:
+                continue
+            trial = list(choice)
+            trial[p] = j
+            try:
+                solve_counts(sides, [cands[q][trial[q]].side_matrix() for q in range(len(cands))], counts=want,
+                             size=size, widths=[cands[q][trial[q]].chord_widths() for q in range(len(cands))],
+                             source=source)
+            except LayoutInfeasible:
+                continue
+            choice[p] = j
+            return True
+    return False
+
+
+
+def layout_key(layout: Layout) -> tuple:
+    """The cache key of ``layout`` (every field, ``source`` too: the messages name it)."""
+    return cache_key(layout)
+
+
+def layout_sides_kept(layout: Layout, catalogue: Catalogue, lkey: tuple | None = None) -> Sides:
+    """:func:`~jaxmatch.placement.layout.layout_sides`, kept in the catalogue's cache (store ``sides``)."""
+    return catalogue.cache.get("sides", layout_key(layout) if lkey is None else lkey, lambda: layout_sides(layout),
+                               keep_errors=(InputError, LayoutInfeasible))
+
+
+def patch_shapes_kept(layout: Layout, catalogue: Catalogue, lkey: tuple | None = None) -> list[Shape]:
+    """:func:`~jaxmatch.placement.layout.patch_shapes`, kept in the catalogue's cache (store ``shapes``)."""
+    return catalogue.cache.get("shapes", layout_key(layout) if lkey is None else lkey, lambda: patch_shapes(layout),
+                               keep_errors=(InputError, LayoutInfeasible))
+
+
+def _solve_counts_cached(layout: Layout, sides: Sides, matrices, want, size, widths, floors, cache: Cache,
+                         lkey: tuple):
+    """:func:`solve_counts` of ``layout`` (whose ``sides`` these are, ``lkey`` its
+    :func:`layout_key`), from ``cache`` (store ``solves``) when the same program was solved
+    before; fresh copies of the arrays either way."""
+    k = (lkey,) + cache_key(matrices, {int(a): int(b) for a, b in want.items()}, None if size is None else float(size),
+                            widths, floors)
+    mults, n = cache.get("solves", k, lambda: solve_counts(sides, matrices, counts=want, size=size, widths=widths,
+                                                          source=layout.source, floors=floors),
+                         keep_errors=(InputError, LayoutInfeasible))
+    return [np.array(m) for m in mults], np.array(n)
+
+
+CUT_RINGS = 6
+"""Above :data:`jaxmatch.placement.refine.SMOOTH_ALWAYS` quads, the whole-mesh smoothing of a
+decomposition moves only the vertices within this many rings of quads of an inner side (the
+cuts): the patches come smoothed already, and smoothing every vertex was ~80% of the time of a
+25,000-quad L-shape."""
+
+
+def _smooth_cuts(xy: np.ndarray, quads: np.ndarray, fixed: np.ndarray, sides: Sides, side_ids) -> np.ndarray:
+    """The merged mesh smoothed with the outer loops ``fixed``
+    (:func:`jaxmatch.placement.embed.smooth_in_frame`): every other vertex up to
+    :data:`~jaxmatch.placement.refine.SMOOTH_ALWAYS` quads; above, with
+    :data:`~jaxmatch.placement.refine.SMOOTH_ITERS_LARGE` iterations, only the vertices within
+    :data:`CUT_RINGS` rings of the inner sides (the quads around them smoothed as a submesh
+    whose other vertices stay)."""
+    if quads.shape[0] <= SMOOTH_ALWAYS:
+        return smooth_in_frame(xy, quads, fixed)
+    inner = [np.asarray(side_ids[s], np.int64) for s in range(len(side_ids)) if sides.users[s, 1] >= 0]
+    if not inner:
+        return xy
+    return smooth_near(xy, quads, np.concatenate(inner), fixed, rings=CUT_RINGS, frame=xy[fixed],
+                       iters=SMOOTH_ITERS_LARGE)
+
+
+def _mesh_layout_cached(layout: Layout, catalogue, lattice, *, size, counts, templates_per_patch, sizes, smooth_cuts,
+                        progress, first_templates, quality) -> LayoutMesh:
+    """:func:`_mesh_layout` from the catalogue's cache (store ``layouts``) when the same layout was
+    meshed with the same options (the answer names the given layout; its arrays are copies)."""
+    lkey = layout_key(layout)
+    k = (lkey,) + cache_key(lattice, None if size is None else float(size),
+                            None if counts is None else {int(a): int(b) for a, b in dict(counts).items()},
+                            int(templates_per_patch), sizes, bool(smooth_cuts), first_templates, quality)
+    cache = catalogue.cache
+    done = cache.lookup("layouts", k)  # (an error kept for these options is raised again)
+    if done is not None:
+        if progress:
+            for p in range(layout.n_patches):
+                progress(p + 1, layout.n_patches)
+        return _copied(done, layout)
+    lm = cache.get("layouts", k, lambda: _mesh_layout(layout, catalogue, lattice, size=size, counts=counts,
+                                                      templates_per_patch=templates_per_patch, sizes=sizes,
+                                                      smooth_cuts=smooth_cuts, progress=progress,
+                                                      first_templates=first_templates, quality=quality, lkey=lkey),
+                   quads=lambda m: m.quads.shape[0], keep_errors=(LayoutInfeasible, InputError))
+    return _copied(lm, layout)
+
+
+def _copied(lm: LayoutMesh, layout: Layout) -> LayoutMesh:
+    """``lm`` for ``layout``, its arrays copied (a caller may write to them)."""
+    def cp(v):
+        if isinstance(v, np.ndarray):
+            return v.copy()
+        if isinstance(v, tuple):
+            return tuple(cp(x) for x in v)
+        if isinstance(v, list):
+            return [cp(x) for x in v]
+        return v
+
+    out = {f.name: cp(getattr(lm, f.name)) for f in dataclasses.fields(lm) if f.name not in ("layout", "sides")}
+    return dataclasses.replace(lm, layout=layout, **out)
+
+
+def _mesh_layout(layout: Layout, catalogue: Catalogue, lattice: Lattice, *, size, counts, templates_per_patch, sizes,
+                 smooth_cuts, progress, first_templates, quality: Quality, lkey: tuple) -> LayoutMesh:
+    """The work of :func:`mesh_layout` (see there; ``lkey``: :func:`layout_key` of ``layout``)."""
+    cache = catalogue.cache
+    sides = layout_sides_kept(layout, catalogue, lkey)
+    want = {s: c for s, c in parse_counts(dict(layout.requested), sides, layout.source).items()}
+    want.update(counts or {})
+    shapes = patch_shapes_kept(layout, catalogue, lkey)
+    moved = _translates(layout)
+    cands = []
+    for p, shp in enumerate(shapes):
+        if moved[p].of != p:  # a translate of an earlier patch: its templates, turned
+            cands.append(_Turned(cands[moved[p].of], moved[p].turn, shp))
+            if progress:
+                progress(p + 1, len(shapes))
+            continue
+        t = first_group_templates(shp, catalogue, lattice, templates_per_patch, sizes)
+        if not t:
+            ks = sorted({k for g in sizes for k in g if k in catalogue.internal})
+            raise InputError(f"patch {p}: no catalogue template with {ks[0]}..{ks[-1]} internal vertices keeps its "
+                             f"{shp.n_corners} corners without folding (split the patch)", where=layout.source)
+        cands.append(t)
+        if progress:
+            progress(p + 1, len(shapes))
+    region = region_area(layout)
+    floors = curve_floors(layout, sides, quality.area_tol, region) if size is not None else None
+    choice = [0] * len(shapes) if first_templates is None else [int(j) for j in first_templates]
+    for p, j in enumerate(choice):
+        if not (j >= 0 and _has(cands[p], j)):
+            raise IndexError(f"patch {p} has {len(cands[p])} candidate templates, not {j + 1}")
+    made: dict = {}
+    best = None
+    for _ in range(ROUNDS):
+        tmpl = [cands[p][choice[p]] for p in range(len(shapes))]
+        try:
+            mults, n = _solve_counts_cached(layout, sides, [t.side_matrix() for t in tmpl], want, size,
+                                            [t.chord_widths() for t in tmpl], floors, cache, lkey)
+        except LayoutInfeasible:
+            if not _advance_for_feasibility(sides, cands, choice, want, size, layout.source):
+                raise
+            continue
+        refined = []
+        for p, (t, m) in enumerate(zip(tmpl, mults)):
+            q = moved[p].of
+            key = (q, choice[p], tuple(m.tolist()))
+            if key not in made:
+                made[key] = refine_and_place(cands[q][choice[p]] if q != p else t, m, quality=quality, cache=cache)
+            rm = made[key]
+            if q != p:
+                rm = _translated(rm, moved[p], shapes[p], t)
+            if any(len(parts) > 1 for parts in sides.patch_sides[p]):  # neighbours meet along a side
+                rm = _fitted(rm, fit_sides(layout, sides, p, rm, n, quality=quality, cache=cache))
+            refined.append(rm)
+        keys = [_key(r) for r in refined]
+        total = (sum(k[0] for k in keys), max(k[1] for k in keys))  # inverted quads, then the worst patch
+        if best is None or total < best[0]:
+            best = (total, list(tmpl), mults, n, refined)
+        bad = [p for p, k in enumerate(keys) if (k[0] > 0 or -k[1] < quality.good_sj) and _has(cands[p], choice[p] + 1)]
+        if not bad:
+            break
+        for p in bad:
+            choice[p] += 1
+    _, tmpl, mults, n, refined = best
+    xy, quads, patch, side_ids, gap = merge_patches(layout, sides, refined, n)
+    loops = _boundary_loops(layout, sides, side_ids, xy)
+    outer, holes = loops[0], tuple(loops[1:])
+    if smooth_cuts:
+        xy = _smooth_cuts(xy, quads, np.concatenate(loops), sides, side_ids)
+    return LayoutMesh(layout=layout, sides=sides, xy=xy, quads=quads, patch=patch, side_vertices=side_ids,
+                      counts=n, outer=outer, holes=holes, templates=tuple(t.mesh_id for t in tmpl),
+                      multiplicities=tuple(mults), shared_gap=gap, region_area=float(region))
+
+
+TRANSLATE_TOL = 1e-12
+"""Patches whose points, relative to their lowest-leftmost point, agree to this fraction of the
+layout's extent are translates of each other (:func:`_translates`)."""
+
+
+class Translate(NamedTuple):
+    """Patch ``of`` (an earlier patch) moved by ``shift (2,) float64`` is this patch, its loop
+    listed from another corner: this patch's side ``i`` is that patch's side ``i + turn`` (mod
+    its number of sides)."""
+
+    of: int
+    shift: np.ndarray
+    turn: int
+
+
+def _translates(layout: Layout) -> list[Translate]:
+    """Per patch, the first patch of which it is a translate (itself, ``turn`` 0, when none):
+    the same corners and the same points relative to the lowest-leftmost one, up to
+    :data:`TRANSLATE_TOL` of the layout's extent, whichever corner each loop starts from. Such a
+    patch has the same templates, its sides turned (:class:`_Turned`), and its refinement at the
+    same multiplicities is that patch's moved (:func:`_translated`)."""
+    unit = TRANSLATE_TOL * max(float(np.max(np.ptp(layout.points, axis=0))), np.finfo(float).tiny)
+    first: dict = {}
+    out = []
+    for p, (loop, pc) in enumerate(zip(layout.patches, layout.patch_corner)):
+        rel = np.rint((layout.points[loop] - layout.points[loop].min(axis=0)) / unit).astype(np.int64)
+        low = int(np.lexsort((rel[:, 1], rel[:, 0]))[0])  # lowest x, then lowest y (exact on the grid)
+        key = (roll(rel, -low).tobytes(), roll(np.asarray(pc), -low).tobytes())
+        q, qlow = first.setdefault(key, (p, low))
+        n = len(loop)
+        offset = (qlow - low) % n  # point i of this loop is point i + offset of patch q's
+        qloop, qpc = layout.patches[q], np.asarray(layout.patch_corner[q])
+        turn = int(np.count_nonzero(qpc[:offset]))  # this patch's corner 0 (loop point 0) is q's corner `turn`
+        out.append(Translate(q, layout.points[loop[0]] - layout.points[qloop[offset]], turn))
+    return out
+
+
+def _turned_sides(items: tuple, turn: int) -> tuple:
+    """Per-side ``items`` of a patch as seen from a translate whose side ``i`` is side ``i + turn``."""
+    return tuple(items[turn:]) + tuple(items[:turn])
+
+
+class _Turned(Sequence):
+    """The templates of a patch (a sequence of :class:`~jaxmatch.placement.templates.PatchTemplate`,
+    placed as asked for) as templates of its translate ``shape`` whose side ``i`` is its side
+    ``i + turn``: the per-side fields turned, ``shape`` replaced (the placement stays the
+    original's: only its edge lengths, which a translation keeps, are read)."""
+
+    def __init__(self, templates, turn: int, shape: Shape):
+        self._templates, self._turn, self._shape = templates, int(turn), shape
+
+    def __getitem__(self, j):
+        if isinstance(j, slice):
+            return [self._one(t) for t in self._templates[j]]
+        return self._one(self._templates[j])
+
+    def _one(self, t):
+        return t._replace(shape=self._shape, side_chords=_turned_sides(t.side_chords, self._turn),
+                          side_path=_turned_sides(t.side_path, self._turn))
+
+    def __len__(self) -> int:
+        return len(self._templates)
+
+    def __bool__(self) -> bool:
+        return bool(self._templates)
+
+
+def _translated(rm, tr: Translate, shape: Shape, template):
+    """Refined patch ``rm`` (of patch ``tr.of``) moved onto its translate ``shape`` (refined from
+    ``template``, the turned one): the boundary vertices exactly where the refinement of
+    ``shape`` puts them (:func:`jaxmatch.placement.refine.side_points` on its sides, so shared
+    sides stay bit-identical), the others moved by ``tr.shift``; the sides turned; its quality
+    figures are the original's."""
+    xy = rm.xy + tr.shift
+    side_vertices = _turned_sides(rm.side_vertices, tr.turn)
+    counts = np.asarray(_turned_sides(tuple(rm.counts.tolist()), tr.turn), np.int64)
+    for sv, poly, c in zip(side_vertices, side_polylines(shape), counts.tolist()):
+        xy[sv] = side_points(poly, int(c))
+    return rm._replace(xy=xy, side_vertices=side_vertices, counts=counts, template=template)
