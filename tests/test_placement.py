@@ -837,3 +837,20 @@ def test_pinned_placement_is_the_general_one(cat, lat, corners, scale, start):
             slow = place_match(shp, r.annotation, cat, m)
         assert _same_placement(fast, slow)
 
+
+@pytest.mark.parametrize("env, profile", [({"CI": "true"}, "ci"), ({"HYPOTHESIS_PROFILE": "ci"}, "ci"),
+                                          ({}, "dev"), ({"CI": "true", "HYPOTHESIS_PROFILE": "dev"}, "dev")])
+def test_ci_runs_hypothesis_derandomized(env, profile):
+    """Under CI (``CI`` set, as ``.ci/run`` sets it) or ``HYPOTHESIS_PROFILE=ci``, tests/conftest.py
+    loads the ``ci`` profile: derandomized, no example database, so the property above cannot fail
+    by chance or replay an earlier run's failure; locally the random ``dev`` profile."""
+    import os
+    import subprocess
+    import sys
+
+    program = ("import conftest; from hypothesis import settings as s; d = s.default; "
+               "print(d.derandomize, d.database is None, d.deadline, d.max_examples)")
+    base = {k: v for k, v in os.environ.items() if k not in ("CI", "HYPOTHESIS_PROFILE")}
+    out = subprocess.run([sys.executable, "-c", program], env={**base, **env}, cwd=Path(__file__).parent,
+                         capture_output=True, text=True, check=True).stdout.split()
+    assert out == (["True", "True", "None", "80"] if profile == "ci" else ["False", "False", "None", "80"])
