@@ -18,7 +18,7 @@ fi
 if [ ! -f .venv/.warmed ]; then
   # Fill what a first command would otherwise make (bytecode of the sources, compiled-code
   # caches of any kernel the meshing and scoring paths use), so a newcomer's first `jaxmatch`
-  # command is as fast as the second (docs/perf.md, "Meshing speed").
+  # command is as fast as the second (docs/perf.md, "Start-up").
   echo "warming the caches (bytecode, one mesh and one score)" >&2
   .venv/bin/python -m compileall -q jaxmatch >/dev/null 2>&1 || true
   WARM="$(mktemp -d)"

@@ -4,7 +4,7 @@ Runs ``scripts/mesh_table.py``, ``scripts/holes_table.py --no-gmsh`` and ``scrip
 in this process with :func:`jaxmatch.placement.milp._highs` recorded (a copy of every program),
 then solves each program alone, best of ``--reps``, twice: HiGHS's defaults (the feasibility
 jump on) and without the feasibility jump; prints the totals by number of integer variables.
-What set :data:`jaxmatch.placement.milp.FEASIBILITY_JUMP` (docs/perf.md, "Fourth pass", "Fifth pass").
+What set :data:`jaxmatch.placement.milp.FEASIBILITY_JUMP` (docs/perf.md, "Integer programs").
 
     .venv/bin/python scripts/milp_options.py [--reps 2] [--tables mesh,holes,dense]
 """

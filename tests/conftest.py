@@ -1,7 +1,16 @@
 """Shared test setup: import path and hypothesis profiles.
 
-Profiles: ``dev`` (default; modest example counts, no deadline because the first call of a
-shape compiles) and ``thorough`` (``HYPOTHESIS_PROFILE=thorough pytest``).
+Profiles (``HYPOTHESIS_PROFILE=<name>`` picks one):
+
+* ``dev`` (the local default): modest example counts, no deadline (the first call of a shape
+  compiles), a random seed each run; a failing example is kept in ``.hypothesis/`` and replayed
+  first on later runs until it passes. Run chosen seeds with ``pytest --hypothesis-seed=N``
+  (add ``-p no:cacheprovider`` and delete ``.hypothesis/`` to see a seed without the replays).
+* ``ci``: loaded when the environment variable ``CI`` is set (``bash .ci/run`` runs with
+  ``CI=true``): the same counts and health checks, derandomized (each test's examples follow from
+  the test itself, so a submission cannot fail by chance) and no example database (nothing is
+  replayed from an earlier run).
+* ``thorough``: more examples (``HYPOTHESIS_PROFILE=thorough pytest``).
 """
 
 import os
@@ -12,9 +21,23 @@ from hypothesis import HealthCheck, settings
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-settings.register_profile("dev", max_examples=80, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-settings.register_profile("thorough", max_examples=500, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "dev"))
+# parent: hypothesis's own defaults, not the profile it may have loaded already (recent versions load
+# a built-in "ci" profile of their own when they see CI; "dev" must stay random even then)
+_COMMON = dict(parent=settings.get_profile("default"), deadline=None, suppress_health_check=[HealthCheck.too_slow])
+settings.register_profile("dev", max_examples=80, **_COMMON)
+settings.register_profile("ci", max_examples=80, derandomize=True, database=None, print_blob=True, **_COMMON)
+settings.register_profile("thorough", max_examples=500, **_COMMON)
+
+
+def hypothesis_profile(environ=os.environ) -> str:
+    """The profile to load: ``HYPOTHESIS_PROFILE`` when set, else ``ci`` when ``CI`` is set (to
+    anything but empty, ``0`` or ``false``), else ``dev``."""
+    if environ.get("HYPOTHESIS_PROFILE"):
+        return environ["HYPOTHESIS_PROFILE"]
+    return "ci" if environ.get("CI", "").strip().lower() not in ("", "0", "false") else "dev"
+
+
+settings.load_profile(hypothesis_profile())
 
 
 import pytest  # noqa: E402
