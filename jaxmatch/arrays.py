@@ -11,7 +11,7 @@ __all__ = ["roll"]
 def roll(a: np.ndarray, shift: int, axis: int = 0) -> np.ndarray:
     """``np.roll(a, shift, axis=axis)`` (the same values, a new array) by two slices joined:
     a fifth of ``np.roll``'s time on the short loops of patches and templates (1 us against
-    6 us), which the meshing path rolls some 300 times per call (docs/perf.md, "Seventh pass")."""
+    6 us), which the meshing path rolls some 300 times per call (docs/perf.md, "Meshing beside gmsh")."""
     a = np.asarray(a)
     n = a.shape[axis]
     s = (-int(shift)) % n if n else 0

@@ -394,8 +394,8 @@ def _straight(loop_xy: np.ndarray) -> np.ndarray:
 
 def _check_coincident(pts: np.ndarray, tol: float, source: str) -> None:
     """InputError naming the first pair ``i < j`` of points ``(P, 2)`` within ``tol`` of each other
-    (shapely's STRtree, ``dwithin``: distance <= tol; not scipy's cKDTree, whose import costs the
-    meshing command ~0.3 s, docs/perf.md "Third pass")."""
+    (shapely's STRtree, ``dwithin``: distance <= tol; not scipy's cKDTree: scipy.spatial's import
+    costs the meshing command ~0.1 s, docs/perf.md "Start-up")."""
     import shapely
 
     geoms = shapely.points(pts)

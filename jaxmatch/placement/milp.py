@@ -174,7 +174,7 @@ def _chord_row(tau: float) -> tuple[float, float] | None:
     the chord joins two of its integer points), so adding the row changes no integer solution's
     cost. Without it the relaxation sets ``x = tau`` at no cost, and HiGHS branched on every
     side: on the letter A's largest program, 190 ms against 6 ms with the chords (docs/perf.md,
-    "Fifth pass"). With it the relaxation's cost of ``x`` is that of the nearest integers."""
+    "Integer programs"). With it the relaxation's cost of ``x`` is that of the nearest integers."""
     lo = math.floor(tau)
     f = tau - lo
     if f <= 1e-12:
@@ -190,7 +190,7 @@ FEASIBILITY_JUMP = False
 """Whether HiGHS runs its feasibility-jump heuristic. With the chord rows (:func:`_chord_row`)
 the relaxation is tight and the heuristic only costs time: the 386 programs of the meshing,
 holes and dense tables took 3.18 s with it and 2.23 s without, faster without in every size
-band (``scripts/milp_options.py``; docs/perf.md, "Fifth pass")."""
+band (``scripts/milp_options.py``; docs/perf.md, "Integer programs")."""
 
 
 def run_milp(cost, A, lo, hi, integrality, lb, ub, *, time_limit: float = MILP_TIME_LIMIT):
@@ -225,8 +225,8 @@ def _highs(cost, A, lo, hi, integrality, lb, ub, *, presolve: bool, time_limit: 
     scipy bundles, so both give the same solutions bit for bit with the feasibility jump on,
     tested; without it (:data:`FEASIBILITY_JUMP`, which scipy cannot ask for) the same optimum,
     a tie possibly broken otherwise), which spares the command the import of ``scipy.optimize``
-    (~0.3 s with the ``scipy.spatial`` and ``scipy.special`` it loads; docs/perf.md, "Third
-    pass"); else :func:`scipy.optimize.milp`."""
+    (~0.3 s with the ``scipy.spatial`` and ``scipy.special`` it loads; docs/perf.md,
+    "Start-up"); else :func:`scipy.optimize.milp`."""
     try:
         import highspy
     except ImportError:

@@ -106,7 +106,7 @@ def _components(n: int, a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
     A union-find over the few hundred edges of a template (what :func:`_chords` joins: a quad's
     opposite edges), rather than ``scipy.sparse.csgraph.connected_components``, whose import
-    (with ``scipy.sparse.linalg`` it loads) costs the command ~0.1 s (docs/perf.md, "Fourth pass")."""
+    (with ``scipy.sparse.linalg`` it loads) costs the command ~0.1 s (docs/perf.md, "Start-up")."""
     parent = list(range(int(n)))
 
     def root(x: int) -> int:
