@@ -12,6 +12,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from jaxmatch.catalogue.canon import Canonical
+
 
 @numba.njit(cache=True)
 def _min_rot_starts(seq):
@@ -133,7 +135,6 @@ def canonical_key(quads, boundary, vals):
     quads: (F, 4) ccw vertex ids; boundary: (n,) ccw loop; vals: (V,) ints (valences,
     possibly with marks added).
     """
-    from jaxmatch.catalogue.canon import Canonical
 
     q = np.ascontiguousarray(quads, dtype=np.int64).reshape(-1, 4)
     b = np.ascontiguousarray(boundary, dtype=np.int64)

@@ -12,6 +12,7 @@ import numpy as np
 
 from jaxmatch.arrays import roll
 from jaxmatch.meshing.result import QuadMesh
+from jaxmatch.placement.refine import side_lengths
 from jaxmatch.shape import Shape
 
 __all__ = ["from_layout", "from_placement", "from_refined"]
@@ -58,7 +59,6 @@ def from_placement(shape: Shape, pl, mesh_id: str = "") -> QuadMesh:
 
 def from_refined(shape: Shape, rm, *, size: float | None = None) -> QuadMesh:
     """A refined template (:class:`~jaxmatch.placement.refine.RefinedMesh`) of ``shape``."""
-    from jaxmatch.placement.refine import side_lengths
 
     quads = np.asarray(rm.quads, np.int64)
     lengths = side_lengths(shape)

@@ -13,7 +13,11 @@ import numpy as np
 from jaxmatch.arrays import roll
 from jaxmatch.defaults import DEFAULT_DIVISIONS
 from jaxmatch.geometry import cumulative_length
-from jaxmatch.shape import DEFAULT_CORNER_ANGLE, Shape
+from jaxmatch.files import read_limited
+from jaxmatch.io.readers import load_shape
+from jaxmatch.placement.decompose import _corner_points
+from jaxmatch.placement.layout import MAX_BYTES, layout_sides, parse_layout
+from jaxmatch.shape import DEFAULT_CORNER_ANGLE, Shape, make_shape, scale_corners
 
 __all__ = ["DEDUPE", "canonical", "corner_points", "default_size", "load_region"]
 
@@ -23,7 +27,6 @@ def default_size(region, divisions: int = DEFAULT_DIVISIONS) -> float:
     if isinstance(region, Shape):
         pts = region.user_points
     else:  # a Layout: its outer sides
-        from jaxmatch.placement.layout import layout_sides
 
         sides = layout_sides(region)
         return float(np.sum(sides.lengths[sides.outer])) / divisions
@@ -35,12 +38,9 @@ def load_region(path: str | os.PathLike, *, corner_angle: float = DEFAULT_CORNER
     (:func:`jaxmatch.placement.layout.parse_layout`), anything else a shape of any format
     jaxmatch reads (``file#element`` chooses an element). Raises :class:`InputError` naming the
     file."""
-    from jaxmatch.io.readers import load_shape
 
     p = Path(path)
     if p.suffix.lower() == ".json" and p.is_file():
-        from jaxmatch.files import read_limited
-        from jaxmatch.placement.layout import MAX_BYTES, parse_layout
 
         raw = read_limited(p, MAX_BYTES, "shape file")
         try:
@@ -54,7 +54,6 @@ def load_region(path: str | os.PathLike, *, corner_angle: float = DEFAULT_CORNER
 
 def corner_points(shape: Shape) -> np.ndarray:
     """``(C, 2)`` every corner of the region (outer loop and holes), user coordinates."""
-    from jaxmatch.placement.decompose import _corner_points
 
     return _corner_points(shape)
 
@@ -93,12 +92,10 @@ def canonical(shape: Shape, size: float | None = None, corner_angle: float = DEF
     (:func:`jaxmatch.shape.scale_corners`: wiggles shorter than about ``size`` are no corners);
     explicit corners are kept. Meshing the canonical shape makes the mesh
     independent of where the user's loop starts and which way it runs."""
-    from jaxmatch.shape import make_shape
 
     def first(ring: np.ndarray) -> int:
         return int(np.lexsort((ring[:, 1], ring[:, 0]))[0])
 
-    from jaxmatch.shape import scale_corners
 
     rejudge = size is not None and not shape.explicit_corners
 

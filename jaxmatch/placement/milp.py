@@ -10,7 +10,7 @@ from typing import Mapping, NamedTuple, Sequence
 
 import numpy as np
 
-from jaxmatch.errors import InputError
+from jaxmatch.errors import InputError, SolverError
 
 __all__ = ["CHORD_WEIGHT", "FEASIBILITY_JUMP", "LayoutInfeasible", "MILP_TIME_LIMIT", "OneSides", "one_patch_sides", "run_milp", "solve_counts"]
 
@@ -203,7 +203,6 @@ def run_milp(cost, A, lo, hi, integrality, lb, ub, *, time_limit: float = MILP_T
     limit without a solution) is retried once without presolve, then raised as
     :class:`jaxmatch.errors.SolverError`, never reported as infeasible. The solver:
     :func:`_highs` (status numbers as :func:`scipy.optimize.milp`'s)."""
-    from jaxmatch.errors import SolverError
 
     args = [np.asarray(a, np.float64) for a in (cost, A, lo, hi, integrality, lb, ub)]
     status, x, message = 4, None, ""

@@ -87,9 +87,10 @@ from typing import NamedTuple, Sequence
 import numpy as np
 
 from jaxmatch.arrays import roll
+from jaxmatch.catalogue.mesh import triples
 from jaxmatch.errors import UnmatchableError
 from jaxmatch.scoring.backends import c_kernel, default_backend
-from jaxmatch.scoring.model import NEG, SkipFrame, skip_frame, skip_offset, weights_of  # noqa: F401 (SkipFrame re-exported)
+from jaxmatch.scoring.model import NEG, SkipFrame, skip_frame, skip_offset, skipped_weight, weights_of  # noqa: F401 (SkipFrame re-exported)
 from jaxmatch.scoring.problem import (  # noqa: F401 (the problem contract, re-exported)
     _INVALID,
     UNROLL,
@@ -446,8 +447,6 @@ class UtilityParts(NamedTuple):
 def utility_parts(codes, vals_one, weights, rotation: int, reflected: bool, alignment) -> UtilityParts:
     """:class:`UtilityParts` of one explicit alignment (numpy, the model's ``-inf`` entries as
     ``-inf``). ValueError when the alignment is not strictly increasing in range."""
-    from jaxmatch.catalogue.mesh import triples
-    from jaxmatch.scoring.model import skipped_weight
 
     w = weights_of(weights)
     seq = oriented_sequence(vals_one, rotation, reflected)

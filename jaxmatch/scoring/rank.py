@@ -18,6 +18,7 @@ from jaxmatch.errors import UnmatchableError
 from jaxmatch.scoring.lattice import Lattice
 from jaxmatch.catalogue.mesh import triples
 from jaxmatch.scoring.exact import align, oriented_sequence, score_bucket, utility_parts
+from jaxmatch.scoring.bulk import prepared, top_k
 from jaxmatch.scoring.model import Weights, weights_of
 from jaxmatch.shape import Annotation, Shape, annotate, default_points
 
@@ -187,7 +188,6 @@ def rank(
         raise ValueError(f"tie_break must be 'id' or a tie breaker function, got {tie_break!r}")
     bulk_path = prune or (devices is not None and devices > 1)
     if bulk_path:  # the catalogue grouped once (bulk.prepared), not re-read for every shape
-        from jaxmatch.scoring.bulk import prepared, top_k
 
         parts = prepared(catalogue, internal)
         lengths = [p.n for p in parts]
