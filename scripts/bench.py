@@ -940,17 +940,21 @@ def mesh_case(name: str, div: int, reps: int = 3, catalogue=None) -> dict:
 
 
 def clear_mesh_caches() -> None:
-    """Forget what the meshing path keeps between calls (templates per patch, integer programs,
-    refined patches: :func:`jaxmatch.placement.refine.clear_template_cache`,
-    :func:`jaxmatch.placement.layout.clear_caches`), so that the next ``jaxmatch.mesh`` call
-    is a first call on its shape (the compiled code and the opened catalogue stay)."""
+    """Forget what the meshing path keeps between calls (templates per patch, rankings, integer
+    programs, refined patches: the catalogue's cache, :mod:`jaxmatch.cache`), so that the next
+    ``jaxmatch.mesh`` call is a first call on its shape (the compiled code and the opened
+    catalogue stay). A checkout from before the one cache layer is cleared its own way, so two
+    trees can be timed alike."""
     import jaxmatch
-    from jaxmatch.placement import layout, refine
 
-    if hasattr(refine, "clear_template_cache"):
-        refine.clear_template_cache(jaxmatch.load_catalogue())
-    if hasattr(layout, "clear_caches"):
-        layout.clear_caches()
+    cat = jaxmatch.load_catalogue()
+    if hasattr(cat, "cache"):
+        cat.cache.clear()
+        return
+    from jaxmatch.placement import layout, refine  # an older checkout's caches
+
+    refine.clear_template_cache(cat)
+    layout.clear_caches()
 
 
 def mesh_quality(cases: list[dict], who: str) -> dict:
