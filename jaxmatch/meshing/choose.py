@@ -21,6 +21,30 @@
 :func:`choose` names the first rule on which the winner beats the runner-up;
 :func:`cannot_win` tells, before a candidate is meshed, that it cannot beat a given key (from its
 patch count, and an upper bound on its min scaled Jacobian when one is known).
+
+:func:`mesh_key` is the one rule for whole meshes of a region; :func:`best_possible_key` is the
+same key for a mesh not made yet. The other orders in the package answer other questions, on
+other objects, and say so here so that none of them is mistaken for a second choice rule:
+
+=========================================== ==================================================
+key                                         why it is not :func:`mesh_key`
+=========================================== ==================================================
+``placement.solve._round_key``              one refined *patch* inside a layout's round loop
+                                            (inverted quads, then min scaled Jacobian to 3
+                                            decimals): which round of one solve to keep, before
+                                            the patches are merged into a mesh
+``placement.embed._key``                    two *positions* of the same quads during smoothing
+                                            (never make the worst quad worse); no corners, area
+                                            or size to judge: they are the same
+``placement.choose.placement_key``          placements of one catalogue *template* in the shape
+                                            (the paper's answer, no size): missed corners, then
+                                            quality, then coordinates for a deterministic tie
+``placement.choose.geometry_key``           ties of *utility* in the paper's ranking (the
+                                            selector, not the mesher): placed quality, then id
+``placement.choose.size_key``               the template *size* (internal vertices) of
+                                            ``mesh --template``: bands of min scaled Jacobian and
+                                            area, then fewer quads (no target size to conform to)
+=========================================== ==================================================
 """
 
 from __future__ import annotations

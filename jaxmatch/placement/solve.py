@@ -70,7 +70,7 @@ def _has(templates, j: int) -> bool:
     return True
 
 
-def _key(refined_mesh) -> tuple:
+def _round_key(refined_mesh) -> tuple:
     """``(inverted quads, -min scaled Jacobian to 3 decimals)`` of a refined patch, from its own
     figures (which :func:`_fitted` keeps up to date when its sides move)."""
     return (int(refined_mesh.inverted), -round(float(refined_mesh.scaled_jacobian.min()), 3))
@@ -278,7 +278,7 @@ def _mesh_layout(layout: Layout, catalogue: Catalogue, lattice: Lattice, *, size
             if any(len(parts) > 1 for parts in sides.patch_sides[p]):  # neighbours meet along a side
                 rm = _fitted(rm, fit_sides(layout, sides, p, rm, n, quality=quality, cache=cache))
             refined.append(rm)
-        keys = [_key(r) for r in refined]
+        keys = [_round_key(r) for r in refined]
         total = (sum(k[0] for k in keys), max(k[1] for k in keys))  # inverted quads, then the worst patch
         if best is None or total < best[0]:
             best = (total, list(tmpl), mults, n, refined)
