@@ -242,7 +242,7 @@ def test_kept_measures_are_the_plain_ones(fold):
     functions' values, and the arrays it hands out are copies."""
     from jaxmatch.catalogue.mesh import edges, valences
     from jaxmatch.meshing.result import boundary_loops
-    from jaxmatch.placement.embed import inverted_mask, quality
+    from jaxmatch.quality import inverted_mask, quality
 
     m = grid_mesh(4, 3, fold=fold, patches=2)
     for mm in (m, m.with_choice("x", "", None, ()), m.with_choice("y", "", None, ())):

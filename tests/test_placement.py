@@ -15,7 +15,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from jaxmatch.catalogue import store as cm
-from jaxmatch.placement.embed import inverted_mask, quality, quad_areas
+from jaxmatch.quality import inverted_mask, quality, quad_areas
 from jaxmatch.errors import InputError
 from jaxmatch.scoring.lattice import load_lattice
 from jaxmatch.api import rank

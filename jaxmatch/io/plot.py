@@ -12,17 +12,20 @@ import math
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterable, Sequence
+from typing import TYPE_CHECKING, Iterable, Sequence
 
 import numpy as np
 from matplotlib.collections import LineCollection, PolyCollection
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 
-from jaxmatch.placement.embed import Placement, inverted_mask
+from jaxmatch.catalogue.mesh import edges, valences
 from jaxmatch.files import atomic_path
 from jaxmatch.io import registry
-from jaxmatch.catalogue.mesh import edges, valences
+from jaxmatch.quality import inverted_mask, quality
+
+if TYPE_CHECKING:  # pragma: no cover
+    from jaxmatch.placement.embed import Placement
 
 __all__ = [
     "CODE_STYLE",
@@ -234,8 +237,6 @@ PATCH_PALETTE = np.array([[0.80, 0.88, 0.97], [0.98, 0.88, 0.75], [0.83, 0.94, 0
 
 def mesh_quality_line(xy: np.ndarray, quads: np.ndarray) -> str:
     """``"240 quads, SJ min 0.812 mean 0.951, 0 inverted"``."""
-    from jaxmatch.placement.embed import quality
-
     sj = quality(xy, quads)[0]
     return (f"{quads.shape[0]} quads, SJ min {sj.min():.3f} mean {sj.mean():.3f}, "
             f"{int(inverted_mask(xy, quads).sum())} inverted")

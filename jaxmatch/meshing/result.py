@@ -15,7 +15,7 @@ from typing import Mapping, NamedTuple
 import numpy as np
 
 from jaxmatch.catalogue.mesh import boundary_edges, edges, valences
-from jaxmatch.placement.embed import edge_ratios, quad_areas, sj_inverted
+from jaxmatch.quality import edge_ratios, quad_areas, sj_inverted
 
 __all__ = ["Candidate", "QuadMesh", "boundary_loops", "irregular_bound"]
 

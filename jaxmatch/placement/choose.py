@@ -35,7 +35,8 @@ from jaxmatch.defaults import QUALITY
 from jaxmatch.errors import InputError
 from jaxmatch.arrays import roll
 from jaxmatch.catalogue.mesh import boundary_valences, mesh_valences
-from jaxmatch.placement.embed import Placement, edge_ratios, exact_paths, inverted_mask, oriented_boundary, place, quad_areas, quality
+from jaxmatch.placement.embed import Placement, exact_paths, oriented_boundary, place
+from jaxmatch.quality import edge_ratios, inverted_mask, quad_areas, quality
 from jaxmatch.shape import S as S_CODE
 from jaxmatch.shape import point_at as shape_point_at
 from jaxmatch.scoring.model import weights_of

@@ -55,9 +55,9 @@ from jaxmatch.files import read_limited
 from jaxmatch.arrays import roll
 from jaxmatch.placement.refine import _array_key
 from jaxmatch.placement.milp import CHORD_WEIGHT, LayoutInfeasible, solve_counts  # noqa: F401 (public here)
-from jaxmatch.placement.embed import (inverted_mask, polygon_area, quad_areas, quality, sj_inverted, smooth_in_frame,
-                                      smooth_near)
+from jaxmatch.placement.embed import polygon_area, smooth_in_frame, smooth_near
 from jaxmatch.catalogue.mesh import boundary_edges, valences  # noqa: F401 (boundary_edges public here)
+from jaxmatch.quality import inverted_mask, quad_areas, quality, sj_inverted
 from jaxmatch.shape import Shape, make_shape
 
 if TYPE_CHECKING:  # pragma: no cover

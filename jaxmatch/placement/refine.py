@@ -46,8 +46,8 @@ from jaxmatch.defaults import QUALITY
 from jaxmatch.errors import InputError, UnmatchableError
 from jaxmatch.arrays import roll
 from jaxmatch.placement.milp import LayoutInfeasible, one_patch_sides, solve_counts
-from jaxmatch.placement.embed import (DENSE_TUTTE, Placement, quad_areas, quality, sj_inverted,
-                                      smooth_in_frame, smooth_near, tutte)
+from jaxmatch.placement.embed import DENSE_TUTTE, Placement, smooth_in_frame, smooth_near, tutte
+from jaxmatch.quality import quad_areas, quality, sj_inverted
 from jaxmatch.shape import Shape
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -1343,7 +1343,7 @@ def _refine_and_place(template: PatchTemplate, mult, *, smooth_iters: int | None
 
 def bad_quads(sj: np.ndarray, inverted: np.ndarray) -> np.ndarray:
     """``(Q,) bool``: the quads a large mesh smooths around: inverted, or a scaled Jacobian
-    below :data:`SJ_FLOOR` (``sj``, ``inverted``: :func:`~jaxmatch.placement.embed.sj_inverted`)."""
+    below :data:`SJ_FLOOR` (``sj``, ``inverted``: :func:`~jaxmatch.quality.sj_inverted`)."""
     return inverted | (sj < SJ_FLOOR)
 
 
