@@ -11,20 +11,16 @@ Arrays: ``xy (V, 2) float64`` positions (any unit), ``quads (F, 4)`` vertex ids,
 
 from __future__ import annotations
 
-import importlib
-
 import numpy as np
 
 from jaxmatch.catalogue.mesh import QUAD_NEXT as _NEXT
+from jaxmatch.lazy import Later
 
 __all__ = ["corner_vectors", "edge_ratios", "inverted_mask", "quad_areas", "quality", "sj_inverted"]
 
-
-def _kernels():
-    """The compiled placement kernels (:mod:`jaxmatch.placement.kernels`), loaded on the first
-    :func:`sj_inverted` call only: loading them may mean loading numba (~0.5 s) where the C
-    library is absent, which a process that only reads or writes meshes does not need."""
-    return importlib.import_module("jaxmatch.placement.kernels")
+_later = Later(kernels="jaxmatch.placement.kernels")
+"""The compiled kernels, on the first :func:`sj_inverted`: where the C library is absent they
+are numba's (~0.5 s to load), which a process that only reads or writes meshes does not need."""
 
 
 def quad_areas(xy: np.ndarray, quads: np.ndarray) -> np.ndarray:
@@ -89,7 +85,7 @@ def sj_inverted(xy: np.ndarray, quads: np.ndarray) -> tuple[np.ndarray, np.ndarr
     q = np.asarray(quads)
     if q.size == 0:
         return np.zeros(0), np.zeros(0, bool)
-    kernels = _kernels()
+    kernels = _later.kernels
     if kernels.BACKEND == "c" and q.ndim == 2 and q.shape[1] == 4 and q.min() >= 0 and q.max() < len(xy) \
             and np.ndim(xy) == 2 and np.shape(xy)[1] == 2:  # the same operations in C, one pass
         return kernels.sj_inverted(xy, q)  # (100,000 quads: ~40 ms in numpy); numpy's errors for bad ids below
