@@ -23,7 +23,6 @@ from jaxmatch.catalogue.mesh import from_quads
 from jaxmatch.placement.embed import place
 from jaxmatch.placement.choose import (
     AREA_BAND,
-    GAP_UNIT,
     GOOD_QUALITY,
     UTILITY_BAND,
     SIZE_RULES,
@@ -32,18 +31,15 @@ from jaxmatch.placement.choose import (
     choose_mesh,
     choose_size,
     match_candidates,
-    orientation_utilities,
     size_key,
-    spread_optimal_alignment,
     draw_placements,
     first_valid,
-    gap_cost,
     geometry_key,
     place_match,
     place_top,
     rerank_ties,
-    spread_alignment,
 )
+from jaxmatch.placement.spread import GAP_UNIT, gap_cost, orientation_utilities, spread_alignment, spread_optimal_alignment
 from jaxmatch.scoring.exact import score_bucket, utility_of
 from jaxmatch.scoring.reference import dp_reference as reference_dp
 from jaxmatch.io.readers import load_shape
@@ -706,7 +702,7 @@ def test_c_and_numba_alignment_kernels_agree(seed):
     """The numba fallback of the alignment DPs gives what the C library gives: utilities of
     every orientation, and per orientation the same tied alignments in the same order."""
     from jaxmatch.placement import _numba_spread, kernels
-    from jaxmatch.placement.choose import MAX_TIED_ALIGNMENTS, _spread_setup
+    from jaxmatch.placement.spread import MAX_TIED_ALIGNMENTS, spread_setup
 
     if kernels.BACKEND != "c":
         pytest.skip("the C library is not built in this installation")
@@ -718,7 +714,7 @@ def test_c_and_numba_alignment_kernels_agree(seed):
         c, v = np.asarray(codes, np.int64), np.asarray(vals, np.int64)
         np.testing.assert_array_equal(kernels.orientation_utilities(c, v, table, skip),
                                       _numba_spread.orientation_utilities(c, v, table, skip))
-        st = _spread_setup(t, per, codes, (table, skip))
+        st = spread_setup(t, per, codes, (table, skip))
         n = len(v)
         seqs = np.stack([np.roll(v[::-1] if o >= n else v, -(o % n)) for o in range(2 * n)]).astype(np.int64)
         args = (st.c, seqs, st.table, st.between, st.prefix, st.suffix, st.gq, st.tt, per, st.unit, MAX_TIED_ALIGNMENTS)
