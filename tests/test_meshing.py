@@ -330,14 +330,17 @@ def test_a_skipped_candidate_never_wins_and_keeps_its_place(inserted):
 
 
 def test_every_result_writes_with_groups(cat, tmp_path):
+    """Every result is a QuadMesh by the time it is written (one output path)."""
     import meshio
+
+    from jaxmatch.meshing.build import from_refined
 
     shp = jaxmatch.load_shape(EX / "lshape.json")
     lat = jaxmatch.load_lattice("fine")
     results = {
         "mesh": jaxmatch.mesh(shp, size=0.25, catalogue=cat),
         "template": jaxmatch.mesh(shp, template=True, catalogue=cat, internal=2),
-        "refine": jaxmatch.refine_mesh(shp, cat, lat, size=0.25),
+        "refine": from_refined(shp, jaxmatch.refine_mesh(shp, cat, lat, size=0.25).mesh, size=0.25),
         "concave": jaxmatch.mesh_concave(shp, 0.25, cat),
         "layout": jaxmatch.mesh_layout(EX / "layouts" / "two-blocks.json", cat, size=0.5),
     }

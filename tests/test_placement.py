@@ -27,12 +27,10 @@ from jaxmatch.placement.choose import (
     UTILITY_BAND,
     SIZE_RULES,
     acceptable,
-    check_outputs,
     choose_mesh,
     choose_size,
     match_candidates,
     size_key,
-    draw_placements,
     first_valid,
     geometry_key,
     place_match,
@@ -364,21 +362,17 @@ def test_acceptable_needs_edge_ratio_and_scaled_jacobian(xy, good):
 
 
 # ---------------------------------------------------------------------------------------------
-# output helpers
-
-
-def test_check_outputs():
-    check_outputs("a.vtk", "a.png", "a.svg")
-    check_outputs(None, None, None)
-    for kw in ({"out": "a.stl"}, {"png": "a.svg"}, {"svg": "a.png"}, {"out": "noext"}):
-        with pytest.raises(InputError):
-            check_outputs(**kw)
+# pictures of placements (as QuadMeshes)
 
 
 def test_draw_placements_png(tmp_path, ranked, cat):
+    from jaxmatch.io.plot import draw_in_shape
+    from jaxmatch.meshing.build import from_placement
+
     shp, r, _ = ranked["lshape"]
     pls = place_top(shp, r, cat)[:2]
-    path = draw_placements(tmp_path / "p.png", shp, r.annotation, [("a", pls[0]), ("b", pls[1])], title="two")
+    items = [("a", from_placement(shp, pls[0])), ("b", from_placement(shp, pls[1]))]
+    path = draw_in_shape(tmp_path / "p.png", shp, r.annotation, items, title="two")
     assert path.read_bytes().startswith(PNG_MAGIC)
     assert [p.name for p in tmp_path.iterdir()] == ["p.png"]
 

@@ -144,7 +144,7 @@ def mesh(region, *, size: float | None = None, divisions: int | None = None, sid
     if template:
         if size is not None or sides is not None:
             raise InputError("the single template is placed as is; it takes no size or sides")
-        return _mesh_template(region, cat, lat, template_options)
+        return _mesh_template(region, cat, lat, template_options, progress)
     if template_options:
         raise TypeError(f"unexpected options without template=True: {', '.join(sorted(template_options))}")
     if sides is not None:
@@ -174,15 +174,16 @@ def _mesh_layout_file(layout, cat, lat, size, sides, counts) -> QuadMesh:
     return from_layout(lm, size=h).with_choice("layout", "", None, ())
 
 
-def _mesh_template(shape, cat, lat, options) -> QuadMesh:
+def _mesh_template(shape, cat, lat, options, progress) -> QuadMesh:
     from jaxmatch.inputs import check_sizes
     from jaxmatch.placement.choose import choose_mesh
 
     opts = dict(options)
     if "internal" in opts:
         opts["internal"] = check_sizes(cat, opts["internal"])
-    choice = choose_mesh(shape, cat, lat, **opts)
-    m = from_placement(shape, choice.placement, choice.match.mesh_id)
+    scored = None if progress is None else (lambda done, total: progress(done, total, "template"))
+    choice = choose_mesh(shape, cat, lat, progress=scored, **opts)
+    m = from_placement(shape, choice.placement, choice.match.mesh_id, detail=choice)
     return m.with_choice("template", "", None, (Candidate("template", m),))
 
 

@@ -7,8 +7,7 @@ how the loop is listed; :func:`jaxmatch.placement.embed.place` on the unit-box s
 to the user's coordinates), re-orders tied utilities by the quality of the embedding
 (:func:`rerank_ties`), walks down a ranking for the first good mesh of the shape
 (:func:`first_valid`, :func:`acceptable`), chooses the mesh size by fit (:func:`choose_size`,
-:data:`SIZE_RULES`), and draws placed meshes (:func:`draw_placements`). The evenly spread alignments it
-places come from :mod:`jaxmatch.placement.spread`.
+:data:`SIZE_RULES`). The evenly spread alignments it places come from :mod:`jaxmatch.placement.spread`.
 
 :func:`choose_mesh` is what ``jaxmatch mesh`` does; :func:`place_top` is what
 ``jaxmatch score --png`` does.
@@ -23,10 +22,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import os
 from dataclasses import dataclass
 from itertools import groupby, islice, takewhile
-from pathlib import Path
 from typing import TYPE_CHECKING, Callable, Iterable, NamedTuple, Sequence
 
 import numpy as np
@@ -61,7 +58,6 @@ __all__ = [
     "SizeChoice",
     "TIE_CAP",
     "acceptable",
-    "check_outputs",
     "choose_mesh",
     "choose_size",
     "corner_boundary",
@@ -69,7 +65,6 @@ __all__ = [
     "match_candidates",
     "placement_key",
     "size_key",
-    "draw_placements",
     "first_valid",
     "geometry_key",
     "geometry_tie_breaker",
@@ -879,51 +874,3 @@ def place_top(shape: Shape, ranking: Ranking, catalogue: Catalogue, *, placement
     ``lattice``, as for the tie-break)."""
     cache = placements if placements is not None else (ranking.placements if ranking.placements is not None else {})
     return [place_match(shape, ranking.annotation, catalogue, m, lattice=lattice, placements=cache) for m in ranking.results]
-
-
-# ---------------------------------------------------------------------------------------------
-# output
-
-
-def check_outputs(out: str | os.PathLike | None = None, png: str | os.PathLike | None = None,
-                  svg: str | os.PathLike | None = None) -> None:
-    """Refuse unsupported output suffixes before any work is done (:class:`InputError`, where
-    is the option): ``out`` a mesh file (.vtk .vtu .obj .msh .json), ``png`` a .png file,
-    ``svg`` a .svg file."""
-    from jaxmatch.io.meshfile import mesh_format
-
-    if out is not None:
-        try:
-            mesh_format(out)
-        except InputError as e:
-            raise InputError(f"{e}", "--out") from None
-    for opt, path, suffix in (("--png", png, ".png"), ("--svg", svg, ".svg")):
-        if path is not None and Path(path).suffix.lower() != suffix:
-            raise InputError(f"{path}: picture file must end in {suffix}", opt)
-
-
-def draw_placements(path: str | os.PathLike, shape: Shape, annotation: Annotation,
-                    items: Sequence[tuple[str, Placement]], *, title: str | None = None, ncols: int | None = None) -> Path:
-    """Draw placed meshes side by side (one panel per ``(panel title, placement)``) over the
-    shape's outline and annotated s/x/v points, in user coordinates, and save to ``path``
-    (.png or .svg, atomically; see :func:`jaxmatch.io.plot.draw_many`). Each panel shows boundary
-    vertices coloured by valence, irregular internal vertices, inverted quads in red and the
-    quality (min / mean scaled Jacobian, inverted count) in its title."""
-    from jaxmatch.io.plot import Panel, draw_many
-
-    outline = shape.user_points
-    pos = shape.to_user(annotation.positions)
-    panels = [Panel(outline, pos, annotation.codes, pl, t) for t, pl in items]
-    return draw_many(panels, path, ncols=ncols, title=title)
-
-
-def panel_title(rank: int, match: Match, placement: Placement | None = None) -> str:
-    """``"#1 k5-b2b65fa5f3b0 (utility 24, rot 0, corners 4/4)"``: title line for a picture panel
-    (the full mesh id, so that it can be copied into ``catalogue export --id``; with
-    ``placement``, the orientation placed and the corners kept)."""
-    if placement is None:
-        refl = ", reflected" if match.reflected else ""
-        return f"#{rank} {match.mesh_id} (utility {match.utility:g}, rot {match.rotation}{refl})"
-    refl = ", reflected" if placement.reflected else ""
-    corners = f", corners {placement.kept_corners}/{placement.corners}" if placement.corners else ""
-    return f"#{rank} {match.mesh_id} (utility {match.utility:g}, rot {placement.rotation}{refl}{corners})"

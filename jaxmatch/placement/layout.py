@@ -44,7 +44,6 @@ from __future__ import annotations
 import json
 import math
 from dataclasses import dataclass
-from pathlib import Path
 from typing import TYPE_CHECKING, Mapping, NamedTuple, Sequence
 
 import numpy as np
@@ -73,21 +72,17 @@ __all__ = [
     "CHORD_WEIGHT",
     "boundary_edges",
     "check_layout",
-    "draw_meshes",
     "fit_sides",
-    "layout_panel",
     "layout_sides",
     "load_counts",
     "load_layout",
     "make_layout",
-    "mesh_quality_line",
     "merge_patches",
     "mesh_layout",
     "parse_layout",
     "patch_shapes",
     "parse_counts",
     "solve_counts",
-    "write_layout_mesh",
 ]
 
 MAX_BYTES = 16 * 2**20
@@ -1194,39 +1189,6 @@ def _advance_for_feasibility(sides, cands, choice, want, size, source) -> bool:
             choice[p] = j
             return True
     return False
-
-
-# ---------------------------------------------------------------------------------------------
-# output
-
-
-def write_layout_mesh(path, mesh: LayoutMesh) -> Path:
-    """Write ``mesh`` atomically: :func:`jaxmatch.io.meshfile.write_mesh` (cell data ``patch``
-    and ``scaled_jacobian``, quad groups ``"patch p"``, line groups ``"boundary"`` and
-    ``"side i-j"``)."""
-    from jaxmatch.io.meshfile import write_mesh
-
-    return write_mesh(path, mesh)
-
-
-def mesh_quality_line(xy: np.ndarray, quads: np.ndarray) -> str:
-    """One line of quality figures (:func:`jaxmatch.io.plot.mesh_quality_line`)."""
-    from jaxmatch.io.plot import mesh_quality_line as line
-
-    return line(xy, quads)
-
-
-def draw_meshes(path, panels: Sequence[tuple], *, title: str | None = None, ncols: int | None = None) -> Path:
-    """Draw quad meshes side by side: :func:`jaxmatch.io.plot.draw_meshes`."""
-    from jaxmatch.io.plot import draw_meshes as draw
-
-    return draw(path, panels, title=title, ncols=ncols)
-
-
-def layout_panel(mesh: LayoutMesh, head: str) -> tuple:
-    """A :func:`draw_meshes` panel for a layout mesh (sides drawn thick)."""
-    lines = [mesh.xy[ids] for ids in mesh.side_vertices]
-    return (head, mesh.xy, mesh.quads, mesh.patch, lines)
 
 
 # ---------------------------------------------------------------------------------------------
