@@ -20,9 +20,8 @@ because meshio 5.3 writes ASCII ``$ElementData`` values that it cannot read back
 numpy 2; every element gets physical and geometrical tag 1.
 
 Every mesh (:func:`write_mesh`) gets the cell data ``patch`` (the patch id of every quad) and
-named groups: quad groups (each quad in one)
-and line groups (boundary edges, e.g. the outer boundary and each input side; an edge may be in
-several). In ``.msh`` every group is a physical group with its name in ``$PhysicalNames``
+named groups: quad groups (each quad in one) and line groups (boundary edges, e.g. the outer
+boundary and each input side; an edge may be in several). In ``.msh`` every group is a physical group with its name in ``$PhysicalNames``
 (quads: dimension 2, group ``i`` has physical tag ``i + 1``; lines: dimension 1, 2-node line
 elements); an element's geometrical tag equals its physical tag, and a line in several groups
 is written once per group (MSH 2 gives an element one physical tag, and gmsh itself writes such
@@ -42,16 +41,13 @@ from __future__ import annotations
 import json
 import os
 from pathlib import Path
-from typing import TYPE_CHECKING, Mapping, NamedTuple, Sequence
+from typing import Mapping, NamedTuple, Sequence
 
 import numpy as np
 
 from jaxmatch.errors import InputError
 from jaxmatch.files import atomic_open, atomic_path
 from jaxmatch.io import registry
-
-if TYPE_CHECKING:  # pragma: no cover
-    from jaxmatch.meshing.result import QuadMesh
 
 __all__ = ["LineGroup", "MESH_FORMATS", "QUADMESH_FIELDS", "mesh_format", "mesh_groups", "read_json_mesh", "write_mesh",
            "write_quads"]
@@ -165,10 +161,11 @@ def write_quads(path: str | os.PathLike, xy: np.ndarray, quads: np.ndarray, *,
 
 
 QUADMESH_FIELDS = ("xy", "quads", "patch", "line_sets", "scaled_jacobian")
-"""What the writers read of a :class:`jaxmatch.meshing.result.QuadMesh` (the one mesh type they take)."""
+"""What the writers read of a :class:`jaxmatch.meshing.result.QuadMesh`, the one mesh type they take
+(named, not imported: this low layer imports nothing of the meshing pipeline above it)."""
 
 
-def mesh_groups(mesh: QuadMesh) -> tuple[np.ndarray, list[str], list[LineGroup]]:
+def mesh_groups(mesh: "QuadMesh") -> tuple[np.ndarray, list[str], list[LineGroup]]:
     """``(quad groups (Q,) int64, their names, line groups)`` of a
     :class:`~jaxmatch.meshing.result.QuadMesh`: its ``patch`` (groups ``"patch p"``) and its
     ``line_sets`` (``"boundary"``, ``"side i-j"``, ``"hole h"``), in their order."""
@@ -177,7 +174,7 @@ def mesh_groups(mesh: QuadMesh) -> tuple[np.ndarray, list[str], list[LineGroup]]
     return patch, names, [LineGroup(k, np.asarray(v, np.int64)) for k, v in mesh.line_sets.items()]
 
 
-def write_mesh(path: str | os.PathLike, mesh: QuadMesh) -> Path:
+def write_mesh(path: str | os.PathLike, mesh: "QuadMesh") -> Path:
     """Write a :class:`~jaxmatch.meshing.result.QuadMesh` (what :func:`jaxmatch.mesh` returns)
     to ``path`` atomically: points, quads, cell data (``scaled_jacobian``, ``patch``) and named
     groups (``"patch p"``, ``"boundary"``, ``"side i-j"``; see :func:`mesh_groups`).
