@@ -1,4 +1,5 @@
-"""The ``jaxmatch`` command line (typer app only: parse, call the library, print).
+"""The ``jaxmatch`` command line (typer app only: parse, call the library, hand the results to
+:mod:`jaxmatch.report`, which prints them).
 
 Bad input ends with one line on stderr and exit status 2 (see :mod:`jaxmatch.errors`).
 """
@@ -44,7 +45,7 @@ later = Later(
     layout="jaxmatch.placement.layout",  # a layout's named sides (--sides-file)
     refine="jaxmatch.placement.refine",  # the sides table of 'annotate'
     choose="jaxmatch.placement.choose",  # 'score --png' places the ranked meshes
-    # heavy third-party modules
+    # modules that load heavy third-party ones
     plot="jaxmatch.io.plot",  # matplotlib: only with --png/--svg
     label="jaxmatch.label.cli",  # starlette and uvicorn: only 'label'
 )
