@@ -10,7 +10,8 @@ The Python API (documented in :mod:`jaxmatch.api` and the README's "Python API")
     shape = jaxmatch.load_shape("examples/lshape.json")   # JSON, GeoJSON, CSV/TXT, SVG, DXF
     ranking = jaxmatch.rank(shape, internal=4, top=3)
     placement = jaxmatch.place(shape, ranking)            # the #1 mesh in the shape
-    jaxmatch.write_mesh("lshape.vtk", placement)
+    m = jaxmatch.mesh(shape, size=0.25)                   # the meshing pipeline: a QuadMesh
+    jaxmatch.write_mesh("lshape.vtk", m)
 
 The names are imported on first use, so ``import jaxmatch`` itself is quick (JAX is loaded
 by the first call that scores).

@@ -8,8 +8,9 @@ A session (the README's "Python API" section runs this, as a test)::
     ranking = jaxmatch.rank(shape, internal=4, top=3)           # default catalogue and lattice
     best = ranking.results[0]                                   # a Match: mesh_id, utility, ...
     placement = jaxmatch.place(shape, ranking)                  # the #1 mesh, user coordinates
-    jaxmatch.write_mesh("lshape.vtk", placement)                # .vtk .vtu .obj .msh .json
     m = jaxmatch.mesh(shape, size=0.25)                         # the meshing pipeline: a QuadMesh
+    jaxmatch.write_mesh("lshape.vtk", m)                        # .vtk .vtu .obj .msh .json
+    t = jaxmatch.mesh(shape, template=True, internal=4)         # the paper's answer, as a QuadMesh
 
 Defaults are those of the ``jaxmatch`` command (``score``, ``score-many`` and ``mesh``), all
 from :mod:`jaxmatch.defaults`: the shipped catalogue (k = 0..5), lattice ``"fine"``, top 5,
@@ -24,6 +25,7 @@ the argument); a shape no selected mesh can match raises
 
 from __future__ import annotations
 
+import importlib
 import os
 from typing import TYPE_CHECKING, Callable
 
@@ -32,6 +34,7 @@ from jaxmatch.defaults import DEFAULT_BAND, DEFAULT_LATTICE, DEFAULT_PRUNE, DEFA
 from jaxmatch.inputs import Sizes, _lattice, check_sizes, load_catalogue, sizes_text  # noqa: F401 (public here)
 from jaxmatch.errors import InputError
 from jaxmatch.io.readers import load_shape, parse_shape
+from jaxmatch.lazy import Later
 from jaxmatch.scoring.lattice import Lattice, load_lattice
 from jaxmatch.scoring.rank import Match, Ranking
 from jaxmatch.scoring.rank import rank as _rank
@@ -68,17 +71,19 @@ __all__ = [
     "write_mesh",
 ]
 
+later = Later(choose="jaxmatch.placement.choose", refine="jaxmatch.placement.refine", pipeline="jaxmatch.meshing.pipeline")
+"""The placement and meshing modules (and scipy), loaded only when a mesh is placed or made:
+ranking with ``tie_break="id"``, and every command that imports this module (the command line),
+do not pay for them."""
+
 _LAZY = {"write_mesh": "jaxmatch.io.meshfile", "mesh": "jaxmatch.meshing.pipeline", "Placement": "jaxmatch.placement.embed", "MeshChoice": "jaxmatch.placement.choose"}
-"""Names served on first access: the placement modules (and scipy) load only when a mesh is placed
-or written, so ranking with ``tie_break="id"`` does not pay for them."""
+"""Names served on first access (for the same reason as :data:`later`)."""
 
 
 def __getattr__(name: str):
     module = _LAZY.get(name)
     if module is None:
         raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    import importlib
-
     value = getattr(importlib.import_module(module), name)
     globals()[name] = value
     return value
@@ -115,9 +120,7 @@ def rank(shape: Shape, catalogue: str | os.PathLike | Catalogue | None = None, l
     lat = _lattice(lattice)
     tb = "id"
     if tie_break == "geometry":
-        from jaxmatch.placement.choose import geometry_tie_breaker
-
-        tb = geometry_tie_breaker(cat, lat)
+        tb = later.choose.geometry_tie_breaker(cat, lat)
     return _rank(shape, cat, lat, internal=ks, top=top, points=points, per_size=per_size, tie_break=tb,
                  prune=prune, devices=devices, progress=progress, tie_cap=tie_cap)
 
@@ -133,7 +136,9 @@ def place(shape: Shape, ranking: Ranking, which: int | Match = 1,
     result does not depend on how the shape's loop is written.
     Returns a :class:`~jaxmatch.placement.embed.Placement`: ``xy (V, 2)`` vertex positions,
     ``mesh.quads (F, 4)``, ``scaled_jacobian (F,)``, ``min_scaled_jacobian``, ``inverted``
-    (count of inverted quads), ``area_ratio``, ...; write it with :func:`write_mesh`.
+    (count of inverted quads), ``area_ratio``, ...; to write it, mesh with ``mesh(shape,
+    template=True, ...)`` (a :class:`~jaxmatch.meshing.result.QuadMesh`, what :func:`write_mesh`
+    takes) or convert it with :func:`jaxmatch.meshing.build.from_placement`.
     """
     if isinstance(which, Match):
         match = which
@@ -142,11 +147,9 @@ def place(shape: Shape, ranking: Ranking, which: int | Match = 1,
         if not 1 <= r <= len(ranking.results):
             raise InputError(f"rank {r} is not in the ranking (it holds {len(ranking.results)} results; raise top)")
         match = ranking.results[r - 1]
-    from jaxmatch.placement.choose import place_match
-
     cache = ranking.placements if ranking.placements is not None else None
-    return place_match(shape, ranking.annotation, load_catalogue(catalogue), match, placements=cache,
-                       lattice=_lattice(lattice))
+    return later.choose.place_match(shape, ranking.annotation, load_catalogue(catalogue), match, placements=cache,
+                                    lattice=_lattice(lattice))
 
 
 def choose_mesh(shape: Shape, catalogue: str | os.PathLike | Catalogue | None = None,
@@ -164,12 +167,10 @@ def choose_mesh(shape: Shape, catalogue: str | os.PathLike | Catalogue | None = 
     """
     if tie_break not in TIE_BREAKS:
         raise ValueError(f"tie_break must be one of {TIE_BREAKS}, got {tie_break!r}")
-    from jaxmatch.placement.choose import choose_mesh as _choose_mesh
-
     cat = load_catalogue(catalogue)
     ks = check_sizes(cat, internal)
-    return _choose_mesh(shape, cat, _lattice(lattice), rank=rank, internal=ks, points=points, tie_break=tie_break,
-                        require_valid=require_valid, band=band, progress=progress)
+    return later.choose.choose_mesh(shape, cat, _lattice(lattice), rank=rank, internal=ks, points=points,
+                                    tie_break=tie_break, require_valid=require_valid, band=band, progress=progress)
 
 
 def annotate_shape(shape: Shape, catalogue: str | os.PathLike | Catalogue | None = None, *, internal: Sizes = None,
@@ -197,11 +198,9 @@ def refine_mesh(shape: Shape, catalogue: str | os.PathLike | Catalogue | None = 
     Raises :class:`~jaxmatch.placement.refine.InfeasibleRequest` (an :class:`InputError`) naming
     the sides and the nearest feasible counts when no template can meet ``sides``.
     """
-    from jaxmatch.placement.refine import refine_mesh as _refine_mesh
-
     cat = load_catalogue(catalogue)
     ks = check_sizes(cat, internal)
-    return _refine_mesh(shape, cat, _lattice(lattice), sides=sides, size=size, internal=ks)
+    return later.refine.refine_mesh(shape, cat, _lattice(lattice), sides=sides, size=size, internal=ks)
 
 
 def mesh_layout(layout, catalogue: str | os.PathLike | Catalogue | None = None,
@@ -209,9 +208,7 @@ def mesh_layout(layout, catalogue: str | os.PathLike | Catalogue | None = None,
     """A multi-patch layout (a path or a :class:`~jaxmatch.placement.layout.Layout`) as one
     conforming mesh: a thin wrapper of :func:`jaxmatch.mesh` (``counts``: ``{side id: edges}``).
     Returns a :class:`~jaxmatch.meshing.result.QuadMesh`."""
-    from jaxmatch.meshing.pipeline import mesh
-
-    return mesh(layout, size=size, counts=counts, catalogue=catalogue, lattice=lattice)
+    return later.pipeline.mesh(layout, size=size, counts=counts, catalogue=catalogue, lattice=lattice)
 
 
 def mesh_concave(shape: Shape, size: float, catalogue: str | os.PathLike | Catalogue | None = None,
@@ -219,6 +216,4 @@ def mesh_concave(shape: Shape, size: float, catalogue: str | os.PathLike | Catal
     """``shape`` meshed with edges of about ``size``, the best of one template and every
     decomposition: a thin wrapper of :func:`jaxmatch.mesh`. Returns a
     :class:`~jaxmatch.meshing.result.QuadMesh` (``chosen`` names the candidate)."""
-    from jaxmatch.meshing.pipeline import mesh
-
-    return mesh(shape, size=size, catalogue=catalogue, lattice=lattice)
+    return later.pipeline.mesh(shape, size=size, catalogue=catalogue, lattice=lattice)

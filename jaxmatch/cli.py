@@ -1,4 +1,5 @@
-"""The ``jaxmatch`` command line (typer app only: parse, call the library, print).
+"""The ``jaxmatch`` command line (typer app only: parse, call the library, hand the results to
+:mod:`jaxmatch.report`, which prints them).
 
 Bad input ends with one line on stderr and exit status 2 (see :mod:`jaxmatch.errors`).
 """
@@ -16,17 +17,41 @@ from typing import List, Optional
 import typer
 from rich.console import Console
 
-from jaxmatch import __version__
+from jaxmatch import __version__, report
 from jaxmatch.catalogue import store as cat_mod
 from jaxmatch.errors import EXIT_BAD_INPUT, EXIT_INVERTED, EXIT_UNMATCHABLE, InputError, InputWarning, SolverError, UnmatchableError
 from jaxmatch.defaults import DEFAULT_BUDGET_S, DEFAULT_LATTICE, DEFAULT_TIE_BREAK, DEFAULT_TOP, QUALITY, TIE_BREAKS
-from jaxmatch.shape import DEFAULT_CORNER_ANGLE
+from jaxmatch.io.meshfile import MESH_FORMATS, mesh_format, write_mesh
+from jaxmatch.lazy import Later
+from jaxmatch.meshing.region import canonical, default_size, load_region
+from jaxmatch.scoring import distributed
+from jaxmatch.shape import DEFAULT_CORNER_ANGLE, Shape, check_corner_angle, default_points
+from jaxmatch.shape import annotate as annotate_shape
 
 try:  # typer >= 0.2x vendors click as typer._click and no longer installs click
     from typer._click.exceptions import ClickException
 except ImportError:  # pragma: no cover - older typer with click
     from click.exceptions import ClickException
 
+later = Later(
+    # the library behind the commands that score, read shapes or mesh (not for --help, 'lattice', 'catalogue')
+    api="jaxmatch.api",  # rank, check_sizes, load_shape, load_lattice
+    lattice="jaxmatch.scoring.lattice",  # 'lattice show'
+    rank="jaxmatch.scoring.rank",  # ranking records
+    build="jaxmatch.meshing.build",  # placements as QuadMeshes ('score --png')
+    bulk="jaxmatch.scoring.bulk", backends="jaxmatch.scoring.backends", parallel="jaxmatch.parallel",  # many at once
+    # the meshing stack (placement, integer programs): only the commands that mesh or place
+    pipeline="jaxmatch.meshing.pipeline",
+    layout="jaxmatch.placement.layout",  # a layout's named sides (--sides-file)
+    refine="jaxmatch.placement.refine",  # the sides table of 'annotate'
+    choose="jaxmatch.placement.choose",  # 'score --png' places the ranked meshes
+    # modules that load heavy third-party ones
+    plot="jaxmatch.io.plot",  # matplotlib: only with --png/--svg
+    label="jaxmatch.label.cli",  # starlette and uvicorn: only 'label'
+)
+"""Modules a command imports when it runs (:class:`jaxmatch.lazy.Later`), so that the others
+start without them: ``jaxmatch --help``, ``lattice`` and ``catalogue`` load no scoring or
+meshing, ``mesh`` no matplotlib or web server (``tests/test_cli_mesh.py`` checks that)."""
 
 ENV_HELP = ("Environment: JAXMATCH_PROGRESS=1 shows progress bars even when stderr is not a terminal, 0 hides all "
             "progress; JAXMATCH_CACHE=DIR holds the compiled-code cache (default ~/.cache/jaxmatch); "
@@ -136,18 +161,14 @@ def enable_compile_cache() -> None:
         for name, value in settings.items():
             os.environ[name.upper()] = str(value)
         return
-    import jax
-
     try:
         for name, value in settings.items():
-            jax.config.update(name, value)
+            sys.modules["jax"].config.update(name, value)
     except Exception:  # an older JAX without one of the options: run without the cache
         pass
 
 
 def _corner_angle(value) -> float:
-    from jaxmatch.shape import check_corner_angle
-
     try:
         return check_corner_angle(value)
     except InputError as e:
@@ -155,10 +176,8 @@ def _corner_angle(value) -> float:
 
 
 def _sizes(cat, internal: Optional[str]):
-    from jaxmatch.api import check_sizes
-
     try:
-        return check_sizes(cat, internal)
+        return later.api.check_sizes(cat, internal)
     except InputError as e:
         raise InputError(e.problem, "--internal") from None
 
@@ -176,21 +195,17 @@ def _quietly(read, *args, **kwargs):
 
 def _load(shape: Path, corner_angle: float):
     """The shape file, read (:func:`_quietly`)."""
-    from jaxmatch.io.readers import load_shape
-
-    return _quietly(load_shape, shape, corner_angle=corner_angle)
+    return _quietly(later.api.load_shape, shape, corner_angle=corner_angle)
 
 
 def _inputs(shape: Optional[Path], corner_angle: float, lattice: str, catalogue: Optional[Path], internal: Optional[str]):
     """(shape or None, lattice, catalogue, k list or None): the inputs every scoring command
     reads, options checked first (the option is named in errors)."""
-    from jaxmatch.scoring.lattice import load_lattice
-
     angle = _corner_angle(corner_angle)
     cat = _open_catalogue(catalogue)
     ks = _sizes(cat, internal)
     shp = _load(shape, angle) if shape is not None else None
-    return shp, load_lattice(lattice), cat, ks
+    return shp, later.api.load_lattice(lattice), cat, ks
 
 
 def _open_catalogue(path: Optional[Path]):
@@ -240,55 +255,32 @@ def score(
 ) -> None:
     """Rank catalogue meshes for SHAPE by the paper's modified LCS utility."""
     if devices is not None:
-        from jaxmatch.scoring.bulk import configure_host_devices
-
-        configure_host_devices(devices)  # before JAX is imported
-    from jaxmatch.api import rank
-    from jaxmatch.scoring.rank import ranking_json
-
+        later.bulk.configure_host_devices(devices)  # before JAX is imported
     pictures = png is not None or svg is not None
-    if pictures:  # placement (and scipy) only loads when something is placed
-        from jaxmatch.placement.choose import check_outputs, draw_placements, panel_title, place_top
-
-        check_outputs(png=png, svg=svg)
+    check_outputs(png=png, svg=svg)
     tb = _tie_break(tie_break)
     enable_compile_cache()
     shp, lat, cat, ks = _inputs(shape, corner_angle, lattice, catalogue, internal)
     with _progress() as prog:
         task = prog.add_task("scoring meshes", total=None)
-        ranking = rank(shp, cat, lat, internal=ks, top=top, points=points, per_size=per_size, tie_break=tb,
-                       prune=not exhaustive, devices=devices,
-                       progress=lambda d, t: prog.update(task, completed=d, total=t))
+        ranking = later.api.rank(shp, cat, lat, internal=ks, top=top, points=points, per_size=per_size, tie_break=tb,
+                           prune=not exhaustive, devices=devices,
+                           progress=lambda d, t: prog.update(task, completed=d, total=t))
     written = []
-    if pictures:
-        placed = place_top(shp, ranking, cat, lattice=lat)
-        items = [(panel_title(i, r, pl), pl) for i, (r, pl) in enumerate(zip(ranking.results, placed), 1)]
+    if pictures:  # each ranked mesh placed (placement, and scipy, load only then), drawn as a QuadMesh
+        placed = later.choose.place_top(shp, ranking, cat, lattice=lat)
+        items = [(report.panel_title(i, r, pl), later.build.from_placement(shp, pl, r.mesh_id))
+                 for i, (r, pl) in enumerate(zip(ranking.results, placed), 1)]
         head = f"{shape.name}: {'best per size' if per_size else f'top {len(items)}'}"
-        written = [str(draw_placements(p, shp, ranking.annotation, items, title=head)) for p in (png, svg) if p is not None]
+        written = [str(later.plot.draw_in_shape(p, shp, ranking.annotation, items, title=head))
+                   for p in (png, svg) if p is not None]
     if as_json:
-        print(json.dumps(ranking_json(str(shape), ranking, lat.name, tb)))
+        print(json.dumps(later.rank.ranking_json(str(shape), ranking, lat.name, tb)))
         for w in written:
             print(f"wrote {w}", file=sys.stderr)
         return
-    out.print(f"shape [bold]{shape}[/]: {len(ranking.annotation.codes)} points [cyan]{ranking.annotation.symbols}[/]")
-    skipped = f", {ranking.pruned} skipped by the bound" if ranking.pruned else ""
-    out.print(f"lattice {lat.name}; {ranking.scored} meshes, {ranking.unmatchable} unmatchable{skipped}")
-    from rich.table import Table
-
-    table = Table(title="best per size" if per_size else f"top {top}")
-    for col in ("rank", "mesh id", "internal", "boundary", "utility", "rotation", "reflected"):
-        table.add_column(col, justify="right" if col not in ("mesh id",) else "left", no_wrap=True, min_width=15 if col == "mesh id" else None)
-    for i, r in enumerate(ranking.results, 1):
-        table.add_row(str(i), r.mesh_id, str(r.internal_vertices), str(r.boundary_length), f"{r.utility:g}",
-                      str(r.rotation), "yes" if r.reflected else "no")
-    out.print(table)
-    if ks is None and not per_size:
-        out.print("all sizes compete here by raw utility, which grows with the mesh (more matched points); "
-                  "'jaxmatch mesh' without --internal chooses the size by the fit of each size's best mesh "
-                  "(corners kept, folds, quality, area, then fewer quads); --per-size compares sizes",
-                  markup=False, highlight=False)
-    for w in written:
-        out.print(f"wrote {w}", markup=False, highlight=False)
+    report.print_ranking(out, shape, ranking, lat.name, top=top, per_size=per_size, all_sizes=ks is None and not per_size,
+                         written=written)
 
 
 @app.command("score-many")
@@ -321,13 +313,7 @@ def score_many(
     """
     cluster = _cluster(coordinator, num_processes, process_id, devices)
     if devices is not None:
-        from jaxmatch.scoring.bulk import configure_host_devices
-
-        configure_host_devices(devices)
-    from jaxmatch.scoring.bulk import write_jsonl
-    from jaxmatch.api import rank
-    from jaxmatch.scoring.rank import ranking_json
-
+        later.bulk.configure_host_devices(devices)
     tb = _tie_break(tie_break)
     if out_path.suffix.lower() not in (".jsonl", ".json", ".ndjson"):
         raise InputError("results are JSON lines: use a .jsonl file", str(out_path))
@@ -342,8 +328,6 @@ def score_many(
             if not skip_bad:
                 raise
             loaded.append((p, str(e)))
-    from jaxmatch.scoring import distributed
-
     distributed.initialize(cluster)
     mine = distributed.share(len(loaded), cluster)
 
@@ -353,29 +337,26 @@ def score_many(
         if isinstance(shp, str):
             return {"shape": str(p), "error": shp}, None
         try:
-            ranking = rank(shp, cat, lat, internal=ks, top=top, points=points, per_size=per_size, tie_break=tb,
-                           prune=True, devices=devices)
-            return ranking_json(str(p), ranking, lat.name, tb), None
+            ranking = later.api.rank(shp, cat, lat, internal=ks, top=top, points=points, per_size=per_size, tie_break=tb,
+                               prune=True, devices=devices)
+            return later.rank.ranking_json(str(p), ranking, lat.name, tb), None
         except UnmatchableError as e:
             if not skip_bad:
                 return None, f"{p}: {e}"
             return {"shape": str(p), "error": f"no match: {e}"}, None
 
-    from jaxmatch.parallel import available_cpus, ordered_map
-    from jaxmatch.scoring.backends import serial_only
-
-    workers = 1 if (coordinator is not None or devices is not None) else (available_cpus() if jobs is None else jobs)
+    workers = 1 if (coordinator is not None or devices is not None) else (later.parallel.available_cpus() if jobs is None else jobs)
     records = []
     with _progress() as prog:
         task = prog.add_task("shapes", total=len(mine))
         def worker_start():  # in each worker process
-            serial_only()
+            later.backends.serial_only()
             cat.reopen()
             sys.stdout, sys.stderr = sys.__stdout__, sys.__stderr__  # not the progress display's proxies (their lock)
 
         if workers > 1:
-            serial_only()  # one core per process (and numba's OpenMP layer must not start before fork)
-        for record, fatal in ordered_map(one, list(mine), workers, initializer=worker_start, warm_first=True):
+            later.backends.serial_only()  # one core per process (and numba's OpenMP layer must not start before fork)
+        for record, fatal in later.parallel.ordered_map(one, list(mine), workers, initializer=worker_start, warm_first=True):
             if fatal is not None:
                 raise UnmatchableError(fatal)
             records.append(record)
@@ -383,7 +364,7 @@ def score_many(
     records = distributed.gather_records(records, mine, len(loaded), cluster)
     if cluster.process_id == 0:
         failed = sum(1 for r in records if "error" in r)
-        write_jsonl(out_path, records)
+        later.bulk.write_jsonl(out_path, records)
         note = f", {failed} failed (records with \"error\")" if failed else ""
         print(f"wrote {out_path}: {len(records)} shapes, {len(records) - failed} scored{note}", file=sys.stderr)  # one line
     distributed.shutdown(cluster)
@@ -391,16 +372,14 @@ def score_many(
 
 def _cluster(coordinator: Optional[str], num_processes: int, process_id: int, devices: Optional[int]):
     """The :class:`jaxmatch.scoring.distributed.Cluster` of score-many's options (one process without --coordinator)."""
-    from jaxmatch.scoring.distributed import Cluster, make_cluster
-
     if coordinator is None:
         if num_processes != 1 or process_id != 0:
             raise InputError("needs --coordinator HOST:PORT", "--num-processes/--process-id")
-        return Cluster("", 1, 0)
+        return distributed.Cluster("", 1, 0)
     if devices is not None:
         raise InputError("use either --devices or --coordinator, not both", "--devices")
     try:
-        return make_cluster(coordinator, num_processes, process_id)
+        return distributed.make_cluster(coordinator, num_processes, process_id)
     except InputError as e:
         raise InputError(e.problem, "--coordinator/--num-processes/--process-id") from None
 
@@ -469,8 +448,6 @@ def mesh(
                      "--require-valid": require_valid, "--min-quality": min_quality != QUALITY.min_sj,
                      "--max-edge-ratio": max_edge_ratio != QUALITY.max_edge_ratio, "--band": band != QUALITY.band,
                      "--tie-break": tie_break != DEFAULT_TIE_BREAK}
-    from jaxmatch.placement.choose import check_outputs
-
     check_outputs(out_path, png, svg)
     if size is not None and not (size > 0 and size < float("inf")):
         raise InputError(f"must be a positive length, got {size:g}", "--size")
@@ -497,17 +474,14 @@ def mesh(
             raise InputError("applies with --template only", opt)
     names = None
     if strategy is not None:
-        from jaxmatch.meshing.pipeline import strategy_names
-
+        known = later.pipeline.strategy_names()
         names = [n.strip() for n in strategy.split(",") if n.strip()]
-        bad = [n for n in names if n not in strategy_names()]
+        bad = [n for n in names if n not in known]
         if bad or not names:
-            raise InputError(f"expected names among {', '.join(strategy_names())}, got {strategy!r}", "--strategy")
+            raise InputError(f"expected names among {', '.join(known)}, got {strategy!r}", "--strategy")
     angle = _corner_angle(corner_angle)
     enable_compile_cache()
-    from jaxmatch.scoring.lattice import load_lattice
-
-    cat, lat = _open_catalogue(catalogue), load_lattice(lattice)
+    cat, lat = _open_catalogue(catalogue), later.api.load_lattice(lattice)
     for opt, given in (("--size", size is not None), ("--sides", sides is not None), ("--sides-file", sides_file is not None)):
         if divisions is not None and given:
             raise InputError(f"give --divisions or {opt}, not both", "--divisions")
@@ -523,32 +497,41 @@ def mesh(
     _mesh_one(regions[0], angle, options, sides, sides_file, out_path, png, svg, as_json)
 
 
+def check_outputs(out: str | os.PathLike | None = None, png: str | os.PathLike | None = None,
+                  svg: str | os.PathLike | None = None) -> None:
+    """Refuse unsupported output suffixes before any work is done (:class:`InputError`, where
+    is the option): ``out`` a mesh file (.vtk .vtu .obj .msh .json), ``png`` a .png file,
+    ``svg`` a .svg file."""
+    if out is not None:
+        try:
+            mesh_format(out)
+        except InputError as e:
+            raise InputError(f"{e}", "--out") from None
+    for opt, path, suffix in (("--png", png, ".png"), ("--svg", svg, ".svg")):
+        if path is not None and Path(path).suffix.lower() != suffix:
+            raise InputError(f"{path}: picture file must end in {suffix}", opt)
+
+
+def _write(m, out_path, png, svg, draw) -> dict:
+    """Write the mesh ``m`` (a QuadMesh) to ``out_path`` and its pictures (``draw(picture path)``)
+    to ``png``/``svg``, each given one; ``{option: path written}``."""
+    written = {}
+    if out_path is not None:
+        written["out"] = str(write_mesh(out_path, m))
+    for key, pic in (("png", png), ("svg", svg)):
+        if pic is not None:
+            written[key] = str(draw(pic))
+    return written
+
+
 def _load_region(path: Path, corner_angle: float):
     """A shape or layout file, read (:func:`_quietly`)."""
-    from jaxmatch.meshing.pipeline import load_region
-
     return _quietly(load_region, path, corner_angle=corner_angle)
 
 
-def _mesh_record(path: Path, m, seconds: float | None = None) -> dict:
-    rec = {"shape": str(path), **m.summary()}
-    rec["candidates"] = [{"name": c.name, "note": c.note, **({} if c.mesh is None else {
-        "patches": c.mesh.n_patches, "quads": int(c.mesh.quads.shape[0]), "min_scaled_jacobian": c.mesh.min_scaled_jacobian,
-        "mean_scaled_jacobian": c.mesh.mean_scaled_jacobian, "inverted": c.mesh.inverted,
-        "irregular": int(c.mesh.irregular.size), "sides_off_size": len(c.mesh.sides_off_size(QUALITY.size_tol))})}
-        for c in m.tried]
-    if seconds is not None:
-        rec["seconds"] = round(seconds, 4)
-    return rec
-
-
 def _mesh_one(path: Path, angle: float, options: dict, sides, sides_file, out_path, png, svg, as_json) -> None:
-    import jaxmatch
-    from jaxmatch.meshing.pipeline import default_size
-    from jaxmatch.placement.layout import Layout
-
     region = _load_region(path, angle)
-    is_layout = isinstance(region, Layout)
+    is_layout = not isinstance(region, Shape)
     counts = None
     if sides is not None:
         if is_layout:
@@ -558,40 +541,30 @@ def _mesh_one(path: Path, angle: float, options: dict, sides, sides_file, out_pa
     if sides_file is not None:
         if not is_layout:
             raise InputError("edge counts per named side are for layout files; use --sides for a shape", "--sides-file")
-        from jaxmatch.placement.layout import load_counts, layout_sides
-
-        named = load_counts(sides_file, layout_sides(region))
+        named = later.layout.load_counts(sides_file, later.layout.layout_sides(region))
     elif is_layout and options["size"] is None and options["divisions"] is None and not region.requested:
         options = {**options, "size": default_size(region)}
     defaulted = options["size"] is None and options["divisions"] is None and counts is None and not is_layout
     with _progress() as prog:
         task = prog.add_task("meshing candidates", total=None)
         try:
-            m = jaxmatch.mesh(region, sides=counts, counts=named,
-                              progress=lambda d, t, name: prog.update(task, completed=d, total=t, description=name),
-                              **options)
+            m = later.pipeline.mesh(region, sides=counts, counts=named,
+                                    progress=lambda d, t, name: prog.update(task, completed=d, total=t, description=name),
+                                    **options)
         except InputError as e:
             if counts is not None:
                 raise InputError(str(e), "--sides") from None
             raise
-    written = {}
-    if out_path is not None:
-        from jaxmatch.io.meshfile import write_mesh
-
-        written["out"] = str(write_mesh(out_path, m))
-    for key, pic in (("png", png), ("svg", svg)):
-        if pic is not None:
-            from jaxmatch.io.plot import draw_quadmesh
-
-            written[key] = str(draw_quadmesh(pic, m, title=path.name, y_down=_y_down(path)))
-    rec = _mesh_record(path, m)
+    written = _write(m, out_path, png, svg,
+                     lambda pic: later.plot.draw_quadmesh(pic, m, title=path.name, y_down=_y_down(path)))
+    rec = report.mesh_record(path, m)
     if as_json:
         if counts is not None:
             rec["sides"] = counts
         print(json.dumps({**rec, "default_size": defaulted, "out": written.get("out"), "png": written.get("png"),
                           "svg": written.get("svg")}))
     else:
-        _print_mesh(path, m, rec, defaulted)
+        report.print_mesh(out, path, m, rec, defaulted)
         for pic in written.values():
             out.print(f"wrote {pic}", markup=False, highlight=False)
     if not m.valid:
@@ -605,45 +578,10 @@ def _y_down(path: Path) -> bool:
     return str(path).split("#", 1)[0].lower().endswith(".svg")
 
 
-def _patches(n: int) -> str:
-    return f"{n} patch" if n == 1 else f"{n} patches"
-
-
-def _print_mesh(path: Path, m, rec: dict, defaulted: bool) -> None:
-    def say(text: str) -> None:
-        out.print(text, markup=False, highlight=False)
-
-    for c in rec["candidates"]:
-        if "quads" in c:
-            say(f"{c['name']}: {_patches(c['patches'])}, {c['quads']} quads, SJ min {c['min_scaled_jacobian']:.3f} "
-                f"mean {c['mean_scaled_jacobian']:.3f}, {c['inverted']} inverted, {c['irregular']} irregular, "
-                f"{c['sides_off_size']} sides off the size")
-        else:
-            say(f"{c['name']}: not meshed ({c['note']})")
-    unmeshed = any(c.name == m.runner_up and c.mesh is None for c in m.tried)
-    decided = (f" (rule that decided: {m.rule}; runner-up {m.runner_up}"
-               f"{', not meshed: at its best' if unmeshed else ''})") if m.rule else ""
-    say(f"chosen: {m.chosen}{decided}")
-    if m.size:
-        how = " (default: perimeter / 32)" if defaulted else ""
-        say(f"size {m.size:.4g}{how}: mean edge {m.mean_edge_length:.4g}, worst side {100 * m.size_deviation:.0f}% "
-            "off length / size")
-    say(f"{path}: {_patches(m.n_patches)}, {rec['quads']} quads, {rec['vertices']} vertices, {rec['irregular']} irregular "
-        f"internal (Euler's bound {rec['irregular_bound']}); scaled Jacobian min {rec['min_scaled_jacobian']:.3f} mean "
-        f"{rec['mean_scaled_jacobian']:.3f}; inverted quads: {rec['inverted']}; corners kept: "
-        f"{rec['corners'] - rec['missed_corners']} of {rec['corners']}; mesh area / region area {rec['area_ratio']:.6f}")
-
-
 def _mesh_many(regions: List[Path], out_dir: Optional[Path], fmt: str, angle: float, options: dict, jobs, skip_bad) -> None:
     """Bulk meshing: every region read and checked first (bad input stops the run before any
     work, unless --skip-bad), then meshed in worker processes; one mesh file each and a JSONL
     summary, all written atomically."""
-    import jaxmatch
-    from jaxmatch.io.meshfile import MESH_FORMATS, write_mesh
-    from jaxmatch.meshing.pipeline import warm_up
-    from jaxmatch.parallel import available_cpus, ordered_map
-    from jaxmatch.scoring.bulk import write_jsonl
-
     suffix = "." + fmt.lower().lstrip(".")
     if suffix not in MESH_FORMATS:
         raise InputError(f"expected one of {', '.join(s[1:] for s in MESH_FORMATS)}, got {fmt!r}", "--format")
@@ -666,6 +604,7 @@ def _mesh_many(regions: List[Path], out_dir: Optional[Path], fmt: str, angle: fl
                 raise
             loaded.append((p, str(e), None))
     out_dir.mkdir(parents=True, exist_ok=True)
+    pipeline = later.pipeline
 
     def one(i: int) -> dict:
         p, region, target = loaded[i]
@@ -673,14 +612,14 @@ def _mesh_many(regions: List[Path], out_dir: Optional[Path], fmt: str, angle: fl
             return {"shape": str(p), "error": region}
         t0 = time.perf_counter()
         try:
-            m = jaxmatch.mesh(region, **options)
+            m = pipeline.mesh(region, **options)
         except InputError as e:
             return {"shape": str(p), "error": str(e)}
-        rec = _mesh_record(p, m, time.perf_counter() - t0)
+        rec = report.mesh_record(p, m, time.perf_counter() - t0)
         rec["out"] = str(write_mesh(target, m))
         return rec
 
-    workers = available_cpus() if jobs is None else jobs
+    workers = later.parallel.available_cpus() if jobs is None else jobs
     records = []
     with _progress() as prog:
         task = prog.add_task("regions", total=len(loaded))
@@ -690,18 +629,18 @@ def _mesh_many(regions: List[Path], out_dir: Optional[Path], fmt: str, angle: fl
 
         def warm() -> None:  # in this process, before the workers fork: they inherit what it loads
             try:
-                warm_up(options["catalogue"], options["lattice"])
+                pipeline.warm_up(options["catalogue"], options["lattice"])
             except Exception:  # noqa: BLE001 - only a head start: the regions themselves report any problem
                 pass
 
-        for rec in ordered_map(one, list(range(len(loaded))), workers, initializer=worker_start, warm=warm):
+        for rec in later.parallel.ordered_map(one, list(range(len(loaded))), workers, initializer=worker_start, warm=warm):
             if "error" in rec and not skip_bad:
                 raise InputError(rec["error"].split(": ", 1)[-1] if rec["error"].startswith(rec["shape"]) else rec["error"],
                                  rec["shape"])
             records.append(rec)
             prog.advance(task)
     summary = out_dir / "summary.jsonl"
-    write_jsonl(summary, records)
+    later.bulk.write_jsonl(summary, records)
     failed = sum(1 for r in records if "error" in r)
     folded = sum(1 for r in records if "error" not in r and (r["inverted"] or r["missed_corners"]))
     note = f", {failed} failed (records with \"error\")" if failed else ""
@@ -731,11 +670,10 @@ def _parse_sides(text: str, n_sides: int) -> list[int]:
 
 def _mesh_template(shape: Path, *, catalogue, internal, lattice, points, rank_, out_path, png, svg, require_valid,
                    min_quality, max_edge_ratio, band, tie_break, corner_angle, as_json) -> None:
-    """``mesh --template``: the paper's answer, the best-ranked catalogue mesh placed as is, with
-    the ranking's report (rank, utility, the quality band, the next valid mesh)."""
-    from jaxmatch.io.meshfile import write_mesh
-    from jaxmatch.placement.choose import DEFAULT_WALK, GOOD_QUALITY, choose_mesh, draw_placements, fit_json, panel_title
-
+    """``mesh --template``: the paper's answer, the best-ranked catalogue mesh placed as is
+    (``jaxmatch.mesh(..., template=True)``), with the ranking's report (rank, utility, the
+    quality band, the next valid mesh: the :class:`~jaxmatch.placement.choose.MeshChoice` in
+    the mesh's ``detail``)."""
     tb = _tie_break(tie_break)
     if not -1.0 <= min_quality <= 1.0:
         raise InputError(f"must lie in [-1, 1] (a scaled Jacobian), got {min_quality:g}", "--min-quality")
@@ -747,92 +685,24 @@ def _mesh_template(shape: Path, *, catalogue, internal, lattice, points, rank_, 
     shp, lat, cat, ks = _inputs(shape, corner_angle, lattice, catalogue, internal)
     with _progress() as prog:
         task = prog.add_task("scoring meshes", total=None)
-        choice = choose_mesh(shp, cat, lat, rank=rank_, internal=ks, points=points, tie_break=tb,
-                             require_valid=require_valid, walk=DEFAULT_WALK, min_quality=min_quality,
-                             max_edge_ratio=max_edge_ratio, band=band,
-                             progress=lambda d, t: prog.update(task, completed=d, total=t))
-    m, pl, ann = choice.match, choice.placement, choice.ranking.annotation
-    written = {}
-    if out_path is not None:
-        written["out"] = str(write_mesh(out_path, pl))
-    for key, path in (("png", png), ("svg", svg)):
-        if path is not None:
-            written[key] = str(draw_placements(path, shp, ann, [(panel_title(choice.rank, m, pl), pl)], title=shape.name))
-    floor = f"min scaled Jacobian >= {min_quality:g}, max edge ratio <= {max_edge_ratio:g}"
-    notes = []
-    if choice.size is not None:
-        notes.append(choice.size.describe())
-    if choice.passed_over is not None:
-        pr, pm, ppl = choice.passed_over
-        how = "in another orientation or alignment, " if choice.reoriented else ""
-        notes.append(f"quality band: mesh #{pr} {pm.mesh_id} (utility {pm.utility:g}) places with min scaled Jacobian "
-                     f"{ppl.min_scaled_jacobian:.3f}, below {GOOD_QUALITY:g}; placed #{choice.rank} {m.mesh_id} ({how}utility "
-                     f"{choice.utility:g}, within {band:g} of it) with {pl.min_scaled_jacobian:.3f} (--band 0 places #{pr})")
-    elif choice.rank != choice.requested_rank:
-        notes.append(f"mesh #{choice.requested_rank} is not a good mesh of the shape; placed #{choice.rank} {m.mesh_id}, the first "
-                     f"mesh of the ranking that keeps every corner, has no inverted quad and {floor}")
-    if pl.missed_corners.shape[0]:
-        where = ", ".join(f"({x:.6g}, {y:.6g})" for x, y in pl.missed_corners)
-        notes.append(f"MISSED CORNERS: {pl.missed_corners.shape[0]} of {pl.corners} corners of the shape get no vertex of mesh "
-                     f"#{choice.rank} {m.mesh_id}: {where} (the mesh cuts across them)")
-    if pl.inverted:
-        notes.append(f"FOLDED: {pl.inverted} of {pl.mesh.n_quads} quads of mesh #{choice.rank} {m.mesh_id} are inverted "
-                     "(a corner of zero or negative area: the placed mesh folds over itself or is degenerate)")
-    if choice.valid and not choice.good:
-        notes.append(f"LOW QUALITY: mesh #{choice.rank} {m.mesh_id} has min scaled Jacobian {pl.min_scaled_jacobian:.3f} and max "
-                     f"edge ratio {pl.max_edge_ratio:.2f}; the floor is {floor}")
-    if not choice.valid:
-        notes.append("files were written anyway")
-    if not choice.good:
-        if choice.alternative is not None:
-            ar, am, apl = choice.alternative
-            notes.append(f"next-ranked mesh that keeps every corner, has no inverted quad and {floor}: #{ar} {am.mesh_id} "
-                         f"(utility {am.utility:g}, min scaled Jacobian {apl.min_scaled_jacobian:.3f}); use --rank {ar} or --require-valid")
-        else:
-            last = choice.requested_rank + choice.searched
-            more = "" if choice.searched >= DEFAULT_WALK - 1 else " (no further meshes match)"
-            notes.append(f"no mesh ranked #{choice.requested_rank}..#{last} keeps every corner, has no inverted quad and {floor}{more}")
+        m = later.pipeline.mesh(shp, template=True, catalogue=cat, lattice=lat, internal=ks, rank=rank_, points=points,
+                                tie_break=tb, require_valid=require_valid, min_quality=min_quality,
+                                max_edge_ratio=max_edge_ratio, band=band,
+                                progress=lambda d, t, name: prog.update(task, completed=d, total=t))
+    choice = m.detail
+    title = report.panel_title(choice.rank, choice.match, choice.placement)
+    written = _write(m, out_path, png, svg, lambda pic: later.plot.draw_in_shape(
+        pic, shp, choice.ranking.annotation, [(title, m)], title=shape.name))
+    notes = report.template_notes(choice, min_quality=min_quality, max_edge_ratio=max_edge_ratio, band=band)
     if as_json:
-        alt = choice.alternative
-        print(json.dumps({
-            "shape": str(shape), "sequence": ann.symbols, "lattice": lat.name, "tie_break": tb,
-            "rank": choice.rank, "requested_rank": choice.requested_rank, "mesh_id": m.mesh_id,
-            "internal_vertices": int(m.internal_vertices), "boundary_length": int(m.boundary_length),
-            "utility": choice.utility, "rotation": int(pl.rotation), "reoriented": choice.reoriented, "reflected": bool(pl.reflected),
-            **fit_json(pl), "irregular": int(len(pl.irregular)), "good": choice.good,
-            "min_quality": min_quality, "max_edge_ratio_allowed": max_edge_ratio,
-            "alignment": [int(i) for i in pl.alignment],
-            "size_choice": None if choice.size is None else choice.size.as_json(),
-            "out": written.get("out"), "png": written.get("png"), "svg": written.get("svg"),
-            "band": band,
-            "passed_over": None if choice.passed_over is None else {
-                "rank": choice.passed_over[0], "mesh_id": choice.passed_over[1].mesh_id,
-                "utility": float(choice.passed_over[1].utility),
-                "min_scaled_jacobian": choice.passed_over[2].min_scaled_jacobian},
-            "next_valid": None if alt is None else {"rank": alt[0], "mesh_id": alt[1].mesh_id, "utility": float(alt[1].utility),
-                                                    "min_scaled_jacobian": alt[2].min_scaled_jacobian},
-        }))
+        print(json.dumps(report.template_json(shape, choice, lattice_name=lat.name, tie_break=tb, min_quality=min_quality,
+                                              max_edge_ratio=max_edge_ratio, band=band, written=written)))
         for note in notes:
             print(note, file=sys.stderr)
     else:
-        out.print(f"shape [bold]{shape}[/]: {len(ann.codes)} points [cyan]{ann.symbols}[/]")
-        out.print(f"lattice {lat.name}; scored {choice.ranking.scored} meshes, {choice.ranking.unmatchable} unmatchable; "
-                  f"ties broken by {tb}", highlight=False)
-        out.print(f"mesh #{choice.rank} {m.mesh_id}: {m.internal_vertices} internal, {m.boundary_length} boundary vertices, "
-                  f"{pl.mesh.n_quads} quads, {len(pl.irregular)} irregular internal; utility {choice.utility:g}, rotation {pl.rotation}, "
-                  f"{'reflected' if pl.reflected else 'not reflected'}", markup=False, highlight=False)
-        out.print(f"corners kept: {pl.kept_corners} of {pl.corners}; scaled Jacobian: min {pl.min_scaled_jacobian:.3f}, "
-                  f"mean {pl.mean_scaled_jacobian:.3f}; max edge ratio {pl.max_edge_ratio:.2f}; inverted quads: {pl.inverted}; "
-                  f"mesh area / shape area {pl.area_ratio:.6f}", markup=False, highlight=False)
-        if choice.size is not None:  # part of the answer: which size and why
-            out.print(notes[0], markup=False, highlight=False)
-        for note in notes[1 if choice.size is not None else 0:]:  # warnings (FOLDED, next valid mesh): stderr, as with --json
-            err.print(note, markup=False, highlight=False)
-        for path in written.values():
-            out.print(f"wrote {path}", markup=False, highlight=False)
+        report.print_template(out, err, shape, choice, lattice_name=lat.name, tie_break=tb, notes=notes, written=written)
     if not choice.valid:
         raise typer.Exit(EXIT_INVERTED)
-
 
 
 @app.command()
@@ -847,8 +717,6 @@ def annotate(
     as_json: bool = typer.Option(False, "--json", help=JSON_HELP),
 ) -> None:
     """Print the s/x/v sequence 'score' would use for SHAPE (same options) and where each point lies (user coordinates)."""
-    from jaxmatch.shape import annotate as annotate_shape, default_points
-
     angle = _corner_angle(corner_angle)
     if size is not None and not (size > 0 and size < float("inf")):
         raise InputError(f"must be a positive length, got {size:g}", "--size")
@@ -856,55 +724,28 @@ def annotate(
     ks = _sizes(cat, internal)
     shp = _load(shape, angle)
     if size is not None:
-        from jaxmatch.meshing.pipeline import canonical
-
         shp = canonical(shp, size, angle)
         err.print(f"corners judged at size {size:g}: {shp.n_corners}", highlight=False)
     if points is None:
         points = default_points(shp, max(b.n for b in cat.buckets(ks)))
     ann = annotate_shape(shp, points)
     xy = shp.to_user(ann.positions)
-    from jaxmatch.placement.refine import side_lengths, side_polylines
-
-    polys, lengths = side_polylines(shp), side_lengths(shp)
+    polys, lengths = later.refine.side_polylines(shp), later.refine.side_lengths(shp)
     if as_json:
-        print(json.dumps({"shape": str(shape), "sequence": ann.symbols,
-                          "points": [{"index": i, "symbol": s, "x": float(p[0]), "y": float(p[1]), "side": int(sd)}
-                                     for i, (s, p, sd) in enumerate(zip(ann.symbols, xy, ann.side))],
-                          "sides": [{"side": i, "from": [float(v) for v in p[0]], "to": [float(v) for v in p[-1]],
-                                     "length": float(ln)} for i, (p, ln) in enumerate(zip(polys, lengths))]}))
+        print(json.dumps(report.annotation_json(shape, ann, xy, polys, lengths)))
         return
-    out.print(ann.symbols)
-    from rich.table import Table
-
-    table = Table()
-    for col in ("index", "symbol", "x", "y", "side"):
-        table.add_column(col, justify="right")
-    for i, (s, p, sd) in enumerate(zip(ann.symbols, xy, ann.side)):
-        table.add_row(str(i), s, f"{p[0]:.6g}", f"{p[1]:.6g}", str(int(sd)))
-    out.print(table)
-    out.print("sides for 'mesh --sides' (side i runs from corner i to corner i+1, in the file's order; "
-              "the s/x/v table above numbers them counter-clockwise):" if shp.n_corners else
-              "no corners: 'mesh --sides' takes one total count", markup=False, highlight=False)
-    sides = Table()
-    for col in ("side", "from", "to", "length"):
-        sides.add_column(col, justify="right")
-    for i, (p, ln) in enumerate(zip(polys, lengths)):
-        sides.add_row(str(i), f"({p[0][0]:.6g}, {p[0][1]:.6g})", f"({p[-1][0]:.6g}, {p[-1][1]:.6g})", f"{ln:.6g}")
-    out.print(sides)
+    report.print_annotation(out, shp.n_corners, ann, xy, polys, lengths)
 
 
 @lattice_app.command("show")
 def lattice_show(name: str = typer.Argument(..., metavar="NAME|FILE", help="fine, coarse, or a TOML path."),
                  as_json: bool = typer.Option(False, "--json", help="All 64 triples per type; null means -inf.")) -> None:
     """Show a lattice's weight table."""
-    from jaxmatch.scoring.lattice import lattice_json, lattice_text, load_lattice
-
-    lat = load_lattice(name)
+    lat = later.lattice.load_lattice(name)
     if as_json:
-        print(json.dumps(lattice_json(lat)))
+        print(json.dumps(later.lattice.lattice_json(lat)))
     else:
-        out.print(lattice_text(lat), markup=False)
+        out.print(later.lattice.lattice_text(lat), markup=False)
 
 
 @catalogue_app.command("build")
@@ -935,21 +776,7 @@ def catalogue_info(path: Path = typer.Argument(..., metavar="FILE", help="Catalo
     if as_json:
         print(json.dumps(c))
         return
-    out.print(f"format version {c['format_version']}")
-    from rich.table import Table
-
-    t = Table(title="per k")
-    for col in ("k", "meshes (up to rotation and reflection)", "up to rotation only"):
-        t.add_column(col, justify="right")
-    for k, d in c["per_k"].items():
-        t.add_row(k, str(d["meshes"]), str(d["up_to_rotation"]))
-    out.print(t)
-    t2 = Table(title="per boundary length")
-    t2.add_column("n", justify="right")
-    t2.add_column("meshes", justify="right")
-    for n, cnt in c["per_boundary_length"].items():
-        t2.add_row(n, str(cnt))
-    out.print(t2)
+    report.print_catalogue_counts(out, c)
 
 
 @catalogue_app.command("export")
@@ -977,10 +804,8 @@ def label(shapes: Optional[list[Path]] = typer.Argument(None, help="Shape files 
           out_path: Optional[Path] = typer.Option(None, "--out", metavar="FILE", help="Tuned lattice TOML (default: <labels>.tuned.toml)."),
           epochs: int = typer.Option(10, min=0, help="Tuning passes over the labels.")) -> None:
     """A local web page to pick the preferred mesh for shapes; appends labels, tunes the lattice."""
-    from jaxmatch.label.cli import run_label
-
     enable_compile_cache()
-    run_label(shapes or [], labels, internal=internal, size=size, top=top, port=port, host=host, lattice=lattice,
+    later.label.run_label(shapes or [], labels, internal=internal, size=size, top=top, port=port, host=host, lattice=lattice,
               catalogue=catalogue, corner_angle=_corner_angle(corner_angle), tune=tune, out=out_path, epochs=epochs)
 
 

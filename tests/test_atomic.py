@@ -115,15 +115,17 @@ def test_leftovers_of_dead_writers_are_removed(tmp_path):
 
 
 def _placement():
+    """A placed 2x2 grid as a QuadMesh (what the writers take)."""
     from jaxmatch.placement.embed import arc_lengths, place
     from jaxmatch.catalogue.mesh import from_quads
+    from jaxmatch.meshing.build import from_placement
 
     vid = np.arange(9).reshape(3, 3)
     quads = [[vid[j, i], vid[j, i + 1], vid[j + 1, i + 1], vid[j + 1, i]] for j in range(2) for i in range(2)]
     xy = np.array([[i, j] for j in range(3) for i in range(3)], float)
     mesh = from_quads(quads)
     pts = xy[mesh.boundary]
-    return place(pts, arc_lengths(pts)[:-1], np.arange(len(pts)), mesh, 0, False)
+    return from_placement(None, place(pts, arc_lengths(pts)[:-1], np.arange(len(pts)), mesh, 0, False))
 
 
 def _figure():

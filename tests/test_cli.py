@@ -52,6 +52,20 @@ def test_score_table_and_per_size(small_cat):
         assert k in r.stdout
 
 
+def test_check_outputs():
+    """Output suffixes are refused before any work, naming the option."""
+    from jaxmatch.cli import check_outputs
+    from jaxmatch.errors import InputError
+
+    check_outputs("a.vtk", "a.png", "a.svg")
+    check_outputs(None, None, None)
+    for kw, opt in (({"out": "a.stl"}, "--out"), ({"png": "a.svg"}, "--png"), ({"svg": "a.png"}, "--svg"),
+                    ({"out": "noext"}, "--out")):
+        with pytest.raises(InputError) as e:
+            check_outputs(**kw)
+        assert opt in str(e.value)
+
+
 def test_annotate_json():
     r = run("annotate", EXAMPLES / "triangle.json", "--points", "12", "--json")
     assert r.returncode == 0, r.stderr

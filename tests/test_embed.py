@@ -14,19 +14,15 @@ from jaxmatch.placement.embed import (
     Placement,
     arc_lengths,
     boundary_paths,
-    edge_ratios,
-    inverted_mask,
     oriented_boundary,
     place,
     point_at,
     polygon_area,
-    quad_areas,
-    quality,
-    sj_inverted,
     smooth,
     to_user,
     tutte,
 )
+from jaxmatch.quality import edge_ratios, inverted_mask, quad_areas, quality, sj_inverted
 from jaxmatch.catalogue.mesh import boundary_valences, from_quads, validate, valences
 
 # ---------------------------------------------------------------------------------------------

@@ -14,7 +14,8 @@ from hypothesis import strategies as st
 
 from jaxmatch.placement import _numba_smooth, kernels
 from jaxmatch.placement.embed import LBFGS_FTOL, LBFGS_GTOL, LBFGS_MEMORY, Slide, _energy, _lbfgs, _objective, _Params
-from jaxmatch.placement.embed import inverted_mask, quality, smooth
+from jaxmatch.placement.embed import smooth
+from jaxmatch.quality import inverted_mask, quality
 
 from test_embed import grid, star
 

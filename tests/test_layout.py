@@ -36,8 +36,9 @@ from jaxmatch.placement.layout import (
     merge_patches,
     parse_layout,
     solve_counts,
-    write_layout_mesh,
 )
+from jaxmatch.io.meshfile import write_mesh
+from jaxmatch.meshing.build import from_layout
 from jaxmatch.placement import solve as lay_solve
 from jaxmatch.placement.solve import mesh_layout
 from jaxmatch.scoring.lattice import load_lattice
@@ -518,7 +519,7 @@ def check_msh(path, m):
 def test_two_blocks_msh_read_back(cat, lat, tmp_path):
     lay = load_layout(LAYOUTS / "two-blocks.json")
     m = mesh_layout(lay, cat, lat, size=0.5)
-    out = write_layout_mesh(tmp_path / "t.msh", m)
+    out = write_mesh(tmp_path / "t.msh", from_layout(m))
     check_msh(out, m)
 
 
@@ -527,7 +528,7 @@ def test_two_blocks_other_formats_keep_patch_and_lines(cat, lat, tmp_path, suffi
     import meshio
 
     m = mesh_layout(load_layout(LAYOUTS / "two-blocks.json"), cat, lat, size=0.5)
-    out = write_layout_mesh(tmp_path / f"t{suffix}", m)
+    out = write_mesh(tmp_path / f"t{suffix}", from_layout(m))
     if suffix == ".json":
         d = json.loads(out.read_text())
         assert d["patch"] == m.patch.tolist() and d["quads"] == m.quads.tolist()
@@ -552,7 +553,7 @@ def test_notched_plate_many_patches(cat, lat, tmp_path):
     assert m.counts[sid(m.sides, "14-15")] == 4  # the file's requested count
     sj = scaled_jacobians(m.xy, m.quads)
     assert sj.min() >= 0.3
-    check_msh(write_layout_mesh(tmp_path / "plate.msh", m), m)
+    check_msh(write_mesh(tmp_path / "plate.msh", from_layout(m)), m)
 
 
 # ---------------------------------------------------------------------------------------------

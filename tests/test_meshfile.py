@@ -13,6 +13,7 @@ from jaxmatch.placement.embed import arc_lengths, place
 from jaxmatch.errors import InputError
 from jaxmatch.io.meshfile import MESH_FORMATS, mesh_format, read_json_mesh, write_mesh
 from jaxmatch.catalogue.mesh import from_quads
+from jaxmatch.meshing.build import from_placement
 
 
 def grid(nx, ny):
@@ -36,10 +37,16 @@ def placement():
     return pl
 
 
+@pytest.fixture(scope="module")
+def qmesh(placement):
+    """The placement as the one mesh type the writers take (no shape: no corners)."""
+    return from_placement(None, placement)
+
+
 @pytest.mark.parametrize("suffix", [".vtk", ".vtu", ".msh", ".obj"])
-def test_meshio_formats_round_trip(tmp_path, placement, suffix):
+def test_meshio_formats_round_trip(tmp_path, placement, qmesh, suffix):
     path = tmp_path / f"mesh{suffix}"
-    assert write_mesh(path, placement) == path
+    assert write_mesh(path, qmesh) == path
     back = meshio.read(path)
     np.testing.assert_array_equal(back.points[:, :2], placement.xy)
     np.testing.assert_array_equal(back.points[:, 2], 0.0)
@@ -58,11 +65,12 @@ def test_meshio_formats_round_trip(tmp_path, placement, suffix):
     assert [p.name for p in tmp_path.iterdir()] == [path.name]  # no temporary left
 
 
-def test_json_round_trip(tmp_path, placement):
+def test_json_round_trip(tmp_path, placement, qmesh):
     path = tmp_path / "mesh.json"
-    write_mesh(path, placement)
+    write_mesh(path, qmesh)
     data = json.loads(path.read_text())
-    assert set(data) == {"points", "quads", "scaled_jacobian", "groups"}
+    assert set(data) == {"points", "quads", "scaled_jacobian", "patch", "quad_groups", "groups"}
+    assert data["quad_groups"] == {"names": ["patch 0"], "group": [0] * len(placement.mesh.quads)}
     assert len(data["groups"]["boundary"]) == len(placement.mesh.boundary)
     np.testing.assert_array_equal(np.array(data["points"]), placement.xy)
     np.testing.assert_array_equal(np.array(data["quads"]), placement.mesh.quads)
@@ -73,23 +81,23 @@ def test_json_round_trip(tmp_path, placement):
     np.testing.assert_array_equal(sj, placement.scaled_jacobian)
 
 
-def test_suffix_is_case_insensitive(tmp_path, placement):
+def test_suffix_is_case_insensitive(tmp_path, placement, qmesh):
     path = tmp_path / "MESH.VTK"
-    write_mesh(path, placement)
+    write_mesh(path, qmesh)
     assert meshio.read(path, file_format="vtk").points.shape == (placement.xy.shape[0], 3)
     assert mesh_format("a/b.Json") == "json"
 
 
 @pytest.mark.parametrize("name", ["mesh.stl", "mesh", "mesh.txt"])
-def test_unknown_suffix_is_input_error(tmp_path, placement, name):
+def test_unknown_suffix_is_input_error(tmp_path, placement, qmesh, name):
     with pytest.raises(InputError, match="unknown mesh file format") as err:
-        write_mesh(tmp_path / name, placement)
+        write_mesh(tmp_path / name, qmesh)
     assert name in str(err.value)
     assert list(tmp_path.iterdir()) == []
 
 
 @pytest.mark.parametrize("suffix", sorted(MESH_FORMATS))
-def test_failed_write_leaves_nothing_and_keeps_old_file(tmp_path, placement, monkeypatch, suffix):
+def test_failed_write_leaves_nothing_and_keeps_old_file(tmp_path, placement, qmesh, monkeypatch, suffix):
     path = tmp_path / f"mesh{suffix}"
     path.write_text("old")
 
@@ -99,9 +107,17 @@ def test_failed_write_leaves_nothing_and_keeps_old_file(tmp_path, placement, mon
     monkeypatch.setattr(meshio, "write", boom)
     monkeypatch.setattr(json, "dumps", boom)
     with pytest.raises(RuntimeError, match="disk full"):
-        write_mesh(path, placement)
+        write_mesh(path, qmesh)
     assert path.read_text() == "old"
     assert [p.name for p in tmp_path.iterdir()] == [path.name]
+
+
+def test_only_a_quadmesh_is_written(tmp_path, placement):
+    """One output path: other results become a QuadMesh where they are made (meshing.build)."""
+    for other in (placement, placement.mesh, object()):
+        with pytest.raises(TypeError, match="takes a jaxmatch.QuadMesh"):
+            write_mesh(tmp_path / "m.msh", other)
+    assert list(tmp_path.iterdir()) == []
 
 
 @pytest.mark.parametrize(

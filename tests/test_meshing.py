@@ -242,7 +242,7 @@ def test_kept_measures_are_the_plain_ones(fold):
     functions' values, and the arrays it hands out are copies."""
     from jaxmatch.catalogue.mesh import edges, valences
     from jaxmatch.meshing.result import boundary_loops
-    from jaxmatch.placement.embed import inverted_mask, quality
+    from jaxmatch.quality import inverted_mask, quality
 
     m = grid_mesh(4, 3, fold=fold, patches=2)
     for mm in (m, m.with_choice("x", "", None, ()), m.with_choice("y", "", None, ())):
@@ -330,14 +330,17 @@ def test_a_skipped_candidate_never_wins_and_keeps_its_place(inserted):
 
 
 def test_every_result_writes_with_groups(cat, tmp_path):
+    """Every result is a QuadMesh by the time it is written (one output path)."""
     import meshio
+
+    from jaxmatch.meshing.build import from_refined
 
     shp = jaxmatch.load_shape(EX / "lshape.json")
     lat = jaxmatch.load_lattice("fine")
     results = {
         "mesh": jaxmatch.mesh(shp, size=0.25, catalogue=cat),
         "template": jaxmatch.mesh(shp, template=True, catalogue=cat, internal=2),
-        "refine": jaxmatch.refine_mesh(shp, cat, lat, size=0.25),
+        "refine": from_refined(shp, jaxmatch.refine_mesh(shp, cat, lat, size=0.25).mesh, size=0.25),
         "concave": jaxmatch.mesh_concave(shp, 0.25, cat),
         "layout": jaxmatch.mesh_layout(EX / "layouts" / "two-blocks.json", cat, size=0.5),
     }

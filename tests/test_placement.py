@@ -15,7 +15,7 @@ from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from jaxmatch.catalogue import store as cm
-from jaxmatch.placement.embed import inverted_mask, quality, quad_areas
+from jaxmatch.quality import inverted_mask, quality, quad_areas
 from jaxmatch.errors import InputError
 from jaxmatch.scoring.lattice import load_lattice
 from jaxmatch.api import rank
@@ -23,27 +23,21 @@ from jaxmatch.catalogue.mesh import from_quads
 from jaxmatch.placement.embed import place
 from jaxmatch.placement.choose import (
     AREA_BAND,
-    GAP_UNIT,
     GOOD_QUALITY,
     UTILITY_BAND,
     SIZE_RULES,
     acceptable,
-    check_outputs,
     choose_mesh,
     choose_size,
     match_candidates,
-    orientation_utilities,
     size_key,
-    spread_optimal_alignment,
-    draw_placements,
     first_valid,
-    gap_cost,
     geometry_key,
     place_match,
     place_top,
     rerank_ties,
-    spread_alignment,
 )
+from jaxmatch.placement.spread import GAP_UNIT, gap_cost, orientation_utilities, spread_alignment, spread_optimal_alignment
 from jaxmatch.scoring.exact import score_bucket, utility_of
 from jaxmatch.scoring.reference import dp_reference as reference_dp
 from jaxmatch.io.readers import load_shape
@@ -368,21 +362,17 @@ def test_acceptable_needs_edge_ratio_and_scaled_jacobian(xy, good):
 
 
 # ---------------------------------------------------------------------------------------------
-# output helpers
-
-
-def test_check_outputs():
-    check_outputs("a.vtk", "a.png", "a.svg")
-    check_outputs(None, None, None)
-    for kw in ({"out": "a.stl"}, {"png": "a.svg"}, {"svg": "a.png"}, {"out": "noext"}):
-        with pytest.raises(InputError):
-            check_outputs(**kw)
+# pictures of placements (as QuadMeshes)
 
 
 def test_draw_placements_png(tmp_path, ranked, cat):
+    from jaxmatch.io.plot import draw_in_shape
+    from jaxmatch.meshing.build import from_placement
+
     shp, r, _ = ranked["lshape"]
     pls = place_top(shp, r, cat)[:2]
-    path = draw_placements(tmp_path / "p.png", shp, r.annotation, [("a", pls[0]), ("b", pls[1])], title="two")
+    items = [("a", from_placement(shp, pls[0])), ("b", from_placement(shp, pls[1]))]
+    path = draw_in_shape(tmp_path / "p.png", shp, r.annotation, items, title="two")
     assert path.read_bytes().startswith(PNG_MAGIC)
     assert [p.name for p in tmp_path.iterdir()] == ["p.png"]
 
@@ -706,7 +696,7 @@ def test_c_and_numba_alignment_kernels_agree(seed):
     """The numba fallback of the alignment DPs gives what the C library gives: utilities of
     every orientation, and per orientation the same tied alignments in the same order."""
     from jaxmatch.placement import _numba_spread, kernels
-    from jaxmatch.placement.choose import MAX_TIED_ALIGNMENTS, _spread_setup
+    from jaxmatch.placement.spread import MAX_TIED_ALIGNMENTS, spread_setup
 
     if kernels.BACKEND != "c":
         pytest.skip("the C library is not built in this installation")
@@ -718,7 +708,7 @@ def test_c_and_numba_alignment_kernels_agree(seed):
         c, v = np.asarray(codes, np.int64), np.asarray(vals, np.int64)
         np.testing.assert_array_equal(kernels.orientation_utilities(c, v, table, skip),
                                       _numba_spread.orientation_utilities(c, v, table, skip))
-        st = _spread_setup(t, per, codes, (table, skip))
+        st = spread_setup(t, per, codes, (table, skip))
         n = len(v)
         seqs = np.stack([np.roll(v[::-1] if o >= n else v, -(o % n)) for o in range(2 * n)]).astype(np.int64)
         args = (st.c, seqs, st.table, st.between, st.prefix, st.suffix, st.gq, st.tt, per, st.unit, MAX_TIED_ALIGNMENTS)

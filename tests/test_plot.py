@@ -14,6 +14,7 @@ from jaxmatch.placement.embed import arc_lengths, place
 from jaxmatch.errors import InputError
 from jaxmatch.catalogue.mesh import boundary_valences, from_quads
 from jaxmatch.io.plot import Panel, draw_many, draw_match, new_figure, quality_line, save_figure
+from jaxmatch.meshing.build import from_placement
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
@@ -42,7 +43,7 @@ def l_match(**kw):
     pts, codes = l_outline()
     t = arc_lengths(pts)[:-1]
     pl = place(pts, t, np.array([0, 2, 4, 6, 8, 10, 12, 18, 21, 24, 30, 33]), grid(3, 3), 0, False, **kw)
-    return Panel(pts, pts, codes, pl, "L, 3x3 grid")
+    return Panel(pts, pts, codes, from_placement(None, pl), "L, 3x3 grid")
 
 
 def star_match(k=5, reflected=False):
@@ -56,21 +57,21 @@ def star_match(k=5, reflected=False):
     rot = int(np.flatnonzero(s == 2)[0])  # a corner (valence 2) first in matched order
     pl = place(pts, t, 2 * np.arange(2 * k), mesh, rot, reflected)
     assert pl.inverted == 0
-    return Panel(pts, pts, codes, pl, f"valence-{k} star")
+    return Panel(pts, pts, codes, from_placement(None, pl), f"valence-{k} star")
 
 
 @pytest.fixture(scope="module")
 def panels():
     bad = l_match(smooth_iters=0)
-    assert bad.placement.inverted > 0
+    assert bad.mesh.inverted > 0
     good = l_match()
-    assert good.placement.inverted == 0
+    assert good.mesh.inverted == 0
     return {"good": good, "bad": bad, "star": star_match()}
 
 
 def draw_one(panel) -> tuple[Figure, object]:
     fig, (ax,) = new_figure(1)
-    draw_match(ax, panel.points, panel.positions, panel.codes, panel.placement, title=panel.title)
+    draw_match(ax, panel.points, panel.positions, panel.codes, panel.mesh, title=panel.title)
     return fig, ax
 
 
@@ -103,30 +104,30 @@ def test_legend_and_title_show_valences_codes_and_quality(panels):
     assert "inverted quad" not in labels
     title = ax.get_title()
     assert title.startswith("valence-5 star\n")
-    assert quality_line(panels["star"].placement) in title and "inverted 0" in title
+    assert quality_line(panels["star"].mesh) in title and "inverted 0" in title
     fig, ax = draw_one(panels["good"])
     assert "v (concave corner)" in legend_labels(ax)
 
 
 def test_inverted_quads_are_filled_red(panels):
-    pl = panels["bad"].placement
+    m = panels["bad"].mesh
     fig, ax = draw_one(panels["bad"])
     assert "inverted quad" in legend_labels(ax)
-    assert f"inverted {pl.inverted}" in ax.get_title()
+    assert f"inverted {m.inverted}" in ax.get_title()
     polys = [c for c in ax.collections if isinstance(c, PolyCollection)]
     assert len(polys) == 1
     colours = polys[0].get_facecolors()
-    assert colours.shape[0] == pl.mesh.n_quads
+    assert colours.shape[0] == m.quads.shape[0]
     red = (colours[:, 0] > 0.8) & (colours[:, 1] < 0.3)
-    assert red.sum() == pl.inverted
+    assert red.sum() == m.inverted
 
 
 def test_draw_many_accepts_panels_tuples_and_dicts(tmp_path, panels):
     s = panels["star"]
     items = [
         panels["good"],
-        (s.points, s.positions, s.codes, s.placement),
-        dict(points=s.points, positions=s.positions, codes=s.codes, placement=star_match(3, reflected=True).placement, title="reflected"),
+        (s.points, s.positions, s.codes, s.mesh),
+        dict(points=s.points, positions=s.positions, codes=s.codes, mesh=star_match(3, reflected=True).mesh, title="reflected"),
         panels["bad"],
         star_match(4),
     ]
@@ -178,7 +179,7 @@ def test_failed_save_leaves_nothing(tmp_path, panels, monkeypatch, suffix):
 
 def test_panel_title_keeps_the_whole_mesh_id():
     """Regression: 15-character ids were cut to 14, so an id copied from a picture was not found."""
-    from jaxmatch.placement.choose import panel_title
+    from jaxmatch.report import panel_title
     from jaxmatch.scoring.rank import Match
 
     mesh_id = "k5-b2b65fa5f3b0"
@@ -187,5 +188,5 @@ def test_panel_title_keeps_the_whole_mesh_id():
     assert mesh_id in title.split()
     panel = star_match()
     fig, axes = new_figure(1)
-    draw_match(axes[0], panel.points, panel.positions, panel.codes, panel.placement, title)
+    draw_match(axes[0], panel.points, panel.positions, panel.codes, panel.mesh, title)
     assert mesh_id in axes[0].get_title().split()

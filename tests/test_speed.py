@@ -113,7 +113,7 @@ def test_a_lattice_is_parsed_once_per_content():
 
 def test_a_large_decomposition_is_smoothed_near_its_cuts_only(cat):
     from jaxmatch.placement import layout as L
-    from jaxmatch.placement.embed import inverted_mask, quality
+    from jaxmatch.quality import inverted_mask, quality
     from jaxmatch.placement.refine import SMOOTH_ALWAYS
 
     lat = load_lattice("fine")

@@ -1,4 +1,4 @@
-"""Write a placed quad mesh to a file (meshio formats and a small JSON format).
+"""Write a :class:`~jaxmatch.meshing.result.QuadMesh` to a file (meshio formats and a small JSON format).
 
 The format comes from the file suffix (case-insensitive):
 
@@ -13,16 +13,15 @@ suffix     format                                          keeps ``scaled_jacobi
            "scaled_jacobian": [...]}`` (written here)      yes
 =========  ==============================================  ==========================
 
-Points are the placement's ``xy`` in the user's coordinates; meshio formats get them padded
+Points are the mesh's ``xy`` in the user's coordinates; meshio formats get them padded
 to 3D with ``z = 0``. Quads are 0-based vertex indices, counter-clockwise (OBJ and Gmsh files
 store them 1-based, as their formats require; meshio converts back). Gmsh is written binary
 because meshio 5.3 writes ASCII ``$ElementData`` values that it cannot read back under
 numpy 2; every element gets physical and geometrical tag 1.
 
-Meshes of several patches (:func:`write_quads`, used by ``jaxmatch layout``) add more cell data
-(e.g. ``patch``, the patch id of every quad) and named groups: quad groups (each quad in one)
-and line groups (boundary edges, e.g. the outer boundary and each input side; an edge may be in
-several). In ``.msh`` every group is a physical group with its name in ``$PhysicalNames``
+Every mesh (:func:`write_mesh`) gets the cell data ``patch`` (the patch id of every quad) and
+named groups: quad groups (each quad in one) and line groups (boundary edges, e.g. the outer
+boundary and each input side; an edge may be in several). In ``.msh`` every group is a physical group with its name in ``$PhysicalNames``
 (quads: dimension 2, group ``i`` has physical tag ``i + 1``; lines: dimension 1, 2-node line
 elements); an element's geometrical tag equals its physical tag, and a line in several groups
 is written once per group (MSH 2 gives an element one physical tag, and gmsh itself writes such
@@ -50,7 +49,8 @@ from jaxmatch.errors import InputError
 from jaxmatch.files import atomic_open, atomic_path
 from jaxmatch.io import registry
 
-__all__ = ["LineGroup", "MESH_FORMATS", "mesh_format", "mesh_groups", "read_json_mesh", "write_mesh", "write_quads"]
+__all__ = ["LineGroup", "MESH_FORMATS", "QUADMESH_FIELDS", "mesh_format", "mesh_groups", "read_json_mesh", "write_mesh",
+           "write_quads"]
 
 for _name in ("vtk", "vtu", "obj", "gmsh22", "json"):
     registry.register_format(_name, "mesh", ("." + {"gmsh22": "msh"}.get(_name, _name),), writer=_name)
@@ -160,60 +160,38 @@ def write_quads(path: str | os.PathLike, xy: np.ndarray, quads: np.ndarray, *,
     return final
 
 
-def _unwrap(mesh):
-    """The mesh inside a choice object (MeshChoice.placement, RefineChoice.mesh, ShapeChoice.mesh)."""
-    for attr in ("placement", "mesh"):
-        inner = getattr(mesh, attr, None)
-        if inner is not None and hasattr(inner, "xy"):
-            return inner
-    return mesh
+QUADMESH_FIELDS = ("xy", "quads", "patch", "line_sets", "scaled_jacobian")
+"""What the writers read of a :class:`jaxmatch.meshing.result.QuadMesh`, the one mesh type they take
+(named, not imported: this low layer imports nothing of the meshing pipeline above it)."""
 
 
-def mesh_groups(mesh) -> tuple[np.ndarray | None, list[str], list[LineGroup]]:
-    """``(quad groups (Q,) int64 or None, their names, line groups)`` of any jaxmatch mesh: a
-    :class:`jaxmatch.meshing.result.QuadMesh` (``patch``, ``line_sets``), a layout mesh
-    (``patch``, ``outer``, ``side_vertices``), or a placed/refined template (its boundary loop)."""
-    patch = getattr(mesh, "patch", None)
-    names = [f"patch {p}" for p in range(int(np.max(patch)) + 1)] if patch is not None and len(patch) else []
-    if hasattr(mesh, "line_sets"):
-        return patch, names, [LineGroup(k, np.asarray(v, np.int64)) for k, v in mesh.line_sets.items()]
-    if hasattr(mesh, "side_vertices") and hasattr(mesh, "outer"):  # a layout mesh
-        loop = np.asarray(mesh.outer, np.int64)
-        groups = [LineGroup("boundary", np.stack([loop, np.roll(loop, -1)], axis=1))]
-        for name, ids in zip(mesh.sides.names, mesh.side_vertices):
-            groups.append(LineGroup(f"side {name}", np.stack([ids[:-1], ids[1:]], axis=1)))
-        return patch, names, groups
-    loop = getattr(mesh, "boundary", None)
-    if loop is None and hasattr(mesh, "mesh"):
-        loop = getattr(mesh.mesh, "boundary", None)
-    if loop is None:
-        return patch, names, []
-    loop = np.asarray(loop, np.int64)
-    return patch, names, [LineGroup("boundary", np.stack([loop, np.roll(loop, -1)], axis=1))]
+def mesh_groups(mesh: "QuadMesh") -> tuple[np.ndarray, list[str], list[LineGroup]]:
+    """``(quad groups (Q,) int64, their names, line groups)`` of a
+    :class:`~jaxmatch.meshing.result.QuadMesh`: its ``patch`` (groups ``"patch p"``) and its
+    ``line_sets`` (``"boundary"``, ``"side i-j"``, ``"hole h"``), in their order."""
+    patch = np.asarray(mesh.patch, np.int64)
+    names = [f"patch {p}" for p in range(int(np.max(patch)) + 1)] if patch.size else []
+    return patch, names, [LineGroup(k, np.asarray(v, np.int64)) for k, v in mesh.line_sets.items()]
 
 
-def write_mesh(path: str | os.PathLike, mesh) -> Path:
-    """Write any jaxmatch mesh to ``path`` atomically: points, quads, cell data
-    (``scaled_jacobian``, and ``patch`` when it has patches) and named groups (``"patch p"``,
-    ``"boundary"``, ``"side i-j"``; see :func:`mesh_groups`).
+def write_mesh(path: str | os.PathLike, mesh: "QuadMesh") -> Path:
+    """Write a :class:`~jaxmatch.meshing.result.QuadMesh` (what :func:`jaxmatch.mesh` returns)
+    to ``path`` atomically: points, quads, cell data (``scaled_jacobian``, ``patch``) and named
+    groups (``"patch p"``, ``"boundary"``, ``"side i-j"``; see :func:`mesh_groups`).
 
-    mesh: a :class:`jaxmatch.meshing.result.QuadMesh` (what :func:`jaxmatch.mesh` returns), a
-    layout mesh, a :class:`~jaxmatch.placement.embed.Placement`, a refined mesh, or a choice
-    object holding one. The format comes from the suffix (see the module docstring). Raises
-    :class:`InputError` for an unknown suffix, before anything is written; TypeError for an
-    object that is not a mesh. Returns the path written.
+    Other results become a QuadMesh where they are made (:mod:`jaxmatch.meshing.build`:
+    ``from_placement``, ``from_layout``, ``from_refined``). The format comes from the suffix
+    (see the module docstring). Raises :class:`InputError` for an unknown suffix, before
+    anything is written; TypeError for anything but a QuadMesh. Returns the path written.
     """
-    m = _unwrap(mesh)
-    quads = getattr(m, "quads", None)
-    if quads is None and hasattr(m, "mesh"):
-        quads = getattr(m.mesh, "quads", None)
-    if quads is None or not hasattr(m, "xy"):
-        raise TypeError(f"not a jaxmatch mesh: {type(mesh).__name__}")
-    cell = {"scaled_jacobian": np.asarray(m.scaled_jacobian, dtype=np.float64)}
-    patch, names, lines = mesh_groups(m)
-    if patch is not None:
-        cell["patch"] = np.asarray(patch, np.int64)
-    return write_quads(path, m.xy, quads, cell_data=cell, quad_groups=patch, quad_group_names=names, line_groups=lines)
+    missing = [f for f in QUADMESH_FIELDS if not hasattr(mesh, f)]
+    if missing:
+        raise TypeError(f"write_mesh takes a jaxmatch.QuadMesh (jaxmatch.meshing.build makes one of other results), "
+                        f"got {type(mesh).__name__} without {', '.join(missing)}")
+    patch, names, lines = mesh_groups(mesh)
+    cell = {"scaled_jacobian": np.asarray(mesh.scaled_jacobian, dtype=np.float64), "patch": patch}
+    return write_quads(path, mesh.xy, mesh.quads, cell_data=cell, quad_groups=patch, quad_group_names=names,
+                       line_groups=lines)
 
 
 def read_json_mesh(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -1,4 +1,7 @@
-"""Pictures of matches: the shape, its s/x/v annotation and the placed mesh.
+"""Pictures of meshes: a placed template over the shape and its s/x/v annotation
+(:func:`draw_match`, :func:`draw_in_shape`), and meshes of a region by patch (:func:`draw_meshes`,
+:func:`draw_quadmesh`). Every mesh drawn is a :class:`~jaxmatch.meshing.result.QuadMesh` (the
+type the writers take too; ``QuadMesh`` is only named here, this low layer imports no meshing).
 
 Drawing uses :class:`matplotlib.figure.Figure` directly (Agg canvas, no pyplot, no display,
 no global state). Colours follow the paper's figures in spirit: each boundary valence
@@ -19,18 +22,21 @@ from matplotlib.collections import LineCollection, PolyCollection
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 
-from jaxmatch.placement.embed import Placement, inverted_mask
+from jaxmatch.catalogue.mesh import edges, valences
 from jaxmatch.files import atomic_path
 from jaxmatch.io import registry
-from jaxmatch.catalogue.mesh import edges, valences
+from jaxmatch.quality import inverted_mask, quality
 
 __all__ = [
     "CODE_STYLE",
     "FIGURE_FORMATS",
     "Panel",
     "VALENCE_COLOURS",
+    "draw_in_shape",
     "draw_many",
     "draw_match",
+    "draw_meshes",
+    "draw_quadmesh",
     "figure_format",
     "new_figure",
     "quality_line",
@@ -64,21 +70,19 @@ OUTLINE_COLOUR = "#b0b0b0"
 @dataclass(frozen=True, eq=False)
 class Panel:
     """One match to draw: shape outline ``points (P, 2)``, annotated ``positions (m, 2)`` and
-    ``codes (m,)``, the :class:`~jaxmatch.placement.embed.Placement`, and a title."""
+    ``codes (m,)``, the placed template as a :class:`~jaxmatch.meshing.result.QuadMesh`
+    (``line_sets["boundary"]`` its boundary loop), and a title."""
 
     points: np.ndarray
     positions: np.ndarray
     codes: np.ndarray
-    placement: Placement
+    mesh: "QuadMesh"
     title: str = ""
 
 
-def quality_line(placement: Placement) -> str:
+def quality_line(mesh: "QuadMesh") -> str:
     """``"min SJ 0.873, mean SJ 0.973, inverted 0"``."""
-    return (
-        f"min SJ {placement.min_scaled_jacobian:.3f}, mean SJ {placement.mean_scaled_jacobian:.3f}, "
-        f"inverted {placement.inverted}"
-    )
+    return f"min SJ {mesh.min_scaled_jacobian:.3f}, mean SJ {mesh.mean_scaled_jacobian:.3f}, inverted {mesh.inverted}"
 
 
 def draw_match(
@@ -86,7 +90,7 @@ def draw_match(
     points: np.ndarray,
     annotation_positions: np.ndarray,
     codes: np.ndarray,
-    placement: Placement,
+    mesh: "QuadMesh",
     title: str | None = None,
     *,
     legend: bool = True,
@@ -94,16 +98,17 @@ def draw_match(
     """Draw one match on the matplotlib axes ``ax``.
 
     points: (P, 2) shape outline (closed ccw loop); annotation_positions: (m, 2) and
-    codes: (m,) ints (0 s, 1 x, 2 v); placement: the placed mesh (same coordinates).
+    codes: (m,) ints (0 s, 1 x, 2 v); mesh: the placed template (same coordinates; its
+    ``line_sets["boundary"]`` the boundary loop, edge ``j`` from vertex ``j``).
     Draws the outline, the quads (inverted ones filled red), the mesh edges, the annotated
     points (marker per code), boundary vertices coloured by valence and irregular internal
     vertices (valence 3 triangle, 5 pentagon); the title gets a second line with the quality
     (min / mean scaled Jacobian, inverted count).
     """
     pts = np.asarray(points, dtype=np.float64)
-    xy = np.asarray(placement.xy, dtype=np.float64)
-    quads = np.asarray(placement.mesh.quads)
-    loop = np.asarray(placement.mesh.boundary)
+    xy = np.asarray(mesh.xy, dtype=np.float64)
+    quads = np.asarray(mesh.quads)
+    loop = np.asarray(mesh.line_sets["boundary"])[:, 0]
     val = valences(quads, xy.shape[0])
 
     # quads: light fill, inverted ones red
@@ -141,7 +146,7 @@ def draw_match(
         ax.scatter(xy[sel, 0], xy[sel, 1], s=70, facecolors="none", edgecolors=colour, linewidths=2.2, zorder=5)
         handles.append(Line2D([], [], ls="", marker="o", mfc="none", mec=colour, mew=2.2, label=f"boundary valence {v}"))
     # irregular internal vertices
-    irr = np.asarray(placement.irregular, dtype=np.int64)
+    irr = np.asarray(mesh.irregular, dtype=np.int64)
     for v in sorted(set(val[irr].tolist())):
         marker = IRREGULAR_MARKERS.get(v, "D")
         colour = VALENCE_COLOURS.get(v, "#7f7f7f")
@@ -162,7 +167,7 @@ def draw_match(
     for spine in ax.spines.values():
         spine.set_visible(False)
     head = f"{title}\n" if title else ""
-    ax.set_title(head + quality_line(placement), fontsize=10)
+    ax.set_title(head + quality_line(mesh), fontsize=10)
     if legend:
         ax.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.01), ncol=3, fontsize=7, frameon=False, handletextpad=0.2, columnspacing=0.8)
 
@@ -209,7 +214,7 @@ def _panel(item) -> Panel:
 def draw_many(items: Iterable[Panel | Sequence | dict], path: str | os.PathLike, *, ncols: int | None = None, title: str | None = None) -> Path:
     """Draw several matches side by side (one panel each, e.g. the top K) and save to ``path``.
 
-    items: :class:`Panel` objects, or tuples ``(points, positions, codes, placement[, title])``,
+    items: :class:`Panel` objects, or tuples ``(points, positions, codes, mesh[, title])``,
     or dicts with those keys. Returns the path written (atomically, see :func:`save_figure`).
     """
     figure_format(path)  # fail early on a bad suffix
@@ -218,10 +223,23 @@ def draw_many(items: Iterable[Panel | Sequence | dict], path: str | os.PathLike,
         raise ValueError("draw_many needs at least one match to draw")
     fig, axes = new_figure(len(panels), ncols)
     for ax, p in zip(axes, panels):
-        draw_match(ax, p.points, p.positions, p.codes, p.placement, title=p.title or None)
+        draw_match(ax, p.points, p.positions, p.codes, p.mesh, title=p.title or None)
     if title:
         fig.suptitle(title)
     return save_figure(fig, path)
+
+
+def draw_in_shape(path: str | os.PathLike, shape, annotation, items: Sequence[tuple[str, "QuadMesh"]], *,
+                  title: str | None = None, ncols: int | None = None) -> Path:
+    """Draw placed templates side by side (one panel per ``(panel title, QuadMesh)``) over the
+    shape's outline and annotated s/x/v points, in user coordinates, and save to ``path``
+    (.png or .svg, atomically; :func:`draw_many`). shape: the :class:`~jaxmatch.shape.Shape`;
+    annotation: its :class:`~jaxmatch.shape.Annotation` (unit-box positions, codes). Each panel
+    shows boundary vertices coloured by valence, irregular internal vertices, inverted quads in
+    red and the quality (min / mean scaled Jacobian, inverted count) in its title."""
+    outline = shape.user_points
+    pos = shape.to_user(annotation.positions)
+    return draw_many([Panel(outline, pos, annotation.codes, m, t) for t, m in items], path, ncols=ncols, title=title)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -234,8 +252,6 @@ PATCH_PALETTE = np.array([[0.80, 0.88, 0.97], [0.98, 0.88, 0.75], [0.83, 0.94, 0
 
 def mesh_quality_line(xy: np.ndarray, quads: np.ndarray) -> str:
     """``"240 quads, SJ min 0.812 mean 0.951, 0 inverted"``."""
-    from jaxmatch.placement.embed import quality
-
     sj = quality(xy, quads)[0]
     return (f"{quads.shape[0]} quads, SJ min {sj.min():.3f} mean {sj.mean():.3f}, "
             f"{int(inverted_mask(xy, quads).sum())} inverted")

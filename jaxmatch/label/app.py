@@ -48,8 +48,12 @@ from starlette.responses import FileResponse, JSONResponse
 from starlette.routing import Mount, Route
 from starlette.staticfiles import StaticFiles
 
+from jaxmatch import api
+from jaxmatch.catalogue.mesh import valences
 from jaxmatch.errors import InputError, InputWarning, UnmatchableError
-from jaxmatch.label.store import LabelStore, shape_key
+from jaxmatch.io.readers import SUFFIXES, detect_format, parse_shape, split_element
+from jaxmatch.label.store import LabelStore, shape_key, tune_labels
+from jaxmatch.shape import DEFAULT_CORNER_ANGLE, check_corner_angle
 
 __all__ = ["Item", "LabelSession", "STATIC_DIR", "create_app"]
 
@@ -97,9 +101,6 @@ class LabelSession:
 
     def __init__(self, shapes=(), labels="labels.jsonl", *, internal=None, top: int = 5, size: float | None = None,
                  out=None, lattice: str = "fine", catalogue=None, corner_angle: float | None = None, epochs: int = 10):
-        from jaxmatch.api import check_sizes, load_catalogue, load_lattice
-        from jaxmatch.shape import DEFAULT_CORNER_ANGLE, check_corner_angle
-
         if not 1 <= int(top) <= 9:
             raise InputError(f"must be 1..9 (keys 1..9 choose), got {top}", where="--top")
         if size is not None and not (size > 0 and math.isfinite(size)):
@@ -112,12 +113,12 @@ class LabelSession:
         self.out = Path(out) if out is not None else self.labels.with_suffix(".tuned.toml")
         self.top, self.size, self.epochs = int(top), size, int(epochs)
         self.lattice_name = str(lattice)
-        self.catalogue = load_catalogue(catalogue)
+        self.catalogue = api.load_catalogue(catalogue)
         try:
-            self.internal = check_sizes(self.catalogue, internal)
+            self.internal = api.check_sizes(self.catalogue, internal)
         except InputError as e:
             raise InputError(e.problem, where="--internal") from None
-        self.lattice = load_lattice(lattice)
+        self.lattice = api.load_lattice(lattice)
         self.corner_angle = check_corner_angle(DEFAULT_CORNER_ANGLE if corner_angle is None else corner_angle)
         self.store = LabelStore(self.labels)
         self.items: list[Item] = []
@@ -143,16 +144,12 @@ class LabelSession:
     # -- shapes -------------------------------------------------------------------------------
 
     def _load(self, path: str):
-        from jaxmatch.io.readers import load_shape
-
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", InputWarning)
-            return load_shape(path, corner_angle=self.corner_angle)
+            return api.load_shape(path, corner_angle=self.corner_angle)
 
     def _file_item(self, path: str) -> Item:
         """A shape given on the command line: its label lines name it relative to the labels folder."""
-        from jaxmatch.io.readers import split_element
-
         shape = self._load(path)
         file, element = split_element(path)
         rel = os.path.relpath(os.path.abspath(file), os.path.abspath(self.labels.parent))
@@ -161,8 +158,6 @@ class LabelSession:
 
     def _record_item(self, spec) -> Item:
         """A shape found in the labels file (a path there is relative to the file's folder)."""
-        from jaxmatch.io.readers import parse_shape
-
         if isinstance(spec, str):
             path = Path(spec)
             full = path if path.is_absolute() else self.labels.parent / path
@@ -190,8 +185,6 @@ class LabelSession:
     def add_drawn(self, doc) -> int:
         """A drawn shape ``{"boundary": [[x, y], ...], "corners": [...]}``: the JSON shape file
         checks apply (InputError with their message)."""
-        from jaxmatch.io.readers import parse_shape
-
         if not isinstance(doc, dict) or not isinstance(doc.get("boundary"), list):
             raise BadRequest('expected {"boundary": [[x, y], ...], "corners": [i, ...]}')
         if len(doc["boundary"]) > MAX_DRAWN_POINTS:
@@ -205,8 +198,6 @@ class LabelSession:
     def add_upload(self, data: bytes, name: str) -> int:
         """A dropped shape file's bytes; ``name`` (a file name, never opened) picks the format by
         its suffix, else the content does."""
-        from jaxmatch.io.readers import SUFFIXES, detect_format, parse_shape
-
         base = PurePath(str(name).replace("\\", "/")).name.replace("#", "_")[:120] or "dropped shape"
         suffix = PurePath(base).suffix.lower()
         fmt = detect_format("upload" + (suffix if suffix in SUFFIXES else ""), data)
@@ -253,16 +244,13 @@ class LabelSession:
         return out
 
     def _compute_candidates(self, item: Item) -> dict:
-        import jaxmatch
-        from jaxmatch.catalogue.mesh import valences
-
         shape = item.shape
-        ranking = jaxmatch.rank(shape, self.catalogue, self.lattice, internal=self.internal, top=self.top)
+        ranking = api.rank(shape, self.catalogue, self.lattice, internal=self.internal, top=self.top)
         ann = ranking.annotation
         pos = shape.to_user(ann.positions)
         cands = []
         for r, match in enumerate(ranking.results, start=1):
-            pl = jaxmatch.place(shape, ranking, which=r, catalogue=self.catalogue, lattice=self.lattice)
+            pl = api.place(shape, ranking, which=r, catalogue=self.catalogue, lattice=self.lattice)
             note = ""
             if self.size is not None:
                 pl, note = self._refined(shape, ann, match, r, pl)
@@ -327,8 +315,6 @@ class LabelSession:
 
     def tune(self) -> dict:
         """Tune on the labels file, write :attr:`out`; the summary plus ``toml`` (the text)."""
-        from jaxmatch.label.store import tune_labels
-
         if not self._tuning.acquire(blocking=False):
             raise BadRequest("a tuning run is already going on", 409)
         try:

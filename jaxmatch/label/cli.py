@@ -6,8 +6,13 @@ import sys
 from pathlib import Path
 
 from jaxmatch.errors import InputError
+from jaxmatch.label.store import tune_labels
+from jaxmatch.lazy import Later
 
 __all__ = ["run_label"]
+
+_later = Later(app="jaxmatch.label.app")
+"""The web app (starlette, uvicorn): not for ``label --tune``."""
 
 
 def _pct(x) -> str:
@@ -24,8 +29,6 @@ def run_label(shapes, labels: Path, *, internal=None, size=None, top: int = 5, p
             raise InputError("--tune needs --out FILE (where the tuned lattice is written)", where="--out")
         if shapes:
             raise InputError("--tune reads the labels file; give no shapes", where="--tune")
-        from jaxmatch.label.store import tune_labels
-
         r = tune_labels(labels, out, lattice=lattice, catalogue=catalogue, epochs=epochs,
                         stage=lambda text: print(text, file=sys.stderr, flush=True))
         print(f"{r['examples']} labelled shapes ({r['skipped']} bad lines skipped); {r['lattice']} -> {r['tuned']}")
@@ -38,9 +41,7 @@ def run_label(shapes, labels: Path, *, internal=None, size=None, top: int = 5, p
         return
     if not host or any(c.isspace() for c in host):
         raise InputError(f"expected a host name or address, got {host!r}", where="--host")
-    from jaxmatch.label.app import LabelSession, serve
-
-    session = LabelSession(shapes, labels, internal=internal, top=top, size=size, out=out, lattice=lattice,
+    session = _later.app.LabelSession(shapes, labels, internal=internal, top=top, size=size, out=out, lattice=lattice,
                            catalogue=catalogue, corner_angle=corner_angle, epochs=epochs)
     if host not in ("127.0.0.1", "localhost", "::1"):
         print(f"warning: listening on {host}: anyone who can reach it can read the shapes and add labels", file=sys.stderr)
@@ -50,4 +51,4 @@ def run_label(shapes, labels: Path, *, internal=None, size=None, top: int = 5, p
         print(f"{st['total']} shapes, {st['labelled']} labelled in {labels}; Ctrl-C stops", file=sys.stderr, flush=True)
         print(url, flush=True)
 
-    serve(session, host, port, announce=announce)
+    _later.app.serve(session, host, port, announce=announce)

@@ -39,6 +39,13 @@ from typing import Callable, NamedTuple
 
 from jaxmatch.errors import InputError
 from jaxmatch.files import read_limited
+from jaxmatch.inputs import load_catalogue
+from jaxmatch.lazy import Later
+from jaxmatch.scoring.lattice import BUILTIN_DIR, load_lattice, save_lattice
+from jaxmatch.tuning.labels import example_record, load_labels, mesh_index
+
+_later = Later(tune="jaxmatch.tuning.tune")
+"""The lattice tuner (JAX and optax): only when the page's tune action or ``label --tune`` runs."""
 
 __all__ = ["NONE_PREFIX", "LabelStore", "Mark", "shape_key", "tune_labels"]
 
@@ -143,8 +150,6 @@ class LabelStore:
 
     def add_label(self, spec, preferred: str, rotation: int, reflected: bool) -> dict:
         """Append a label record (the :mod:`jaxmatch.tuning.labels` format); returns it."""
-        from jaxmatch.tuning.labels import example_record
-
         rec = example_record(spec, preferred, rotation=rotation, reflected=reflected)
         self.append(json.dumps(rec, separators=(", ", ": ")))
         return rec
@@ -181,11 +186,6 @@ def tune_labels(labels: str | os.PathLike, out: str | os.PathLike, *, lattice: s
     in [0, 1], None without examples). Raises :class:`InputError` when there are fewer than 2
     labels.
     """
-    from jaxmatch.api import load_catalogue
-    from jaxmatch.scoring.lattice import load_lattice, save_lattice
-    from jaxmatch.tuning.labels import load_labels, mesh_index
-    from jaxmatch.tuning.tune import run_tuning
-
     cat = load_catalogue(catalogue)
     index = mesh_index(cat)
     lat = load_lattice(lattice)
@@ -197,8 +197,8 @@ def tune_labels(labels: str | os.PathLike, out: str | os.PathLike, *, lattice: s
                 if (m := marks.get(shape_key(ex.record["shape"]))) is not None and f"{Path(labels)}:{m.line}" == ex.where]
     if len(examples) < 2:
         raise InputError(f"tuning needs at least 2 labelled shapes, the file has {len(examples)}", where=str(labels))
-    tuned, rep = run_tuning(lat, examples, cat, heldout=heldout, seed=seed, epochs=epochs, max_candidates=max_candidates,
-                            stage=stage)
+    tuned, rep = _later.tune.run_tuning(lat, examples, cat, heldout=heldout, seed=seed, epochs=epochs,
+                                        max_candidates=max_candidates, stage=stage)
     save_lattice(tuned, out, template=_template(lattice))
     load_lattice(out)  # what was written loads
     summary = {"examples": len(examples), "skipped": len(loaded.problems), "out": str(out), "lattice": lat.name,
@@ -212,8 +212,6 @@ def tune_labels(labels: str | os.PathLike, out: str | os.PathLike, *, lattice: s
 
 def _template(lattice: str) -> str | None:
     """The input lattice's TOML text (its comments are kept in the tuned file), or None."""
-    from jaxmatch.scoring.lattice import BUILTIN_DIR
-
     path = Path(lattice)
     if not path.is_file():
         path = BUILTIN_DIR / f"{lattice}.toml"

@@ -49,12 +49,15 @@ def from_layout(lm, *, size: float | None = None, corners: np.ndarray | None = N
                     side_counts={n: int(c) for n, c, o in zip(names, lm.counts, outer) if o}, templates=tuple(lm.templates))
 
 
-def from_placement(shape: Shape, pl, mesh_id: str = "") -> QuadMesh:
-    """A placed catalogue template (:class:`~jaxmatch.placement.embed.Placement`)."""
+def from_placement(shape: Shape | None, pl, mesh_id: str = "", *, detail=None) -> QuadMesh:
+    """A placed catalogue template (:class:`~jaxmatch.placement.embed.Placement`) of ``shape``
+    (None: a placement without a shape, no corners); ``detail``: how it was chosen
+    (:attr:`QuadMesh.detail`)."""
     quads = np.asarray(pl.mesh.quads, np.int64)
     return QuadMesh(xy=np.asarray(pl.xy, np.float64), quads=quads, patch=np.zeros(len(quads), np.int64),
                     line_sets={"boundary": _loop_edges(pl.mesh.boundary)}, region_area=float(pl.region_area),
-                    corners=_shape_corners(shape), templates=(mesh_id,) if mesh_id else ())
+                    corners=np.zeros((0, 2)) if shape is None else _shape_corners(shape),
+                    templates=(mesh_id,) if mesh_id else (), detail=detail)
 
 
 def from_refined(shape: Shape, rm, *, size: float | None = None) -> QuadMesh:

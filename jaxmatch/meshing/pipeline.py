@@ -132,7 +132,7 @@ def mesh(region, *, size: float | None = None, divisions: int | None = None, sid
     if isinstance(region, Layout):
         if template:
             raise InputError("a layout is meshed patch by patch; the single template (template=True) is for shapes")
-        return _mesh_layout_file(region, cat, lat, size, sides, counts)
+        return _mesh_layout_file(region, cat, lat, size, sides, counts, quality)
     if counts:
         raise InputError("edge counts per named side are for layouts; give sides (one count per side) for a shape")
     if not isinstance(region, Shape):
@@ -140,11 +140,11 @@ def mesh(region, *, size: float | None = None, divisions: int | None = None, sid
     if template:
         if size is not None or sides is not None:
             raise InputError("the single template is placed as is; it takes no size or sides")
-        return _mesh_template(region, cat, lat, template_options)
+        return _mesh_template(region, cat, lat, template_options, progress)
     if template_options:
         raise TypeError(f"unexpected options without template=True: {', '.join(sorted(template_options))}")
     if sides is not None:
-        return _mesh_sides(region, cat, lat, sides)
+        return _mesh_sides(region, cat, lat, sides, quality)
     h = size if size is not None else default_size(region)
     return _mesh_size(region, cat, lat, h, strategies, quality, budget_s, progress, corner_angle)
 
@@ -158,37 +158,35 @@ def warm_up(catalogue=None, lattice=DEFAULT_LATTICE) -> None:
          lattice=lattice)
 
 
-def _mesh_layout_file(layout, cat, lat, size, sides, counts) -> QuadMesh:
-
+def _mesh_layout_file(layout, cat, lat, size, sides, counts, quality) -> QuadMesh:
     if sides is not None:
         raise InputError("a layout takes edge counts per side in its file (\"sides\") or as counts=; not sides")
     h = size if size is not None or layout.requested or counts else default_size(layout)
-    lm = mesh_layout(layout, cat, lat, size=h, counts=counts)
+    lm = mesh_layout(layout, cat, lat, size=h, counts=counts, quality=quality)
     return from_layout(lm, size=h).with_choice("layout", "", None, ())
 
 
-def _mesh_template(shape, cat, lat, options) -> QuadMesh:
-
+def _mesh_template(shape, cat, lat, options, progress) -> QuadMesh:
     opts = dict(options)
     if "internal" in opts:
         opts["internal"] = check_sizes(cat, opts["internal"])
-    choice = choose_mesh(shape, cat, lat, **opts)
-    m = from_placement(shape, choice.placement, choice.match.mesh_id)
+    scored = None if progress is None else (lambda done, total: progress(done, total, "template"))
+    choice = choose_mesh(shape, cat, lat, progress=scored, **opts)
+    m = from_placement(shape, choice.placement, choice.match.mesh_id, detail=choice)
     return m.with_choice("template", "", None, (Candidate("template", m),))
 
 
-def _mesh_sides(shape, cat, lat, sides) -> QuadMesh:
-
+def _mesh_sides(shape, cat, lat, sides, quality) -> QuadMesh:
     n_sides = max(shape.n_corners, 1)
     counts = _check_counts(sides, n_sides, shape.source)
     if shape.n_corners < 2:
-        choice = refine_mesh(shape, cat, lat, sides=counts.tolist())
+        choice = refine_mesh(shape, cat, lat, sides=counts.tolist(), quality=quality)
         m = from_refined(shape, choice.mesh)
     else:
         lay = single_patch(shape)
         ids = _side_ids(shape, lay)
         try:
-            lm = mesh_layout(lay, cat, lat, counts={s: int(c) for s, c in zip(ids, counts)},
+            lm = mesh_layout(lay, cat, lat, counts={s: int(c) for s, c in zip(ids, counts)}, quality=quality,
                              sizes=ALL_SIZES)
         except LayoutInfeasible as e:
             names = layout_sides(lay).names

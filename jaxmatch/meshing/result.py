@@ -15,7 +15,7 @@ from typing import Mapping, NamedTuple
 import numpy as np
 
 from jaxmatch.catalogue.mesh import boundary_edges, edges, valences
-from jaxmatch.placement.embed import edge_ratios, quad_areas, sj_inverted
+from jaxmatch.quality import edge_ratios, quad_areas, sj_inverted
 
 __all__ = ["Candidate", "QuadMesh", "boundary_loops", "irregular_bound"]
 
@@ -88,7 +88,10 @@ class QuadMesh:
     chosen: the candidate that won (``"single"``, a decomposition, ``"template"``, ``"layout"``);
     rule: the rule of :mod:`jaxmatch.meshing.choose` that decided (empty with one candidate);
     runner_up: the best other candidate's name or None; tried: every :class:`Candidate`;
-    templates: catalogue ids of the templates used, per patch.
+    templates: catalogue ids of the templates used, per patch; detail: the strategy's own record
+    of its choice where it has one (``template=True``: the
+    :class:`~jaxmatch.placement.choose.MeshChoice`, with the ranking, rank, utility and quality
+    band that the command line reports), else None.
 
     The measures of ``xy`` and ``quads`` (scaled Jacobians, edges, valences, boundary loops,
     missed corners) are computed once per mesh and kept (:data:`_KEPT`): the choice rule reads
@@ -109,6 +112,7 @@ class QuadMesh:
     rule: str = ""
     runner_up: str | None = None
     tried: tuple[Candidate, ...] = ()
+    detail: object = None
 
     def with_choice(self, chosen: str, rule: str, runner_up: str | None, tried) -> "QuadMesh":
         """This mesh, labelled with how it was chosen (the measures kept so far kept with it)."""

@@ -48,24 +48,20 @@ from typing import NamedTuple
 
 import numpy as np
 
-from jaxmatch.catalogue.mesh import QUAD_NEXT as _NEXT, QuadMesh, edges, mesh_valences
+from jaxmatch.catalogue.mesh import QuadMesh, edges, mesh_valences
 from jaxmatch.arrays import roll
 from jaxmatch.geometry import VERTEX_SNAP, cumulative_length, point_at, signed_area, sub_polyline
+from jaxmatch.quality import corner_vectors, edge_ratios, inverted_mask, quad_areas, quality, sj_inverted
 
 __all__ = [
     "Placement",
     "Slide",
     "arc_lengths",
     "boundary_paths",
-    "edge_ratios",
-    "inverted_mask",
     "oriented_boundary",
     "place",
     "point_at",
     "polygon_area",
-    "quad_areas",
-    "quality",
-    "sj_inverted",
     "smooth",
     "smooth_near",
     "to_user",
@@ -95,7 +91,7 @@ class Placement:
     mesh_area: signed area covered by the quads (sum of the quads' shoelace areas; equals the
         area of the polygon of boundary vertices when nothing is folded).
     edge_ratio: ``(F,) float64`` per quad, longest over shortest edge (>= 1; inf for a
-        zero-length edge), see :func:`edge_ratios`.
+        zero-length edge), see :func:`jaxmatch.quality.edge_ratios`.
     rotation, reflected: the orientation of the match that was placed (see
         :func:`oriented_boundary`).
     missed_corners: ``(c, 2) float64`` corners of the shape that are not a mesh vertex (same
@@ -217,106 +213,9 @@ polygon_area = signed_area
 """Signed area of a closed polygon, positive when ccw (:func:`jaxmatch.geometry.signed_area`)."""
 
 
-def quad_areas(xy: np.ndarray, quads: np.ndarray) -> np.ndarray:
-    """Signed (shoelace) areas of the quads, ``(F,)``; positive for ccw quads."""
-    p = np.asarray(xy, dtype=np.float64)[np.asarray(quads)]
-    q = p[:, _NEXT]
-    return 0.5 * np.sum(p[..., 0] * q[..., 1] - p[..., 1] * q[..., 0], axis=1)
-
-
 def to_user(xy: np.ndarray, scale: float, offset) -> np.ndarray:
     """Map normalised positions back to user coordinates: ``xy * scale + offset`` (V, 2)."""
     return np.asarray(xy, dtype=np.float64) * float(scale) + np.asarray(offset, dtype=np.float64)
-
-
-# ---------------------------------------------------------------------------------------------
-# quality
-
-
-_PREV = np.array([3, 0, 1, 2])
-_TINY = np.finfo(np.float64).tiny
-
-
-def _corners(xy: np.ndarray, quads: np.ndarray):
-    """Corner edge vectors ``e1`` (to next vertex), ``e2`` (to previous), (F, 4, 2) each,
-    and corner signed areas ``e1 x e2`` (F, 4)."""
-    p = np.asarray(xy, dtype=np.float64)[np.asarray(quads)]
-    e1 = p[:, _NEXT] - p  # = np.roll(p, -1, axis=1) - p, without roll's overhead (same values)
-    e2 = p[:, _PREV] - p
-    cross = e1[..., 0] * e2[..., 1] - e1[..., 1] * e2[..., 0]
-    return e1, e2, cross
-
-
-def quality(xy: np.ndarray, quads: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per-quad shape quality.
-
-    xy: (V, 2) positions; quads: (F, 4) vertex ids, ccw.
-    Returns ``(scaled_jacobian, min_angle, max_angle)``, each ``(F,) float64``:
-
-    * scaled Jacobian (Verdict): min over the four corners of ``(e1 x e2) / (|e1| |e2|)``,
-      ``e1``/``e2`` the edges leaving the corner to the next/previous vertex; in ``[-1, 1]``,
-      1 for a square (or any rectangle), 0 when an edge has zero length;
-    * min/max interior angle in degrees: the ccw angle from ``e1`` to ``e2`` in ``[0, 360)``,
-      so a reflex (non-convex) corner reads above 180 and an inverted quad has angles
-      above 180; a corner with a zero-length edge reads 0.
-    """
-    q = np.asarray(quads)
-    if q.size == 0:
-        z = np.zeros(0)
-        return z, z.copy(), z.copy()
-    e1, e2, cross = _corners(xy, q)
-    dot = np.sum(e1 * e2, axis=-1)
-    ang = np.degrees(np.mod(np.arctan2(cross, dot), 2 * np.pi))
-    return _scaled_jacobian(e1, e2, cross), ang.min(axis=1), ang.max(axis=1)
-
-
-def _scaled_jacobian(e1: np.ndarray, e2: np.ndarray, cross: np.ndarray) -> np.ndarray:
-    """``(F,) float64`` scaled Jacobian from the corner vectors of :func:`_corners` (the one
-    formula of :func:`quality` and :func:`sj_inverted`)."""
-    ln = np.linalg.norm(e1, axis=-1) * np.linalg.norm(e2, axis=-1)
-    ok = ln > _TINY
-    sj_c = np.where(ok, cross / np.where(ok, ln, 1.0), 0.0)
-    return np.clip(sj_c.min(axis=1), -1.0, 1.0)
-
-
-def sj_inverted(xy: np.ndarray, quads: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``(scaled_jacobian (F,) float64, inverted (F,) bool)``: :func:`quality`'s first array and
-    :func:`inverted_mask`, the same values from one pass over the corners (no angles), for
-    callers that need both of a large mesh.
-
-    xy: (V, 2) positions; quads: (F, 4) vertex ids, ccw."""
-    q = np.asarray(quads)
-    if q.size == 0:
-        return np.zeros(0), np.zeros(0, bool)
-    from jaxmatch.placement import kernels
-
-    if kernels.BACKEND == "c" and q.ndim == 2 and q.shape[1] == 4 and q.min() >= 0 and q.max() < len(xy) \
-            and np.ndim(xy) == 2 and np.shape(xy)[1] == 2:  # the same operations in C, one pass
-        return kernels.sj_inverted(xy, q)  # (100,000 quads: ~40 ms in numpy); numpy's errors for bad ids below
-    e1, e2, cross = _corners(xy, q)
-    return _scaled_jacobian(e1, e2, cross), (cross <= 0).any(axis=1)
-
-
-def inverted_mask(xy: np.ndarray, quads: np.ndarray) -> np.ndarray:
-    """``(F,) bool``: quads with any corner of signed area ``e1 x e2 <= 0``."""
-    q = np.asarray(quads)
-    if q.size == 0:
-        return np.zeros(0, bool)
-    return (_corners(xy, q)[2] <= 0).any(axis=1)
-
-
-def edge_ratios(xy: np.ndarray, quads: np.ndarray) -> np.ndarray:
-    """``(F,) float64``: longest over shortest of each quad's four edges (1 for a square or
-    rhombus; ``inf`` when an edge has zero length). Scale-free; a min scaled Jacobian near 1
-    says nothing about it (a 1 x 13 rectangle has scaled Jacobian 1 and edge ratio 13)."""
-    q = np.asarray(quads)
-    if q.size == 0:
-        return np.zeros(0)
-    p = np.asarray(xy, dtype=np.float64)[q]
-    ln = np.linalg.norm(p[:, _NEXT] - p, axis=-1)
-    lo, hi = ln.min(axis=1), ln.max(axis=1)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where(lo > 0, hi / np.where(lo > 0, lo, 1.0), np.inf)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -381,7 +280,7 @@ def _energy(pos, quads, delta, power):
     """Power mean of the regularised corner condition numbers, ``(mean kappa**power)**(1/power)``,
     and its gradient w.r.t. every position ``(V, 2)``. Same minimisers as the sum of
     ``kappa**power``, but computed without overflow. ``(inf, zeros)`` where not finite."""
-    e1, e2, a = _corners(pos, quads)
+    e1, e2, a = corner_vectors(pos, quads)
     d2 = 4.0 * delta * delta
     zero = np.zeros_like(pos)
     with np.errstate(all="ignore"):
@@ -615,7 +514,7 @@ def smooth(
     best, best_key = xy.copy(), _key(xy, q)
     cur = xy.copy()
     for _ in range(untangle_rounds):
-        s_min = float(_corners(cur, q)[2].min())
+        s_min = float(corner_vectors(cur, q)[2].min())
         if s_min >= eps:
             break
         delta = np.sqrt(eps * (eps - s_min))

@@ -36,7 +36,6 @@ from __future__ import annotations
 import json
 import math
 from dataclasses import dataclass
-from pathlib import Path
 from typing import TYPE_CHECKING, Mapping, NamedTuple, Sequence
 
 import numpy as np
@@ -49,9 +48,9 @@ from jaxmatch.arrays import roll
 from jaxmatch.placement.milp import CHORD_WEIGHT, LayoutInfeasible, solve_counts  # noqa: F401 (public here)
 from jaxmatch.placement.refine import (SMOOTH_LOCAL, bad_quads, harmonic_displacement, side_points,
                                        smooth_near_bad)
-from jaxmatch.placement.embed import (inverted_mask, polygon_area, quad_areas, quality, sj_inverted, smooth_in_frame, tutte,
-                                      smooth_near)
+from jaxmatch.placement.embed import polygon_area, smooth_in_frame, smooth_near, tutte
 from jaxmatch.catalogue.mesh import boundary_edges, valences  # noqa: F401 (boundary_edges public here)
+from jaxmatch.quality import inverted_mask, quad_areas, quality, sj_inverted
 from jaxmatch.shape import Shape, make_shape
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -66,20 +65,16 @@ __all__ = [
     "CHORD_WEIGHT",
     "boundary_edges",
     "check_layout",
-    "draw_meshes",
     "fit_sides",
-    "layout_panel",
     "layout_sides",
     "load_counts",
     "load_layout",
     "make_layout",
-    "mesh_quality_line",
     "merge_patches",
     "parse_layout",
     "patch_shapes",
     "parse_counts",
     "solve_counts",
-    "write_layout_mesh",
 ]
 
 MAX_BYTES = 16 * 2**20
@@ -794,42 +789,3 @@ def _boundary_loops(layout: Layout, sides: Sides, side_ids, xy: np.ndarray) -> l
         key = np.round(area / np.abs(area).max(), 9)
         loops = [loops[i] for i in sorted(range(len(loops)), key=lambda i: (-key[i], i))]
     return loops
-
-
-# ---------------------------------------------------------------------------------------------
-# output
-
-
-def write_layout_mesh(path, mesh: LayoutMesh) -> Path:
-    """Write ``mesh`` atomically: :func:`jaxmatch.io.meshfile.write_mesh` (cell data ``patch``
-    and ``scaled_jacobian``, quad groups ``"patch p"``, line groups ``"boundary"`` and
-    ``"side i-j"``)."""
-    from jaxmatch.io.meshfile import write_mesh
-
-    return write_mesh(path, mesh)
-
-
-def mesh_quality_line(xy: np.ndarray, quads: np.ndarray) -> str:
-    """One line of quality figures (:func:`jaxmatch.io.plot.mesh_quality_line`)."""
-    from jaxmatch.io.plot import mesh_quality_line as line
-
-    return line(xy, quads)
-
-
-def draw_meshes(path, panels: Sequence[tuple], *, title: str | None = None, ncols: int | None = None) -> Path:
-    """Draw quad meshes side by side: :func:`jaxmatch.io.plot.draw_meshes`."""
-    from jaxmatch.io.plot import draw_meshes as draw
-
-    return draw(path, panels, title=title, ncols=ncols)
-
-
-def layout_panel(mesh: LayoutMesh, head: str) -> tuple:
-    """A :func:`draw_meshes` panel for a layout mesh (sides drawn thick)."""
-    lines = [mesh.xy[ids] for ids in mesh.side_vertices]
-    return (head, mesh.xy, mesh.quads, mesh.patch, lines)
-
-
-# ---------------------------------------------------------------------------------------------
-# caches of the meshing path (issue 22): pure functions of their inputs, kept between calls
-
-

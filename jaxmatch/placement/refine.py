@@ -47,9 +47,9 @@ from jaxmatch.catalogue.mesh import QuadMesh, edges, valences
 from jaxmatch.defaults import QUALITY, Quality
 from jaxmatch.errors import InputError
 from jaxmatch.placement.milp import LayoutInfeasible, one_patch_sides, solve_counts
-from jaxmatch.placement.embed import (DENSE_TUTTE, Placement, quad_areas, quality, sj_inverted,
-                                      smooth_in_frame, smooth_near, tutte)
+from jaxmatch.placement.embed import DENSE_TUTTE, Placement, smooth_in_frame, smooth_near, tutte
 from jaxmatch.placement.templates import LazyTemplates, PatchTemplate, walk
+from jaxmatch.quality import quad_areas, quality, sj_inverted
 from jaxmatch.shape import Shape
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -682,7 +682,7 @@ def _refine_and_place(template: PatchTemplate, mult, *, smooth_iters: int | None
 
 def bad_quads(sj: np.ndarray, inverted: np.ndarray, floor: float) -> np.ndarray:
     """``(Q,) bool``: the quads a large mesh smooths around: inverted, or a scaled Jacobian
-    below ``quality.good_sj`` (``sj``, ``inverted``: :func:`~jaxmatch.placement.embed.sj_inverted`)."""
+    below ``floor`` (``sj``, ``inverted``: :func:`~jaxmatch.quality.sj_inverted`)."""
     return inverted | (sj < floor)
 
 

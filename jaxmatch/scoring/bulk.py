@@ -493,7 +493,6 @@ def top_k(
         return thr
 
     def score_some(p: Part, sel: np.ndarray, plan) -> None:
-
         rep = _values(codes, p.groups.seqs[sel], weights, plan=plan, batch=batch, threads=threads, devices=devices)
         mesh_rows = np.flatnonzero(np.isin(p.groups.index, sel))
         # fan_out of the scored rows only (sel is sorted): no (U, 2n) array per call
