@@ -362,7 +362,7 @@ def score_many(
             return {"shape": str(p), "error": f"no match: {e}"}, None
 
     from jaxmatch.parallel import available_cpus, ordered_map
-    from jaxmatch.scoring.backends import serial_only
+    from jaxmatch.kernels.backends import serial_only
 
     workers = 1 if (coordinator is not None or devices is not None) else (available_cpus() if jobs is None else jobs)
     records = []

@@ -45,7 +45,7 @@ from jaxmatch.placement.choose import (
     spread_alignment,
 )
 from jaxmatch.scoring.exact import score_bucket, utility_of
-from jaxmatch.scoring.reference import dp_reference as reference_dp
+from jaxmatch.kernels.reference import dp_reference as reference_dp
 from jaxmatch.io.readers import load_shape
 from jaxmatch.shape import annotate, make_shape
 
@@ -705,7 +705,8 @@ def test_quality_band_last_resort_tries_other_orientations(cat, lat):
 def test_c_and_numba_alignment_kernels_agree(seed):
     """The numba fallback of the alignment DPs gives what the C library gives: utilities of
     every orientation, and per orientation the same tied alignments in the same order."""
-    from jaxmatch.placement import _numba_spread, kernels
+    from jaxmatch.kernels import _numba_spread
+    from jaxmatch.kernels import placement as kernels
     from jaxmatch.placement.choose import MAX_TIED_ALIGNMENTS, _spread_setup
 
     if kernels.BACKEND != "c":
@@ -726,14 +727,14 @@ def test_c_and_numba_alignment_kernels_agree(seed):
             np.testing.assert_array_equal(x, y)
 
 
-@pytest.mark.skipif(__import__("jaxmatch.placement.kernels", fromlist=["BACKEND"]).BACKEND != "c",
+@pytest.mark.skipif(__import__("jaxmatch.kernels.placement", fromlist=["BACKEND"]).BACKEND != "c",
                     reason="the C placement library is not built")
 @settings(max_examples=300, deadline=None)
 @given(st.integers(0, 2**32 - 1))
 def test_spread_alignment_in_c_equals_numpy(seed):
     """The compiled spread programme gives numpy's alignment, ties included (integer
     parameters make many)."""
-    from jaxmatch.placement import kernels
+    from jaxmatch.kernels import placement as kernels
 
     rng = np.random.default_rng(seed)
     m = int(rng.integers(3, 14))

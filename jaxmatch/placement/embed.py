@@ -288,7 +288,7 @@ def sj_inverted(xy: np.ndarray, quads: np.ndarray) -> tuple[np.ndarray, np.ndarr
     q = np.asarray(quads)
     if q.size == 0:
         return np.zeros(0), np.zeros(0, bool)
-    from jaxmatch.placement import kernels
+    from jaxmatch.kernels import placement as kernels
 
     if kernels.BACKEND == "c" and q.ndim == 2 and q.shape[1] == 4 and q.min() >= 0 and q.max() < len(xy) \
             and np.ndim(xy) == 2 and np.shape(xy)[1] == 2:  # the same operations in C, one pass
@@ -341,7 +341,7 @@ def tutte(quads: np.ndarray, n_vertices: int, boundary: np.ndarray, boundary_xy:
     """
     V = int(n_vertices)
     if not reference and 0 < V - len(boundary) <= DENSE_TUTTE:
-        from jaxmatch.placement import kernels
+        from jaxmatch.kernels import placement as kernels
 
         return kernels.tutte_dense(np.ascontiguousarray(quads, dtype=np.int64), V, np.asarray(boundary, dtype=np.int64),
                               np.ascontiguousarray(boundary_xy, dtype=np.float64))
@@ -433,7 +433,7 @@ class _Params:
         self.free = free
         self.slides = [Slide(np.asarray(s.a, float), np.asarray(s.b, float), np.asarray(s.vertices, np.int64)) for s in slides]
         self.nf = 2 * free.size
-        from jaxmatch.placement.kernels import flat_slides
+        from jaxmatch.kernels.placement import flat_slides
 
         self.flat = flat_slides(self.slides)  # (sa, sb, sp, sv) for the compiled optimiser
 
@@ -604,7 +604,7 @@ def smooth(
         return xy.copy()
     params = _Params(xy, free, slides)
     if not reference:
-        from jaxmatch.placement import kernels
+        from jaxmatch.kernels import placement as kernels
 
         return kernels.smooth(xy, np.ascontiguousarray(q, dtype=np.int64), free.astype(np.int64), *params.flat, int(iters),
                          np.asarray(powers, dtype=np.float64), int(untangle_rounds), LBFGS_MEMORY, LBFGS_FTOL, LBFGS_GTOL)

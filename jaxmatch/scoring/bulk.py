@@ -40,6 +40,17 @@ from typing import Callable, Iterable, NamedTuple, Sequence
 
 import numpy as np
 
+from jaxmatch.files import atomic_open
+from jaxmatch.kernels.model import NEG, skip_frame, skip_offset, weights_of
+from jaxmatch.scoring.exact import (  # numpy only: no JAX import here
+    DEFAULT_BATCH,
+    UNROLL,
+    block_size,
+    exact_values,
+    final_values,
+    reduce_orientations,
+)
+
 __all__ = [
     "SequenceGroups",
     "ShardedBackend",
@@ -61,8 +72,6 @@ __all__ = [
     "score_many",
     "write_jsonl",
 ]
-
-from jaxmatch.scoring.model import NEG, skip_frame, skip_offset, weights_of  # numpy only: no JAX import here
 
 
 # --------------------------------------------------------------------------- devices
@@ -225,8 +234,6 @@ def score_distinct(codes, vals, weights, **kw):
     """:func:`jaxmatch.scoring.exact.score_bucket`, scoring each distinct sequence once (same result).
     Keyword arguments go to :func:`jaxmatch.scoring.exact.final_values` (or, with ``devices``, to
     :func:`sharded_values`)."""
-    from jaxmatch.scoring.exact import reduce_orientations
-
     g = group_sequences(np.asarray(vals).reshape(-1, np.shape(vals)[-1]))
     rep = _values(codes, g.seqs, weights, **kw)
     return reduce_orientations(fan_out(rep, g))
@@ -397,8 +404,6 @@ def _values(codes, seqs, weights, *, devices=None, plan=None, **kw) -> np.ndarra
     if devices is not None and not (isinstance(devices, (int, np.integer)) and int(devices) == 1):
         kw.pop("threads", None)
         return sharded_values(codes, seqs, weights, devices=devices, plan=plan, **kw)
-    from jaxmatch.scoring.exact import final_values
-
     return final_values(codes, seqs, weights, plan=plan, **kw)
 
 
@@ -467,8 +472,6 @@ def top_k(
     threads; an int or a device list = :func:`sharded_values` over those devices.
     progress(done, total): meshes settled (scored, pruned or unmatchable) so far.
     """
-    from jaxmatch.scoring.exact import DEFAULT_BATCH, block_size
-
     weights = weights_of(weights)  # compiled once for all calls
     top = max(int(top), 1)
     batch = DEFAULT_BATCH if batch is None else int(batch)
@@ -496,8 +499,6 @@ def top_k(
         return thr
 
     def score_some(p: Part, sel: np.ndarray, plan) -> None:
-        from jaxmatch.scoring.exact import reduce_orientations
-
         rep = _values(codes, p.groups.seqs[sel], weights, plan=plan, batch=batch, threads=threads, devices=devices)
         mesh_rows = np.flatnonzero(np.isin(p.groups.index, sel))
         # fan_out of the scored rows only (sel is sorted): no (U, 2n) array per call
@@ -612,8 +613,6 @@ def top_k_many(codes_list: Sequence, parts, weights, *, devices=None, **kw) -> l
     weights = weights_of(weights)
     if _mesh_size(devices) <= 1:
         return [top_k(c, parts, weights, devices=None, **kw) for c in codes_list]
-    from jaxmatch.scoring.exact import reduce_orientations
-
     top, per_size = max(int(kw.get("top", 5)), 1), bool(kw.get("per_size", False))
     total = sum(len(p.ids) for p in parts)
     rows: list[list] = [[] for _ in codes_list]
@@ -653,7 +652,7 @@ def _sharded_fn(mesh, unroll: int, over: str, strict: bool):
     import jax
     from jax.sharding import PartitionSpec as P
 
-    from jaxmatch.scoring.exact import _blocks
+    from jaxmatch.kernels.dp_xla import _blocks  # imports JAX
 
     def body(codes, vals, tab, gate):
         return _blocks(codes, vals, tab, gate, strict, unroll)
@@ -678,8 +677,6 @@ class ShardedBackend:
     def __init__(self, devices=None, over: str = "meshes", unroll: int | None = None):
         if over not in ("meshes", "shapes"):
             raise ValueError(f"over must be 'meshes' or 'shapes', got {over!r}")
-        from jaxmatch.scoring.exact import UNROLL
-
         self.mesh = device_mesh(devices)
         self.over = over
         self.unroll = UNROLL if unroll is None else int(unroll)
@@ -718,8 +715,6 @@ def sharded_values(
     """:func:`jaxmatch.scoring.exact.final_values` with the meshes sharded over ``devices``
     (:class:`ShardedBackend`): ``(N, 2n) float32``, ``-inf`` for orientations without a finite
     alignment. Each call holds ``devices x blocks per call x block`` meshes."""
-    from jaxmatch.scoring.exact import DEFAULT_BATCH, exact_values
-
     be = ShardedBackend(devices, "meshes", unroll)
     return exact_values([codes], vals, weights, backend=be, batch=DEFAULT_BATCH if batch is None else batch,
                         m_pad=m_pad, plan=plan)[0]
@@ -727,8 +722,6 @@ def sharded_values(
 
 def score_sharded(codes, vals, weights, *, devices=None, **kw):
     """:func:`jaxmatch.scoring.exact.score_bucket` with the meshes sharded over ``devices`` (same result)."""
-    from jaxmatch.scoring.exact import reduce_orientations
-
     return reduce_orientations(sharded_values(codes, vals, weights, devices=devices, **kw))
 
 
@@ -749,8 +742,6 @@ def score_many(
     the longest one's :func:`jaxmatch.scoring.exact.bucket_length` (padding points are skipped) and to a
     multiple of the device count; meshes go in chunks of ``batch``.
     """
-    from jaxmatch.scoring.exact import DEFAULT_BATCH, exact_values, reduce_orientations
-
     if not len(codes_list):
         return []
     be = ShardedBackend(devices, "shapes", unroll)
@@ -764,8 +755,6 @@ def score_many(
 def write_jsonl(path, records: Iterable[dict]) -> None:
     """Write one JSON object per line, atomically (temp file + rename: readers see the old file
     or the complete new one, never a partial one)."""
-    from jaxmatch.files import atomic_open
-
     with atomic_open(path, "w") as fh:
         for rec in records:
             fh.write(json.dumps(rec, sort_keys=False) + "\n")

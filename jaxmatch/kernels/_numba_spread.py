@@ -1,5 +1,5 @@
 """Compiled forward pass and tie walk of :func:`jaxmatch.placement.choose.spread_optimal_alignment`
-in numba: the fallback of :mod:`jaxmatch.placement.kernels` where the C library was not built
+in numba: the fallback of :mod:`jaxmatch.kernels.placement` where the C library was not built
 (imported on first use, cached on disk after the first compile).
 
 The numpy version (``spread_optimal_alignment(..., reference=True)``) builds ``(S, m, m)``

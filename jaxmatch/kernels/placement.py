@@ -54,10 +54,10 @@ def _load_c():
     if os.environ.get("JAXMATCH_PLACEMENT_KERNELS", "").strip().lower() == "numba":
         return None
     try:
-        from jaxmatch.placement import _ckernels
+        from jaxmatch.kernels import _placement
     except ImportError:
         return None
-    lib = ctypes.CDLL(_ckernels.__file__)
+    lib = ctypes.CDLL(_placement.__file__)
     D, L, P = ctypes.c_double, ctypes.c_int64, ctypes.c_void_p
     sig = {
         "jm_smooth": (ctypes.c_int, [P, L, P, L, P, L, P, P, P, P, L, L, P, L, L, L, D, D, P]),
@@ -175,5 +175,5 @@ if _C is not None:
         return sj, inv.view(bool)
 
 else:  # pragma: no cover - exercised with JAXMATCH_PLACEMENT_KERNELS=numba
-    from jaxmatch.placement._numba_smooth import energy, lbfgs, objective, smooth, tutte_dense  # noqa: F401
-    from jaxmatch.placement._numba_spread import candidates, orientation_utilities  # noqa: F401
+    from jaxmatch.kernels._numba_smooth import energy, lbfgs, objective, smooth, tutte_dense  # noqa: F401
+    from jaxmatch.kernels._numba_spread import candidates, orientation_utilities  # noqa: F401

@@ -1,0 +1,1 @@
+"""Compiled code and its registry: the bottom floor of the package (table below, filled in the next commit)."""
