@@ -702,10 +702,10 @@ def test_quality_band_last_resort_tries_other_orientations(cat, lat):
 
 
 @pytest.mark.parametrize("seed", range(4))
-def test_c_and_numba_alignment_kernels_agree(seed):
-    """The numba fallback of the alignment DPs gives what the C library gives: utilities of
-    every orientation, and per orientation the same tied alignments in the same order."""
-    from jaxmatch.kernels import _numba_spread
+def test_c_alignment_kernels_equal_the_numpy_reference(seed):
+    """The C library's alignment DPs give what the numpy references give: utilities of every
+    orientation, and, for all orientations in one call, each orientation's utility, gap cost and
+    tied alignments in the same order (one numpy spread per orientation)."""
     from jaxmatch.kernels import placement as kernels
     from jaxmatch.placement.choose import MAX_TIED_ALIGNMENTS, _spread_setup
 
@@ -718,13 +718,18 @@ def test_c_and_numba_alignment_kernels_agree(seed):
             t, per = np.arange(len(t), dtype=float), float(len(t))
         c, v = np.asarray(codes, np.int64), np.asarray(vals, np.int64)
         np.testing.assert_array_equal(kernels.orientation_utilities(c, v, table, skip),
-                                      _numba_spread.orientation_utilities(c, v, table, skip))
+                                      orientation_utilities(codes, vals, (table, skip), reference=True))
         st = _spread_setup(t, per, codes, (table, skip))
         n = len(v)
         seqs = np.stack([np.roll(v[::-1] if o >= n else v, -(o % n)) for o in range(2 * n)]).astype(np.int64)
-        args = (st.c, seqs, st.table, st.between, st.prefix, st.suffix, st.gq, st.tt, per, st.unit, MAX_TIED_ALIGNMENTS)
-        for x, y in zip(kernels.candidates(*args), _numba_spread.candidates(*args)):
-            np.testing.assert_array_equal(x, y)
+        util, gap, own, A = kernels.candidates(st.c, seqs, st.table, st.between, st.prefix, st.suffix, st.gq, st.tt, per,
+                                               st.unit, MAX_TIED_ALIGNMENTS)
+        for o, seq in enumerate(seqs):
+            best, als, g = spread_optimal_alignment(t, per, codes, seq, (table, skip), all_ties=True, reference=True)
+            assert util[o] == best
+            assert [a.tolist() for a in A[own == o]] == [a.tolist() for a in als]
+            if np.isfinite(best):
+                assert gap[o] == g
 
 
 @pytest.mark.skipif(__import__("jaxmatch.kernels.placement", fromlist=["BACKEND"]).BACKEND != "c",

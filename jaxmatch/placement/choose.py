@@ -38,6 +38,7 @@ from jaxmatch.catalogue.mesh import boundary_valences, mesh_valences
 from jaxmatch.placement.embed import Placement, edge_ratios, exact_paths, inverted_mask, oriented_boundary, place, quad_areas, quality
 from jaxmatch.shape import S as S_CODE
 from jaxmatch.shape import point_at as shape_point_at
+from jaxmatch.kernels import placement as kernels
 from jaxmatch.kernels.model import weights_of
 from jaxmatch.scoring.rank import TIE_CAP, Match, Ranking, TieBreaker
 from jaxmatch.scoring.rank import rank as rank_meshes
@@ -125,8 +126,6 @@ def spread_alignment(t: np.ndarray, perimeter: float, codes: np.ndarray, alignme
         keep = max(SPREAD_MAX_WORK // (m * m * n), 1)
         starts = starts[np.argsort(np.abs(starts - al[0]), kind="stable")[:keep]]
         starts = np.union1d(starts, al[:1])
-    from jaxmatch.kernels import placement as kernels
-
     if kernels.BACKEND == "c":  # the same programme compiled (the same doubles, the same ties)
         out = kernels.spread(tt, float(perimeter), ok, starts)
         return al.copy() if out is None else out
@@ -201,9 +200,7 @@ def orientation_utilities(codes, vals, lattice, *, reference: bool = False) -> n
     v = np.asarray(vals, dtype=np.int64).ravel()
     table, skip = lattice_weights(lattice)
     n, m = v.shape[0], c.shape[0]
-    if not reference and n > 0:
-        from jaxmatch.kernels import placement as kernels
-
+    if not reference and kernels.BACKEND == "c" and n > 0:
         return kernels.orientation_utilities(c, v, np.ascontiguousarray(table), np.ascontiguousarray(skip))
     rot = (np.arange(n)[:, None] + np.arange(n)[None, :]) % n
     seqs = np.concatenate([v[rot], v[::-1][rot]])  # (2n, n)
@@ -264,9 +261,7 @@ def spread_optimal_alignment(t: np.ndarray, perimeter: float, codes: np.ndarray,
     S = starts.size
     U = np.full((S, m), -np.inf)
     U[np.arange(S), starts] = prefix[starts] + E[0, starts]
-    if not reference:  # the same DP compiled; its first tied alignment is the backtrack's
-        from jaxmatch.kernels import placement as kernels
-
+    if not reference and kernels.BACKEND == "c":  # the same DP compiled; its first tied alignment is the backtrack's
         _, gap, _, A = kernels.candidates(c, sq[None, :], table, between, prefix, suffix, gq, tt, float(perimeter), unit,
                                           MAX_TIED_ALIGNMENTS if all_ties else 1)
         return best, (list(A) if all_ties else A[0].copy()), int(gap[0])
@@ -596,15 +591,13 @@ def match_candidates(annotation: Annotation, vals: np.ndarray, lattice, utility:
     if orients.size == 0 or n == 0 or n > len(annotation.codes):
         return []
     seqs = np.stack([roll(v[::-1] if o >= n else v, -int(o % n)) for o in orients]).astype(np.int64)
-    if reference:
+    if reference or kernels.BACKEND != "c":
         cands = []
         for o, seq in zip(orients, seqs):
             u, als, g = spread_optimal_alignment(annotation.t, annotation.perimeter, annotation.codes, seq, lattice,
                                                  all_ties=True, reference=True)
             cands.extend((g, int(o % n), bool(o >= n), al) for al in als)
     else:  # the same, compiled, all orientations in one call
-        from jaxmatch.kernels import placement as kernels
-
         st = _spread_setup(annotation.t, annotation.perimeter, annotation.codes, lattice)
         _, gap, own, A = kernels.candidates(st.c, seqs, st.table, st.between, st.prefix, st.suffix, st.gq, st.tt,
                                        float(annotation.perimeter), st.unit, MAX_TIED_ALIGNMENTS)
