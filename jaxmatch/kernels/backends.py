@@ -50,6 +50,11 @@ import numpy as np
 from jaxmatch.errors import InputError
 from jaxmatch.kernels.problem import UNROLL, DPProblem
 
+try:  # the C library, built with the package where a C compiler exists (loaded with ctypes on first use)
+    from jaxmatch.kernels import _dp
+except ImportError:  # pragma: no cover - installed without a C compiler
+    _dp = None
+
 __all__ = ["BACKENDS", "LANES", "NUMPY_CELLS", "PARALLEL_CELLS", "NumbaBackend", "c_align", "c_kernel", "c_values",
            "default_backend", "jax_on_cpu", "numba_values", "numpy_values", "serial_only"]
 
@@ -140,9 +145,7 @@ def _load_c_dp():
     """The C library of :func:`c_values` (and of :func:`jaxmatch.scoring.exact.align`'s rows)
     through ctypes, or None when it was not built (it is optional: a machine without a C
     compiler installs the package without it)."""
-    try:
-        from jaxmatch.kernels import _dp
-    except ImportError:
+    if _dp is None:
         return None
     lib = ctypes.CDLL(_dp.__file__)
     P, L = ctypes.c_void_p, ctypes.c_int64

@@ -53,6 +53,11 @@ import os
 
 import numpy as np
 
+try:  # the C library, built with the package where a C compiler exists
+    from jaxmatch.kernels import _placement
+except ImportError:  # pragma: no cover - installed without a C compiler
+    _placement = None
+
 __all__ = ["BACKEND", "energy", "flat_slides", "lbfgs", "objective", "smooth", "tutte_dense"]  # + the C-only ones below
 
 
@@ -73,9 +78,7 @@ def flat_slides(slides) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
 def _load_c():
     if os.environ.get("JAXMATCH_PLACEMENT_KERNELS", "").strip().lower() == "numba":
         return None
-    try:
-        from jaxmatch.kernels import _placement
-    except ImportError:
+    if _placement is None:
         return None
     lib = ctypes.CDLL(_placement.__file__)
     D, L, P = ctypes.c_double, ctypes.c_int64, ctypes.c_void_p
