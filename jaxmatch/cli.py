@@ -39,7 +39,7 @@ later = Later(
     lattice="jaxmatch.scoring.lattice",  # 'lattice show'
     rank="jaxmatch.scoring.rank",  # ranking records
     build="jaxmatch.meshing.build",  # placements as QuadMeshes ('score --png')
-    bulk="jaxmatch.scoring.bulk", backends="jaxmatch.scoring.backends", parallel="jaxmatch.parallel",  # many at once
+    bulk="jaxmatch.scoring.bulk", backends="jaxmatch.kernels.backends", parallel="jaxmatch.parallel",  # many at once
     # the meshing stack (placement, integer programs): only the commands that mesh or place
     pipeline="jaxmatch.meshing.pipeline",
     layout="jaxmatch.placement.layout",  # a layout's named sides (--sides-file)

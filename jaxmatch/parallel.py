@@ -50,7 +50,7 @@ def ordered_map(fn: Callable[[Any], Any], items: Sequence[Any], jobs: int = 1,
     fn: any callable (a closure is fine: workers inherit it by ``fork``, nothing is pickled
     but the results); its results must be picklable. jobs: worker processes (at most
     ``len(items)``); an exception in ``fn`` is raised here, at its item, as in a plain loop.
-    initializer: run once in each worker (e.g. :func:`jaxmatch.scoring.backends.serial_only`).
+    initializer: run once in each worker (e.g. :func:`jaxmatch.kernels.backends.serial_only`).
     warm_first: run the first item in this process before starting the workers, so that what
     it loads and compiles (prepared catalogue, compiled kernels) is inherited, not redone in
     every worker. warm: instead, run ``warm()`` in this process before starting the workers

@@ -18,7 +18,7 @@ from jaxmatch.lazy import Later
 
 __all__ = ["corner_vectors", "edge_ratios", "inverted_mask", "quad_areas", "quality", "sj_inverted"]
 
-_later = Later(kernels="jaxmatch.placement.kernels")
+_later = Later(kernels="jaxmatch.kernels.placement")
 """The compiled kernels, on the first :func:`sj_inverted`: where the C library is absent they
 are numba's (~0.5 s to load), which a process that only reads or writes meshes does not need."""
 

@@ -15,7 +15,7 @@ Printed, from one run:
 * jaxmatch exact scorer (``score_bucket`` on every mesh, all host threads): compile time
   (first pass minus a warm pass) and run time (min / median of ``--reps``), meshes/s, cells/s;
 * the reference (numba ``@njit``, nopython, single thread, float32; the plain recurrence of
-  ``jaxmatch.scoring.reference.dp_reference`` with skip weights,
+  ``jaxmatch.kernels.reference.dp_reference`` with skip weights,
   ``D[i][j] = max(D[i-1][j] + skip[c], D[i-1][j-1] + W[i-1, j-1])``, in the unshifted frame,
   written for this benchmark), checked to give identical
   utilities for every mesh and shape; its throughput, and the ratio jaxmatch / reference
@@ -176,7 +176,7 @@ def make_backend(args):
 
         return CPUBackend(args.threads)
     if args.backend == "numba" or args.lanes:
-        from jaxmatch.scoring.backends import NumbaBackend
+        from jaxmatch.kernels.backends import NumbaBackend
 
         return NumbaBackend(args.threads, **({"lanes": args.lanes} if args.lanes else {}))
     return None
@@ -199,7 +199,7 @@ def make_reference():
     import numba
     import numpy as np
 
-    from jaxmatch.scoring.model import NEG, weights_of
+    from jaxmatch.kernels.model import NEG, weights_of
 
     neg = np.float32(NEG)
 
@@ -655,7 +655,7 @@ def many_probe(args) -> dict | None:
     from jaxmatch.api import rank
     from jaxmatch.catalogue import store as cat_mod
     from jaxmatch.parallel import available_cpus, can_fork, ordered_map
-    from jaxmatch.scoring.backends import serial_only
+    from jaxmatch.kernels.backends import serial_only
     from jaxmatch.scoring.lattice import load_lattice
     from jaxmatch.scoring.rank import ranking_json
     from jaxmatch.io.readers import load_shape

@@ -1,4 +1,4 @@
-"""The numba backend of the exact host (jaxmatch.scoring.backends), its C kernel for problems of one
+"""The numba backend of the exact host (jaxmatch.kernels.backends), its C kernel for problems of one
 thread and its numpy kernel for small problems, against the XLA backend and the plain-Python DP,
 with and without skip weights (must-match types included)."""
 
@@ -9,11 +9,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from jaxmatch.scoring import reference
+from jaxmatch.kernels import reference
 from jaxmatch.errors import InputError
-from jaxmatch.scoring.backends import NumbaBackend, c_kernel, c_values, default_backend, numba_values, numpy_values
+from jaxmatch.kernels.backends import NumbaBackend, c_kernel, c_values, default_backend, numba_values, numpy_values
 from jaxmatch.scoring.exact import CPUBackend, dp_problem, exact_values, score_bucket
-from jaxmatch.scoring.model import make_weights
+from jaxmatch.kernels.model import make_weights
 
 
 def random_model(seed: int, forbidden: float, skip: str):
@@ -71,7 +71,7 @@ def test_numpy_kernel_equals_the_xla_backend(case, wider):
     np.testing.assert_array_equal(ours[valid], theirs[valid])
 
 
-needs_c = pytest.mark.skipif(c_kernel() is None, reason="the C kernel (jaxmatch.scoring._cdp) is not built")
+needs_c = pytest.mark.skipif(c_kernel() is None, reason="the C kernel (jaxmatch.kernels._dp) is not built")
 
 
 @needs_c
@@ -102,7 +102,7 @@ def budget_case(monkeypatch, seed: int, skip: str):
     """A small problem (one 30-point shape, 40 meshes of 8 vertices), its XLA values, and the
     list every kernel call of the numba backend is recorded in ("c", "numpy", "numba"), in a
     process where neither the budget nor the numba kernel has been used yet."""
-    from jaxmatch.scoring import backends
+    from jaxmatch.kernels import backends
 
     rng = np.random.default_rng(seed)
     shapes, vals = [rng.integers(0, 3, 30)], rng.integers(2, 6, (40, 8))
@@ -129,7 +129,7 @@ def test_small_problems_run_in_c_within_the_budget(monkeypatch):
 
 def test_numba_backend_runs_small_problems_in_numpy_within_its_budget(monkeypatch):
     """Without the C library: small problems in numpy until the budget is spent, then numba."""
-    from jaxmatch.scoring import backends
+    from jaxmatch.kernels import backends
 
     monkeypatch.setattr(backends, "_C_DP", [None, True])  # as if not built
     shapes, vals, w, ref, ran = budget_case(monkeypatch, 3, "must")
@@ -195,7 +195,7 @@ def test_default_backend_rejects_unknown_names(monkeypatch):
 
 @pytest.mark.parametrize("skip", ["zero", "must"])
 def test_parallel_and_serial_kernels_agree(monkeypatch, skip):
-    from jaxmatch.scoring import backends
+    from jaxmatch.kernels import backends
 
     rng = np.random.default_rng(11)
     shapes = [rng.integers(0, 3, 40), rng.integers(0, 3, 17)]

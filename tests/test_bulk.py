@@ -19,7 +19,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from jaxmatch.scoring import bulk
-from jaxmatch.scoring import reference
+from jaxmatch.kernels import reference
 from jaxmatch.catalogue.store import Bucket, default_catalogue
 from jaxmatch.scoring.lattice import load_lattice
 from jaxmatch.scoring.exact import (
@@ -33,7 +33,7 @@ from jaxmatch.scoring.exact import (
     reduce_orientations,
     score_bucket,
 )
-from jaxmatch.scoring.model import make_weights
+from jaxmatch.kernels.model import make_weights
 from jaxmatch.io.readers import load_shape
 from jaxmatch.shape import annotate
 
@@ -329,7 +329,7 @@ SHARDED = textwrap.dedent("""
     from jaxmatch.scoring.exact import score_bucket
     from jaxmatch.io.readers import load_shape
     from jaxmatch.shape import annotate
-    from jaxmatch.scoring.model import make_weights
+    from jaxmatch.kernels.model import make_weights
     table = make_weights(load_lattice("fine").table(), [0, -7, float("-inf")])  # skip weights, must-match corners
     cat = default_catalogue()
     rng = np.random.default_rng(0)
@@ -367,7 +367,7 @@ def test_sharded_results_equal_single_device_on_4_simulated_devices():
 @pytest.mark.parametrize("m", [6, 10, 24])
 @pytest.mark.parametrize("skip", [None, [0.0, -2.0, -np.inf]])
 def test_part_bounds_equal_per_part_upper_bounds(m, skip, small_parts):
-    from jaxmatch.scoring.model import make_weights
+    from jaxmatch.kernels.model import make_weights
 
     weights = make_weights(random_table(m, 0.2), skip)
     codes = np.random.default_rng(m).integers(0, 3, m)  # m = 6, 10: some parts are longer than the shape

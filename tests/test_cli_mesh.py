@@ -243,7 +243,7 @@ def test_mesh_band_out_of_range_is_a_clear_error(cli, small_cat, value):
 MESH_IMPORTS = """
 unwanted = {"jax", "jaxlib", "numba", "matplotlib", "optax", "starlette", "uvicorn", "svgelements", "ezdxf",
             "rich.progress", "rich.table", "jaxmatch.tuning", "jaxmatch.label", "jaxmatch.scoring.soft",
-            "jaxmatch.scoring.xla", "jaxmatch.io.plot", "jaxmatch.catalogue.canon_fast", "scipy"}
+            "jaxmatch.kernels.dp_xla", "jaxmatch.io.plot", "jaxmatch.catalogue.canon_fast", "scipy"}
 print(sorted(m for m in sys.modules if m in unwanted or m.split(".")[0] == "scipy"))
 """
 

@@ -1,5 +1,5 @@
-"""The compiled smoothers (the C library, placement/_ckernels.c through placement/kernels.py, and
-its numba fallback, placement/_numba_smooth.py) are the numpy reference in embed.py, step for
+"""The compiled smoothers (the C library, kernels/_placement.c through kernels/placement.py, and
+its numba fallback, kernels/_numba_smooth.py) are the numpy reference in embed.py, step for
 step: same energy and gradient, same parametrisation of sliding vertices, same L-BFGS iterates,
 hence the same smoothed placements (up to round-off)."""
 
@@ -12,7 +12,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from jaxmatch.placement import _numba_smooth, kernels
+from jaxmatch.kernels import _numba_smooth
+from jaxmatch.kernels import placement as kernels
 from jaxmatch.placement.embed import LBFGS_FTOL, LBFGS_GTOL, LBFGS_MEMORY, Slide, _energy, _lbfgs, _objective, _Params
 from jaxmatch.placement.embed import smooth
 from jaxmatch.quality import inverted_mask, quality

@@ -39,7 +39,7 @@ from jaxmatch.placement.choose import (
 )
 from jaxmatch.placement.spread import GAP_UNIT, gap_cost, orientation_utilities, spread_alignment, spread_optimal_alignment
 from jaxmatch.scoring.exact import score_bucket, utility_of
-from jaxmatch.scoring.reference import dp_reference as reference_dp
+from jaxmatch.kernels.reference import dp_reference as reference_dp
 from jaxmatch.io.readers import load_shape
 from jaxmatch.shape import annotate, make_shape
 
@@ -692,10 +692,11 @@ def test_quality_band_last_resort_tries_other_orientations(cat, lat):
 
 
 @pytest.mark.parametrize("seed", range(4))
-def test_c_and_numba_alignment_kernels_agree(seed):
-    """The numba fallback of the alignment DPs gives what the C library gives: utilities of
-    every orientation, and per orientation the same tied alignments in the same order."""
-    from jaxmatch.placement import _numba_spread, kernels
+def test_c_alignment_kernels_equal_the_numpy_reference(seed):
+    """The C library's alignment DPs give what the numpy references give: utilities of every
+    orientation, and, for all orientations in one call, each orientation's utility, gap cost and
+    tied alignments in the same order (one numpy spread per orientation)."""
+    from jaxmatch.kernels import placement as kernels
     from jaxmatch.placement.spread import MAX_TIED_ALIGNMENTS, spread_setup
 
     if kernels.BACKEND != "c":
@@ -707,23 +708,28 @@ def test_c_and_numba_alignment_kernels_agree(seed):
             t, per = np.arange(len(t), dtype=float), float(len(t))
         c, v = np.asarray(codes, np.int64), np.asarray(vals, np.int64)
         np.testing.assert_array_equal(kernels.orientation_utilities(c, v, table, skip),
-                                      _numba_spread.orientation_utilities(c, v, table, skip))
+                                      orientation_utilities(codes, vals, (table, skip), reference=True))
         st = spread_setup(t, per, codes, (table, skip))
         n = len(v)
         seqs = np.stack([np.roll(v[::-1] if o >= n else v, -(o % n)) for o in range(2 * n)]).astype(np.int64)
-        args = (st.c, seqs, st.table, st.between, st.prefix, st.suffix, st.gq, st.tt, per, st.unit, MAX_TIED_ALIGNMENTS)
-        for x, y in zip(kernels.candidates(*args), _numba_spread.candidates(*args)):
-            np.testing.assert_array_equal(x, y)
+        util, gap, own, A = kernels.candidates(st.c, seqs, st.table, st.between, st.prefix, st.suffix, st.gq, st.tt, per,
+                                               st.unit, MAX_TIED_ALIGNMENTS)
+        for o, seq in enumerate(seqs):
+            best, als, g = spread_optimal_alignment(t, per, codes, seq, (table, skip), all_ties=True, reference=True)
+            assert util[o] == best
+            assert [a.tolist() for a in A[own == o]] == [a.tolist() for a in als]
+            if np.isfinite(best):
+                assert gap[o] == g
 
 
-@pytest.mark.skipif(__import__("jaxmatch.placement.kernels", fromlist=["BACKEND"]).BACKEND != "c",
+@pytest.mark.skipif(__import__("jaxmatch.kernels.placement", fromlist=["BACKEND"]).BACKEND != "c",
                     reason="the C placement library is not built")
 @settings(max_examples=300, deadline=None)
 @given(st.integers(0, 2**32 - 1))
 def test_spread_alignment_in_c_equals_numpy(seed):
     """The compiled spread programme gives numpy's alignment, ties included (integer
     parameters make many)."""
-    from jaxmatch.placement import kernels
+    from jaxmatch.kernels import placement as kernels
 
     rng = np.random.default_rng(seed)
     m = int(rng.integers(3, 14))

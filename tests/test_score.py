@@ -9,7 +9,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from jaxmatch.catalogue import mesh
-from jaxmatch.scoring import reference
+from jaxmatch.kernels import reference
 from jaxmatch.errors import UnmatchableError
 from jaxmatch.scoring.exact import (
     NEG,
@@ -24,7 +24,7 @@ from jaxmatch.scoring.exact import (
     utility_of,
     utility_parts,
 )
-from jaxmatch.scoring.model import make_weights, weights_of
+from jaxmatch.kernels.model import make_weights, weights_of
 
 S, X, V = 0, 1, 2
 
@@ -147,7 +147,7 @@ def test_dp_rows_are_the_rows_of_dp_scan(m, n, skip, seed):
     import jax.numpy as jnp
 
     from jaxmatch.scoring.exact import dp_rows, dp_scan
-    from jaxmatch.scoring.model import skip_frame
+    from jaxmatch.kernels.model import skip_frame
 
     rng = np.random.default_rng(seed)
     codes, seq = rng.integers(0, 3, m), rng.integers(2, 6, n)
@@ -163,14 +163,14 @@ def test_dp_rows_are_the_rows_of_dp_scan(m, n, skip, seed):
     np.testing.assert_array_equal(dp_rows(codes, seq, w), np.asarray(rows))
 
 
-@pytest.mark.skipif(__import__("jaxmatch.scoring.backends", fromlist=["c_kernel"]).c_kernel() is None,
-                    reason="the C kernel (jaxmatch.scoring._cdp) is not built")
+@pytest.mark.skipif(__import__("jaxmatch.kernels.backends", fromlist=["c_kernel"]).c_kernel() is None,
+                    reason="the C kernel (jaxmatch.kernels._dp) is not built")
 @given(st.integers(1, 40), st.integers(1, 14), st.sampled_from(["zero", "neg", "must"]), st.integers(0, 2**32 - 1),
        st.integers(0, 13), st.booleans(), st.booleans())
 def test_align_in_c_is_align_in_numpy(m, n, skip, seed, rotation, reflected, strided):
     """align's C rows and backtrack give numpy's alignment (ties included: integer weights make
     many) or both find none; strided codes (a view) too."""
-    from jaxmatch.scoring import backends
+    from jaxmatch.kernels import backends
 
     rng = np.random.default_rng(seed)
     codes, vals = rng.integers(0, 3, 2 * m), rng.integers(2, 6, n)

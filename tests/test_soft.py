@@ -9,11 +9,11 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from jaxmatch.scoring import reference
+from jaxmatch.kernels import reference
 from jaxmatch.scoring import exact as score
 from jaxmatch.scoring import soft
 from jaxmatch.scoring.exact import NEG, score_bucket
-from jaxmatch.scoring.model import make_weights
+from jaxmatch.kernels.model import make_weights
 from jaxmatch.scoring.soft import pad_shapes, soft_utility, soft_utility_batch, table_parts
 
 S, X, V = 0, 1, 2

@@ -32,7 +32,7 @@ from jaxmatch.defaults import QUALITY
 from jaxmatch.errors import InputError
 from jaxmatch.arrays import roll
 from jaxmatch.catalogue.mesh import boundary_valences, mesh_valences
-from jaxmatch.placement import kernels
+from jaxmatch.kernels import placement as kernels
 from jaxmatch.placement.embed import Placement, exact_paths, oriented_boundary, place
 from jaxmatch.placement.spread import (MAX_TIED_ALIGNMENTS, orientation_utilities, spread_alignment,
                                        spread_optimal_alignment, spread_setup)
@@ -280,7 +280,7 @@ def match_candidates(annotation: Annotation, vals: np.ndarray, lattice, utility:
 
     min_utility: instead, every orientation whose utility is at least this, each with its own
     most evenly spread best alignments (no gap-cost comparison across orientations). Compiled
-    (:func:`jaxmatch.placement.kernels.candidates`); ``reference``: one numpy :func:`spread_optimal_alignment`
+    (:func:`jaxmatch.kernels.placement.candidates`); ``reference``: one numpy :func:`spread_optimal_alignment`
     per orientation, which it is tested against."""
     v = np.asarray(vals, dtype=np.int64).ravel()
     n = v.shape[0]
@@ -292,7 +292,7 @@ def match_candidates(annotation: Annotation, vals: np.ndarray, lattice, utility:
     if orients.size == 0 or n == 0 or n > len(annotation.codes):
         return []
     seqs = np.stack([roll(v[::-1] if o >= n else v, -int(o % n)) for o in orients]).astype(np.int64)
-    if reference:
+    if reference or kernels.BACKEND != "c":
         cands = []
         for o, seq in zip(orients, seqs):
             u, als, g = spread_optimal_alignment(annotation.t, annotation.perimeter, annotation.codes, seq, lattice,

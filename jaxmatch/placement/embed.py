@@ -234,13 +234,13 @@ def tutte(quads: np.ndarray, n_vertices: int, boundary: np.ndarray, boundary_xy:
 
     quads: (F, 4); boundary: (n,) vertex ids fixed at ``boundary_xy`` (n, 2). Every other vertex
     is the average of its edge neighbours (one linear solve: dense and compiled,
-    :func:`jaxmatch.placement.kernels.tutte_dense`, up to :data:`DENSE_TUTTE` free vertices;
+    :func:`jaxmatch.kernels.placement.tutte_dense`, up to :data:`DENSE_TUTTE` free vertices;
     sparse beyond).
     ``reference``: the numpy/scipy version (tests). Returns ``(V, 2) float64``.
     """
     V = int(n_vertices)
     if not reference and 0 < V - len(boundary) <= DENSE_TUTTE:
-        from jaxmatch.placement import kernels
+        from jaxmatch.kernels import placement as kernels
 
         return kernels.tutte_dense(np.ascontiguousarray(quads, dtype=np.int64), V, np.asarray(boundary, dtype=np.int64),
                               np.ascontiguousarray(boundary_xy, dtype=np.float64))
@@ -332,7 +332,7 @@ class _Params:
         self.free = free
         self.slides = [Slide(np.asarray(s.a, float), np.asarray(s.b, float), np.asarray(s.vertices, np.int64)) for s in slides]
         self.nf = 2 * free.size
-        from jaxmatch.placement.kernels import flat_slides
+        from jaxmatch.kernels.placement import flat_slides
 
         self.flat = flat_slides(self.slides)  # (sa, sb, sp, sv) for the compiled optimiser
 
@@ -454,7 +454,7 @@ def _lbfgs(fg, x0: np.ndarray, maxiter: int, mem: int = LBFGS_MEMORY, ftol: floa
 
 def _minimise(xy, params, quads, delta, power, maxiter):
     """L-BFGS on the free vertices (and sliding boundary vertices); returns new (V, 2) positions
-    (numpy reference of the compiled loop, :func:`jaxmatch.placement.kernels.smooth`)."""
+    (numpy reference of the compiled loop, :func:`jaxmatch.kernels.placement.smooth`)."""
     x = _lbfgs(lambda z: _objective(z, params, quads, delta, power), params.start(xy), maxiter)
     return params.positions(x)
 
@@ -482,7 +482,7 @@ def smooth(
     slides: boundary vertices (listed in ``fixed``) that may nevertheless move along a straight
     side (:class:`Slide`); they stay on it, in order, so the region covered is unchanged.
     reference: run this numpy version instead of the compiled one
-    (:func:`jaxmatch.placement.kernels.smooth`, the same steps; for tests).
+    (:func:`jaxmatch.kernels.placement.smooth`, the same steps; for tests).
 
     Untangling: rounds of the regularised objective (power 1) with ``delta`` from the worst
     corner area (Escobar et al.'s rule ``delta^2 = eps (eps - min_area)``) until every corner
@@ -503,7 +503,7 @@ def smooth(
         return xy.copy()
     params = _Params(xy, free, slides)
     if not reference:
-        from jaxmatch.placement import kernels
+        from jaxmatch.kernels import placement as kernels
 
         return kernels.smooth(xy, np.ascontiguousarray(q, dtype=np.int64), free.astype(np.int64), *params.flat, int(iters),
                          np.asarray(powers, dtype=np.float64), int(untangle_rounds), LBFGS_MEMORY, LBFGS_FTOL, LBFGS_GTOL)

@@ -5,7 +5,7 @@ The utility of an alignment depends only on the codes of the points its vertices
 scorer's alignment (which only maximises utility and often packs the vertices into a few
 neighbouring points) can be replaced by any alignment with the same codes, or, given the
 lattice, by the best-utility alignment of least squared arc-length gaps. This module holds those
-dynamic programmes (numpy references of the compiled ones in :mod:`jaxmatch.placement.kernels`):
+dynamic programmes (numpy references of the compiled ones in :mod:`jaxmatch.kernels.placement`):
 :func:`spread_alignment` (same codes), :func:`orientation_utilities` (the best utility of every
 orientation of a mesh), :func:`spread_optimal_alignment` (best utility, then least gaps, with
 every tie on request) and the lattice as they read it (:func:`lattice_weights`).
@@ -21,8 +21,8 @@ from typing import NamedTuple
 import numpy as np
 
 from jaxmatch.arrays import roll
-from jaxmatch.placement import kernels
-from jaxmatch.scoring.model import weights_of
+from jaxmatch.kernels import placement as kernels
+from jaxmatch.kernels.model import weights_of
 
 __all__ = [
     "GAP_UNIT",
@@ -119,7 +119,7 @@ def lattice_weights(lattice) -> tuple[np.ndarray, np.ndarray]:
     """``(table (3, 64) float64, skip (3,) float64)`` of a lattice: the pairing weights
     ``[code, 16 (u-2) + 4 (v-2) + (w-2)]`` and the weight of skipping a point of each code
     (``-inf``: forbidden; zeros for a lattice without skip weights, the paper's free skipping).
-    ``lattice``: a :class:`~jaxmatch.scoring.lattice.Lattice` or :class:`~jaxmatch.scoring.model.Weights`, or a ``(table, skip)`` pair."""
+    ``lattice``: a :class:`~jaxmatch.scoring.lattice.Lattice` or :class:`~jaxmatch.kernels.model.Weights`, or a ``(table, skip)`` pair."""
     if isinstance(lattice, tuple):
         table, skip = lattice
         tab = np.asarray(table, dtype=np.float64).reshape(3, 64)
@@ -143,12 +143,12 @@ def orientation_utilities(codes, vals, lattice, *, reference: bool = False) -> n
     rotation ``o``, ``o >= n`` rotation ``o - n`` reflected (as in :mod:`jaxmatch.scoring.exact`).
     Plain numpy, the recurrence ``D[i][j] = max(D[i-1][j] + skip[code[i-1]], D[i-1][j-1] +
     W[i-1, j-1])`` for all orientations at once; compiled
-    (:func:`jaxmatch.placement.kernels.orientation_utilities`), ``reference``: numpy."""
+    (:func:`jaxmatch.kernels.placement.orientation_utilities`), ``reference``: numpy."""
     c = np.asarray(codes, dtype=np.int64).ravel()
     v = np.asarray(vals, dtype=np.int64).ravel()
     table, skip = lattice_weights(lattice)
     n, m = v.shape[0], c.shape[0]
-    if not reference and n > 0:
+    if not reference and kernels.BACKEND == "c" and n > 0:
         return kernels.orientation_utilities(c, v, np.ascontiguousarray(table), np.ascontiguousarray(skip))
     rot = (np.arange(n)[:, None] + np.arange(n)[None, :]) % n
     seqs = np.concatenate([v[rot], v[::-1][rot]])  # (2n, n)
@@ -188,7 +188,7 @@ def spread_optimal_alignment(t: np.ndarray, perimeter: float, codes: np.ndarray,
     several equally good ones a single answer picks depends on where the loop is labelled to
     start.
 
-    Compiled (:func:`jaxmatch.placement.kernels.candidates` for the one orientation);
+    Compiled (:func:`jaxmatch.kernels.placement.candidates` for the one orientation);
     ``reference``: the numpy version it is tested against.
     """
     sq = np.asarray(seq, dtype=np.int64).ravel()
@@ -209,7 +209,7 @@ def spread_optimal_alignment(t: np.ndarray, perimeter: float, codes: np.ndarray,
     S = starts.size
     U = np.full((S, m), -np.inf)
     U[np.arange(S), starts] = prefix[starts] + E[0, starts]
-    if not reference:  # the same DP compiled; its first tied alignment is the backtrack's
+    if not reference and kernels.BACKEND == "c":  # the same DP compiled; its first tied alignment is the backtrack's
         _, gap, _, A = kernels.candidates(c, sq[None, :], table, between, prefix, suffix, gq, tt, float(perimeter), unit,
                                           MAX_TIED_ALIGNMENTS if all_ties else 1)
         return best, (list(A) if all_ties else A[0].copy()), int(gap[0])

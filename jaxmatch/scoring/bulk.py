@@ -40,6 +40,17 @@ from typing import Callable, Iterable, NamedTuple, Sequence
 
 import numpy as np
 
+from jaxmatch.files import atomic_open
+from jaxmatch.kernels.model import NEG, skip_frame, skip_offset, weights_of
+from jaxmatch.scoring.exact import (  # numpy only: no JAX import here
+    DEFAULT_BATCH,
+    UNROLL,
+    block_size,
+    exact_values,
+    final_values,
+    reduce_orientations,
+)
+
 __all__ = [
     "SequenceGroups",
     "ShardedBackend",
@@ -62,7 +73,7 @@ __all__ = [
     "write_jsonl",
 ]
 
-from jaxmatch.scoring.model import NEG, skip_frame, skip_offset, weights_of  # numpy only: no JAX import here
+from jaxmatch.kernels.model import NEG, skip_frame, skip_offset, weights_of  # numpy only: no JAX import here
 from jaxmatch.files import atomic_open
 from jaxmatch.scoring.exact import (DEFAULT_BATCH, UNROLL, block_size, exact_values, final_values,
                                      reduce_orientations)
@@ -228,7 +239,6 @@ def score_distinct(codes, vals, weights, **kw):
     """:func:`jaxmatch.scoring.exact.score_bucket`, scoring each distinct sequence once (same result).
     Keyword arguments go to :func:`jaxmatch.scoring.exact.final_values` (or, with ``devices``, to
     :func:`sharded_values`)."""
-
     g = group_sequences(np.asarray(vals).reshape(-1, np.shape(vals)[-1]))
     rep = _values(codes, g.seqs, weights, **kw)
     return reduce_orientations(fan_out(rep, g))
@@ -396,7 +406,6 @@ def _values(codes, seqs, weights, *, devices=None, plan=None, **kw) -> np.ndarra
     if devices is not None and not (isinstance(devices, (int, np.integer)) and int(devices) == 1):
         kw.pop("threads", None)
         return sharded_values(codes, seqs, weights, devices=devices, plan=plan, **kw)
-
     return final_values(codes, seqs, weights, plan=plan, **kw)
 
 
@@ -465,7 +474,6 @@ def top_k(
     threads; an int or a device list = :func:`sharded_values` over those devices.
     progress(done, total): meshes settled (scored, pruned or unmatchable) so far.
     """
-
     weights = weights_of(weights)  # compiled once for all calls
     top = max(int(top), 1)
     batch = DEFAULT_BATCH if batch is None else int(batch)
@@ -607,7 +615,6 @@ def top_k_many(codes_list: Sequence, parts, weights, *, devices=None, **kw) -> l
     weights = weights_of(weights)
     if _mesh_size(devices) <= 1:
         return [top_k(c, parts, weights, devices=None, **kw) for c in codes_list]
-
     top, per_size = max(int(kw.get("top", 5)), 1), bool(kw.get("per_size", False))
     total = sum(len(p.ids) for p in parts)
     rows: list[list] = [[] for _ in codes_list]
@@ -647,8 +654,7 @@ def _sharded_fn(mesh, unroll: int, over: str, strict: bool):
     import jax
     from jax.sharding import PartitionSpec as P
 
-    from jaxmatch.scoring.xla import _blocks  # (JAX)
-
+    from jaxmatch.kernels.dp_xla import _blocks  # imports JAX
 
     def body(codes, vals, tab, gate):
         return _blocks(codes, vals, tab, gate, strict, unroll)
@@ -673,7 +679,6 @@ class ShardedBackend:
     def __init__(self, devices=None, over: str = "meshes", unroll: int | None = None):
         if over not in ("meshes", "shapes"):
             raise ValueError(f"over must be 'meshes' or 'shapes', got {over!r}")
-
         self.mesh = device_mesh(devices)
         self.over = over
         self.unroll = UNROLL if unroll is None else int(unroll)
@@ -712,7 +717,6 @@ def sharded_values(
     """:func:`jaxmatch.scoring.exact.final_values` with the meshes sharded over ``devices``
     (:class:`ShardedBackend`): ``(N, 2n) float32``, ``-inf`` for orientations without a finite
     alignment. Each call holds ``devices x blocks per call x block`` meshes."""
-
     be = ShardedBackend(devices, "meshes", unroll)
     return exact_values([codes], vals, weights, backend=be, batch=DEFAULT_BATCH if batch is None else batch,
                         m_pad=m_pad, plan=plan)[0]
@@ -720,7 +724,6 @@ def sharded_values(
 
 def score_sharded(codes, vals, weights, *, devices=None, **kw):
     """:func:`jaxmatch.scoring.exact.score_bucket` with the meshes sharded over ``devices`` (same result)."""
-
     return reduce_orientations(sharded_values(codes, vals, weights, devices=devices, **kw))
 
 
@@ -741,7 +744,6 @@ def score_many(
     the longest one's :func:`jaxmatch.scoring.exact.bucket_length` (padding points are skipped) and to a
     multiple of the device count; meshes go in chunks of ``batch``.
     """
-
     if not len(codes_list):
         return []
     be = ShardedBackend(devices, "shapes", unroll)
@@ -755,7 +757,6 @@ def score_many(
 def write_jsonl(path, records: Iterable[dict]) -> None:
     """Write one JSON object per line, atomically (temp file + rename: readers see the old file
     or the complete new one, never a partial one)."""
-
     with atomic_open(path, "w") as fh:
         for rec in records:
             fh.write(json.dumps(rec, sort_keys=False) + "\n")

@@ -5,7 +5,7 @@ Problem
 ``codes: (m,) int`` is the shape's annotation, 0 = ``s`` straight, 1 = ``x`` convex,
 2 = ``v`` concave; its start is fixed. A mesh boundary is a ccw valence sequence
 ``vals: (n,)`` with valences in {2, 3, 4, 5}. The scoring model is a
-:class:`jaxmatch.scoring.model.Weights` (a lattice compiles to one; a bare ``(3, 4, 4, 4)``
+:class:`jaxmatch.kernels.model.Weights` (a lattice compiles to one; a bare ``(3, 4, 4, 4)``
 table means skip weights 0): match weights ``table[code, u - 2, v - 2, w - 2]`` (integers or
 ``-inf`` = forbidden) and skip weights ``skip[code]`` (integers or ``-inf`` = the point must
 get a mesh vertex).
@@ -61,7 +61,7 @@ orientation (the rows :func:`align` backtracks). Exact scoring goes through one 
 narrowest exact one, :func:`dp_kind`: int16 for the shipped lattices), pads input lengths to
 a few bucket sizes (:func:`bucket_length`) and mesh batches to a fixed chunk size
 (:func:`plan_chunks`), hands the padded chunks to a *backend* and turns the raw values back
-into utilities. Backends (:class:`Backend`): :class:`jaxmatch.scoring.backends.NumbaBackend`
+into utilities. Backends (:class:`Backend`): :class:`jaxmatch.kernels.backends.NumbaBackend`
 (the default on CPUs), :class:`CPUBackend` (the XLA kernel: the max-plus recurrence in a flat
 ``(n, 2n * block)`` layout with cache-sized blocks, :func:`final_blocks`, calls dispatched on
 several host threads) and :class:`jaxmatch.scoring.bulk.ShardedBackend` (the same blocks over
@@ -70,12 +70,12 @@ never sees the padding or the chunking. Weights are integers, so all number type
 identical utilities. Measurements: ``docs/perf.md``.
 
 Layering: the problem contract (:class:`DPProblem`, :class:`DPKind`, :class:`Backend`,
-:func:`run_calls`, ...) lives in :mod:`jaxmatch.scoring.problem` (re-exported here), which the
-kernels (:mod:`jaxmatch.scoring.backends`, :mod:`jaxmatch.scoring.xla`) import; no kernel imports
-this module. This host picks the default backend from :mod:`jaxmatch.scoring.backends`.
+:func:`run_calls`, ...) lives in :mod:`jaxmatch.kernels.problem` (re-exported here), which the
+kernels (:mod:`jaxmatch.kernels.backends`, :mod:`jaxmatch.kernels.dp_xla`) import; no kernel imports
+this module. This host picks the default backend from :mod:`jaxmatch.kernels.backends`.
 
 This module imports numpy only. The JAX code (:func:`dp_scan`, :func:`final_blocks`,
-:class:`CPUBackend`, :func:`orientation_weights`, ...) lives in :mod:`jaxmatch.scoring.xla` and
+:class:`CPUBackend`, :func:`orientation_weights`, ...) lives in :mod:`jaxmatch.kernels.dp_xla` and
 is re-exported here on first access (:data:`XLA_NAMES`), so JAX is loaded only when one of
 those names is used: the default CPU path (numba backend, numpy :func:`align`) never loads it.
 """
@@ -89,9 +89,16 @@ import numpy as np
 from jaxmatch.arrays import roll
 from jaxmatch.catalogue.mesh import triples
 from jaxmatch.errors import UnmatchableError
-from jaxmatch.scoring.backends import c_kernel, default_backend
-from jaxmatch.scoring.model import NEG, SkipFrame, skip_frame, skip_offset, skipped_weight, weights_of  # noqa: F401 (SkipFrame re-exported)
-from jaxmatch.scoring.problem import (  # noqa: F401 (the problem contract, re-exported)
+from jaxmatch.kernels.backends import c_align, c_kernel, default_backend
+from jaxmatch.kernels.model import (  # noqa: F401 (SkipFrame re-exported)
+    NEG,
+    SkipFrame,
+    skip_frame,
+    skip_offset,
+    skipped_weight,
+    weights_of,
+)
+from jaxmatch.kernels.problem import (  # noqa: F401 (the problem contract, re-exported)
     _INVALID,
     UNROLL,
     Backend,
@@ -271,9 +278,9 @@ def exact_values(
     ``(S, N, 2n) float32``, ``-inf`` where an orientation has no finite alignment (or ``n > m``).
 
     codes_list: ``S`` shapes ``(m_s,)``; vals: ``(N, n)`` boundary valences; weights: the model
-    (:func:`jaxmatch.scoring.model.weights_of`). Meshes are padded to whole calls of
+    (:func:`jaxmatch.kernels.model.weights_of`). Meshes are padded to whole calls of
     ``mesh_lanes x blocks per call x block`` (:func:`plan_chunks` of ``batch``, or ``plan``);
-    ``backend`` (default :func:`jaxmatch.scoring.backends.default_backend`) computes the raw values.
+    ``backend`` (default :func:`jaxmatch.kernels.backends.default_backend`) computes the raw values.
     """
     if backend is None:
         backend = default_backend()
@@ -308,7 +315,7 @@ def final_values(
     """Best utility of every orientation for one shape: ``(N, 2n) float32``, ``-inf`` where the
     orientation has no finite alignment (or ``n > m``). Column ``o`` is orientation ``o`` of the
     module docstring. :func:`exact_values` for one shape (``threads``, ``unroll``: of the
-    default backend, :func:`jaxmatch.scoring.backends.default_backend`)."""
+    default backend, :func:`jaxmatch.kernels.backends.default_backend`)."""
     if backend is None:
         backend = default_backend(threads, unroll)
     return exact_values([codes], vals, weights, backend=backend, batch=batch, m_pad=m_pad, plan=plan)[0]
@@ -343,7 +350,7 @@ def score_bucket(
     """Score every mesh of one bucket (all of boundary length ``n``) against ``codes``.
 
     codes: ``(m,)`` ints 0/1/2; vals: ``(N, n)`` ccw boundary valences; weights: the model (a
-    :class:`jaxmatch.scoring.model.Weights`, a lattice, or a ``(3, 4, 4, 4)`` table with ``-inf``
+    :class:`jaxmatch.kernels.model.Weights`, a lattice, or a ``(3, 4, 4, 4)`` table with ``-inf``
     for forbidden and skip weights 0). ``m`` is padded to :func:`bucket_length` (or ``m_pad``),
     the meshes to a multiple of the chunk size ``min(batch, next power of two >= N)`` (at least
     8), cut into cache-sized blocks (:func:`block_size`); one compilation per (padded m, n,
@@ -396,7 +403,7 @@ def align(codes, vals_one, weights, rotation: int, reflected: bool, *, m_pad: in
     each vertex takes the earliest best point counted from the end). Raises
     :class:`UnmatchableError` when this orientation has no finite alignment. ``m_pad`` is only
     checked (``>= m``): padded points never change the rows up to ``m``. Rows and backtrack run
-    in C when its library is built (:func:`jaxmatch.scoring.backends.c_kernel`: the same float32
+    in C when its library is built (:func:`jaxmatch.kernels.backends.c_kernel`: the same float32
     operations in the same order, so the same alignment, tested), else in numpy.
     """
     seq = oriented_sequence(vals_one, rotation, reflected)
@@ -408,17 +415,9 @@ def align(codes, vals_one, weights, rotation: int, reflected: bool, *, m_pad: in
     _check_vals(seq)
     pad_codes(c, m_pad)  # checks the codes (and m_pad)
     fr = skip_frame(weights)
-    lib = c_kernel()
-    if lib is not None:  # the same rows and backtrack in C (jaxmatch/scoring/_cdp.c)
-        out = np.empty(n, np.int32)
-        tab = np.ascontiguousarray(fr.table, dtype=np.float32).reshape(3, 64)
-        must = np.ascontiguousarray(fr.gate, dtype=np.uint8)
-        s64 = np.ascontiguousarray(seq, dtype=np.int64)
-        cc = np.ascontiguousarray(c)
-        rc = lib.jm_align_f32(cc.ctypes.data, m, s64.ctypes.data, n, tab.ctypes.data, must.ctypes.data, NEG, out.ctypes.data)
-        if rc < 0:
-            raise MemoryError("alignment kernel: out of memory")
-        if rc == 1:
+    if c_kernel() is not None:  # the same rows and backtrack in C (jaxmatch/kernels/_dp.c)
+        out = c_align(c, seq, fr.table, fr.gate, NEG)
+        if out is None:
             raise UnmatchableError(_NO_ALIGNMENT)
         return out
     rows = dp_rows(c, seq, weights)
@@ -447,7 +446,6 @@ class UtilityParts(NamedTuple):
 def utility_parts(codes, vals_one, weights, rotation: int, reflected: bool, alignment) -> UtilityParts:
     """:class:`UtilityParts` of one explicit alignment (numpy, the model's ``-inf`` entries as
     ``-inf``). ValueError when the alignment is not strictly increasing in range."""
-
     w = weights_of(weights)
     seq = oriented_sequence(vals_one, rotation, reflected)
     n = seq.shape[0]
@@ -474,14 +472,14 @@ def utility_of(codes, vals_one, weights, rotation: int, reflected: bool, alignme
 
 XLA_NAMES = frozenset({"CPUBackend", "dp_scan", "final_blocks", "finite_table", "orientation_slabs",
                        "orientation_triples", "orientation_weights", "oriented_sequences", "_blocks", "_final_block"})
-"""Names served from :mod:`jaxmatch.scoring.xla` (importing it imports JAX) on first access."""
+"""Names served from :mod:`jaxmatch.kernels.dp_xla` (importing it imports JAX) on first access."""
 
 
 def __getattr__(name: str):
     if name in XLA_NAMES:
-        from jaxmatch.scoring import xla
+        from jaxmatch.kernels import dp_xla  # imports JAX
 
-        value = getattr(xla, name)
+        value = getattr(dp_xla, name)
         globals()[name] = value
         return value
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -36,7 +36,7 @@ as before (skipping is free, as in the paper).
 Arrays: ``table()`` is ``(3, 4, 4, 4) float32`` indexed ``[type, u-2, v-2, w-2]`` with type
 ``0 = s, 1 = x, 2 = v`` (:data:`jaxmatch.shape.SYMBOLS`), ``-inf`` where weeded/forbidden;
 :func:`finite_table` replaces ``-inf`` by :data:`NEG` for the scorer; ``weights()`` compiles the
-lattice (table and skip weights) into the :class:`jaxmatch.scoring.model.Weights` every scorer takes.
+lattice (table and skip weights) into the :class:`jaxmatch.kernels.model.Weights` every scorer takes.
 """
 
 from __future__ import annotations
@@ -56,7 +56,7 @@ import numpy as np
 
 from jaxmatch.errors import InputError
 from jaxmatch.files import read_limited, write_text_atomic
-from jaxmatch.scoring.model import NEG, Weights, make_weights
+from jaxmatch.kernels.model import NEG, Weights, make_weights
 from jaxmatch.shape import SYMBOLS
 
 __all__ = [

@@ -18,8 +18,8 @@ from jaxmatch.errors import UnmatchableError
 from jaxmatch.scoring.lattice import Lattice
 from jaxmatch.catalogue.mesh import triples
 from jaxmatch.scoring.exact import align, oriented_sequence, score_bucket, utility_parts
+from jaxmatch.kernels.model import Weights, weights_of
 from jaxmatch.scoring.bulk import prepared, top_k
-from jaxmatch.scoring.model import Weights, weights_of
 from jaxmatch.shape import Annotation, Shape, annotate, default_points
 
 
@@ -152,7 +152,7 @@ def rank(
     """Score every selected catalogue mesh against ``shape`` and return the best ``top``.
 
     lattice: the scoring model (a :class:`Lattice` or its compiled
-    :class:`jaxmatch.scoring.model.Weights`), compiled once for the whole ranking.
+    :class:`jaxmatch.kernels.model.Weights`), compiled once for the whole ranking.
     internal: k values to consider (None: all sizes compete; raw utilities then favour larger
     meshes, which match more points). per_size: return the best ``top`` of *each* k.
     points: number m of annotated shape points (default :func:`default_points` for the

@@ -1,6 +1,6 @@
 """Soft (differentiable) relaxation of the exact scorer, for tuning lattice weights.
 
-Same DP core as :mod:`jaxmatch.scoring.exact` (:func:`jaxmatch.scoring.exact.dp_scan`), with ``max``
+Same DP core as :mod:`jaxmatch.scoring.exact` (:func:`jaxmatch.kernels.dp_xla.dp_scan`), with ``max``
 replaced by the smoothed maximum ``smax_gamma(a, b) = gamma * logaddexp(a / gamma, b / gamma)``,
 and the maximum over the ``2n`` orientations replaced by ``gamma * logsumexp(. / gamma)``.
 Since log-sum-exp distributes over ``+``, the result is exactly the log-partition function
@@ -13,7 +13,7 @@ is used under the Gibbs distribution ``exp(U / gamma)`` (each matchable mesh's g
 to ``n``; for any mesh it is nonnegative with sum at most ``n``: the smoothed maxima use
 normalised weights in their derivatives, see :func:`smax2`).
 
-The model is a :class:`jaxmatch.scoring.model.Weights` (match table, forbidden mask, skip
+The model is a :class:`jaxmatch.kernels.model.Weights` (match table, forbidden mask, skip
 weights, must-match mask); the free values (``table``, ``skip``) may be given separately as JAX
 arrays to differentiate in them. Skip weights enter as in the exact scorer (the shifted frame
 of :mod:`jaxmatch.scoring.exact`: ``W' = W - skip[c]`` in the DP, ``sum_i skip[codes[i]]``
@@ -38,8 +38,10 @@ import jax.numpy as jnp
 import numpy as np
 from jax.custom_derivatives import SymbolicZero
 
-from jaxmatch.scoring.exact import UNROLL, bucket_length, dp_scan, orientation_weights
-from jaxmatch.scoring.model import NEG, weights_of
+from jaxmatch.kernels.dp_xla import dp_scan, orientation_weights
+from jaxmatch.kernels.model import NEG, weights_of
+from jaxmatch.kernels.problem import UNROLL
+from jaxmatch.scoring.exact import bucket_length
 
 __all__ = [
     "smax",
@@ -149,7 +151,7 @@ def table_parts(table) -> tuple[np.ndarray, np.ndarray]:
 
 def soft_parts(weights) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """``(table_free (3, 4, 4, 4) float32, forbidden (3, 4, 4, 4) bool, skip_free (3,) float32,
-    must (3,) bool)`` of a model (:func:`jaxmatch.scoring.model.weights_of`); forbidden entries
+    must (3,) bool)`` of a model (:func:`jaxmatch.kernels.model.weights_of`); forbidden entries
     of ``table_free`` and must-match entries of ``skip_free`` are 0."""
     w = weights_of(weights)
     return (np.where(w.forbidden, 0.0, w.table).astype(np.float32).reshape(3, 4, 4, 4), w.forbidden.reshape(3, 4, 4, 4).copy(),
@@ -199,7 +201,7 @@ def _model_arrays(weights, table, skip):
 def soft_utility(codes, vals, weights, gamma, *, table=None, skip=None, m_pad: int | None = None, unroll: int = UNROLL):
     """Soft utilities ``(N,)`` of meshes ``vals: (N, n)`` against one shape ``codes: (m,)``.
 
-    weights: the model (:func:`jaxmatch.scoring.model.weights_of`); ``table (3, 4, 4, 4)`` and
+    weights: the model (:func:`jaxmatch.kernels.model.weights_of`); ``table (3, 4, 4, 4)`` and
     ``skip (3,)``, when given, replace its free values (forbidden / must-match entries stay
     fixed at NEG). Differentiable in ``table``, ``skip`` and ``gamma``; traceable
     (``codes``/``vals`` may be traced, their shapes are static). ``m`` is padded to

@@ -85,7 +85,7 @@ from dataclasses import replace
 
 from jaxmatch.scoring.exact import exact_values
 from jaxmatch.scoring.lattice import MAX_WEIGHT, Lattice, LevelStructure, level_structure, table_from_levels, with_level_weights
-from jaxmatch.scoring.model import NEG, make_weights, weights_of
+from jaxmatch.kernels.model import NEG, make_weights, weights_of
 from jaxmatch.scoring.soft import pad_shapes, soft_batch, soft_parts
 from jaxmatch.shape import annotate, default_points
 
@@ -271,7 +271,7 @@ def split_examples(examples: Sequence[Example], fraction: float, seed: int) -> t
 
 def exact_utilities(enc: Encoded, cands: Candidates, weights) -> np.ndarray:
     """``(S, N) float32`` exact utilities (``-inf`` when unmatchable) under a model (a
-    :class:`Lattice`, :class:`jaxmatch.scoring.model.Weights` or a ``(3, 4, 4, 4)`` table with
+    :class:`Lattice`, :class:`jaxmatch.kernels.model.Weights` or a ``(3, 4, 4, 4)`` table with
     ``-inf`` = excluded and skip weights 0), by the exact host, in chunks of a fixed number of
     shapes (one compilation per (m_pad, bucket))."""
     w = weights_of(weights)
@@ -350,7 +350,7 @@ def _ranks(groups: list[_Group], n_examples: int, weights) -> tuple[np.ndarray, 
 
 def evaluate(examples: Sequence[Example], catalogue_or_index, table, *, detail: bool = False) -> dict:
     """Exact-scorer accuracy of a model ``table`` (a :class:`Lattice`, its
-    :class:`jaxmatch.scoring.model.Weights`, or a ``(3, 4, 4, 4)`` array with skip weights 0) on
+    :class:`jaxmatch.kernels.model.Weights`, or a ``(3, 4, 4, 4)`` array with skip weights 0) on
     ``examples``: ``{"top1", "top5", "top1_by_id", "top5_by_id", "mean_rank", "examples",
     "unmatchable"}`` over *all* catalogue meshes of each example's size (tie rule: module
     docstring); with ``detail`` also ``"ranks"`` (pessimistic rank per example)."""

@@ -1,6 +1,6 @@
 /* The scoring DPs in C, without numba's import (~0.45 s per process):
- *   - jm_dp_i16: the max-plus DP of the exact host (jaxmatch/scoring/backends.py, c_values), the
- *     numba kernel's steps (jaxmatch/scoring/_numba_dp.py) in int16, chunks of meshes as the
+ *   - jm_dp_i16: the max-plus DP of the exact host (jaxmatch/kernels/backends.py, c_values), the
+ *     numba kernel's steps (jaxmatch/kernels/dp_numba.py) in int16, chunks of meshes as the
  *     lanes, so its values are bit for bit the numba kernel's;
  *   - jm_align_f32: one orientation's alignment (jaxmatch/scoring/exact.py, align): the float32
  *     rows of exact.dp_rows, the same operations in the same order, and align's backtrack.
@@ -153,7 +153,7 @@ int jm_align_f32(const int32_t *codes, i64 m, const i64 *seq, i64 n, const float
     return rc;
 }
 
-static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_cdp",
+static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_dp",
                                     "jaxmatch's compiled scoring DP (called through ctypes)", -1, NULL};
 
-PyMODINIT_FUNC PyInit__cdp(void) { return PyModule_Create(&module); }
+PyMODINIT_FUNC PyInit__dp(void) { return PyModule_Create(&module); }

@@ -1,14 +1,31 @@
-"""The compiled placement kernels, whichever is available: the C library built with the package
-(``_ckernels.c``, called through ctypes), else the numba versions (``_numba_smooth.py``,
-``_numba_spread.py``). Both are the numpy references of :mod:`jaxmatch.placement.embed` and
+"""The placement kernels: the C library built with the package (``_placement.c``, called through
+ctypes), each the numpy reference of :mod:`jaxmatch.placement.embed` or
 :mod:`jaxmatch.placement.choose` step for step (``tests/test_embed_numba.py`` and
-``tests/test_placement.py`` check each against them).
+``tests/test_placement.py`` check each against it). ``JAXMATCH_PLACEMENT_KERNELS`` is read here
+and nowhere else.
 
-Why two: loading numba and its cached code costs a process ~0.55 s before its first placement,
-the C library a few milliseconds (``docs/perf.md``); numba stays as the fallback where the
-package was installed without a C compiler. :data:`BACKEND` says which one this process uses;
-``JAXMATCH_PLACEMENT_KERNELS=numba`` forces numba. After editing ``_ckernels.c``, rebuild it with
-``.venv/bin/python -m pip install -e .`` (an editable install puts the library next to it).
+Where the library was not built (it is optional: a machine without a C compiler installs the
+package without it, and the README asks only for ``python3`` and PyPI) or
+``JAXMATCH_PLACEMENT_KERNELS=numba`` is set, :data:`BACKEND` is ``"numba"``: the smoothing loop and
+the dense Tutte solve run in numba (``_numba_smooth.py``, imported on first use), everything else
+in the callers' numpy (they test ``BACKEND == "c"``). Why numba for the smoother and numpy for
+the rest (seconds per ``jaxmatch mesh REGION --divisions 32`` process, the implementations forced
+and alternated, median of 3 for the first; the numpy column is every placement kernel in numpy):
+
+=============================  ======  ======  ======
+region                         C       numba   numpy
+=============================  ======  ======  ======
+``examples/tshape.json``       0.39    0.98    0.41
+``examples/holes/letter-A``    0.64    1.27    13.2
+``examples/dense/glyph-G``     3.52    4.05    55.3
+=============================  ======  ======  ======
+
+numba pays ~0.6 s a process to load; numpy's L-BFGS loop calls its objective ~10^5 times on a
+mesh with holes, so the smoother keeps its numba copy. The alignment DPs do not need one: over
+the 118 meshes of ``scripts/snapshot_meshes`` (every example region at P/16 and P/32) numba
+smoothing with them in numpy took 165.2 s against 163.3 s with them in numba too (alternated
+region by region, the same files byte for byte), so their numba copy (``_numba_spread.py``) was
+dropped. (C took 71.8 s and numba 202.8 s over those meshes, run one after the other.)
 
 Functions (arrays C-contiguous; ``float64`` or ``int64``):
 
@@ -16,13 +33,17 @@ Functions (arrays C-contiguous; ``float64`` or ``int64``):
   iters, powers (p,), untangle_rounds, mem, ftol, gtol) -> (V, 2)``: ``embed.smooth``'s loop;
 * :func:`lbfgs`, :func:`energy`, :func:`objective`: its pieces (tests);
 * :func:`tutte_dense` ``(quads, V, boundary (n,), boundary_xy (n, 2)) -> (V, 2)``;
-* :func:`orientation_utilities` ``(codes (m,), vals (n,), table (3, 64), skip (3,)) -> (2n,)``;
-* :func:`sj_inverted` ``(xy (V, 2), quads (F, 4)) -> (sj (F,), inverted (F,) bool)``: C only (no numba
-  version: ``embed.sj_inverted`` computes it in numpy when the library is absent, the same values);
-* :func:`spread` ``(tt (m,), perimeter, ok (n, m) bool, starts (S,)) -> (n,) int64 or None``:
-  ``choose.spread_alignment``'s programme, C only (numpy there when the library is absent);
-* :func:`candidates` ``(codes, seqs (O, n), table, between (m, m), prefix, suffix (m,), gq (m, m),
-  tt (m,), perimeter, unit, limit) -> (utility (O,), gap (O,), orientation (K,), alignments (K, n))``.
+* C only (the callers' numpy when :data:`BACKEND` is ``"numba"``, the same values):
+  :func:`orientation_utilities` ``(codes (m,), vals (n,), table (3, 64), skip (3,)) -> (2n,)``
+  (``choose.orientation_utilities``); :func:`candidates` ``(codes, seqs (O, n), table, between
+  (m, m), prefix, suffix (m,), gq (m, m), tt (m,), perimeter, unit, limit) -> (utility (O,), gap
+  (O,), orientation (K,), alignments (K, n))`` (``choose.spread_optimal_alignment`` for ``O``
+  orientations); :func:`spread` ``(tt (m,), perimeter, ok (n, m) bool, starts (S,)) -> (n,) int64
+  or None`` (``choose.spread_alignment``); :func:`sj_inverted` ``(xy (V, 2), quads (F, 4)) ->
+  (sj (F,), inverted (F,) bool)`` (``embed.sj_inverted``).
+
+After editing ``_placement.c``, rebuild it with ``.venv/bin/python -m pip install -e .`` (an
+editable install puts the library next to it).
 """
 
 from __future__ import annotations
@@ -32,8 +53,12 @@ import os
 
 import numpy as np
 
-__all__ = ["BACKEND", "candidates", "energy", "flat_slides", "lbfgs", "objective", "orientation_utilities", "smooth",
-           "tutte_dense"]
+try:  # the C library, built with the package where a C compiler exists
+    from jaxmatch.kernels import _placement
+except ImportError:  # pragma: no cover - installed without a C compiler
+    _placement = None
+
+__all__ = ["BACKEND", "energy", "flat_slides", "lbfgs", "objective", "smooth", "tutte_dense"]  # + the C-only ones below
 
 
 def flat_slides(slides) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -53,11 +78,9 @@ def flat_slides(slides) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
 def _load_c():
     if os.environ.get("JAXMATCH_PLACEMENT_KERNELS", "").strip().lower() == "numba":
         return None
-    try:
-        from jaxmatch.placement import _ckernels
-    except ImportError:
+    if _placement is None:
         return None
-    lib = ctypes.CDLL(_ckernels.__file__)
+    lib = ctypes.CDLL(_placement.__file__)
     D, L, P = ctypes.c_double, ctypes.c_int64, ctypes.c_void_p
     sig = {
         "jm_smooth": (ctypes.c_int, [P, L, P, L, P, L, P, P, P, P, L, L, P, L, L, L, D, D, P]),
@@ -78,7 +101,11 @@ def _load_c():
 
 _C = _load_c()
 BACKEND = "c" if _C is not None else "numba"
-"""``"c"`` (the library built with the package) or ``"numba"`` (the fallback)."""
+"""``"c"`` (the library built with the package) or ``"numba"`` (the fallback: the smoother in
+numba, the other kernels in the callers' numpy)."""
+
+_NUMBA_NAMES = frozenset({"energy", "lbfgs", "objective", "smooth", "tutte_dense"})
+"""What the fallback serves from ``_numba_smooth.py``."""
 
 
 def _f(a) -> np.ndarray:
@@ -101,6 +128,7 @@ def _check(rc: int) -> None:
 
 
 if _C is not None:
+    __all__ += ["candidates", "orientation_utilities", "sj_inverted", "spread"]
 
     def smooth(xy, quads, free, sa, sb, sp, sv, iters, powers, untangle_rounds, mem, ftol, gtol):
         xy, q, fr, sa, sb, sp, sv, pw = _f(xy), _i(quads), _i(free), _f(sa), _f(sb), _i(sp), _i(sv), _f(powers)
@@ -175,5 +203,13 @@ if _C is not None:
         return sj, inv.view(bool)
 
 else:  # pragma: no cover - exercised with JAXMATCH_PLACEMENT_KERNELS=numba
-    from jaxmatch.placement._numba_smooth import energy, lbfgs, objective, smooth, tutte_dense  # noqa: F401
-    from jaxmatch.placement._numba_spread import candidates, orientation_utilities  # noqa: F401
+
+    def __getattr__(name: str):
+        """The smoother's numba copy, imported on first use (importing numba costs ~0.5 s)."""
+        if name in _NUMBA_NAMES:
+            from jaxmatch.kernels import _numba_smooth
+
+            value = getattr(_numba_smooth, name)
+            globals()[name] = value
+            return value
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

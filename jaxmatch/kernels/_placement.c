@@ -1,5 +1,5 @@
 /* Compiled placement kernels of jaxmatch (C, built with the package; called through ctypes by
- * jaxmatch/placement/kernels.py).
+ * jaxmatch/kernels/placement.py).
  *
  * The same algorithms as the numpy references in embed.py and choose.py, step for step:
  *   - the smoother: regularised corner condition numbers (power mean), their gradient, the
@@ -759,7 +759,7 @@ int jm_spread(const double *tt, i64 m, double per, const uint8_t *ok, i64 n, con
 
 /* ------------------------------------------------------------------------------------------ */
 
-static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_ckernels",
+static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_placement",
                                     "jaxmatch's compiled placement kernels (called through ctypes)", -1, NULL};
 
-PyMODINIT_FUNC PyInit__ckernels(void) { return PyModule_Create(&module); }
+PyMODINIT_FUNC PyInit__placement(void) { return PyModule_Create(&module); }

@@ -1,5 +1,5 @@
 """The exact DP's problem contract: what the exact host (:mod:`jaxmatch.scoring.exact`) hands a
-backend, and what every backend (:mod:`jaxmatch.scoring.backends`, :mod:`jaxmatch.scoring.xla`,
+backend, and what every backend (:mod:`jaxmatch.kernels.backends`, :mod:`jaxmatch.kernels.dp_xla`,
 :mod:`jaxmatch.scoring.bulk`) computes from it.
 
 * :class:`DPKind` and :class:`DPProblem`: the padded shapes and the compiled model in the DP
@@ -8,10 +8,10 @@ backend, and what every backend (:mod:`jaxmatch.scoring.backends`, :mod:`jaxmatc
 * :data:`UNROLL`, :data:`_INVALID`, :func:`_rotation_index`: conventions the kernels share;
 * :func:`run_calls`: calls dispatched on host threads (:func:`default_threads`).
 
-The bottom of the scorer: numpy only, and it imports no other jaxmatch module, so the host and
-the kernels import it without importing each other. :mod:`jaxmatch.scoring.exact` re-exports
-every name here. Conventions (orientations, the shifted frame, number types):
-:mod:`jaxmatch.scoring.exact`.
+Part of the bottom floor (:mod:`jaxmatch.kernels`): numpy only, and it imports no other jaxmatch
+module, so the host and the kernels import it without importing each other.
+:mod:`jaxmatch.scoring.exact` re-exports every name here. Conventions (orientations, the shifted
+frame, number types): :mod:`jaxmatch.scoring.exact`.
 """
 
 from __future__ import annotations
@@ -46,7 +46,7 @@ class DPProblem(NamedTuple):
     """What a backend computes: the shapes and the compiled model in the DP number type.
 
     codes: ``(S, m_pad) int32`` (3 = padding); lengths: ``(S,)`` true ``m`` of each shape;
-    offset: ``(S,) float64`` the skip weights added back (:func:`jaxmatch.scoring.model.skip_frame`);
+    offset: ``(S,) float64`` the skip weights added back (:func:`jaxmatch.kernels.model.skip_frame`);
     tab: ``(4, 64)`` and gate: ``(4,)`` in ``kind.dtype`` (:func:`jaxmatch.scoring.exact.dp_table`,
     :func:`jaxmatch.scoring.exact.dp_gate`); strict: some type must be matched (selects the kernel
     variant); kind: the number type; n: boundary length.
@@ -70,7 +70,7 @@ class Backend(Protocol):
     call hold ``mesh_lanes * blocks per call`` blocks). run(problem, vals): ``vals (calls,
     mesh_lanes * per_call, block, n) int32`` (padding meshes are all-2 sequences) ->
     ``(S, calls * mesh_lanes * per_call * block, 2n)`` raw values in ``problem.kind.dtype``
-    (the shifted-frame ``E[m][n]`` of :func:`jaxmatch.scoring.xla.final_blocks`, mesh-major).
+    (the shifted-frame ``E[m][n]`` of :func:`jaxmatch.kernels.dp_xla.final_blocks`, mesh-major).
     """
 
     mesh_lanes: int

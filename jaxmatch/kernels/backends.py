@@ -1,4 +1,5 @@
-"""Compiled CPU backend for the exact host: the max-plus DP as a numba kernel.
+"""The scoring DP's CPU kernels and the choice among them (``JAXMATCH_BACKEND``, read here and
+nowhere else; the role of each kernel: :mod:`jaxmatch.kernels`).
 
 :class:`NumbaBackend` implements the backend seam of :func:`jaxmatch.scoring.exact.exact_values`
 (``mesh_lanes`` and ``run(problem, vals)``): it receives the padded problem (shifted-frame
@@ -7,7 +8,7 @@ returns the raw ``E[m][n]`` of every orientation, the same numbers' classificati
 :func:`jaxmatch.scoring.exact.final_blocks` (valid values bit for bit; invalid ones, at or below
 ``kind.neg / 2``, may differ in their exact sentinel value, which the host maps to ``-inf``).
 
-Kernel (:mod:`jaxmatch.scoring._numba_dp`, int16 models only; others go to the XLA kernel), per
+Kernel (:mod:`jaxmatch.kernels.dp_numba`, int16 models only; others go to the XLA kernel), per
 chunk of :data:`LANES` meshes of one boundary length and one shape, chunks spread over all cores
 with ``numba.prange`` (problems under :data:`PARALLEL_CELLS` on the calling thread):
 
@@ -25,26 +26,37 @@ the pruned search of one shape computes (a few million DP cells). So the default
 (:func:`default_backend`, ``auto``) runs small problems in a light kernel until the process has
 spent :data:`NUMPY_CELLS` cells on them, and numba from then on (or at once for a larger problem,
 or when the kernel is already loaded). The light kernel is :func:`c_values`, the numba kernel's
-steps in C (``jaxmatch/scoring/_cdp.c``, built with the package, loaded with ctypes in
+steps in C (``jaxmatch/kernels/_dp.c``, built with the package, loaded with ctypes in
 milliseconds; bit for bit the numba kernel's values, ~7x numpy's speed on a small ranking), or,
 where that library was not built, :func:`numpy_values` (the same recurrence as the XLA kernel,
 vectorised over meshes x orientations). All kernels give the same utilities
-(tests/test_backends.py).
+(tests/test_backends.py). The same library holds one orientation's alignment (:func:`c_align`,
+for :func:`jaxmatch.scoring.exact.align`).
 
 Measurements and the alternatives tried: ``docs/perf.md``.
 """
 
 from __future__ import annotations
 
+import ctypes
 import functools
+import importlib.util
+import os
+import sys
 import threading
 
 import numpy as np
 
-from jaxmatch.scoring.problem import UNROLL, DPProblem
+from jaxmatch.errors import InputError
+from jaxmatch.kernels.problem import UNROLL, DPProblem
 
-__all__ = ["BACKENDS", "LANES", "NUMPY_CELLS", "PARALLEL_CELLS", "NumbaBackend", "c_values", "default_backend",
-           "jax_on_cpu", "numba_values", "numpy_values"]
+try:  # the C library, built with the package where a C compiler exists (loaded with ctypes on first use)
+    from jaxmatch.kernels import _dp
+except ImportError:  # pragma: no cover - installed without a C compiler
+    _dp = None
+
+__all__ = ["BACKENDS", "LANES", "NUMPY_CELLS", "PARALLEL_CELLS", "NumbaBackend", "c_align", "c_kernel", "c_values",
+           "default_backend", "jax_on_cpu", "numba_values", "numpy_values", "serial_only"]
 
 BACKENDS = ("auto", "numba", "xla")
 """Values of ``JAXMATCH_BACKEND`` (:func:`default_backend`)."""
@@ -73,7 +85,7 @@ def numpy_values(codes, lengths, vals, tab, gate, strict: bool = False) -> np.nd
     """:func:`numba_values` in numpy, for any DP number type: ``(S, N, 2n)`` in ``tab.dtype``.
 
     Arguments as :func:`numba_values`. The recurrence of the XLA kernel
-    (:func:`jaxmatch.scoring.xla._final_block`: ``E[i][j] = max(min(E[i-1][j], gate[c]),
+    (:func:`jaxmatch.kernels.dp_xla._final_block`: ``E[i][j] = max(min(E[i-1][j], gate[c]),
     E[i-1][j-1] + W'[c, j])``, ``E[i][0]`` capped by the gate) on one array ``(n + 1, N * 2n)``
     (rows ``j``; lanes = meshes x orientations), one vector step per input point; padded points
     (beyond ``lengths``) are not visited. Same operations in the same number type, so valid values
@@ -121,24 +133,21 @@ def serial_only() -> None:
 
 
 def _kernel(parallel: bool):
-    """The compiled int16 kernel (:mod:`jaxmatch.scoring._numba_dp`, imported on first use)."""
-    from jaxmatch.scoring import _numba_dp
+    """The compiled int16 kernel (:mod:`jaxmatch.kernels.dp_numba`, imported on first use: importing
+    numba costs ~0.45 s)."""
+    from jaxmatch.kernels import dp_numba
 
     _NUMBA_LOADED[0] = True
-    return _numba_dp.dp_kernel_i16 if parallel else _numba_dp.dp_kernel_i16_serial
+    return dp_numba.dp_kernel_i16 if parallel else dp_numba.dp_kernel_i16_serial
 
 
 def _load_c_dp():
     """The C library of :func:`c_values` (and of :func:`jaxmatch.scoring.exact.align`'s rows)
     through ctypes, or None when it was not built (it is optional: a machine without a C
     compiler installs the package without it)."""
-    import ctypes
-
-    try:
-        from jaxmatch.scoring import _cdp
-    except ImportError:
+    if _dp is None:
         return None
-    lib = ctypes.CDLL(_cdp.__file__)
+    lib = ctypes.CDLL(_dp.__file__)
     P, L = ctypes.c_void_p, ctypes.c_int64
     lib.jm_dp_i16.restype = ctypes.c_int
     lib.jm_dp_i16.argtypes = [P, L, L, P, P, L, L, P, P, ctypes.c_int, L, P]
@@ -157,9 +166,34 @@ def c_kernel():
     return _C_DP[0]
 
 
+def c_align(codes, seq, table, must, neg: float) -> np.ndarray | None:
+    """One orientation's best alignment in C (``jm_align_f32``): the float32 rows of
+    :func:`jaxmatch.scoring.exact.dp_rows` and the backtrack of :func:`jaxmatch.scoring.exact.align`,
+    the same operations in the same order, so the same alignment. ``(n,) int32``, or None when
+    no alignment of this orientation is finite.
+
+    codes: ``(m,)`` ints 0/1/2; seq: ``(n,)`` valences in matched order; table: ``(3, 64)`` the
+    shifted-frame weights (:func:`jaxmatch.kernels.model.skip_frame`), ``neg`` where forbidden;
+    must: ``(3,)`` bool, the must-match types. RuntimeError when the library was not built,
+    MemoryError when it runs out."""
+    lib = c_kernel()
+    if lib is None:
+        raise RuntimeError("the C kernel (jaxmatch.kernels._dp) is not built")
+    c = np.ascontiguousarray(codes, dtype=np.int32).reshape(-1)
+    s = np.ascontiguousarray(seq, dtype=np.int64).reshape(-1)
+    tab = np.ascontiguousarray(table, dtype=np.float32).reshape(3, 64)
+    mu = np.ascontiguousarray(must, dtype=np.uint8)
+    out = np.empty(s.shape[0], np.int32)
+    rc = lib.jm_align_f32(c.ctypes.data, c.shape[0], s.ctypes.data, s.shape[0], tab.ctypes.data, mu.ctypes.data,
+                          float(neg), out.ctypes.data)
+    if rc < 0:
+        raise MemoryError("alignment kernel: out of memory")
+    return None if rc == 1 else out
+
+
 def c_values(codes, lengths, vals, tab, gate, strict: bool = False, lanes: int = LANES) -> np.ndarray:
     """:func:`numba_values` in C on the calling thread: ``(S, N, 2n) int16``, the same steps in
-    the same order (``jaxmatch/scoring/_cdp.c``, chunks of ``lanes`` meshes as the lanes of one
+    the same order (``jaxmatch/kernels/_dp.c``, chunks of ``lanes`` meshes as the lanes of one
     row), so the same values bit for bit, invalid ones included. Arguments as
     :func:`numba_values`; int16 only. Raises RuntimeError when the library was not built,
     MemoryError when it runs out."""
@@ -168,7 +202,7 @@ def c_values(codes, lengths, vals, tab, gate, strict: bool = False, lanes: int =
         raise ValueError(f"the C kernel is int16 only, got {tab.dtype}")
     lib = c_kernel()
     if lib is None:
-        raise RuntimeError("the C kernel (jaxmatch.scoring._cdp) is not built")
+        raise RuntimeError("the C kernel (jaxmatch.kernels._dp) is not built")
     v = np.ascontiguousarray(vals, dtype=np.int32)
     big_n, n = v.shape
     c = np.ascontiguousarray(codes, dtype=np.int32).reshape(-1, np.shape(codes)[-1])
@@ -244,7 +278,7 @@ class NumbaBackend:
                 return c_values(problem.codes, problem.lengths, flat, problem.tab, problem.gate, problem.strict, self.lanes)
             return numpy_values(problem.codes, problem.lengths, flat, problem.tab, problem.gate, problem.strict)
         if np.dtype(problem.kind.dtype) != np.int16:  # int32 / float32 models: the XLA kernel
-            from jaxmatch.scoring.xla import CPUBackend  # imports JAX
+            from jaxmatch.kernels.dp_xla import CPUBackend  # imports JAX
 
             return CPUBackend(self.threads).run(problem, vals)
         import numba
@@ -259,8 +293,6 @@ class NumbaBackend:
 def _numba_available() -> bool:
     """Whether numba is installed (asked once per process: finding the spec stats the path,
     about 1 ms a call, once per scored bucket)."""
-    import importlib.util
-
     return importlib.util.find_spec("numba") is not None
 
 
@@ -270,8 +302,7 @@ def _jax_plugins_installed() -> bool:
     namespace package or its entry points, as :func:`jax._src.xla_bridge.discover_pjrt_plugins`
     finds them: CUDA, ROCm, Metal, ...) or ``libtpu``. Answered without importing JAX, once per
     process (reading every installed package's metadata took ~2 ms a call, 48 calls a mesh)."""
-    import importlib.util
-    from importlib.metadata import entry_points
+    from importlib.metadata import entry_points  # ~70 ms to import: only when this is asked
 
     if importlib.util.find_spec("jax_plugins") is not None or importlib.util.find_spec("libtpu") is not None:
         return True
@@ -283,9 +314,6 @@ def jax_on_cpu() -> bool:
     JAX when the answer is certain anyway: ``JAX_PLATFORMS=cpu``, or no accelerator plugin
     installed (:func:`_jax_plugins_installed`). Otherwise (JAX already imported, another
     ``JAX_PLATFORMS``, a plugin present) JAX itself is asked."""
-    import os
-    import sys
-
     if "jax" not in sys.modules:
         platforms = os.environ.get("JAX_PLATFORMS", "").strip().lower()
         if platforms == "cpu" or (not platforms and not _jax_plugins_installed()):
@@ -302,14 +330,10 @@ def default_backend(threads: int | None = None, unroll: int | None = None):
     (:func:`jax_on_cpu`) and numba is installed (int16 models; others fall back to the XLA
     kernel), small problems first in the light kernel, C or numpy (``numpy_cells=NUMPY_CELLS``,
     module docstring),
-    else the XLA kernel :class:`jaxmatch.scoring.xla.CPUBackend` (GPUs, TPUs); ``numba``
+    else the XLA kernel :class:`jaxmatch.kernels.dp_xla.CPUBackend` (GPUs, TPUs); ``numba``
     (always the numba kernel) or ``xla`` force one. Both give identical utilities (tests/test_backends.py).
     The numba choice does not import JAX. InputError for another value.
     """
-    import os
-
-    from jaxmatch.errors import InputError
-
     choice = os.environ.get("JAXMATCH_BACKEND", "auto").strip().lower() or "auto"
     if choice not in BACKENDS:
         raise InputError(f"must be one of {', '.join(BACKENDS)}, got {choice!r}", "JAXMATCH_BACKEND")
@@ -319,6 +343,6 @@ def default_backend(threads: int | None = None, unroll: int | None = None):
         choice = "xla"
     if choice == "numba":
         return NumbaBackend(threads)
-    from jaxmatch.scoring.xla import CPUBackend  # imports JAX
+    from jaxmatch.kernels.dp_xla import CPUBackend  # imports JAX
 
     return CPUBackend(threads, UNROLL if unroll is None else int(unroll))

@@ -1,5 +1,5 @@
 """Compiled L-BFGS smoothing of :func:`jaxmatch.placement.embed.smooth` in numba: the fallback of
-:mod:`jaxmatch.placement.kernels` where the C library was not built (imported on first use,
+:mod:`jaxmatch.kernels.placement` where the C library was not built (imported on first use,
 cached on disk after the first compile).
 
 The same objective, parametrisation and optimiser as the numpy reference in

@@ -1,4 +1,4 @@
-"""The numba kernel of :class:`jaxmatch.scoring.backends.NumbaBackend` (imported on first use,
+"""The numba kernel of :class:`jaxmatch.kernels.backends.NumbaBackend` (imported on first use,
 so ``import jaxmatch`` does not pay for numba; compiled once, then loaded from numba's on-disk
 cache). int16 only: the ``np.int16`` casts keep LLVM on 16-bit lanes (without them numba widens
 to int64 and the loop runs on 4 lanes per 256 bits)."""

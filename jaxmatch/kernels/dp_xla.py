@@ -24,8 +24,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxmatch.scoring.model import NEG
-from jaxmatch.scoring.problem import _INVALID, UNROLL, DPProblem, _rotation_index, run_calls
+from jaxmatch.kernels.model import NEG
+from jaxmatch.kernels.problem import _INVALID, UNROLL, DPProblem, _rotation_index, run_calls
 
 __all__ = ["CPUBackend", "dp_scan", "final_blocks", "finite_table", "orientation_slabs", "orientation_triples",
            "orientation_weights", "oriented_sequences"]
@@ -200,7 +200,7 @@ def final_blocks(codes, vals, tab, gate, strict: bool = False, unroll: int = UNR
 
 class CPUBackend:
     """:func:`final_blocks` on this process's default device, calls dispatched on ``threads``
-    host threads (default :func:`jaxmatch.scoring.problem.default_threads`)."""
+    host threads (default :func:`jaxmatch.kernels.problem.default_threads`)."""
 
     mesh_lanes = 1
 
