@@ -23,6 +23,7 @@ shapes         a layout's patch shapes                                          
 refined        refined, placed templates (``max_quads`` each, ``total_quads`` in all)     placement.refine
 topology       refined topologies, a function of a template's combinatorics              placement.refine
 factors        the factorised Laplacian of the last large refined topology               placement.refine
+spread         a shape annotation's set-up of the alignment-spreading programme          placement.spread
 ============== ======================================================================== ==========
 
 Values are shared, not copied: callers must not write to the arrays they get (the stores that
@@ -60,6 +61,7 @@ class CacheSizes:
     refined: int = 512
     topology: int = 256
     factors: int = 1
+    spread: int = 16
     max_quads: int = 20_000
     total_quads: int = 200_000
 

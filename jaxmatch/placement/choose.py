@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING, Callable, Iterable, NamedTuple, Sequence
 
 import numpy as np
 
+from jaxmatch.cache import Cache
 from jaxmatch.defaults import QUALITY
 from jaxmatch.errors import InputError
 from jaxmatch.arrays import roll
@@ -269,7 +270,8 @@ def placement_key(pl: Placement) -> tuple:
 
 
 def match_candidates(annotation: Annotation, vals: np.ndarray, lattice, utility: float | None = None, *,
-                     reference: bool = False, min_utility: float | None = None) -> list[tuple[int, bool, np.ndarray]]:
+                     reference: bool = False, min_utility: float | None = None,
+                     cache: Cache | None = None) -> list[tuple[int, bool, np.ndarray]]:
     """Every orientation of a mesh with the best utility, each with its most evenly spread
     best alignments (:func:`spread_optimal_alignment`, one per first point), keeping those of
     the smallest gap cost:
@@ -281,7 +283,8 @@ def match_candidates(annotation: Annotation, vals: np.ndarray, lattice, utility:
     min_utility: instead, every orientation whose utility is at least this, each with its own
     most evenly spread best alignments (no gap-cost comparison across orientations). Compiled
     (:func:`jaxmatch.kernels.placement.candidates`); ``reference``: one numpy :func:`spread_optimal_alignment`
-    per orientation, which it is tested against."""
+    per orientation, which it is tested against. ``cache``: where the shape's
+    :func:`~jaxmatch.placement.spread.spread_setup` is kept (the catalogue's)."""
     v = np.asarray(vals, dtype=np.int64).ravel()
     n = v.shape[0]
     ut = orientation_utilities(annotation.codes, v, lattice)
@@ -296,10 +299,10 @@ def match_candidates(annotation: Annotation, vals: np.ndarray, lattice, utility:
         cands = []
         for o, seq in zip(orients, seqs):
             u, als, g = spread_optimal_alignment(annotation.t, annotation.perimeter, annotation.codes, seq, lattice,
-                                                 all_ties=True, reference=True)
+                                                 all_ties=True, reference=True, cache=cache)
             cands.extend((g, int(o % n), bool(o >= n), al) for al in als)
     else:  # the same, compiled, all orientations in one call
-        st = spread_setup(annotation.t, annotation.perimeter, annotation.codes, lattice)
+        st = spread_setup(annotation.t, annotation.perimeter, annotation.codes, lattice, cache)
         _, gap, own, A = kernels.candidates(st.c, seqs, st.table, st.between, st.prefix, st.suffix, st.gq, st.tt,
                                        float(annotation.perimeter), st.unit, MAX_TIED_ALIGNMENTS)
         gl, ol = gap.tolist(), orients.tolist()
@@ -356,9 +359,10 @@ def place_match(shape: Shape, annotation: Annotation, catalogue: Catalogue, matc
         user = to_user_placement(shape, dataclasses.replace(pl, missed_corners=miss, corners=shape.n_corners))
     else:
         if lattice is not None and min_utility is not None:
-            cands = match_candidates(annotation, boundary_valences(mesh), lattice, min_utility=min_utility)
+            cands = match_candidates(annotation, boundary_valences(mesh), lattice, min_utility=min_utility,
+                                     cache=catalogue.cache)
         elif lattice is not None:
-            cands = match_candidates(annotation, boundary_valences(mesh), lattice, match.utility)
+            cands = match_candidates(annotation, boundary_valences(mesh), lattice, match.utility, cache=catalogue.cache)
         else:
             cands = []
         if not cands:

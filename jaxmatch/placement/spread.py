@@ -15,12 +15,13 @@ every tie on request) and the lattice as they read it (:func:`lattice_weights`).
 from __future__ import annotations
 
 import math
-from functools import lru_cache
 from typing import NamedTuple
 
 import numpy as np
 
 from jaxmatch.arrays import roll
+from jaxmatch.cache import Cache
+from jaxmatch.cache import key as cache_key
 from jaxmatch.kernels import placement as kernels
 from jaxmatch.kernels.model import weights_of
 
@@ -173,7 +174,8 @@ so that equal spacings compare equal whatever the round-off of where the loop st
 
 
 def spread_optimal_alignment(t: np.ndarray, perimeter: float, codes: np.ndarray, seq: np.ndarray,
-                             lattice, *, all_ties: bool = False, reference: bool = False) -> tuple[float, np.ndarray | None, int]:
+                             lattice, *, all_ties: bool = False, reference: bool = False,
+                             cache: Cache | None = None) -> tuple[float, np.ndarray | None, int]:
     """The alignment of the oriented sequence ``seq`` with the highest utility, and among those
     the most evenly spread one.
 
@@ -189,10 +191,11 @@ def spread_optimal_alignment(t: np.ndarray, perimeter: float, codes: np.ndarray,
     start.
 
     Compiled (:func:`jaxmatch.kernels.placement.candidates` for the one orientation);
-    ``reference``: the numpy version it is tested against.
+    ``reference``: the numpy version it is tested against. ``cache``: where the shape's
+    :func:`spread_setup` is kept.
     """
     sq = np.asarray(seq, dtype=np.int64).ravel()
-    tt, c, table, between, prefix, suffix, unit, gq = spread_setup(t, perimeter, codes, lattice)
+    tt, c, table, between, prefix, suffix, unit, gq = spread_setup(t, perimeter, codes, lattice, cache)
     n, m = sq.shape[0], c.shape[0]
     if n == 0 or n > m:
         return -math.inf, ([] if all_ties else None), 0
@@ -246,21 +249,21 @@ class SpreadSetup(NamedTuple):
     gq: np.ndarray
 
 
-def spread_setup(t, perimeter, codes, lattice) -> SpreadSetup:
-    """:class:`SpreadSetup` of one shape annotation and lattice (cached: every orientation of
-    every mesh placed for one shape shares it)."""
-    tt = np.asarray(t, dtype=np.float64).ravel()
-    c = np.asarray(codes, dtype=np.int64).ravel()
+def spread_setup(t, perimeter, codes, lattice, cache: Cache | None = None) -> SpreadSetup:
+    """:class:`SpreadSetup` of one shape annotation and lattice (kept in ``cache``, store
+    ``spread``: every orientation of every mesh placed for one shape shares it)."""
+    tt = np.ascontiguousarray(np.asarray(t, dtype=np.float64).ravel())
+    c = np.ascontiguousarray(np.asarray(codes, dtype=np.int64).ravel())
     table, skip = lattice_weights(lattice)
-    return _setup_cached(tt.tobytes(), float(perimeter), c.tobytes(), table.tobytes(), skip.tobytes())
+    if cache is None:
+        return _make_setup(tt, float(perimeter), c, table, skip)
+    return cache.get("spread", cache_key(tt, float(perimeter), c, table, skip),
+                     lambda: _make_setup(tt, float(perimeter), c, table, skip))
 
 
-@lru_cache(maxsize=16)
-def _setup_cached(tt_b: bytes, perimeter: float, c_b: bytes, table_b: bytes, skip_b: bytes) -> SpreadSetup:
-    tt = np.frombuffer(tt_b, dtype=np.float64)
-    c = np.frombuffer(c_b, dtype=np.int64)
-    table = np.frombuffer(table_b, dtype=np.float64).reshape(3, 64)
-    skip = np.frombuffer(skip_b, dtype=np.float64)
+def _make_setup(tt: np.ndarray, perimeter: float, c: np.ndarray, table: np.ndarray, skip: np.ndarray) -> SpreadSetup:
+    """:func:`spread_setup`, made."""
+    tt, c, table, skip = tt.copy(), c.copy(), table.copy(), skip.copy()
     m = c.shape[0]
     sk = skip[c]
     fin = np.isfinite(sk)
