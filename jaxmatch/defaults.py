@@ -55,6 +55,9 @@ class Quality:
         ``|n - L / h| <= max(1, size_tol * L / h)`` (one edge of rounding, or this fraction).
     long_edge: inside the region too, an edge longer than this many ``h`` breaks size conformity
         (a strip of quads across a region much wider than ``h``).
+    sj_step: min scaled Jacobians within one step of this size count as equal (the choice rule's
+        quality rule, and the template size's band of ``mesh --template``): a mesh with fewer
+        irregular vertices, patches or quads is not given up for a few hundredths of quality.
     """
 
     min_sj: float = 0.2
@@ -65,6 +68,7 @@ class Quality:
     area_tol: float = 0.01
     size_tol: float = 0.25
     long_edge: float = 2.0
+    sj_step: float = 0.1
 
 
 QUALITY = Quality()

@@ -127,7 +127,7 @@ def template_notes(choice, *, min_quality: float, max_edge_ratio: float, band: f
         pr, pm, ppl = choice.passed_over
         how = "in another orientation or alignment, " if choice.reoriented else ""
         notes.append(f"quality band: mesh #{pr} {pm.mesh_id} (utility {pm.utility:g}) places with min scaled Jacobian "
-                     f"{ppl.min_scaled_jacobian:.3f}, below {choose.GOOD_QUALITY:g}; placed #{choice.rank} {m.mesh_id} ({how}utility "
+                     f"{ppl.min_scaled_jacobian:.3f}, below {QUALITY.good_sj:g}; placed #{choice.rank} {m.mesh_id} ({how}utility "
                      f"{choice.utility:g}, within {band:g} of it) with {pl.min_scaled_jacobian:.3f} (--band 0 places #{pr})")
     elif choice.rank != choice.requested_rank:
         notes.append(f"mesh #{choice.requested_rank} is not a good mesh of the shape; placed #{choice.rank} {m.mesh_id}, the first "

@@ -14,6 +14,7 @@ import shapely
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
+from jaxmatch.defaults import QUALITY
 from jaxmatch.catalogue import store as cm
 from jaxmatch.quality import inverted_mask, quality, quad_areas
 from jaxmatch.errors import InputError
@@ -23,8 +24,6 @@ from jaxmatch.catalogue.mesh import from_quads
 from jaxmatch.placement.embed import place
 from jaxmatch.placement.choose import (
     AREA_BAND,
-    GOOD_QUALITY,
-    UTILITY_BAND,
     SIZE_RULES,
     acceptable,
     choose_mesh,
@@ -655,12 +654,12 @@ def test_quality_band_places_a_near_top_mesh_that_reaches_the_target(cat, lat):
     shp = load_shape(STAIRS)
     plain = choose_mesh(shp, cat, lat, internal=[3], band=0)
     assert plain.rank == 1 and plain.passed_over is None
-    assert _measured_min_sj(plain.placement) < GOOD_QUALITY
+    assert _measured_min_sj(plain.placement) < QUALITY.good_sj
     c = choose_mesh(shp, cat, lat, internal=[3])
     assert c.passed_over is not None and c.passed_over[0] == 1 and c.passed_over[1].mesh_id == plain.match.mesh_id
     assert c.rank > 1 and c.requested_rank == 1
-    assert float(c.match.utility) >= (1 - UTILITY_BAND) * float(plain.match.utility)
-    assert c.placement.valid and _measured_min_sj(c.placement) >= GOOD_QUALITY
+    assert float(c.match.utility) >= (1 - QUALITY.band) * float(plain.match.utility)
+    assert c.placement.valid and _measured_min_sj(c.placement) >= QUALITY.good_sj
 
 
 @pytest.mark.parametrize("name, k", [("square", 1), ("lshape", 2), ("hexagon", 1)])
@@ -668,7 +667,7 @@ def test_quality_band_keeps_a_top_mesh_that_is_good_already(cat, lat, name, k):
     shp = load_shape(EXAMPLES / f"{name}.json")
     c = choose_mesh(shp, cat, lat, internal=[k])
     plain = choose_mesh(shp, cat, lat, internal=[k], band=0)
-    assert _measured_min_sj(plain.placement) >= GOOD_QUALITY
+    assert _measured_min_sj(plain.placement) >= QUALITY.good_sj
     assert c.passed_over is None and c.rank == 1 and c.match.mesh_id == plain.match.mesh_id
 
 
@@ -683,9 +682,9 @@ def test_quality_band_last_resort_tries_other_orientations(cat, lat):
     shp = load_shape(STAIRS)
     c = choose_mesh(shp, cat, lat, internal=[1])
     top = c.passed_over
-    assert top is not None and top[0] == 1 and _measured_min_sj(top[2]) < GOOD_QUALITY
-    assert c.reoriented and c.placement.valid and _measured_min_sj(c.placement) >= GOOD_QUALITY
-    assert (1 - UTILITY_BAND) * float(top[1].utility) <= c.utility <= float(top[1].utility)
+    assert top is not None and top[0] == 1 and _measured_min_sj(top[2]) < QUALITY.good_sj
+    assert c.reoriented and c.placement.valid and _measured_min_sj(c.placement) >= QUALITY.good_sj
+    assert (1 - QUALITY.band) * float(top[1].utility) <= c.utility <= float(top[1].utility)
     pl = c.placement
     vals = boundary_valences(cat.mesh(c.match.mesh_id))
     assert utility_of(c.ranking.annotation.codes, vals, lat, pl.rotation, pl.reflected, pl.alignment) == c.utility

@@ -13,7 +13,7 @@
 7. irregular vertices: fewer irregular internal vertices beyond Euler's lower bound for the
    boundary valences used (:func:`jaxmatch.meshing.result.irregular_bound`; none below it counts
    as 0: a valence-6 vertex can make up for two);
-8. quality: higher min scaled Jacobian, in steps of :data:`SJ_STEP`;
+8. quality: higher min scaled Jacobian, in steps of ``Quality.sj_step``;
 9. fewer patches;
 10. higher mean scaled Jacobian (2 decimals);
 11. the order tried (single template first).
@@ -55,16 +55,11 @@ from typing import Sequence
 from jaxmatch.defaults import QUALITY, Quality
 from jaxmatch.meshing.result import Candidate, QuadMesh
 
-__all__ = ["RULES", "SJ_STEP", "best_possible_key", "cannot_win", "choose", "mesh_key"]
+__all__ = ["RULES", "best_possible_key", "cannot_win", "choose", "mesh_key"]
 
 RULES = ("no fold", "corners kept", "area kept", "quality floor", "size conformity", "quality band", "irregular vertices",
          "min scaled Jacobian", "fewer patches", "mean scaled Jacobian", "order tried")
 """The rules of :func:`mesh_key`, in order (the last one: the earlier candidate)."""
-
-SJ_STEP = 0.1
-"""Min scaled Jacobians within one step of this size count as equal (rule 8): a mesh with
-fewer irregular vertices or patches is not given up for a few hundredths of quality."""
-
 
 def mesh_key(m: QuadMesh, order: int = 0, quality: Quality = QUALITY) -> tuple:
     """The sort key of :data:`RULES` for mesh ``m`` (``order``: its place among the candidates)."""
@@ -78,7 +73,7 @@ def mesh_key(m: QuadMesh, order: int = 0, quality: Quality = QUALITY) -> tuple:
         len(m.sides_off_size(quality.size_tol)) + m.long_edges(quality.long_edge),
         not (sj >= quality.high_sj),
         max(int(m.irregular.size) - m.irregular_bound, 0),
-        -math.floor(sj / SJ_STEP + 1e-9) if math.isfinite(sj) else math.inf,
+        -math.floor(sj / quality.sj_step + 1e-9) if math.isfinite(sj) else math.inf,
         m.n_patches,
         -round(mean, 2),
         order,
@@ -90,7 +85,7 @@ def best_possible_key(n_patches: int, order: int, max_sj: float = 1.0, quality: 
     min scaled Jacobian is at most ``max_sj`` can have: no fold, every corner, the area, every
     side at the size, no irregular vertex beyond the bound, min scaled Jacobian ``max_sj``, mean 1."""
     return (False, False, False, not (max_sj >= quality.good_sj), 0, not (max_sj >= quality.high_sj), 0,
-            -math.floor(max_sj / SJ_STEP + 1e-9), int(n_patches), -1.0, int(order))
+            -math.floor(max_sj / quality.sj_step + 1e-9), int(n_patches), -1.0, int(order))
 
 
 def cannot_win(best_key: tuple, n_patches: int, order: int, max_sj: float = 1.0, quality: Quality = QUALITY) -> bool:

@@ -140,7 +140,7 @@ def mesh(region, *, size: float | None = None, divisions: int | None = None, sid
     if template:
         if size is not None or sides is not None:
             raise InputError("the single template is placed as is; it takes no size or sides")
-        return _mesh_template(region, cat, lat, template_options, progress)
+        return _mesh_template(region, cat, lat, template_options, progress, quality)
     if template_options:
         raise TypeError(f"unexpected options without template=True: {', '.join(sorted(template_options))}")
     if sides is not None:
@@ -166,12 +166,12 @@ def _mesh_layout_file(layout, cat, lat, size, sides, counts, quality) -> QuadMes
     return from_layout(lm, size=h).with_choice("layout", "", None, ())
 
 
-def _mesh_template(shape, cat, lat, options, progress) -> QuadMesh:
+def _mesh_template(shape, cat, lat, options, progress, quality) -> QuadMesh:
     opts = dict(options)
     if "internal" in opts:
         opts["internal"] = check_sizes(cat, opts["internal"])
     scored = None if progress is None else (lambda done, total: progress(done, total, "template"))
-    choice = choose_mesh(shape, cat, lat, progress=scored, **opts)
+    choice = choose_mesh(shape, cat, lat, progress=scored, quality=quality, **opts)
     m = from_placement(shape, choice.placement, choice.match.mesh_id, detail=choice)
     return m.with_choice("template", "", None, (Candidate("template", m),))
 

@@ -29,7 +29,7 @@ from typing import TYPE_CHECKING, Callable, Iterable, NamedTuple, Sequence
 import numpy as np
 
 from jaxmatch.cache import Cache
-from jaxmatch.defaults import QUALITY
+from jaxmatch.defaults import QUALITY, Quality
 from jaxmatch.errors import InputError
 from jaxmatch.arrays import roll
 from jaxmatch.catalogue.mesh import boundary_valences, mesh_valences
@@ -50,10 +50,6 @@ if TYPE_CHECKING:  # pragma: no cover
 
 __all__ = [
     "DEFAULT_WALK",
-    "GOOD_QUALITY",
-    "UTILITY_BAND",
-    "MAX_EDGE_RATIO",
-    "MIN_QUALITY",
     "MeshChoice",
     "SIZE_RULES",
     "SizeChoice",
@@ -557,29 +553,11 @@ def geometry_tie_breaker(catalogue: Catalogue, lattice=None, *, smooth_iters: in
 # ---------------------------------------------------------------------------------------------
 # what counts as a good placement
 
-MIN_QUALITY = QUALITY.min_sj
-"""Default floor on the min scaled Jacobian for a placement to count as good (``--min-quality``)."""
-
-GOOD_QUALITY = QUALITY.good_sj
-"""Min scaled Jacobian a placed mesh should reach (the placement table's target). When the
-mesh :func:`choose_mesh` would place falls short, a mesh of nearly the same utility that
-reaches it is placed instead (:data:`UTILITY_BAND`)."""
-
 REORIENT_MESHES = 8
 """The quality band's last resort (other orientations, :func:`choose_mesh`) looks at most at
 this many meshes of the band."""
 
-UTILITY_BAND = QUALITY.band
-""":func:`choose_mesh`'s quality band (``jaxmatch.defaults.DEFAULT_BAND``): meshes whose utility is at most this fraction (of the
-requested mesh's utility's magnitude) below it count as equally good fits for the purpose of
-placing a mesh of good quality (:data:`GOOD_QUALITY`). 0 places the requested mesh as ranked."""
-
-MAX_EDGE_RATIO = QUALITY.max_edge_ratio
-"""Default ceiling on the longest/shortest edge ratio of any quad for a placement to count as
-good: a min scaled Jacobian near 1 does not catch a long thin quad (a 1 x 13 rectangle)."""
-
-
-def acceptable(pl: Placement, min_quality: float = MIN_QUALITY, max_edge_ratio: float = MAX_EDGE_RATIO) -> bool:
+def acceptable(pl: Placement, min_quality: float = QUALITY.min_sj, max_edge_ratio: float = QUALITY.max_edge_ratio) -> bool:
     """``pl`` is a mesh of the shape (every corner kept, no inverted quad, :attr:`Placement.valid`)
     with min scaled Jacobian ``>= min_quality`` and max edge ratio ``<= max_edge_ratio``."""
     return bool(pl.valid and pl.min_scaled_jacobian >= min_quality and pl.max_edge_ratio <= max_edge_ratio)
@@ -610,10 +588,6 @@ def first_valid(shape: Shape, annotation: Annotation, catalogue: Catalogue, matc
 # ---------------------------------------------------------------------------------------------
 # choosing the size
 
-SJ_BAND = 0.1
-"""Min scaled Jacobians are compared in bands of this width when choosing a size, so that a
-marginally better worst quad does not outweigh a much smaller mesh."""
-
 AREA_BAND = 0.05
 """Mesh/shape area ratios are compared by ``|1 - ratio|`` in bands of this width when choosing a
 size (polygons: exactly 1 once every corner is kept; curved outlines: the chords cut off area,
@@ -624,13 +598,14 @@ SIZE_RULES = ("corners kept", "no inverted quads", "quality floor", "area fit ba
 """The rules of :func:`choose_size`, in order."""
 
 
-def size_key(pl: Placement, k: int, min_quality: float = MIN_QUALITY, max_edge_ratio: float = MAX_EDGE_RATIO) -> tuple:
+def size_key(pl: Placement, k: int, min_quality: float = QUALITY.min_sj, max_edge_ratio: float = QUALITY.max_edge_ratio,
+             sj_step: float = QUALITY.sj_step) -> tuple:
     """One entry per rule of :data:`SIZE_RULES` (smaller is better): missed corners, inverted
     quads, 0 if the quality floor holds (min SJ and edge ratio) else 1, the area band
     (``floor(|1 - area ratio| / AREA_BAND)``), minus the min scaled Jacobian's band
-    (``floor(min SJ / SJ_BAND)``), number of quads, internal vertices."""
+    (``floor(min SJ / sj_step)``), number of quads, internal vertices."""
     sj = pl.min_scaled_jacobian
-    band = -math.inf if math.isnan(sj) else math.floor(round(sj, SJ_DIGITS) / SJ_BAND + 1e-9)
+    band = -math.inf if math.isnan(sj) else math.floor(round(sj, SJ_DIGITS) / sj_step + 1e-9)
     ar = pl.area_ratio
     area = math.inf if math.isnan(ar) else math.floor(round(abs(1.0 - ar), 9) / AREA_BAND)
     ok = pl.min_scaled_jacobian >= min_quality and pl.max_edge_ratio <= max_edge_ratio
@@ -687,8 +662,9 @@ def fit_json(pl: Placement) -> dict:
 
 
 def choose_size(shape: Shape, catalogue: Catalogue, lattice: Lattice, *, points: int | None = None,
-                tie_break="geometry", tie_cap: int = TIE_CAP, min_quality: float = MIN_QUALITY,
-                max_edge_ratio: float = MAX_EDGE_RATIO, progress: Callable[[int, int], None] | None = None) -> SizeChoice:
+                tie_break="geometry", tie_cap: int = TIE_CAP, min_quality: float = QUALITY.min_sj,
+                max_edge_ratio: float = QUALITY.max_edge_ratio, progress: Callable[[int, int], None] | None = None,
+                quality: Quality = QUALITY) -> SizeChoice:
     """Choose the number of internal vertices by the fit of the best mesh of each size.
 
     Raw utilities grow with the mesh (more matched points), so they cannot compare sizes. The
@@ -697,7 +673,7 @@ def choose_size(shape: Shape, catalogue: Catalogue, lattice: Lattice, *, points:
     kept; no inverted quad; the quality floor (min scaled Jacobian ``>= min_quality`` and max
     edge ratio ``<= max_edge_ratio``); mesh area closer to the shape's (bands of
     :data:`AREA_BAND` of ``|1 - area ratio|``: matters for curved outlines); the higher band of
-    min scaled Jacobian (bands of :data:`SJ_BAND`); fewer quads; fewer internal vertices. ``SizeChoice.rule`` names the rule
+    min scaled Jacobian (bands of ``Quality.sj_step``); fewer quads; fewer internal vertices. ``SizeChoice.rule`` names the rule
     that decided. The annotation has the same number of points for every size (the default
     for the longest boundary), as in a ranking of all sizes.
     """
@@ -708,7 +684,7 @@ def choose_size(shape: Shape, catalogue: Catalogue, lattice: Lattice, *, points:
     cands = []
     for m in ranking.results:
         pl = place_match(shape, ranking.annotation, catalogue, m, lattice=lattice, placements=cache)
-        cands.append((size_key(pl, m.internal_vertices, min_quality, max_edge_ratio), m.internal_vertices, m, pl))
+        cands.append((size_key(pl, m.internal_vertices, min_quality, max_edge_ratio, quality.sj_step), m.internal_vertices, m, pl))
     cands.sort(key=lambda c: c[0])
     if len(cands) < 2:
         rule = "only size"
@@ -735,7 +711,7 @@ class MeshChoice:
     placed looking for an acceptable one (0 when none was needed); size: the
     :class:`SizeChoice` when the size was chosen (no ``internal`` given), else None;
     min_quality / max_edge_ratio: the quality floor used; passed_over: when the quality band
-    (:data:`UTILITY_BAND`) replaced the requested mesh, that mesh as ``(rank, match,
+    (``Quality.band``) replaced the requested mesh, that mesh as ``(rank, match,
     placement)``, else None; band: the band used; reoriented: the placed mesh is in another
     orientation or alignment than its best-utility, most evenly spread ones (its utility may be
     lower than ``match.utility``, within the band; the alignment is in ``placement``) and
@@ -750,10 +726,10 @@ class MeshChoice:
     alternative: tuple[int, Match, Placement] | None = None
     searched: int = 0
     size: SizeChoice | None = None
-    min_quality: float = MIN_QUALITY
-    max_edge_ratio: float = MAX_EDGE_RATIO
+    min_quality: float = QUALITY.min_sj
+    max_edge_ratio: float = QUALITY.max_edge_ratio
     passed_over: tuple[int, Match, Placement] | None = None
-    band: float = UTILITY_BAND
+    band: float = QUALITY.band
     reoriented: bool = False
     placed_utility: float | None = None
 
@@ -777,8 +753,8 @@ class MeshChoice:
 def choose_mesh(shape: Shape, catalogue: Catalogue, lattice: Lattice, *, rank: int = 1,
                 internal: list[int] | None = None, points: int | None = None, tie_break: str = "geometry",
                 tie_cap: int = TIE_CAP, require_valid: bool = False, walk: int = DEFAULT_WALK,
-                min_quality: float = MIN_QUALITY, max_edge_ratio: float = MAX_EDGE_RATIO, band: float = UTILITY_BAND,
-                progress: Callable[[int, int], None] | None = None) -> MeshChoice:
+                min_quality: float = QUALITY.min_sj, max_edge_ratio: float = QUALITY.max_edge_ratio, band: float = QUALITY.band,
+                progress: Callable[[int, int], None] | None = None, quality: Quality = QUALITY) -> MeshChoice:
     """Rank the catalogue for ``shape``, take the ``rank``-th mesh (1-based) and place it.
 
     Size: with ``internal`` the meshes of those sizes compete by utility; without it the size is
@@ -794,7 +770,7 @@ def choose_mesh(shape: Shape, catalogue: Catalogue, lattice: Lattice, *, rank: i
     than ``rank`` meshes match, :class:`UnmatchableError` when none does.
 
     Quality band (before any of that): when the ``rank``-th mesh is not :func:`acceptable` at
-    ``max(min_quality, GOOD_QUALITY)``, the following meshes whose utility is within ``band``
+    ``max(min_quality, quality.good_sj)``, the following meshes whose utility is within ``band``
     (a fraction of its utility's magnitude) below it are placed in ranking order (at most
     ``walk``), and the first that is acceptable at that quality is placed instead
     (``MeshChoice.passed_over`` keeps the requested one). When none is, the first
@@ -811,7 +787,7 @@ def choose_mesh(shape: Shape, catalogue: Catalogue, lattice: Lattice, *, rank: i
     m_points = points
     if internal is None:
         size = choose_size(shape, catalogue, lattice, points=points, tie_break=tie_break, tie_cap=tie_cap,
-                           min_quality=min_quality, max_edge_ratio=max_edge_ratio, progress=progress)
+                           min_quality=min_quality, max_edge_ratio=max_edge_ratio, progress=progress, quality=quality)
         internal = [size.k]
         m_points = size.points  # keep the annotation the sizes were compared on
     # top=0: score only; count the matchable meshes before aligning (or placing) any of them
@@ -842,7 +818,7 @@ def choose_mesh(shape: Shape, catalogue: Catalogue, lattice: Lattice, *, rank: i
             yield tried[i]
             i += 1
 
-    good = max(min_quality, GOOD_QUALITY)
+    good = max(min_quality, quality.good_sj)
     if band > 0 and not acceptable(pl, good, max_edge_ratio):
         floor_u = float(match.utility) - float(band) * abs(float(match.utility))
         band_matches = takewhile(lambda m: float(m.utility) >= floor_u, after())
