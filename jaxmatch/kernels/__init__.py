@@ -66,16 +66,16 @@ LCS, skip weights included; most copies run it in the shifted frame of
 6. ``_dp.c`` ``jm_align_f32``: one orientation's float32 rows and backtrack (every ranked match).
 7. ``scoring/exact.py`` ``dp_rows``: the same in numpy, fallback and oracle of 6.
 8. ``reference.py`` ``dp_reference``: the tests' oracle, plain Python, unshifted, ``-inf`` as is.
-9. ``placement/choose.py`` ``orientation_utilities(reference=True)``: numpy, float64, unshifted,
+9. ``placement/spread.py`` ``orientation_utilities(reference=True)``: numpy, float64, unshifted,
    every orientation of one mesh with the lattice's own (possibly fractional) weights, whose best
    values ``match_candidates`` compares with ``==``; the fallback and oracle of 10.
 10. ``_placement.c`` ``jm_orientation_utilities``: 9 compiled (per candidate mesh of a placement,
     microseconds, no padding or number-type choice as the scoring host makes).
 
-Different recurrences, not copies of it: the spread DPs (``choose.spread_optimal_alignment`` and
+Different recurrences, not copies of it: the spread DPs (``spread.spread_optimal_alignment`` and
 ``_spread_forward`` in numpy, ``_placement.c`` ``jm_candidates``: best utility with the skip
 weights of the points between consecutive vertices, then least squared arc-length gap, per
-orientation; ``choose.spread_alignment`` and ``jm_spread``: least squared gap at fixed point
+orientation; ``spread.spread_alignment`` and ``jm_spread``: least squared gap at fixed point
 codes) and ``scoring/bulk.py`` ``upper_bounds`` (a bound from triple histograms, no DP).
 
 Dropped: ``_numba_spread.py``, the numba copy of 10 (the recurrence's eleventh copy) and of

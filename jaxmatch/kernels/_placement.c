@@ -672,7 +672,7 @@ out:
 }
 
 /* ------------------------------------------------------------------------------------------ */
-/* per-quad quality: embed.sj_inverted's numpy operations in the same order (the same doubles) */
+/* per-quad quality: quality.sj_inverted's numpy operations in the same order (the same doubles) */
 
 /* sj[f]: min over the four corners of (e1 x e2) / (|e1| |e2|) (0 where |e1| |e2| <= tiny), clipped
  * to [-1, 1] (NaN kept, as numpy's min and clip keep it); inv[f]: 1 when a corner's e1 x e2 <= 0.
@@ -702,7 +702,7 @@ void jm_sj_inverted(const double *xy, const i64 *quads, i64 F, double *sj, uint8
 }
 
 /* ------------------------------------------------------------------------------------------ */
-/* choose.spread_alignment's dynamic programme: its numpy operations in the same order */
+/* spread.spread_alignment's dynamic programme: its numpy operations in the same order */
 
 /* tt (m,): the points' arc-length parameters; ok (n, m): vertex j may take point i; starts (S,):
  * the first vertex's points. D[s][i] = 0 at starts[s], inf elsewhere; for j = 1 .. n-1:

@@ -35,12 +35,12 @@ Functions (arrays C-contiguous; ``float64`` or ``int64``):
 * :func:`tutte_dense` ``(quads, V, boundary (n,), boundary_xy (n, 2)) -> (V, 2)``;
 * C only (the callers' numpy when :data:`BACKEND` is ``"numba"``, the same values):
   :func:`orientation_utilities` ``(codes (m,), vals (n,), table (3, 64), skip (3,)) -> (2n,)``
-  (``choose.orientation_utilities``); :func:`candidates` ``(codes, seqs (O, n), table, between
+  (``spread.orientation_utilities``); :func:`candidates` ``(codes, seqs (O, n), table, between
   (m, m), prefix, suffix (m,), gq (m, m), tt (m,), perimeter, unit, limit) -> (utility (O,), gap
-  (O,), orientation (K,), alignments (K, n))`` (``choose.spread_optimal_alignment`` for ``O``
+  (O,), orientation (K,), alignments (K, n))`` (``spread.spread_optimal_alignment`` for ``O``
   orientations); :func:`spread` ``(tt (m,), perimeter, ok (n, m) bool, starts (S,)) -> (n,) int64
-  or None`` (``choose.spread_alignment``); :func:`sj_inverted` ``(xy (V, 2), quads (F, 4)) ->
-  (sj (F,), inverted (F,) bool)`` (``embed.sj_inverted``).
+  or None`` (``spread.spread_alignment``); :func:`sj_inverted` ``(xy (V, 2), quads (F, 4)) ->
+  (sj (F,), inverted (F,) bool)`` (``quality.sj_inverted``).
 
 After editing ``_placement.c``, rebuild it with ``.venv/bin/python -m pip install -e .`` (an
 editable install puts the library next to it).
@@ -186,7 +186,7 @@ if _C is not None:
         return util, gap, own[:K].copy(), A[:K].copy()
 
     def spread(tt, perimeter, ok, starts):
-        """``choose.spread_alignment``'s programme: ``(n,) int64``, or None when its minimum is
+        """``spread.spread_alignment``'s programme: ``(n,) int64``, or None when its minimum is
         not finite."""
         tt, st = _f(tt), _i(starts)
         okb = np.ascontiguousarray(ok, dtype=np.uint8)

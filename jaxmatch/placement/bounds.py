@@ -72,7 +72,7 @@ def single_sj_bound(layout: Layout, catalogue: Catalogue, lattice, *, templates_
     with these options (a mesh that does not fold; one that folds loses on that first), from its
     template sizes alone: 1 unless the region has straight sides and right-angled corners and no
     catalogue mesh of the template group that :func:`mesh_layout` would use (found as it finds
-    it, the templates kept in ``template_cache`` for it) can be refined into a grid of rectangles
+    it, the templates kept in the catalogue's cache) can be refined into a grid of rectangles
     with the region's corners in their order (:func:`grid_templates_exist`, :data:`NO_GRID_SJ`;
     when none of any size of ``sizes`` can, the group is not looked for). A corner off every
     multiple of 90 degrees gives 1 here: :func:`node_sj_bound` caps that closer. Refinement keeps
