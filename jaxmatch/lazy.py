@@ -17,7 +17,7 @@ from __future__ import annotations
 import importlib
 from types import ModuleType
 
-__all__ = ["Later"]
+__all__ = ["Later", "served_from"]
 
 
 class Later:
@@ -38,3 +38,22 @@ class Later:
 
     def __repr__(self) -> str:
         return f"Later({', '.join(f'{k}={v!r}' for k, v in self._modules.items())})"
+
+
+def served_from(module: str, names, namespace: dict):
+    """A module's ``__getattr__`` that serves ``names`` from ``module``, imported on the first
+    access of one of them and then kept in ``namespace`` (the serving module's ``globals()``)::
+
+        __getattr__ = served_from("jaxmatch.kernels.dp_xla", XLA_NAMES, globals())  # imports JAX
+    """
+    names = frozenset(names)
+    owner = namespace.get("__name__", "?")
+
+    def __getattr__(name: str):
+        if name in names:
+            value = getattr(importlib.import_module(module), name)
+            namespace[name] = value
+            return value
+        raise AttributeError(f"module {owner!r} has no attribute {name!r}")
+
+    return __getattr__

@@ -1,7 +1,7 @@
 """Compiled code and its registry: the bottom floor of the package.
 
 Nothing here imports from ``scoring``, ``placement``, ``meshing``, ``io``, ``catalogue`` or the CLI;
-only numpy, numba, JAX, the standard library and :mod:`jaxmatch.errors`. The environment
+only numpy, numba, JAX, the standard library, :mod:`jaxmatch.errors` and :mod:`jaxmatch.lazy`. The environment
 variables that choose a kernel are read here and nowhere else: ``JAXMATCH_BACKEND``
 (:func:`jaxmatch.kernels.backends.default_backend`; it also reads ``JAX_PLATFORMS``) and
 ``JAXMATCH_PLACEMENT_KERNELS`` (:data:`jaxmatch.kernels.placement.BACKEND`).

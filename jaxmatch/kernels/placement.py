@@ -53,6 +53,8 @@ import os
 
 import numpy as np
 
+from jaxmatch.lazy import served_from
+
 try:  # the C library, built with the package where a C compiler exists
     from jaxmatch.kernels import _placement
 except ImportError:  # pragma: no cover - installed without a C compiler
@@ -203,13 +205,4 @@ if _C is not None:
         return sj, inv.view(bool)
 
 else:  # pragma: no cover - exercised with JAXMATCH_PLACEMENT_KERNELS=numba
-
-    def __getattr__(name: str):
-        """The smoother's numba copy, imported on first use (importing numba costs ~0.5 s)."""
-        if name in _NUMBA_NAMES:
-            from jaxmatch.kernels import _numba_smooth
-
-            value = getattr(_numba_smooth, name)
-            globals()[name] = value
-            return value
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    __getattr__ = served_from("jaxmatch.kernels._numba_smooth", _NUMBA_NAMES, globals())  # numba: ~0.5 s to import

@@ -98,6 +98,7 @@ from jaxmatch.kernels.model import (  # noqa: F401 (SkipFrame re-exported)
     skipped_weight,
     weights_of,
 )
+from jaxmatch.lazy import served_from
 from jaxmatch.kernels.problem import (  # noqa: F401 (the problem contract, re-exported)
     _INVALID,
     UNROLL,
@@ -475,11 +476,4 @@ XLA_NAMES = frozenset({"CPUBackend", "dp_scan", "final_blocks", "finite_table", 
 """Names served from :mod:`jaxmatch.kernels.dp_xla` (importing it imports JAX) on first access."""
 
 
-def __getattr__(name: str):
-    if name in XLA_NAMES:
-        from jaxmatch.kernels import dp_xla  # imports JAX
-
-        value = getattr(dp_xla, name)
-        globals()[name] = value
-        return value
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+__getattr__ = served_from("jaxmatch.kernels.dp_xla", XLA_NAMES, globals())  # (importing it imports JAX)
