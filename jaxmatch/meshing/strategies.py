@@ -1,7 +1,23 @@
-"""The candidates of the pipeline (step 2): each strategy's layout meshed by the one solve, and
-the extra single-template candidates asked for when none of them is good enough (larger
-templates below the quality floor, templates whose side counts follow the size, the central
-block of a region without corners, the bends of a curved outline as corners)."""
+"""The candidates of the pipeline (step 2), each kind of candidate one strategy object, run once
+per request by :func:`run` in the order of one plan (:func:`jaxmatch.meshing.pipeline.mesh` makes
+it), and chosen once (:func:`jaxmatch.meshing.choose.choose`):
+
+==================== ==================================================================== ==========
+strategy             candidates                                                           when
+==================== ==================================================================== ==========
+:class:`Layouts`     the layout strategies together (:class:`Single`: the region as one   always
+                     template; :class:`Split`: each decomposition), meshed by the one
+                     solve most promising first, a layout that cannot win skipped
+:class:`Larger`      the single patch with each larger template size group               below the quality floor
+:class:`Conforming`  single templates whose side counts follow the size                   no candidate follows it
+:class:`Bends`       the layouts again with a curved outline's bends as corners           every candidate folds
+:class:`Smooth`      a region with fewer than two corners: a refined template and the    (its own plan)
+                     central block (``"disk"``)
+==================== ==================================================================== ==========
+
+Every strategy has ``wanted(best, tried, request)`` (its condition on the best mesh so far) and
+``candidates(request, tried)``.
+"""
 
 from __future__ import annotations
 
