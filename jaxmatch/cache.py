@@ -73,9 +73,9 @@ CACHE_SIZES = CacheSizes()
 def key(*parts, ignore: tuple[str, ...] = ()) -> tuple:
     """The one key builder: ``parts`` as a hashable tuple that two parts compare equal in exactly
     when they hold the same values. Arrays become ``(dtype, shape, bytes)``; tuples and lists a
-    tuple of their parts' keys; mappings their sorted items; dataclass instances (a Shape, a
-    Layout) their type and fields' keys, less the fields named in ``ignore`` (e.g. ``source``,
-    which only messages use); numpy scalars Python numbers; everything else (str, int, float,
+    tuple of their parts' keys; mappings their sorted items; a frozen dataclass compared by value
+    (a lattice) itself; other dataclass instances (a Shape, a Layout: arrays inside) their type and
+    fields' keys, less the fields named in ``ignore`` (e.g. ``source``, which only messages use); numpy scalars Python numbers; everything else (str, int, float,
     bool, None, hashable objects such as a lattice) itself."""
     return tuple(_part(p, ignore) for p in parts)
 
@@ -93,6 +93,9 @@ def _part(p, ignore):
     if isinstance(p, dict):
         return tuple(sorted((k, _part(v, ignore)) for k, v in p.items()))
     if dataclasses.is_dataclass(p) and not isinstance(p, type):
+        params, fields = type(p).__dataclass_params__, type(p).__dataclass_fields__
+        if params.frozen and params.eq and not any(n in fields for n in ignore):  # hashable by value (a lattice)
+            return p
         return (type(p).__name__,) + tuple(_part(getattr(p, f.name), ignore) for f in dataclasses.fields(p)
                                            if f.name not in ignore)
     return p
