@@ -39,7 +39,7 @@ from typing import Any, Callable, TypeVar
 
 import numpy as np
 
-__all__ = ["CACHE_SIZES", "Cache", "CacheSizes", "key"]
+__all__ = ["CACHE_SIZES", "CATALOGUE_STORES", "Cache", "CacheSizes", "key"]
 
 T = TypeVar("T")
 
@@ -69,11 +69,16 @@ class CacheSizes:
 CACHE_SIZES = CacheSizes()
 """The default policy."""
 
+CATALOGUE_STORES = ("prepared", "chords")
+"""The stores that depend on the catalogue alone (its meshes grouped for ranking, their chord
+topologies), not on any shape: what an opened catalogue keeps (:meth:`Cache.forget_shapes`
+leaves them)."""
+
 
 def key(*parts, ignore: tuple[str, ...] = ()) -> tuple:
     """The one key builder: ``parts`` as a hashable tuple that two parts compare equal in exactly
     when they hold the same values. Arrays become ``(dtype, shape, bytes)``; tuples and lists a
-    tuple of their parts' keys; mappings their sorted items; a frozen dataclass compared by value
+    tuple of their parts' keys; mappings their sorted items; a frozen dataclass hashable by value
     (a lattice) itself; other dataclass instances (a Shape, a Layout: arrays inside) their type and
     fields' keys, less the fields named in ``ignore`` (e.g. ``source``, which only messages use); numpy scalars Python numbers; everything else (str, int, float,
     bool, None, hashable objects such as a lattice) itself."""
@@ -94,8 +99,12 @@ def _part(p, ignore):
         return tuple(sorted((k, _part(v, ignore)) for k, v in p.items()))
     if dataclasses.is_dataclass(p) and not isinstance(p, type):
         params, fields = type(p).__dataclass_params__, type(p).__dataclass_fields__
-        if params.frozen and params.eq and not any(n in fields for n in ignore):  # hashable by value (a lattice)
-            return p
+        if params.frozen and params.eq and not any(n in fields for n in ignore):
+            try:
+                hash(p)  # hashable by value (a lattice: tuples inside)
+                return p
+            except TypeError:  # arrays inside: field by field
+                pass
         return (type(p).__name__,) + tuple(_part(getattr(p, f.name), ignore) for f in dataclasses.fields(p)
                                            if f.name not in ignore)
     return p
@@ -183,6 +192,13 @@ class Cache:
     def quads(self, store: str) -> int:
         """The quads of the meshes ``store`` holds, in all."""
         return self._quads.get(store, 0)
+
+    def forget_shapes(self) -> None:
+        """Forget everything made for shapes, keeping :data:`CATALOGUE_STORES`: the next call on
+        any shape is a first call (for timings), the catalogue stays opened and grouped."""
+        with self._lock:
+            for name in [n for n in self._stores if n not in CATALOGUE_STORES]:
+                self.clear(name)
 
     def clear(self, store: str | None = None) -> None:
         """Forget ``store`` (None: every store)."""

@@ -949,7 +949,7 @@ def clear_mesh_caches() -> None:
 
     cat = jaxmatch.load_catalogue()
     if hasattr(cat, "cache"):
-        cat.cache.clear()
+        cat.cache.forget_shapes()
         return
     from jaxmatch.placement import layout, refine  # an older checkout's caches
 
