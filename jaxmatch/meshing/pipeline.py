@@ -13,8 +13,10 @@ canonical loops, corners at the size), the candidates (:mod:`.strategies`), the 
   is meshed as one template (``"single"``) and as each decomposition of
   :data:`~jaxmatch.placement.decompose.STRATEGIES`; every candidate is meshed by the same solve
   (:func:`~jaxmatch.placement.solve.mesh_layout`: templates per patch, one integer program for
-  every side count, refinement, placement, merging, smoothing) and the best is kept by the one
-  rule of :mod:`jaxmatch.meshing.choose`;
+  every side count, refinement, placement, merging, smoothing); then, when the best so far needs
+  them, larger templates, templates that follow the size and the bends as corners: one plan of
+  strategy objects (:mod:`.strategies`), run once, and the best kept by the one rule of
+  :mod:`jaxmatch.meshing.choose`, applied once;
 * a shape with ``sides`` (edges per side) is meshed as one template meeting them exactly;
 * ``template=True`` gives the paper's answer: the best-ranked catalogue mesh placed as is
   (:func:`jaxmatch.placement.choose.choose_mesh`).
@@ -48,7 +50,6 @@ from jaxmatch.placement.solve import ALL_SIZES, mesh_layout
 from jaxmatch.shape import DEFAULT_CORNER_ANGLE, Shape, make_shape
 
 __all__ = ["SINGLE", "canonical", "default_size", "load_region", "mesh", "strategy_names", "warm_up"]
-
 
 
 def strategy_names() -> tuple[str, ...]:
