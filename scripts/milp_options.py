@@ -32,7 +32,7 @@ BINS = ((0, 20), (20, 40), (40, 60), (60, 100), (100, 10**9))
 def collect(names) -> list[tuple]:
     """``[(args, kwargs)]`` of every ``_highs`` call the named tables make, in order (copies)."""
     import jaxmatch
-    from jaxmatch.placement import layout, milp, refine
+    from jaxmatch.placement import milp
 
     jaxmatch.load_catalogue().cache.clear()  # every program solved again, as in a new process
     progs, real = [], milp._highs

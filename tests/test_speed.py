@@ -12,7 +12,6 @@ import pytest
 
 from jaxmatch.errors import UnmatchableError
 from jaxmatch.io.readers import load_shape
-from jaxmatch.placement import refine as R
 from jaxmatch.placement import solve as S
 from jaxmatch.placement import templates as T
 from jaxmatch.scoring.lattice import load_lattice
@@ -95,7 +94,6 @@ def test_mesh_layout_from_its_caches_equals_a_fresh_one(cat, name, size):
 
 def test_jaxmatch_mesh_twice_gives_the_same_mesh(cat):
     import jaxmatch
-    from jaxmatch.placement import layout as L
 
     shp = load_shape(ROOT / "examples" / "tshape.json")
     cat.cache.clear()

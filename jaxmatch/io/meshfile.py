@@ -41,13 +41,16 @@ from __future__ import annotations
 import json
 import os
 from pathlib import Path
-from typing import Mapping, NamedTuple, Sequence
+from typing import TYPE_CHECKING, Mapping, NamedTuple, Sequence
 
 import numpy as np
 
 from jaxmatch.errors import InputError
 from jaxmatch.files import atomic_open, atomic_path
 from jaxmatch.io import registry
+
+if TYPE_CHECKING:  # pragma: no cover - the type only (io stays below meshing)
+    from jaxmatch.meshing.result import QuadMesh
 
 __all__ = ["LineGroup", "MESH_FORMATS", "QUADMESH_FIELDS", "mesh_format", "mesh_groups", "read_json_mesh", "write_mesh",
            "write_quads"]

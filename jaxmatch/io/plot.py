@@ -15,7 +15,7 @@ import math
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterable, Sequence
+from typing import TYPE_CHECKING, Iterable, Sequence
 
 import numpy as np
 from matplotlib.collections import LineCollection, PolyCollection
@@ -26,6 +26,9 @@ from jaxmatch.catalogue.mesh import edges, valences
 from jaxmatch.files import atomic_path
 from jaxmatch.io import registry
 from jaxmatch.quality import inverted_mask, quality
+
+if TYPE_CHECKING:  # pragma: no cover - the type only (io stays below meshing)
+    from jaxmatch.meshing.result import QuadMesh
 
 __all__ = [
     "CODE_STYLE",

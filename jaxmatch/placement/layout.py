@@ -36,7 +36,7 @@ from __future__ import annotations
 import json
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Mapping, NamedTuple, Sequence
+from typing import Mapping, NamedTuple, Sequence
 
 import numpy as np
 
@@ -48,14 +48,10 @@ from jaxmatch.arrays import roll
 from jaxmatch.placement.milp import CHORD_WEIGHT, LayoutInfeasible, solve_counts  # noqa: F401 (public here)
 from jaxmatch.placement.refine import (SMOOTH_LOCAL, bad_quads, harmonic_displacement, side_points,
                                        smooth_near_bad)
-from jaxmatch.placement.embed import polygon_area, smooth_in_frame, smooth_near, tutte
+from jaxmatch.placement.embed import polygon_area, smooth_in_frame, tutte
 from jaxmatch.catalogue.mesh import boundary_edges, valences  # noqa: F401 (boundary_edges public here)
 from jaxmatch.quality import inverted_mask, quad_areas, quality, sj_inverted
 from jaxmatch.shape import Shape, make_shape
-
-if TYPE_CHECKING:  # pragma: no cover
-    from jaxmatch.catalogue.store import Catalogue
-    from jaxmatch.scoring.lattice import Lattice
 
 __all__ = [
     "Layout",

@@ -37,7 +37,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from typing import TYPE_CHECKING, Callable, Iterator, NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
@@ -48,7 +48,7 @@ from jaxmatch.defaults import QUALITY, Quality
 from jaxmatch.errors import InputError
 from jaxmatch.placement.milp import LayoutInfeasible, one_patch_sides, solve_counts
 from jaxmatch.placement.embed import DENSE_TUTTE, Placement, smooth_in_frame, smooth_near, tutte
-from jaxmatch.placement.templates import LazyTemplates, PatchTemplate, walk
+from jaxmatch.placement.templates import PatchTemplate, walk
 from jaxmatch.quality import quad_areas, quality, sj_inverted
 from jaxmatch.shape import Shape
 

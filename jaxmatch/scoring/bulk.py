@@ -73,10 +73,6 @@ __all__ = [
     "write_jsonl",
 ]
 
-from jaxmatch.kernels.model import NEG, skip_frame, skip_offset, weights_of  # numpy only: no JAX import here
-from jaxmatch.files import atomic_open
-from jaxmatch.scoring.exact import (DEFAULT_BATCH, UNROLL, block_size, exact_values, final_values,
-                                     reduce_orientations)
 
 
 # --------------------------------------------------------------------------- devices
