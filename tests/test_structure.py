@@ -70,3 +70,9 @@ def test_the_reference_layout_table_names_every_module():
     assert missing == []
     for place in rows:
         assert (ROOT / place).exists(), place  # nothing listed that is gone
+
+
+def test_the_performance_page_is_a_current_state_page():
+    """docs/perf.md says how speed is measured and today's figures (at most 300 lines); its
+    history is git's."""
+    assert len((ROOT / "docs" / "perf.md").read_text().splitlines()) <= 300
