@@ -229,6 +229,8 @@ class Larger:
     """Below the quality floor: the single patch with each larger template size group
     (:func:`larger_templates`), after the single candidate."""
 
+    after_single = True
+
     def wanted(self, best: QuadMesh | None, tried, req: Request) -> bool:
         return _single(tried) is not None and not best.min_scaled_jacobian >= req.quality.good_sj
 
@@ -240,6 +242,8 @@ class Larger:
 class Conforming:
     """No candidate follows the size yet: single templates whose side counts do
     (:func:`conforming_templates`), after the single candidate."""
+
+    after_single = True
 
     def wanted(self, best: QuadMesh | None, tried, req: Request) -> bool:
         return _single(tried) is not None and bool(best.sides_off_size(req.quality.size_tol))
@@ -292,8 +296,8 @@ def _best(tried, quality: Quality) -> QuadMesh | None:
 
 def run(plan: Sequence, req: Request) -> list[Candidate]:
     """Every strategy of ``plan`` whose condition on the best mesh so far holds
-    (``wanted(best, tried, req)``), in order; the candidates of :class:`Larger` and
-    :class:`Conforming` go right after the single candidate (single, conforming, larger, the
+    (``wanted(best, tried, req)``), in order; the candidates of a strategy marked
+    ``after_single`` (:class:`Larger`, :class:`Conforming`) go right after the single candidate (single, conforming, larger, the
     decompositions, the bends), the others at the end. Returns every candidate, for the one
     choice (:func:`~jaxmatch.meshing.choose.choose`)."""
     tried: list[Candidate] = []
@@ -304,7 +308,7 @@ def run(plan: Sequence, req: Request) -> list[Candidate]:
         if not st.wanted(best, tried, req):
             continue
         more = st.candidates(req, tried)
-        if isinstance(st, (Larger, Conforming)):
+        if getattr(st, "after_single", False):
             at = next((i + 1 for i, c in enumerate(tried) if c.name == SINGLE), 1)
             tried = tried[:at] + list(more) + tried[at:]
         else:
