@@ -40,6 +40,7 @@ later = Later(
     rank="jaxmatch.scoring.rank",  # ranking records
     build="jaxmatch.meshing.build",  # placements as QuadMeshes ('score --png')
     bulk="jaxmatch.scoring.bulk", backends="jaxmatch.kernels.backends", parallel="jaxmatch.parallel",  # many at once
+    batch="jaxmatch.batch",  # 'mesh' of many regions: workers, --resume, --region-budget, --dask
     # the meshing stack (placement, integer programs): only the commands that mesh or place
     pipeline="jaxmatch.meshing.pipeline",
     layout="jaxmatch.placement.layout",  # a layout's named sides (--sides-file)
@@ -411,6 +412,14 @@ def mesh(
                                        "(default: the CPUs)."),
     skip_bad: bool = typer.Option(False, "--skip-bad", help="With many regions: a bad region becomes a record "
                                   "{shape, error} in the summary and the rest go on (exit 0)."),
+    resume: bool = typer.Option(False, "--resume", help="With --out-dir: keep the regions whose record in DIR/summary.jsonl "
+                                "has the same input file contents and options and whose mesh file exists."),
+    region_budget: Optional[float] = typer.Option(None, "--region-budget", metavar="SECONDS", help="With many regions: "
+                                                  "a region still meshing after this long gets a record with "
+                                                  "\"status\": \"timed out\" and the run goes on (default: --budget)."),
+    dask: Optional[str] = typer.Option(None, "--dask", metavar="ADDRESS", envvar="JAXMATCH_DASK", show_envvar=False,
+                                       help="With many regions: run them as tasks of the Dask scheduler at ADDRESS "
+                                       "(or $JAXMATCH_DASK; needs pip install 'jaxmatch[dask]')."),
     strategy: Optional[str] = typer.Option(None, "--strategy", metavar="NAMES", help="Candidates to try, comma-separated: "
                                            "single, continuations, bisectors, recursive, radial (default: all)."),
     budget: float = typer.Option(DEFAULT_BUDGET_S, "--budget", metavar="SECONDS", help="Stop trying candidates after "
@@ -492,8 +501,12 @@ def mesh(
                            ("--json", as_json)):
             if given:
                 raise InputError("is for one region; with several use --out-dir", opt)
-        _mesh_many(regions, out_dir, fmt, angle, options, jobs, skip_bad)
+        _mesh_many(regions, out_dir, fmt, angle, options, jobs, skip_bad, resume,
+                   budget if region_budget is None else region_budget, dask or None)
         return
+    for opt, given in (("--resume", resume), ("--region-budget", region_budget is not None)):
+        if given:
+            raise InputError("is for many regions (--out-dir)", opt)
     _mesh_one(regions[0], angle, options, sides, sides_file, out_path, png, svg, as_json)
 
 
@@ -578,80 +591,27 @@ def _y_down(path: Path) -> bool:
     return str(path).split("#", 1)[0].lower().endswith(".svg")
 
 
-def _mesh_many(regions: List[Path], out_dir: Optional[Path], fmt: str, angle: float, options: dict, jobs, skip_bad) -> None:
-    """Bulk meshing: every region read and checked first (bad input stops the run before any
-    work, unless --skip-bad), then meshed in worker processes; one mesh file each and a JSONL
-    summary, all written atomically."""
-    suffix = "." + fmt.lower().lstrip(".")
-    if suffix not in MESH_FORMATS:
-        raise InputError(f"expected one of {', '.join(s[1:] for s in MESH_FORMATS)}, got {fmt!r}", "--format")
+def _mesh_many(regions: List[Path], out_dir: Optional[Path], fmt: str, angle: float, options: dict, jobs, skip_bad,
+               resume: bool, region_budget: float, dask: Optional[str]) -> None:
+    """Bulk meshing (:func:`jaxmatch.batch.run`): every region read and checked first, then
+    meshed by local workers or Dask; one mesh file each and DIR/summary.jsonl. Exit 3 when a
+    mesh folds or misses a corner."""
     if out_dir is None:
         raise InputError("several regions need a folder for their meshes", "--out-dir")
-    if out_dir.exists() and not out_dir.is_dir():
-        raise InputError("is not a folder", str(out_dir))
-    loaded, names = [], set()
-    for p in regions:
-        stem = Path(str(p).split("#", 1)[0]).stem + ("-" + str(p).split("#", 1)[1] if "#" in str(p) else "")
-        name, i = stem, 1
-        while name in names:
-            i += 1
-            name = f"{stem}-{i}"
-        names.add(name)
+    if dask is not None and jobs is not None:
+        warnings.warn("--jobs ignored with --dask (the cluster's workers mesh the regions)", InputWarning)
+
+    def warm() -> None:  # in this process, before the workers fork: they inherit what it loads
         try:
-            loaded.append((p, _load_region(p, angle), out_dir / f"{name}{suffix}"))
-        except InputError as e:
-            if not skip_bad:
-                raise
-            loaded.append((p, str(e), None))
-    out_dir.mkdir(parents=True, exist_ok=True)
-    pipeline = later.pipeline
+            later.pipeline.warm_up(options["catalogue"], options["lattice"])
+        except Exception:  # noqa: BLE001 - only a head start: the regions themselves report any problem
+            pass
 
-    def one(i: int) -> dict:
-        p, region, target = loaded[i]
-        if isinstance(region, str):
-            return {"shape": str(p), "error": region}
-        t0 = time.perf_counter()
-        try:
-            m = pipeline.mesh(region, **options)
-        except InputError as e:
-            return {"shape": str(p), "error": str(e)}
-        rec = report.mesh_record(p, m, time.perf_counter() - t0)
-        rec["out"] = str(write_mesh(target, m))
-        return rec
-
-    workers = later.parallel.available_cpus() if jobs is None else jobs
-    records = []
-    with _progress() as prog:
-        task = prog.add_task("regions", total=len(loaded))
-        def worker_start() -> None:  # in each worker process
-            _plain_streams()
-            options["catalogue"].reopen()
-
-        def warm() -> None:  # in this process, before the workers fork: they inherit what it loads
-            try:
-                pipeline.warm_up(options["catalogue"], options["lattice"])
-            except Exception:  # noqa: BLE001 - only a head start: the regions themselves report any problem
-                pass
-
-        for rec in later.parallel.ordered_map(one, list(range(len(loaded))), workers, initializer=worker_start, warm=warm):
-            if "error" in rec and not skip_bad:
-                raise InputError(rec["error"].split(": ", 1)[-1] if rec["error"].startswith(rec["shape"]) else rec["error"],
-                                 rec["shape"])
-            records.append(rec)
-            prog.advance(task)
-    summary = out_dir / "summary.jsonl"
-    later.bulk.write_jsonl(summary, records)
-    failed = sum(1 for r in records if "error" in r)
-    folded = sum(1 for r in records if "error" not in r and (r["inverted"] or r["missed_corners"]))
-    note = f", {failed} failed (records with \"error\")" if failed else ""
-    print(f"wrote {summary}: {len(records)} regions, {len(records) - failed} meshed{note}", file=sys.stderr)
-    if folded:
+    result = later.batch.run(regions, out_dir, fmt, angle, options, jobs=jobs, skip_bad=skip_bad, resume=resume,
+                             region_budget=region_budget, dask=dask, read=lambda p: _load_region(Path(p), angle),
+                             progress=_progress(), warm=warm, initializer=options["catalogue"].reopen)
+    if result.folded:
         raise typer.Exit(EXIT_INVERTED)
-
-
-def _plain_streams() -> None:
-    """In each worker: plain stdout/stderr (not the progress display's proxies and their lock)."""
-    sys.stdout, sys.stderr = sys.__stdout__, sys.__stderr__
 
 
 def _parse_sides(text: str, n_sides: int) -> list[int]:

@@ -112,6 +112,14 @@ def parse_args(argv=None):
                     help="--mesh: only the bulk benchmark: `jaxmatch mesh` of every example region at --divisions DIV "
                          "with --jobs (--mesh-jobs) against gmsh meshing the same outlines one after another, e.g. 16")
     ap.add_argument("--mesh-jobs", type=int, default=2, help="--mesh-bulk: worker processes (default 2)")
+    ap.add_argument("--mesh-bulk-parts", type=int, default=0, metavar="N",
+                    help="--mesh-bulk: instead of the examples, N random star-shaped parts of scripts/make_bulk_parts.py "
+                         "(its fixed seed; a third with a round hole), e.g. 300")
+    ap.add_argument("--mesh-bulk-ref", type=Path, default=None, metavar="ROOT",
+                    help="--mesh-bulk: also time the same command run from another checkout (e.g. a worktree of main), "
+                         "alternated with this one in the same run (ratio: vs_ref)")
+    ap.add_argument("--mesh-bulk-reps", type=int, default=1, help="--mesh-bulk: timed runs of each command (default 1)")
+    ap.add_argument("--mesh-bulk-no-gmsh", action="store_true", help="--mesh-bulk: leave out the gmsh reference")
     ap.add_argument("--mesh-profile", default="", metavar="SHAPE:DIV",
                     help="--mesh: only profile one warm jaxmatch.mesh call (cProfile: top 10 by cumulative and by own time), e.g. T:32")
     return ap.parse_args(argv)
@@ -1047,52 +1055,85 @@ MESH_BULK_REGIONS = ("examples/*.json", "examples/labels/shapes/*.json")
 """The regions of the bulk benchmark (globs from the repository root): every example shape."""
 
 
-def mesh_bulk(divisions: int = 16, jobs: int = 2) -> dict:
+def _bulk_command(root: Path, paths: list[str], divisions: int, jobs: int, out: Path) -> tuple[float, list[dict]]:
+    """One whole ``jaxmatch mesh PATHS --divisions DIV --out-dir OUT --jobs N --skip-bad`` run from
+    the checkout ``root`` (its ``jaxmatch`` package, by ``python -m`` from there): wall seconds and
+    the summary's records."""
+    cmd = [sys.executable, "-m", "jaxmatch", "mesh", *paths, "--divisions", str(int(divisions)), "--out-dir", str(out),
+           "--jobs", str(int(jobs)), "--skip-bad"]
+    env = {**os.environ, "JAXMATCH_PROGRESS": "0"}
+    env.pop("PYTHONPATH", None)
+    t = time.perf_counter()
+    run = subprocess.run(cmd, capture_output=True, text=True, cwd=root, env=env)
+    wall = time.perf_counter() - t
+    if run.returncode not in (0, 3):
+        raise RuntimeError(f"jaxmatch mesh failed ({run.returncode}) in {root}: {run.stderr.strip()[-500:]}")
+    return wall, [json.loads(line) for line in (out / "summary.jsonl").read_text().splitlines()]
+
+
+def mesh_bulk(divisions: int = 16, jobs: int = 2, parts: int = 0, ref: Path | None = None, reps: int = 1,
+              gmsh: bool = True) -> dict:
     """Bulk meshing as a user runs it: one ``jaxmatch mesh REGIONS --divisions DIV --out-dir DIR
-    --jobs N --skip-bad`` process over every region of :data:`MESH_BULK_REGIONS`, timed as a
-    whole (start-up, reading, meshing, writing): ``shapes_per_s``. Reference, same run: gmsh's
-    quasi-structured quads (:data:`MESH_GMSH`) of each region's outline at the same h, one after
-    another in this process (initialised, meshed, read back each; the characteristic length
-    calibrated untimed, as in :func:`mesh_case`), regions with holes left out of it:
-    ``gmsh.shapes_per_s``; ``bulk_vs_gmsh``: gmsh's shapes/s over jaxmatch's."""
+    --jobs N --skip-bad`` process over every region of :data:`MESH_BULK_REGIONS` (``parts``: over
+    that many random parts of ``scripts/make_bulk_parts.py`` instead), timed as a whole
+    (start-up, reading, meshing, writing): ``shapes_per_s`` (the best of ``reps`` runs; ``runs_s``
+    every wall time). ``ref``: the same command run from another checkout, alternated with this
+    one: ``ref.shapes_per_s`` and ``vs_ref`` (this rate over the reference's). Reference, same
+    run: gmsh's quasi-structured quads (:data:`MESH_GMSH`) of each region's outline at the same
+    h, one after another in this process (initialised, meshed, read back each; the
+    characteristic length calibrated untimed, as in :func:`mesh_case`), regions with holes left
+    out of it: ``gmsh.shapes_per_s``; ``bulk_vs_gmsh``: gmsh's shapes/s over jaxmatch's."""
     import glob
 
     import jaxmatch
     from jaxmatch.geometry import cumulative_length
 
     root = Path(__file__).resolve().parent.parent
-    paths = sorted(p for g in MESH_BULK_REGIONS for p in glob.glob(str(root / g)))
-    cg = _script("compare_gmsh")
-    opts = cg.GMSH_METHODS[MESH_GMSH]
     with tempfile.TemporaryDirectory() as tmp:
-        cmd = [sys.executable, "-m", "jaxmatch", "mesh", *paths, "--divisions", str(int(divisions)), "--out-dir",
-               str(Path(tmp) / "out"), "--jobs", str(int(jobs)), "--skip-bad"]
+        if parts:
+            folder = Path(tmp) / "parts"
+            folder.mkdir()
+            for i, doc in enumerate(_script("make_bulk_parts").parts(int(parts))):
+                (folder / f"part-{i:03d}.json").write_text(json.dumps(doc) + "\n")
+            paths = sorted(str(p) for p in folder.glob("*.json"))
+        else:
+            paths = sorted(p for g in MESH_BULK_REGIONS for p in glob.glob(str(root / g)))
         load0 = list(os.getloadavg())
-        t = time.perf_counter()
-        run = subprocess.run(cmd, capture_output=True, text=True, cwd=root)
-        wall = time.perf_counter() - t
-        if run.returncode != 0:
-            raise RuntimeError(f"jaxmatch mesh failed ({run.returncode}): {run.stderr.strip()[-500:]}")
-        recs = [json.loads(line) for line in (Path(tmp) / "out" / "summary.jsonl").read_text().splitlines()]
+        walls, ref_walls, recs = [], [], []
+        for rep in range(max(int(reps), 1)):
+            if ref is not None:
+                ref_walls.append(_bulk_command(Path(ref).resolve(), paths, divisions, jobs, Path(tmp) / f"ref{rep}")[0])
+            wall, recs = _bulk_command(root, paths, divisions, jobs, Path(tmp) / f"out{rep}")
+            walls.append(wall)
+        load1 = list(os.getloadavg())
+        gmsh_s, gmsh_n = 0.0, 0
+        cg = _script("compare_gmsh") if gmsh else None
+        for p in paths if gmsh else ():
+            shp = jaxmatch.load_shape(p)
+            if shp.holes:
+                continue
+            opts = cg.GMSH_METHODS[MESH_GMSH]
+            outline, _ = cg.mesh_table._outline(shp)
+            h = float(cumulative_length(outline)[-1]) / divisions
+            cal = cg.gmsh_calibrated(outline, h, **opts)
+            t = time.perf_counter()
+            cg.gmsh_quads(outline, cal["lc"], **opts)
+            gmsh_s += time.perf_counter() - t
+            gmsh_n += 1
     per_region = sorted(r["seconds"] for r in recs if "seconds" in r)
-    gmsh_s, gmsh_n = 0.0, 0
-    for p in paths:
-        shp = jaxmatch.load_shape(p)
-        if shp.holes:
-            continue
-        outline, _ = cg.mesh_table._outline(shp)
-        h = float(cumulative_length(outline)[-1]) / divisions
-        cal = cg.gmsh_calibrated(outline, h, **opts)
-        t = time.perf_counter()
-        cg.gmsh_quads(outline, cal["lc"], **opts)
-        gmsh_s += time.perf_counter() - t
-        gmsh_n += 1
-    out = {"regions": len(paths), "meshed": sum("error" not in r for r in recs), "divisions": int(divisions),
-           "jobs": int(jobs), "wall_s": wall, "shapes_per_s": len(paths) / wall,
-           "per_region_s": {"median": statistics.median(per_region), "max": per_region[-1]} if per_region else None,
-           "gmsh": {"regions": gmsh_n, "seconds": gmsh_s, "shapes_per_s": gmsh_n / gmsh_s if gmsh_s else float("nan")},
-           "load": {"before": load0, "after": list(os.getloadavg())}}
-    out["bulk_vs_gmsh"] = out["gmsh"]["shapes_per_s"] / out["shapes_per_s"]
+    wall = min(walls)
+    out = {"regions": len(paths), "meshed": sum(r.get("status", "meshed") == "meshed" and "error" not in r for r in recs),
+           "divisions": int(divisions), "jobs": int(jobs), "parts": int(parts), "wall_s": wall, "runs_s": walls,
+           "shapes_per_s": len(paths) / wall,
+           "per_region_s": {"median": statistics.median(per_region), "max": per_region[-1],
+                            "sum": sum(per_region)} if per_region else None,
+           "load": {"before": load0, "after": load1}}
+    if ref is not None:
+        out["ref"] = {"root": str(ref), "runs_s": ref_walls, "shapes_per_s": len(paths) / min(ref_walls)}
+        out["vs_ref"] = out["shapes_per_s"] / out["ref"]["shapes_per_s"]
+    if gmsh:
+        out["gmsh"] = {"regions": gmsh_n, "seconds": gmsh_s, "shapes_per_s": gmsh_n / gmsh_s if gmsh_s else float("nan")}
+        out["bulk_vs_gmsh"] = out["gmsh"]["shapes_per_s"] / out["shapes_per_s"]
     return out
 
 
@@ -1141,12 +1182,16 @@ def main(argv=None) -> int:
                        f"valid {r['valid']}) in {r['seconds']:.2f} s; peak RSS {r['peak_rss_mb']:.0f} MB "
                        f"({r['rss_before_mb']:.0f} MB before the call); load {r['load'][0]:.2f}", r, args.json)
     if args.mesh and args.mesh_bulk:
-        r = mesh_bulk(args.mesh_bulk, args.mesh_jobs)
+        r = mesh_bulk(args.mesh_bulk, args.mesh_jobs, args.mesh_bulk_parts, args.mesh_bulk_ref, args.mesh_bulk_reps,
+                      not args.mesh_bulk_no_gmsh)
+        ref = (f"; {r['ref']['root']}, same regions, alternated: {r['ref']['shapes_per_s']:.1f} shapes/s (vs_ref "
+               f"{r['vs_ref']:.2f})") if "ref" in r else ""
+        gm = (f"; gmsh, same outlines one after another in one process: {r['gmsh']['shapes_per_s']:.1f} shapes/s "
+              f"({r['gmsh']['regions']} regions); bulk_vs_gmsh {r['bulk_vs_gmsh']:.1f}") if "gmsh" in r else ""
         return _report(f"bulk: {r['meshed']}/{r['regions']} regions meshed at perimeter / {r['divisions']} with --jobs "
                        f"{r['jobs']} in {r['wall_s']:.2f} s (whole command): {r['shapes_per_s']:.1f} shapes/s (per region "
-                       f"in the workers: median {r['per_region_s']['median']:.3f} s, max {r['per_region_s']['max']:.3f} s); "
-                       f"gmsh, same outlines one after another in one process: {r['gmsh']['shapes_per_s']:.1f} shapes/s "
-                       f"({r['gmsh']['regions']} regions); bulk_vs_gmsh {r['bulk_vs_gmsh']:.1f}; load "
+                       f"in the workers: median {r['per_region_s']['median']:.3f} s, max {r['per_region_s']['max']:.3f} s, "
+                       f"sum {r['per_region_s']['sum']:.1f} s){ref}{gm}; load "
                        f"{r['load']['before'][0]:.2f} -> {r['load']['after'][0]:.2f}", r, args.json)
     if args.mesh and args.mesh_profile:
         name, _, div = args.mesh_profile.partition(":")
