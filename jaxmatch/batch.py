@@ -50,11 +50,14 @@ from multiprocessing.connection import wait as wait_any
 from pathlib import Path
 from typing import Callable, Iterator, Sequence
 
+import numpy as np
+
 from jaxmatch import __version__, report
 from jaxmatch.catalogue.store import default_path
 from jaxmatch.errors import InputError
 from jaxmatch.files import atomic_open, atomic_path
 from jaxmatch.io.meshfile import MESH_FORMATS, write_mesh
+from jaxmatch.kernels import backends
 from jaxmatch.lazy import Later
 from jaxmatch.parallel import available_cpus, can_fork
 
@@ -350,6 +353,24 @@ def _write_local(target: str, m) -> str:
 # runners: each yields (index, record) as regions finish
 
 
+PRELOAD_REGIONS = 50
+"""Runs of at least this many regions load numba's kernel before forking (:func:`warm_kernels`);
+fewer regions rarely spend the C kernel's budget in a worker, and loading it costs ~0.7 s."""
+
+
+def warm_kernels(load: bool = True) -> None:
+    """Before forking the workers: keep every process to the single-thread scoring kernel (one
+    core per worker: the multi-thread kernel in each of two workers on two cores only fights
+    for them) and (``load``) load numba's kernel here, where every worker would import numba
+    and load it on its own once the C kernel's budget is spent (~0.5 s each, seconds on a
+    loaded machine). The kernels are exact: the same values, the same meshes."""
+    backends.serial_only()
+    if not load or not backends._numba_available():
+        return
+    backends.numba_values(np.zeros((1, 4), np.int32), np.array([4]), np.full((1, 4), 3, np.int32),
+                          np.zeros((4, 64), np.int16), np.zeros(4, np.int16))
+
+
 def _inline_results(jobs, loaded, options, opts, region_budget) -> Iterator[tuple[int, dict]]:
     for job in jobs:
         yield job.index, mesh_job(job, loaded[job.index], options, opts, region_budget, _write_local)
@@ -551,16 +572,16 @@ def _dask_results(address: str, jobs, options, opts, region_budget, suffix: str,
     try:
         slots = max(4, 4 * sum(client.nthreads().values()))
         todo = deque(jobs)
-        pending = distributed.as_completed()
         by_index = {j.index: j for j in jobs}
+        if not todo:
+            return
 
-        def submit() -> None:
+        def submit():
             job = todo.popleft()
             data = Path(_file_of(job.shape)).read_bytes()
-            pending.add(client.submit(dask_task, job, data, settings, pure=False, key=f"jaxmatch-region-{job.index}-{os.getpid()}"))
+            return client.submit(dask_task, job, data, settings, pure=False, key=f"jaxmatch-region-{job.index}-{os.getpid()}")
 
-        for _ in range(min(slots, len(todo))):
-            submit()
+        pending = distributed.as_completed([submit() for _ in range(min(slots, len(todo)))], loop=client.loop)
         for fut in pending:
             try:
                 i, rec, data = fut.result()
@@ -573,7 +594,7 @@ def _dask_results(address: str, jobs, options, opts, region_budget, suffix: str,
                 with atomic_path(rec["out"]) as tmp:
                     tmp.write_bytes(data)
             if todo:
-                submit()
+                pending.add(submit())
             yield i, rec
     finally:
         client.close()
@@ -638,6 +659,7 @@ def run(regions: Sequence[str | os.PathLike], out_dir: Path, fmt: str, corner_an
     elif todo and can_fork():
         if warm is not None:
             warm()
+        warm_kernels(load=len(todo) >= PRELOAD_REGIONS)
         results = _local_results(todo, loaded, options, opts, region_budget, workers, initializer)
     else:
         results = _inline_results(todo, loaded, options, opts, region_budget)
