@@ -1055,20 +1055,24 @@ MESH_BULK_REGIONS = ("examples/*.json", "examples/labels/shapes/*.json")
 """The regions of the bulk benchmark (globs from the repository root): every example shape."""
 
 
-def _bulk_command(root: Path, paths: list[str], divisions: int, jobs: int, out: Path) -> tuple[float, list[dict]]:
+def _bulk_command(root: Path, paths: list[str], divisions: int, jobs: int, out: Path) -> tuple[float, float, list[dict]]:
     """One whole ``jaxmatch mesh PATHS --divisions DIV --out-dir OUT --jobs N --skip-bad`` run from
-    the checkout ``root`` (its ``jaxmatch`` package, by ``python -m`` from there): wall seconds and
-    the summary's records."""
+    the checkout ``root`` (its ``jaxmatch`` package, by ``python -m`` from there): wall seconds, CPU
+    seconds (user + system of the command and its workers: what other users of the machine
+    change least) and the summary's records."""
     cmd = [sys.executable, "-m", "jaxmatch", "mesh", *paths, "--divisions", str(int(divisions)), "--out-dir", str(out),
            "--jobs", str(int(jobs)), "--skip-bad"]
     env = {**os.environ, "JAXMATCH_PROGRESS": "0"}
     env.pop("PYTHONPATH", None)
+    r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     t = time.perf_counter()
     run = subprocess.run(cmd, capture_output=True, text=True, cwd=root, env=env)
     wall = time.perf_counter() - t
+    r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
     if run.returncode not in (0, 3):
         raise RuntimeError(f"jaxmatch mesh failed ({run.returncode}) in {root}: {run.stderr.strip()[-500:]}")
-    return wall, [json.loads(line) for line in (out / "summary.jsonl").read_text().splitlines()]
+    cpu = (r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime)
+    return wall, cpu, [json.loads(line) for line in (out / "summary.jsonl").read_text().splitlines()]
 
 
 def mesh_bulk(divisions: int = 16, jobs: int = 2, parts: int = 0, ref: Path | None = None, reps: int = 1,
@@ -1077,8 +1081,10 @@ def mesh_bulk(divisions: int = 16, jobs: int = 2, parts: int = 0, ref: Path | No
     --jobs N --skip-bad`` process over every region of :data:`MESH_BULK_REGIONS` (``parts``: over
     that many random parts of ``scripts/make_bulk_parts.py`` instead), timed as a whole
     (start-up, reading, meshing, writing): ``shapes_per_s`` (the best of ``reps`` runs; ``runs_s``
-    every wall time). ``ref``: the same command run from another checkout, alternated with this
-    one: ``ref.shapes_per_s`` and ``vs_ref`` (this rate over the reference's). Reference, same
+    every wall time; ``cpu_s``, ``shapes_per_cpu_s``: the CPU seconds of the command and its
+    workers, which other users of the machine change least). ``ref``: the same command run from
+    another checkout, alternated with this one: ``ref.shapes_per_s`` and ``vs_ref`` (this rate
+    over the reference's; ``vs_ref_cpu`` the same by CPU time). Reference, same
     run: gmsh's quasi-structured quads (:data:`MESH_GMSH`) of each region's outline at the same
     h, one after another in this process (initialised, meshed, read back each; the
     characteristic length calibrated untimed, as in :func:`mesh_case`), regions with holes left
@@ -1099,12 +1105,15 @@ def mesh_bulk(divisions: int = 16, jobs: int = 2, parts: int = 0, ref: Path | No
         else:
             paths = sorted(p for g in MESH_BULK_REGIONS for p in glob.glob(str(root / g)))
         load0 = list(os.getloadavg())
-        walls, ref_walls, recs = [], [], []
+        walls, cpus, ref_walls, ref_cpus, recs = [], [], [], [], []
         for rep in range(max(int(reps), 1)):
             if ref is not None:
-                ref_walls.append(_bulk_command(Path(ref).resolve(), paths, divisions, jobs, Path(tmp) / f"ref{rep}")[0])
-            wall, recs = _bulk_command(root, paths, divisions, jobs, Path(tmp) / f"out{rep}")
+                wall, cpu, _ = _bulk_command(Path(ref).resolve(), paths, divisions, jobs, Path(tmp) / f"ref{rep}")
+                ref_walls.append(wall)
+                ref_cpus.append(cpu)
+            wall, cpu, recs = _bulk_command(root, paths, divisions, jobs, Path(tmp) / f"out{rep}")
             walls.append(wall)
+            cpus.append(cpu)
         load1 = list(os.getloadavg())
         gmsh_s, gmsh_n = 0.0, 0
         cg = _script("compare_gmsh") if gmsh else None
@@ -1124,13 +1133,15 @@ def mesh_bulk(divisions: int = 16, jobs: int = 2, parts: int = 0, ref: Path | No
     wall = min(walls)
     out = {"regions": len(paths), "meshed": sum(r.get("status", "meshed") == "meshed" and "error" not in r for r in recs),
            "divisions": int(divisions), "jobs": int(jobs), "parts": int(parts), "wall_s": wall, "runs_s": walls,
-           "shapes_per_s": len(paths) / wall,
+           "shapes_per_s": len(paths) / wall, "cpu_s": min(cpus), "shapes_per_cpu_s": len(paths) / min(cpus),
            "per_region_s": {"median": statistics.median(per_region), "max": per_region[-1],
                             "sum": sum(per_region)} if per_region else None,
            "load": {"before": load0, "after": load1}}
     if ref is not None:
-        out["ref"] = {"root": str(ref), "runs_s": ref_walls, "shapes_per_s": len(paths) / min(ref_walls)}
+        out["ref"] = {"root": str(ref), "runs_s": ref_walls, "shapes_per_s": len(paths) / min(ref_walls),
+                      "cpu_s": min(ref_cpus), "shapes_per_cpu_s": len(paths) / min(ref_cpus)}
         out["vs_ref"] = out["shapes_per_s"] / out["ref"]["shapes_per_s"]
+        out["vs_ref_cpu"] = out["shapes_per_cpu_s"] / out["ref"]["shapes_per_cpu_s"]
     if gmsh:
         out["gmsh"] = {"regions": gmsh_n, "seconds": gmsh_s, "shapes_per_s": gmsh_n / gmsh_s if gmsh_s else float("nan")}
         out["bulk_vs_gmsh"] = out["gmsh"]["shapes_per_s"] / out["shapes_per_s"]
@@ -1184,12 +1195,13 @@ def main(argv=None) -> int:
     if args.mesh and args.mesh_bulk:
         r = mesh_bulk(args.mesh_bulk, args.mesh_jobs, args.mesh_bulk_parts, args.mesh_bulk_ref, args.mesh_bulk_reps,
                       not args.mesh_bulk_no_gmsh)
-        ref = (f"; {r['ref']['root']}, same regions, alternated: {r['ref']['shapes_per_s']:.1f} shapes/s (vs_ref "
-               f"{r['vs_ref']:.2f})") if "ref" in r else ""
+        ref = (f"; {r['ref']['root']}, same regions, alternated: {r['ref']['shapes_per_s']:.1f} shapes/s, "
+               f"{r['ref']['cpu_s']:.1f} CPU s (vs_ref {r['vs_ref']:.2f}, by CPU time {r['vs_ref_cpu']:.2f})") if "ref" in r else ""
         gm = (f"; gmsh, same outlines one after another in one process: {r['gmsh']['shapes_per_s']:.1f} shapes/s "
               f"({r['gmsh']['regions']} regions); bulk_vs_gmsh {r['bulk_vs_gmsh']:.1f}") if "gmsh" in r else ""
         return _report(f"bulk: {r['meshed']}/{r['regions']} regions meshed at perimeter / {r['divisions']} with --jobs "
-                       f"{r['jobs']} in {r['wall_s']:.2f} s (whole command): {r['shapes_per_s']:.1f} shapes/s (per region "
+                       f"{r['jobs']} in {r['wall_s']:.2f} s (whole command): {r['shapes_per_s']:.1f} shapes/s, "
+                       f"{r['cpu_s']:.1f} CPU s (per region "
                        f"in the workers: median {r['per_region_s']['median']:.3f} s, max {r['per_region_s']['max']:.3f} s, "
                        f"sum {r['per_region_s']['sum']:.1f} s){ref}{gm}; load "
                        f"{r['load']['before'][0]:.2f} -> {r['load']['after'][0]:.2f}", r, args.json)

@@ -95,3 +95,31 @@ def test_bulk_times_the_whole_command_and_gmsh_on_the_same_outlines(bench, monke
     assert r["gmsh"]["regions"] == 2 and r["gmsh"]["shapes_per_s"] > 0
     assert r["bulk_vs_gmsh"] == pytest.approx(r["gmsh"]["shapes_per_s"] / r["shapes_per_s"])
     assert 0 < r["per_region_s"]["median"] <= r["per_region_s"]["max"]
+
+
+def test_bulk_on_random_parts_beside_another_checkout(bench):
+    """--mesh-bulk-parts N --mesh-bulk-ref ROOT: the generator's parts, this checkout's command
+    and the reference's alternated, each rate from its own wall time."""
+    r = json.loads(json.dumps(bench.mesh_bulk(divisions=8, jobs=2, parts=3, ref=ROOT, reps=1, gmsh=False)))
+    assert (r["regions"], r["meshed"], r["parts"]) == (3, 3, 3) and "gmsh" not in r
+    assert r["shapes_per_s"] == pytest.approx(3 / min(r["runs_s"]))
+    assert r["ref"]["shapes_per_s"] == pytest.approx(3 / min(r["ref"]["runs_s"]))
+    assert r["vs_ref"] == pytest.approx(r["shapes_per_s"] / r["ref"]["shapes_per_s"])
+    assert r["per_region_s"]["sum"] >= r["per_region_s"]["max"] > 0
+
+
+def test_the_parts_generator_is_fixed_and_star_shaped(bench):
+    import shapely
+
+    gen = bench._script("make_bulk_parts")
+    a, b = gen.parts(30), gen.parts(30)
+    assert a == b and a[:10] == gen.parts(10)  # the same seed: the same parts, a prefix for fewer
+    assert sum("holes" in d for d in a) == 10
+    for d in a:
+        outer = shapely.Polygon(d["boundary"])
+        assert 5 <= len(d["boundary"]) <= 14 and outer.is_valid
+    for d in a[::3]:  # the round hole sits about the centre every corner sees (star-shaped)
+        outer, hole = shapely.Polygon(d["boundary"]), shapely.Polygon(d["holes"][0])
+        assert len(d["holes"][0]) == gen.HOLE_POINTS and outer.contains(hole)
+        c = hole.centroid
+        assert all(outer.buffer(1e-9).contains(shapely.LineString([p, (c.x, c.y)])) for p in d["boundary"])
