@@ -567,6 +567,8 @@ def _mesh_one(path: Path, angle: float, options: dict, sides, sides_file, out_pa
         report.print_mesh(out, path, m, rec, defaulted)
         for pic in written.values():
             out.print(f"wrote {pic}", markup=False, highlight=False)
+    for w in rec["warnings"]:  # a poor mesh is never silent (also in --json's record)
+        err.print(f"warning: {path}: {w}", markup=False, highlight=False, soft_wrap=True)
     if not m.valid:
         err.print(f"NOT A MESH OF THE REGION: {m.inverted} inverted quads, {m.missed_corners.shape[0]} corners without a "
                   "vertex; files were written anyway", markup=False, highlight=False)
@@ -644,6 +646,8 @@ def _mesh_many(regions: List[Path], out_dir: Optional[Path], fmt: str, angle: fl
     failed = sum(1 for r in records if "error" in r)
     folded = sum(1 for r in records if "error" not in r and (r["inverted"] or r["missed_corners"]))
     note = f", {failed} failed (records with \"error\")" if failed else ""
+    warned = sum(1 for r in records if r.get("warnings"))
+    note += f", {warned} with warnings (records' \"warnings\": a poor mesh)" if warned else ""
     print(f"wrote {summary}: {len(records)} regions, {len(records) - failed} meshed{note}", file=sys.stderr)
     if folded:
         raise typer.Exit(EXIT_INVERTED)

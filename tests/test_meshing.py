@@ -263,6 +263,26 @@ def test_kept_measures_are_the_plain_ones(fold):
     assert m.min_scaled_jacobian <= 1.0
 
 
+def test_a_poor_mesh_says_so_and_a_good_one_does_not():
+    """Never a silent bad mesh: below the quality floor, too many irregular vertices or edges
+    longer than the policy allows, each named with what to do; a plain grid has no warning."""
+    from dataclasses import replace
+    from jaxmatch.defaults import Quality
+    good = grid_mesh(3, 3)
+    assert good.warnings() == [] and good.summary()["warnings"] == []
+    bent = grid_mesh(3, 3)
+    xy = bent.xy.copy()
+    xy[5] = [1.9, 1.9]  # vertex (1, 1) pushed towards (2, 2): its quads are poor
+    poor = replace(bent, xy=xy)
+    assert not poor.min_scaled_jacobian >= 0.3
+    (w,) = poor.warnings()
+    assert w.startswith("poor mesh: min scaled Jacobian") and "smaller --size" in w
+    assert poor.warnings(Quality(good_sj=-1.0)) == []  # the floor is the policy's, passed down
+    sized = replace(good, size=0.4)  # every edge 1 = 2.5 x the size
+    (w,) = sized.warnings()
+    assert w.startswith("24 edges longer than 2 x the size")
+
+
 def test_irregular_bound_is_eulers():
     assert irregular_bound(grid_mesh(3, 2).quads, 12) == 0
     # one quad: four valence-2 corners, sum of (3 - valence) = 4 = 4 * (1 - 0 holes)
