@@ -226,6 +226,8 @@ def write_mesh(path: str | os.PathLike, mesh: "QuadMesh", output: MeshOutput | N
     out = output if output is not None else MeshOutput(**options)
     fmt = mesh_format(path, out.format)
     final = Path(path)
+    if out.element_type is not None and fmt != "abaqus":
+        raise InputError(f"applies to Abaqus .inp files only, not {fmt}", "--element-type")
     if fmt in LEGACY and out.plain and (fmt != "gmsh" or out.msh_version == "2.2"):
         patch, names, lines = mesh_groups(mesh)
         cell = {"scaled_jacobian": np.asarray(mesh.scaled_jacobian, dtype=np.float64), "patch": patch}
@@ -238,8 +240,6 @@ def write_mesh(path: str | os.PathLike, mesh: "QuadMesh", output: MeshOutput | N
     if fmt in ("obj", "json"):
         raise InputError(f"{fmt} files hold first-order quads in the plane only (no --order 2, no --extrude)",
                          "--order" if out.order == 2 else "--extrude")
-    if out.element_type is not None and fmt != "abaqus":
-        raise InputError(f"applies to Abaqus .inp files only, not {fmt}", "--element-type")
     sm = solver_mesh(mesh, order=out.order, serendipity=out.serendipity, extrude_dz=out.extrude, layers=out.layers,
                      grading=out.grading)
     notes = list(sm.notes) + write_solver_file(final, sm, fmt, msh_version=out.msh_version, binary=out.binary,

@@ -336,7 +336,7 @@ def _exodus_names(nc, var: str, dim: str, names) -> None:
     arr = np.zeros((len(names), len(nc.dimensions["len_string"])), "S1")
     for i, n in enumerate(names):
         b = n.encode()[: arr.shape[1] - 1]
-        arr[i, : len(b)] = list(b)
+        arr[i, : len(b)] = np.frombuffer(b, "S1")
     v[:] = arr
 
 
