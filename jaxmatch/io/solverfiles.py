@@ -124,27 +124,42 @@ def _gmsh_blocks(sm: SolverMesh):
     return cells, tags, field, dims
 
 
+def _match(sets: list[list[int]]) -> list[int] | None:
+    """One distinct member of each set (an augmenting-path bipartite matching; sets are the
+    element blocks' nodes, few), or None when there is none."""
+    owner: dict[int, int] = {}
+
+    def place(b: int, seen: set) -> bool:
+        for v in sets[b]:
+            if v not in seen:
+                seen.add(v)
+                if v not in owner or place(owner[v], seen):
+                    owner[v] = b
+                    return True
+        return False
+
+    for b in range(len(sets)):
+        if not place(b, set()):
+            return None
+    chosen = [0] * len(sets)
+    for v, b in owner.items():
+        chosen[b] = v
+    return chosen
+
+
 def _node_entities(n_points: int, cells, dims) -> np.ndarray:
     """``(N, 2)`` (dim, tag) of the entity each node is classified on: every entity gets one of
-    its own nodes (a maximum bipartite matching), the other nodes the first cell block holding them."""
-    from scipy.sparse import csr_matrix
-    from scipy.sparse.csgraph import maximum_bipartite_matching
-
-    rows, cols = [], []
-    for b, (_, c) in enumerate(cells):
-        u = np.unique(c)
-        rows.append(np.full(u.size, b))
-        cols.append(u)
-    rows, cols = np.concatenate(rows), np.concatenate(cols)
-    graph = csr_matrix((np.ones(rows.size), (rows, cols)), shape=(len(cells), n_points))
-    match = maximum_bipartite_matching(graph, perm_type="column")
-    if (match < 0).any():
+    its own nodes (a bipartite matching), the other nodes the first cell block holding them."""
+    sets = [np.unique(c).tolist() for _, c in cells]
+    # a node of few blocks first: the matching then rarely needs to re-route
+    count = np.bincount(np.concatenate([np.asarray(s, np.int64) for s in sets]), minlength=n_points)
+    match = _match([sorted(s, key=lambda v: count[v]) for s in sets])
+    if match is None:
         raise InputError("MSH 4.1: more groups than nodes to classify them on; use --msh-version 2.2")
-    owner = np.full(n_points, -1)
+    owner = np.zeros(n_points, np.int64)
     for b in range(len(cells) - 1, -1, -1):  # the first block holding a node wins
-        owner[np.unique(cells[b][1])] = b
-    owner[owner < 0] = 0
-    owner[match] = np.arange(len(cells))
+        owner[np.asarray(sets[b], np.int64)] = b
+    owner[np.asarray(match, np.int64)] = np.arange(len(cells))
     return np.asarray(dims, np.int64)[owner]
 
 
