@@ -1,5 +1,10 @@
 """Write a :class:`~jaxmatch.meshing.result.QuadMesh` to a file (meshio formats and a small JSON format).
 
+:func:`write_mesh` is the front door: first-order quads to the formats below are written here
+(:func:`write_quads`); MSH 4.1 (the default for ``.msh``), the solver formats (``.inp``,
+``.xdmf``, ``.bdf``, ``.e``/``.exo``, ``.mesh``), second order and extrusion go through
+:mod:`jaxmatch.io.elements` and :mod:`jaxmatch.io.solverfiles` (docs/output.md).
+
 The format comes from the file suffix (case-insensitive):
 
 =========  ==============================================  ==========================
@@ -8,7 +13,9 @@ suffix     format                                          keeps ``scaled_jacobi
 ``.vtk``   legacy VTK, binary (meshio)                     yes (cell data)
 ``.vtu``   VTK XML unstructured grid (meshio)              yes (cell data)
 ``.obj``   Wavefront OBJ (meshio)                          no
-``.msh``   Gmsh 2.2, binary (meshio)                       yes (``$ElementData``)
+``.msh``   Gmsh 2.2, binary (meshio; :func:`write_mesh`    no (with line groups)
+           writes MSH 4.1 by default, through
+           :mod:`jaxmatch.io.solverfiles`)
 ``.json``  ``{"points": [[x, y], ...], "quads": [[a, b, c, d], ...],
            "scaled_jacobian": [...]}`` (written here)      yes
 =========  ==============================================  ==========================
