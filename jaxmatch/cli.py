@@ -475,7 +475,8 @@ def mesh(
         for opt, given in (("--size", size is not None), ("--divisions", divisions is not None),
                            ("--sides", sides is not None),
                            ("--sides-file", sides_file is not None), ("--strategy", strategy is not None),
-                           ("--out-dir", out_dir is not None)):
+                           ("--out-dir", out_dir is not None), ("--png-size/--dpi/--color/--histogram",
+                                                                    drawing != PictureOutput())):
             if given:
                 raise InputError("does not apply with --template (the template is placed as is)", opt)
         if len(regions) != 1:
