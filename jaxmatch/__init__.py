@@ -55,6 +55,7 @@ _API = {
     "mesh_layout": "jaxmatch.api",
     # writing
     "write_mesh": "jaxmatch.api",
+    "draw_mesh": "jaxmatch.io.plot",
     # errors
     "InputError": "jaxmatch.errors",
     "InputWarning": "jaxmatch.errors",
