@@ -379,7 +379,10 @@ def tidy(outline: Outline, source: str) -> Outline:
                       stacklevel=3)
     hole_corners = tuple(hole_corners) if outline.hole_corners is not None else None
     loops = [outer, *holes]
-    if max(len(p) for p in loops) > MAX_POINTS + 1 and corners is None and not any(c is not None for c in hole_corners or ()):
+    def count(p):  # points, a closing repeat of the first not counted
+        return len(p) - int(bool(np.hypot(*(p[-1] - p[0])) <= tol))
+
+    if max(count(p) for p in loops) > MAX_POINTS and corners is None and not any(c is not None for c in hole_corners or ()):
         outer, holes = _simplify(loops, size, source)
     return Outline(outer, corners, tuple(holes), hole_corners)
 
@@ -393,8 +396,9 @@ def _simplify(loops: list[np.ndarray], size: float, source: str) -> tuple[np.nda
         return loops[0], loops[1:]
     before = sum(len(p) for p in loops)
     frac, most = SIMPLIFY_START, max(len(p) for p in loops)
+    tried = frac
     while frac <= MAX_SIMPLIFY * (1 + 1e-9):
-        tol = frac * size
+        tol, tried = frac * size, frac
         simple = poly.simplify(tol, preserve_topology=True)
         if isinstance(simple, shapely.Polygon) and simple.is_valid and not simple.is_empty:
             rings = [np.asarray(simple.exterior.coords)[:-1]] + [np.asarray(r.coords)[:-1] for r in simple.interiors]
@@ -407,4 +411,4 @@ def _simplify(loops: list[np.ndarray], size: float, source: str) -> tuple[np.nda
                 return rings[0], rings[1:]
         frac *= 2
     raise InputError(f"a loop has {max(len(p) for p in loops)} points, more than the maximum {MAX_POINTS}, and still {most} "
-                     f"simplified within {MAX_SIMPLIFY:g} of the part's size", where=source)
+                     f"simplified within {tried:.3g} of the part's size", where=source)
