@@ -221,8 +221,10 @@ def test_text_errors_name_the_line():
 
 def test_too_many_points():
     pts = [[math.cos(a), math.sin(a)] for a in np.linspace(0, 6, MAX_POINTS + 1)]
+    with pytest.raises(InputError, match="maximum"):  # explicit corners: not simplified (tests/test_outline.py)
+        parse_shape(js({"boundary": pts, "corners": [0]}), "big.json")
     with pytest.raises(InputError, match="maximum"):
-        parse_shape(js({"boundary": pts}), "big.json")
+        make_shape(pts)
 
 
 def test_unreadable_file(tmp_path):
