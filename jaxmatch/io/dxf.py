@@ -56,9 +56,7 @@ def read_dxf(data, source: str, element: str | None) -> Outline:
     try:
         for e, origin, block in found:
             _explode(e, origin, block, flat, ignored, 0)
-    except InputError:
-        raise
-    except Exception as err:
+    except Exception as err:  # a damaged block reference
         raise InputError(f"a block of the DXF cannot be inserted ({type(err).__name__}: {_short(str(err), 60)})",
                          where=source) from None
     if flat and all(e is origin and e.dxftype() in ("LWPOLYLINE", "POLYLINE") and _closed(e) for e, origin, _ in flat):

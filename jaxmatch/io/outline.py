@@ -25,12 +25,13 @@ from typing import Any, NamedTuple
 
 import numpy as np
 import shapely
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
-from scipy.spatial import cKDTree
 
 from jaxmatch.errors import InputError, InputWarning
+from jaxmatch.lazy import Later
 from jaxmatch.shape import MAX_COORDINATE, MAX_POINTS, MIN_EXTENT
+
+later = Later(spatial="scipy.spatial",  # scipy (a command's start-up): only to chain a CAD file's pieces
+              sparse="scipy.sparse", csgraph="scipy.sparse.csgraph")
 
 __all__ = [
     "CHAIN_TOLERANCE",
@@ -163,10 +164,10 @@ def chain(pieces: list[Piece], tol: float, source: str) -> list[Ring]:
     if not open_:
         return rings
     ends = np.array([pieces[i].points[k] for i in open_ for k in (0, -1)], np.float64)
-    pairs = cKDTree(ends).query_pairs(tol, output_type="ndarray")
+    pairs = later.spatial.cKDTree(ends).query_pairs(tol, output_type="ndarray")
     m = ends.shape[0]
-    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(m, m)) if len(pairs) else coo_matrix((m, m))
-    _, node = connected_components(graph, directed=False)
+    graph = later.sparse.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(m, m))
+    _, node = later.csgraph.connected_components(graph, directed=False)
     degree = np.bincount(node)
     joint = np.zeros((degree.size, 2))
     np.add.at(joint, node, ends)
