@@ -214,7 +214,7 @@ def _open_catalogue(path: Optional[Path]):
 
 
 SHAPE_HELP = ("Shape file: jaxmatch JSON {boundary, corners}, GeoJSON polygon, CSV/TSV/text rows 'x y' (header optional), "
-              "SVG or DXF; FILE#ID picks one element of an SVG/DXF/GeoJSON file.")
+              "SVG, DXF, STEP/IGES; FILE#ID picks one element of an SVG/DXF/GeoJSON/STEP file.")
 CATALOGUE_HELP = "Catalogue file (default: the shipped k=0..5 catalogue)."
 INTERNAL_HELP = ("Mesh size: K or K1..K2 internal vertices. Without it all sizes compete, and larger meshes "
                  "(more boundary vertices, more matched points) get larger raw utilities.")
@@ -227,7 +227,8 @@ TIE_BREAK_HELP = ("Order among equal utilities: 'geometry' places the tied meshe
                   "combinatorial order (fewer internal vertices, shorter boundary, id).")
 
 
-REGION_HELP = ("Region file(s): a shape (jaxmatch JSON {boundary, corners}, GeoJSON, CSV/TSV/text 'x y' rows, SVG or DXF; "
+REGION_HELP = ("Region file(s): a shape (jaxmatch JSON {boundary, corners, holes}, GeoJSON, CSV/TSV/text 'x y' rows, SVG, DXF, "
+               "STEP/IGES/BREP; "
                "FILE#ID picks an element) or a layout JSON {points, patches}.")
 
 
