@@ -24,6 +24,7 @@ import tempfile
 import numpy as np
 
 from jaxmatch.errors import InputError
+from jaxmatch.files import atomic_open
 from jaxmatch.io.outline import CHAIN_TOLERANCE, CURVE_TOLERANCE, MAX_CURVE_TURN, Outline, Piece, chain, regions
 from jaxmatch.io.outline import short as _short
 from jaxmatch.lazy import Later
@@ -49,7 +50,7 @@ def read_cad(data, source: str, element: str | None, kind: str) -> Outline:
     raw = data.encode("utf-8") if isinstance(data, str) else bytes(data)
     with tempfile.TemporaryDirectory() as tmp, _session(gmsh):
         path = os.path.join(tmp, "part" + suffix)
-        with open(path, "wb") as f:
+        with atomic_open(path, "wb") as f:  # (a name gmsh's reader can open)
             f.write(raw)
         try:
             with _quiet():
@@ -90,12 +91,15 @@ def _quiet():
     sys.stdout.flush()
     saved = os.dup(1)
     try:
-        with open(os.devnull, "wb") as null:
-            os.dup2(null.fileno(), 1)
+        null = os.open(os.devnull, os.O_WRONLY)
+        try:
+            os.dup2(null, 1)
             try:
                 yield
             finally:
                 os.dup2(saved, 1)
+        finally:
+            os.close(null)
     finally:
         os.close(saved)
 

@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from jaxmatch.errors import InputError
-from jaxmatch.files import atomic_path
+from jaxmatch.files import atomic_folder, atomic_path
 from jaxmatch.io.elements import SolverMesh
 
 __all__ = ["ABAQUS_TYPES", "abaqus_name", "facet_partition", "write_solver_file"]
@@ -268,25 +268,6 @@ def write_abaqus(path: Path, sm: SolverMesh, element_type: str | None) -> list[s
 # XDMF, Exodus, Medit, Nastran
 
 
-def _files_together(finals: list[Path], write) -> None:
-    """``write(folder)`` writes the files named as ``finals`` into a temporary folder beside them;
-    then each is moved into place (the ones listed last last)."""
-    parent = finals[0].parent
-    try:
-        parent.mkdir(parents=True, exist_ok=True)
-        tmpdir = Path(tempfile.mkdtemp(prefix=f".{finals[0].stem}.{os.getpid()}-", dir=parent))
-    except OSError as err:
-        raise InputError(f"cannot write file: {err.strerror or err}", where=str(finals[0])) from None
-    try:
-        write(tmpdir)
-        for f in finals:
-            os.replace(tmpdir / f.name, f)
-    except OSError as err:
-        raise InputError(f"cannot write file: {err.strerror or err}", where=str(finals[0])) from None
-    finally:
-        shutil.rmtree(tmpdir, ignore_errors=True)
-
-
 def write_xdmf(path: Path, sm: SolverMesh) -> list[str]:
     meshio = _meshio()
     _need("h5py", "XDMF", str(path))
@@ -296,17 +277,15 @@ def write_xdmf(path: Path, sm: SolverMesh) -> list[str]:
     pts = _points(sm, sm.dim)
     facet_path = path.with_name(path.stem + "_facets.xdmf")
 
-    def write(folder: Path) -> None:
+    finals = [path.with_suffix(".h5"), path]
+    if len(facets):
+        finals = [facet_path.with_suffix(".h5"), facet_path] + finals
+    with atomic_folder(finals) as folder:
         cells = meshio.Mesh(pts, [(sm.cell_type, sm.cells)], cell_data={"patch": [sm.region.astype(np.int32) + 1]})
         meshio.write(folder / path.name, cells, file_format="xdmf")
         if len(facets):
             fm = meshio.Mesh(pts, [(sm.facet_type, facets)], cell_data={"group": [marks.astype(np.int32)]})
             meshio.write(folder / facet_path.name, fm, file_format="xdmf")
-
-    finals = [path.with_suffix(".h5"), path]
-    if len(facets):
-        finals = [facet_path.with_suffix(".h5"), facet_path] + finals
-    _files_together(finals, write)
     return [_marker_note("xdmf", sm, lost) + f" (in {facet_path.name})"]
 
 
