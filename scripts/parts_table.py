@@ -26,6 +26,8 @@ pass criteria, pictures of every part at the first fraction into a ``parts/`` fo
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 import math
 import os
@@ -215,6 +217,8 @@ def mesh_case(name: str, fraction: int, out: Path, *, timeout: float, gmsh: bool
     row = {"part": name, "fraction": fraction, "h": h}
     meshes = {}
     src = with_corners(doc, truth, out) if explicit_corners else folder / f"{name}.json"
+    if src.resolve().is_relative_to(ROOT):  # errors name the file as from the repository root
+        src = src.resolve().relative_to(ROOT)
     for method in METHODS if gmsh else METHODS[:1]:
         msh = out / f"{name}-{fraction}-{method}.msh"
         msh.unlink(missing_ok=True)
@@ -222,7 +226,8 @@ def mesh_case(name: str, fraction: int, out: Path, *, timeout: float, gmsh: bool
                else run_gmsh(name, h, msh, timeout, folder))
         if "error" not in rec:
             try:
-                m = meshio.read(msh)
+                with contextlib.redirect_stdout(io.StringIO()):  # meshio prints a blank line per .msh
+                    m = meshio.read(msh)
                 cells = [(c.type, c.data) for c in m.cells]
                 rec.update(measure(m.points, cells, rings, truth["corners"], truth["area"], h))
                 meshes[method] = (np.asarray(m.points)[:, :2], quads_of(cells)[0])
@@ -346,13 +351,36 @@ def picture(name: str, fraction: int, h: float, meshes: dict, row: dict, doc: di
     os.replace(tmp, path)
 
 
-def page(rows: list[dict], pictures: list[str], command: str) -> str:
+def worst(rows: list[dict]) -> list[str]:
+    """Summary lines: jaxmatch's lowest min SJ and longest edges, and the times beside gmsh's."""
+    jm = [r for r in rows if "error" not in r["jaxmatch"] and "min_sj" in r["jaxmatch"]]
+    out = []
+    if jm:
+        low = sorted(jm, key=lambda r: r["jaxmatch"]["min_sj"])[:5]
+        out.append("- lowest jaxmatch min SJ: " + ", ".join(
+            f"{r['part']} P/{r['fraction']} {r['jaxmatch']['min_sj']:.3f}"
+            + (f" (gmsh {r['gmsh']['min_sj']:.3f})" if "min_sj" in r.get("gmsh", {}) else "") for r in low))
+        long = sorted(jm, key=lambda r: -r["jaxmatch"]["longest"])[:5]
+        out.append("- longest jaxmatch edges: " + ", ".join(
+            f"{r['part']} P/{r['fraction']} {r['jaxmatch']['longest']:.2f} h" for r in long))
+    both = [r for r in rows if "gmsh" in r and r["jaxmatch"].get("seconds") and r["gmsh"].get("seconds")
+            and "error" not in r["jaxmatch"] and "error" not in r["gmsh"]]
+    if both:
+        ratio = [r["jaxmatch"]["seconds"] / r["gmsh"]["seconds"] for r in both]
+        out.append(f"- time, whole commands: jaxmatch median {np.median([r['jaxmatch']['seconds'] for r in both]):.2f} s, "
+                   f"gmsh median {np.median([r['gmsh']['seconds'] for r in both]):.2f} s; jaxmatch / gmsh median "
+                   f"{np.median(ratio):.1f}x, range {min(ratio):.1f}-{max(ratio):.1f}x over the {len(both)} cases both meshed")
+    return out
+
+
+def page(rows: list[dict], pictures: list[str], command: str, load: str = "") -> str:
     """The Markdown page of ``docs/parts.md``."""
     crit = criteria(rows)
+    n_parts = len(dict.fromkeys(r["part"] for r in rows))
     lines = [
         "# Engineering parts beside gmsh",
         "",
-        "Fifteen parts of the kinds a meshing engineer brings (`examples/parts/`, written by",
+        f"{n_parts} parts of the kinds a meshing engineer brings (`examples/parts/`, written by",
         "`scripts/make_parts.py` from exact geometry: round holes, fillets, arcs, the airfoil and the cam are",
         "densely sampled curves, at most 3 degrees apart; `examples/parts/truth/` holds each part's exact area,",
         "its pieces and its corners, every point where the outline turns by more than 30 degrees), meshed by",
@@ -372,7 +400,7 @@ def page(rows: list[dict], pictures: list[str], command: str) -> str:
         "interior vertices of valence other than 4. Time: the whole command for jaxmatch (start-up",
         "included), the whole worker process for gmsh (Python start, geometry, meshing, writing). A regular",
         "12-gon turns by exactly 30 degrees at its vertices, so it has no corners by the rule.",
-        "Each cell: jaxmatch / gmsh.",
+        f"{load}Each cell: jaxmatch / gmsh.",
         "",
         table(rows),
         "",
@@ -380,6 +408,7 @@ def page(rows: list[dict], pictures: list[str], command: str) -> str:
     bad = problems(rows)
     if bad:
         lines += ["Errors and invalid meshes:", "", *bad, ""]
+    lines += worst(rows) + [""]
     lines += ["## The pass criteria of the issue", "", "| criterion | cases met | pass |", "|---|---:|---|"]
     for text, met, n, ok, note in crit:
         lines.append(f"| {text} | {met} of {n}{' (' + note + ')' if note else ''} | {'yes' if ok else 'no'} |")
@@ -417,6 +446,7 @@ def main(parts: Optional[str] = typer.Option(None, help="Comma-separated part na
     out = Path(tempfile.mkdtemp(prefix="parts-")) if out is None else out
     out.mkdir(parents=True, exist_ok=True)
     rows, pictures = [], []
+    load0 = os.getloadavg()[0]
     for name in names:
         for f in fracs:
             row, meshes = mesh_case(name, f, out, timeout=timeout, gmsh=not no_gmsh, explicit_corners=explicit_corners)
@@ -435,7 +465,7 @@ def main(parts: Optional[str] = typer.Option(None, help="Comma-separated part na
                 pictures.append(f"{name}.png")
     if not json_rows:
         print(table(rows))
-        print("\n".join(problems(rows)))
+        print("\n".join(problems(rows) + worst(rows)))
         for text, met, n, ok, note in criteria(rows) if not no_gmsh else []:
             print(f"{'PASS' if ok else 'FAIL'} {met}/{n} {text} {note}")
     print(f"meshes in {out}", file=sys.stderr)
@@ -445,7 +475,9 @@ def main(parts: Optional[str] = typer.Option(None, help="Comma-separated part na
         argv = " ".join(a if a.replace(",", "").replace("/", "").replace(".", "").replace("-", "").isalnum() else repr(a)
                         for a in args)
         tmp = doc.with_suffix(".md.tmp")
-        tmp.write_text(page(rows, pictures, f".venv/bin/python scripts/parts_table.py {argv}".strip()))
+        load = (f"Run on a machine of {os.cpu_count()} CPUs (load average {load0:.1f} at the start, {os.getloadavg()[0]:.1f} at the "
+                "end): the times are of that machine. ")
+        tmp.write_text(page(rows, pictures, f".venv/bin/python scripts/parts_table.py {argv}".strip(), load))
         os.replace(tmp, doc)
         print(f"wrote {doc}", file=sys.stderr)
 

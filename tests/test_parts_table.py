@@ -187,3 +187,17 @@ def test_one_small_part_through_both_meshers(tmp_path):
         assert abs(rec["area_ratio"] - 1) < 0.01 and rec["seconds"] > 0
         assert meshes[method][1].shape == (rec["quads"], 4)
     assert "6-gon | 20 |" in pt.table([row])
+
+
+def test_page_and_explicit_corners(tmp_path):
+    ok = {"valid": True, "min_sj": 0.8, "longest": 1.2, "in_band": 0.9, "quads": 10, "mean_sj": 0.9, "irregular": 0,
+          "corners": 4, "corners_kept": 4, "seconds": 0.5}
+    rows = [{"part": "a", "fraction": 40, "h": 1.0, "jaxmatch": dict(ok), "gmsh": {**ok, "seconds": 0.25}}]
+    text = pt.page(rows, ["a.png"], "scripts/parts_table.py --parts a")
+    assert "| a | 40 | 1 | 10 / 10 | 0.800 / 0.800 |" in text and "![a.png](parts/a.png)" in text
+    assert "jaxmatch / gmsh median 2.0x" in text and "| 1 of 1 | yes |" in text
+    doc, truth = pt.load_part("keyhole")
+    given = json.loads(pt.with_corners(doc, truth, tmp_path).read_text())
+    rings = pt.rings_of(given)
+    pts = [rings[0][given["corners"]]] + [r[c] for r, c in zip(rings[1:], given["hole_corners"])]
+    assert np.concatenate(pts).tolist() == truth["corners"]
