@@ -155,11 +155,18 @@ def test_parts_catalogue_and_corners():
 
 
 def test_written_files_match_the_generator():
+    # the files of examples/parts/ are the generator's (to round-off of another platform's sin/cos)
     for p in mp.parts():
         doc, truth = mp.documents(p)
-        assert json.loads((pt.PARTS / f"{p.name}.json").read_text()) == json.loads(json.dumps(doc)), p.name
-        on_disk = json.loads((pt.PARTS / "truth" / f"{p.name}.json").read_text())
-        assert on_disk == json.loads(json.dumps(truth)), p.name
+        on_disk = json.loads((pt.PARTS / f"{p.name}.json").read_text())
+        assert sorted(on_disk) == sorted(doc), p.name
+        for a, b in zip(pt.rings_of(on_disk), pt.rings_of(doc)):
+            np.testing.assert_allclose(a, b, rtol=0, atol=1e-9)
+        told = json.loads((pt.PARTS / "truth" / f"{p.name}.json").read_text())
+        assert told["rings"] == truth["rings"] and told["name"] == p.name, p.name
+        assert told["area"] == pytest.approx(truth["area"], rel=1e-12)
+        assert told["outer_perimeter"] == pytest.approx(truth["outer_perimeter"], rel=1e-12)
+        np.testing.assert_allclose(np.reshape(told["corners"], (-1, 2)), np.reshape(truth["corners"], (-1, 2)), atol=1e-9)
 
 
 def test_criteria_count_cases():
@@ -196,6 +203,7 @@ def test_page_and_explicit_corners(tmp_path):
     text = pt.page(rows, ["a.png"], "scripts/parts_table.py --parts a")
     assert "| a | 40 | 1 | 10 / 10 | 0.800 / 0.800 |" in text and "![a.png](parts/a.png)" in text
     assert "jaxmatch / gmsh median 2.0x" in text and "| 1 of 1 | yes |" in text
+    assert "| jaxmatch 0.800, gmsh 0.800 over 1 cases | yes |" in text
     doc, truth = pt.load_part("keyhole")
     given = json.loads(pt.with_corners(doc, truth, tmp_path).read_text())
     rings = pt.rings_of(given)
