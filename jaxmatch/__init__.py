@@ -7,7 +7,7 @@ mesh boundary's valence triples, scored by lattices).
 The Python API (documented in :mod:`jaxmatch.api` and the README's "Python API")::
 
     import jaxmatch
-    shape = jaxmatch.load_shape("examples/lshape.json")   # JSON, GeoJSON, CSV/TXT, SVG, DXF
+    shape = jaxmatch.load_shape("examples/lshape.json")   # JSON, GeoJSON, CSV/TXT, SVG, DXF, STEP/IGES/BREP
     ranking = jaxmatch.rank(shape, internal=4, top=3)
     placement = jaxmatch.place(shape, ranking)            # the #1 mesh in the shape
     m = jaxmatch.mesh(shape, size=0.25)                   # the meshing pipeline: a QuadMesh
@@ -55,6 +55,7 @@ _API = {
     "mesh_layout": "jaxmatch.api",
     # writing
     "write_mesh": "jaxmatch.api",
+    "draw_mesh": "jaxmatch.io.plot",
     # errors
     "InputError": "jaxmatch.errors",
     "InputWarning": "jaxmatch.errors",

@@ -57,7 +57,8 @@ from jaxmatch import __version__, report
 from jaxmatch.catalogue.store import default_path
 from jaxmatch.errors import InputError
 from jaxmatch.files import atomic_open, atomic_path
-from jaxmatch.io.meshfile import MESH_FORMATS, write_mesh
+from jaxmatch.io.meshfile import MESH_FORMATS, mesh_format, write_mesh
+from jaxmatch.io.output import MeshOutput
 from jaxmatch.kernels import backends
 from jaxmatch.lazy import Later
 from jaxmatch.parallel import available_cpus, can_fork
@@ -101,6 +102,8 @@ RECORD_FIELDS: dict[str, str] = {
                       "size test allows max(1, 25 %) of L / h edges off, so such a side passes",
     "side_counts": 'edges per side, keyed "i-j" as the mesh file\'s "side i-j" groups (i, j: the side\'s end points)',
     "templates": "the catalogue mesh id of each patch's template",
+    "warnings": "what is poor about the mesh, each with what to try (empty for a good mesh): min scaled Jacobian "
+                "below the quality floor, irregular vertices beyond twice Euler's bound, edges far longer than h",
     "candidates": "every candidate tried: name, note (why it was skipped or how it was meshed) and, when meshed, "
                   "patches, quads, min/mean scaled Jacobian, inverted, irregular and sides_off_size (sides whose "
                   "edge count is off L / h by more than max(1, 25 %))",
@@ -249,13 +252,14 @@ def _catalogue_id(cat) -> str:
     return "shipped" if path and path.resolve() == default_path().resolve() else _hash_file(str(path))
 
 
-def options_hash(options: dict, suffix: str, corner_angle: float) -> str:
+def options_hash(options: dict, writing: MeshOutput, corner_angle: float) -> str:
     """SHA-256 of everything a region's mesh depends on besides its file: ``options`` (the
     :func:`~jaxmatch.meshing.pipeline.mesh` keywords: size, divisions, strategies, budget,
-    catalogue, lattice), the mesh format, the corner angle and jaxmatch's version (the shipped
-    catalogue by name, another by its file's contents; the lattice by its weights)."""
+    catalogue, lattice), how the mesh file is written (``writing``: format, MSH version, element
+    type, order, extrusion), the corner angle and jaxmatch's version (the shipped catalogue by
+    name, another by its file's contents; the lattice by its weights)."""
     doc = {"size": options.get("size"), "divisions": options.get("divisions"), "strategies": options.get("strategies"),
-           "budget_s": options.get("budget_s"), "format": suffix, "corner_angle": float(corner_angle),
+           "budget_s": options.get("budget_s"), "writing": dataclasses.asdict(writing), "corner_angle": float(corner_angle),
            "catalogue": _catalogue_id(options.get("catalogue")), "lattice": repr(options.get("lattice")),
            "version": __version__}
     return hashlib.sha256(json.dumps(doc, sort_keys=True, default=str).encode()).hexdigest()
@@ -342,12 +346,19 @@ def mesh_job(job: Job, region, options: dict, opts: str, region_budget: float | 
                        "seconds": round(time.perf_counter() - t0, 4)}, job, opts)
     seconds = time.perf_counter() - t0
     rec = report.mesh_record(job.shape, m, seconds)
-    rec = {"shape": rec.pop("shape"), "status": "meshed", **rec, "out": write(job.target, m)}
+    try:
+        out = write(job.target, m)
+    except InputError as e:  # the mesh file cannot be written (e.g. a format that cannot hold it)
+        return _stamp({"shape": job.shape, "status": "failed", "error": f"{job.shape}: {e}",
+                       "seconds": round(seconds, 4)}, job, opts)
+    rec = {"shape": rec.pop("shape"), "status": "meshed", **rec, "out": out}
     return _stamp(rec, job, opts)
 
 
-def _write_local(target: str, m) -> str:
-    return str(write_mesh(target, m))
+def _writer(writing: MeshOutput) -> Callable[[str, object], str]:
+    """``write(target, mesh) -> path written``, as ``writing`` says (module level: workers
+    inherit it, Dask pickles it by value of ``writing``)."""
+    return lambda target, m: str(write_mesh(target, m, writing))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -372,9 +383,9 @@ def warm_kernels(load: bool = True) -> None:
                           np.zeros((4, 64), np.int16), np.zeros(4, np.int16))
 
 
-def _inline_results(jobs, loaded, options, opts, region_budget) -> Iterator[tuple[int, dict]]:
+def _inline_results(jobs, loaded, options, opts, region_budget, writing) -> Iterator[tuple[int, dict]]:
     for job in jobs:
-        yield job.index, mesh_job(job, loaded[job.index], options, opts, region_budget, _write_local)
+        yield job.index, mesh_job(job, loaded[job.index], options, opts, region_budget, _writer(writing))
 
 
 def _die_with_parent() -> None:
@@ -392,7 +403,7 @@ def one_core() -> None:
     threadpoolctl.threadpool_limits(1)
 
 
-def _worker_main(conn, jobs, loaded, options, opts, region_budget, initializer) -> None:
+def _worker_main(conn, jobs, loaded, options, opts, region_budget, writing, initializer) -> None:
     _die_with_parent()
     one_core()
     sys.stdout, sys.stderr = sys.__stdout__, sys.__stderr__  # not the progress display's proxies
@@ -405,7 +416,7 @@ def _worker_main(conn, jobs, loaded, options, opts, region_budget, initializer) 
                 return
             for i in chunk:
                 try:
-                    rec = mesh_job(jobs[i], loaded[i], options, opts, region_budget, _write_local)
+                    rec = mesh_job(jobs[i], loaded[i], options, opts, region_budget, _writer(writing))
                 except Exception as e:  # noqa: BLE001 - an internal error: the region's record says so
                     rec = _stamp({"shape": jobs[i].shape, "status": "failed",
                                   "error": f"{jobs[i].shape}: internal error: {type(e).__name__}: {e}"}, jobs[i], opts)
@@ -451,11 +462,11 @@ def chunk_size(remaining: int, jobs: int) -> int:
 
 
 def _local_results(jobs, loaded, options, opts, region_budget, n_workers: int, initializer,
-                   grace: float = DEFAULT_GRACE_S) -> Iterator[tuple[int, dict]]:
+                   grace: float = DEFAULT_GRACE_S, writing: MeshOutput = MeshOutput()) -> Iterator[tuple[int, dict]]:
     todo = deque(j.index for j in jobs)
     by_index = {j.index: j for j in jobs}
     ctx = multiprocessing.get_context("fork")
-    args = ({j.index: j for j in jobs}, loaded, options, opts, region_budget, initializer)
+    args = ({j.index: j for j in jobs}, loaded, options, opts, region_budget, writing, initializer)
     workers = [_Worker(ctx, args) for _ in range(min(n_workers, len(todo)))]
     limit = None if region_budget is None or not math.isfinite(region_budget) else region_budget + grace
 
@@ -516,6 +527,7 @@ class DaskSettings:
     strategies: tuple[str, ...] | None
     budget_s: float
     region_budget: float | None
+    writing: MeshOutput
     suffix: str
     corner_angle: float
     options_hash: str
@@ -553,7 +565,7 @@ def dask_task(job: Job, data: bytes, settings: DaskSettings) -> tuple[int, dict,
         out: dict = {}
 
         def write(target: str, m) -> str:
-            out["data"] = write_mesh(Path(tmp) / ("mesh" + settings.suffix), m).read_bytes()
+            out["data"] = write_mesh(Path(tmp) / ("mesh" + settings.suffix), m, settings.writing).read_bytes()
             return target
 
         rec = mesh_job(job, region, options, settings.options_hash, settings.region_budget, write)
@@ -571,14 +583,14 @@ def _dask_client(address: str):
         raise InputError(f"cannot reach a Dask scheduler at {address!r}: {e}", "--dask") from None
 
 
-def _dask_results(address: str, jobs, options, opts, region_budget, suffix: str,
+def _dask_results(address: str, jobs, options, opts, region_budget, writing: MeshOutput, suffix: str,
                   corner_angle: float) -> Iterator[tuple[int, dict]]:
     distributed, client = _dask_client(address)
     cat = options.get("catalogue")
     shipped = _catalogue_id(cat) == "shipped"
     settings = DaskSettings(None if shipped else str(cat.path), options["lattice"], options.get("size"),
                             options.get("divisions"), None if options.get("strategies") is None else tuple(options["strategies"]),
-                            options["budget_s"], region_budget, suffix, corner_angle, opts)
+                            options["budget_s"], region_budget, writing, suffix, corner_angle, opts)
     try:
         slots = max(4, 4 * sum(client.nthreads().values()))
         todo = deque(jobs)
@@ -623,7 +635,7 @@ def _rate_text(done: int, total: int, started: float) -> str:
     return f"regions ({rate:.1f}/s, ~{(total - done) / rate:.0f} s left)"
 
 
-def run(regions: Sequence[str | os.PathLike], out_dir: Path, fmt: str, corner_angle: float, options: dict, *,
+def run(regions: Sequence[str | os.PathLike], out_dir: Path, writing: MeshOutput, corner_angle: float, options: dict, *,
         jobs: int | None, skip_bad: bool, resume: bool = False, region_budget: float | None = None,
         dask: str | None = None, read: Callable[[str], object], progress=None,
         warm: Callable[[], None] | None = None, initializer: Callable[[], None] | None = None,
@@ -631,7 +643,7 @@ def run(regions: Sequence[str | os.PathLike], out_dir: Path, fmt: str, corner_an
     """Mesh every region into ``out_dir`` (see the module's docstring): the records in the order
     of ``regions``.
 
-    fmt: mesh file suffix (msh, vtk, vtu, obj, json). options: the keywords of
+    writing: how the mesh files are written (format: default msh). options: the keywords of
     :func:`~jaxmatch.meshing.pipeline.mesh` (catalogue and lattice opened). jobs: local worker
     processes (None: the CPUs). read: ``read(shape)`` a region or :class:`InputError`.
     progress: a display with rich's ``add_task``/``update`` (the CLI's), shown while meshing.
@@ -640,15 +652,14 @@ def run(regions: Sequence[str | os.PathLike], out_dir: Path, fmt: str, corner_an
     Raises InputError (bad input, a failed region without ``skip_bad``: stops the run; the
     records so far stay in the summary for ``resume``)."""
     t_start = time.monotonic()
-    suffix = "." + fmt.lower().lstrip(".")
-    if suffix not in MESH_FORMATS:
-        raise InputError(f"expected one of {', '.join(s[1:] for s in MESH_FORMATS)}, got {fmt!r}", "--format")
+    name = mesh_format("x", writing.format or "msh")
+    suffix = next(s for s, n in MESH_FORMATS.items() if n == name)
     if out_dir.exists() and not out_dir.is_dir():
         raise InputError("is not a folder", str(out_dir))
     if region_budget is not None and not region_budget > 0:
         raise InputError(f"must be a positive number of seconds, got {region_budget:g}", "--region-budget")
     job_list, loaded = plan(regions, out_dir, suffix, read, skip_bad)
-    opts = options_hash(options, suffix, corner_angle)
+    opts = options_hash(options, writing, corner_angle)
     summary = out_dir / "summary.jsonl"
     out_dir.mkdir(parents=True, exist_ok=True)
     records: dict[int, dict] = {}
@@ -665,14 +676,14 @@ def run(regions: Sequence[str | os.PathLike], out_dir: Path, fmt: str, corner_an
     todo = [j for j in job_list if j.index not in records]
     workers = available_cpus() if jobs is None else int(jobs)
     if dask is not None:
-        results = _dask_results(dask, todo, options, opts, region_budget, suffix, corner_angle)
+        results = _dask_results(dask, todo, options, opts, region_budget, writing, suffix, corner_angle)
     elif todo and can_fork():
         if warm is not None:
             warm()
         warm_kernels(load=len(todo) >= PRELOAD_REGIONS)
-        results = _local_results(todo, loaded, options, opts, region_budget, workers, initializer)
+        results = _local_results(todo, loaded, options, opts, region_budget, workers, initializer, writing=writing)
     else:
-        results = _inline_results(todo, loaded, options, opts, region_budget)
+        results = _inline_results(todo, loaded, options, opts, region_budget, writing)
     appender = _Appender(summary)
     display = progress if progress is not None else contextlib.nullcontext()
     started, done = time.monotonic(), 0
@@ -697,9 +708,11 @@ def run(regions: Sequence[str | os.PathLike], out_dir: Path, fmt: str, corner_an
     _write_summary(summary, ordered)
     result = RunResult(ordered, len(job_list) - len(todo), time.monotonic() - t_start)
     failed, timed_out = result.count("failed"), result.count("timed out")
+    warned = sum(1 for r in ordered if r.get("warnings"))
     rate = f"; {done / (time.monotonic() - started):.1f} regions/s" if done and time.monotonic() > started else ""
     notes = "".join([f", {len(job_list) - len(todo)} kept from the summary (--resume)" if resume else "",
                      f", {failed} failed (records with \"error\")" if failed else "",
-                     f", {timed_out} timed out (records with \"status\": \"timed out\")" if timed_out else ""])
+                     f", {timed_out} timed out (records with \"status\": \"timed out\")" if timed_out else "",
+                     f", {warned} with warnings (records' \"warnings\": a poor mesh)" if warned else ""])
     say(f"wrote {summary}: {len(ordered)} regions, {result.count('meshed')} meshed{notes}{rate}")
     return result

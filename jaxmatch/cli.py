@@ -22,6 +22,7 @@ from jaxmatch.catalogue import store as cat_mod
 from jaxmatch.errors import EXIT_BAD_INPUT, EXIT_INVERTED, EXIT_UNMATCHABLE, InputError, InputWarning, SolverError, UnmatchableError
 from jaxmatch.defaults import DEFAULT_BUDGET_S, DEFAULT_LATTICE, DEFAULT_TIE_BREAK, DEFAULT_TOP, QUALITY, TIE_BREAKS
 from jaxmatch.io.meshfile import MESH_FORMATS, mesh_format, write_mesh
+from jaxmatch.io.output import MeshOutput, PictureOutput, parse_png_size
 from jaxmatch.lazy import Later
 from jaxmatch.meshing.region import canonical, default_size, load_region
 from jaxmatch.scoring import distributed
@@ -214,7 +215,7 @@ def _open_catalogue(path: Optional[Path]):
 
 
 SHAPE_HELP = ("Shape file: jaxmatch JSON {boundary, corners}, GeoJSON polygon, CSV/TSV/text rows 'x y' (header optional), "
-              "SVG or DXF; FILE#ID picks one element of an SVG/DXF/GeoJSON file.")
+              "SVG, DXF, STEP/IGES; FILE#ID picks one element of an SVG/DXF/GeoJSON/STEP file.")
 CATALOGUE_HELP = "Catalogue file (default: the shipped k=0..5 catalogue)."
 INTERNAL_HELP = ("Mesh size: K or K1..K2 internal vertices. Without it all sizes compete, and larger meshes "
                  "(more boundary vertices, more matched points) get larger raw utilities.")
@@ -227,7 +228,8 @@ TIE_BREAK_HELP = ("Order among equal utilities: 'geometry' places the tied meshe
                   "combinatorial order (fewer internal vertices, shorter boundary, id).")
 
 
-REGION_HELP = ("Region file(s): a shape (jaxmatch JSON {boundary, corners}, GeoJSON, CSV/TSV/text 'x y' rows, SVG or DXF; "
+REGION_HELP = ("Region file(s): a shape (jaxmatch JSON {boundary, corners, holes}, GeoJSON, CSV/TSV/text 'x y' rows, SVG, DXF, "
+               "STEP/IGES/BREP; "
                "FILE#ID picks an element) or a layout JSON {points, patches}.")
 
 
@@ -399,12 +401,25 @@ def mesh(
                                               "named sides (i, j: the side's end points)."),
     template: bool = typer.Option(False, "--template", help="The paper's answer instead: the best-ranked catalogue mesh "
                                   "placed as is (no size; see --internal, --rank, --band)."),
-    out_path: Optional[Path] = typer.Option(None, "--out", help="Mesh file: .msh (physical groups) .vtk .vtu .obj or .json, "
-                                            "written atomically."),
+    out_path: Optional[Path] = typer.Option(None, "--out", help="Mesh file, written atomically: .msh "
+                                            "(physical groups) .inp .xdmf .bdf .e/.exo .vtu .vtk .mesh .obj .json."),
     out_dir: Optional[Path] = typer.Option(None, "--out-dir", metavar="DIR", help="Many regions: one mesh file per region "
                                            "in DIR (named after it) and DIR/summary.jsonl."),
-    fmt: str = typer.Option("msh", "--format", metavar="SUFFIX", help="With --out-dir: the mesh files' format "
-                            "(msh, vtk, vtu, obj, json)."),
+    fmt: Optional[str] = typer.Option(None, "--format", metavar="SUFFIX", help="The mesh file's format (default: --out's "
+                                      "suffix; msh with --out-dir): " + ", ".join(s[1:] for s in MESH_FORMATS) + "."),
+    msh_version: str = typer.Option("4.1", "--msh-version", metavar="4.1|2.2", help=".msh: Gmsh file version."),
+    ascii_: bool = typer.Option(False, "--ascii", help=".msh/.vtk: ASCII instead of binary."),
+    element_type: Optional[str] = typer.Option(None, "--element-type", metavar="TYPE", help=".inp: CPS4 (default), CPE4, "
+                                               "CAX4, S4R; C3D8, C3D8R, C3D8I with --extrude."),
+    order: int = typer.Option(1, "--order", metavar="1|2", help="2: quad9 (hex27) with mid-side nodes on the outline."),
+    serendipity: bool = typer.Option(False, "--serendipity", help="--order 2: quad8 instead of quad9."),
+    extrude: Optional[float] = typer.Option(None, "--extrude", metavar="DZ", help="Hexahedra: the mesh swept along z by DZ."),
+    layers: int = typer.Option(1, "--layers", metavar="N", help="--extrude: element layers."),
+    grading: float = typer.Option(1.0, "--grading", metavar="R", help="--extrude: top layer / bottom layer thickness."),
+    png_size: Optional[str] = typer.Option(None, "--png-size", metavar="W,H", help="Picture size in pixels."),
+    dpi: Optional[int] = typer.Option(None, "--dpi", help="Picture resolution (default 120; the size then fits the region)."),
+    color: str = typer.Option("patch", "--color", metavar="patch|quality", help="Picture: quads by patch or by scaled Jacobian."),
+    histogram: bool = typer.Option(False, "--histogram", help="Picture: add the scaled Jacobians' histogram."),
     png: Optional[Path] = typer.Option(None, "--png", help="Picture of the mesh (.png)."),
     svg: Optional[Path] = typer.Option(None, "--svg", help="Picture of the mesh (.svg)."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object."),
@@ -457,7 +472,9 @@ def mesh(
                      "--require-valid": require_valid, "--min-quality": min_quality != QUALITY.min_sj,
                      "--max-edge-ratio": max_edge_ratio != QUALITY.max_edge_ratio, "--band": band != QUALITY.band,
                      "--tie-break": tie_break != DEFAULT_TIE_BREAK}
-    check_outputs(out_path, png, svg)
+    check_outputs(out_path, png, svg, fmt)
+    writing = MeshOutput(fmt, msh_version, not ascii_, element_type, order, serendipity, extrude, layers, grading)
+    drawing = PictureOutput(parse_png_size(png_size), dpi, color, histogram)
     if size is not None and not (size > 0 and size < float("inf")):
         raise InputError(f"must be a positive length, got {size:g}", "--size")
     if sides is not None and size is not None:
@@ -468,12 +485,13 @@ def mesh(
         for opt, given in (("--size", size is not None), ("--divisions", divisions is not None),
                            ("--sides", sides is not None),
                            ("--sides-file", sides_file is not None), ("--strategy", strategy is not None),
-                           ("--out-dir", out_dir is not None)):
+                           ("--out-dir", out_dir is not None), ("--png-size/--dpi/--color/--histogram",
+                                                                    drawing != PictureOutput())):
             if given:
                 raise InputError("does not apply with --template (the template is placed as is)", opt)
         if len(regions) != 1:
             raise InputError("--template meshes one region at a time", "REGION")
-        _mesh_template(regions[0], catalogue=catalogue, internal=internal, lattice=lattice, points=points, rank_=rank_,
+        _mesh_template(regions[0], writing, catalogue=catalogue, internal=internal, lattice=lattice, points=points, rank_=rank_,
                        out_path=out_path, png=png, svg=svg, require_valid=require_valid, min_quality=min_quality,
                        max_edge_ratio=max_edge_ratio, band=band, tie_break=tie_break, corner_angle=corner_angle,
                        as_json=as_json)
@@ -501,36 +519,38 @@ def mesh(
                            ("--json", as_json)):
             if given:
                 raise InputError("is for one region; with several use --out-dir", opt)
-        _mesh_many(regions, out_dir, fmt, angle, options, jobs, skip_bad, resume,
+        _mesh_many(regions, out_dir, writing, angle, options, jobs, skip_bad, resume,
                    budget if region_budget is None else region_budget, dask or None)
         return
     for opt, given in (("--resume", resume), ("--region-budget", region_budget is not None)):
         if given:
             raise InputError("is for many regions (--out-dir)", opt)
-    _mesh_one(regions[0], angle, options, sides, sides_file, out_path, png, svg, as_json)
+    _mesh_one(regions[0], angle, options, sides, sides_file, out_path, png, svg, as_json, writing, drawing)
 
 
 def check_outputs(out: str | os.PathLike | None = None, png: str | os.PathLike | None = None,
-                  svg: str | os.PathLike | None = None) -> None:
+                  svg: str | os.PathLike | None = None, fmt: str | None = None) -> None:
     """Refuse unsupported output suffixes before any work is done (:class:`InputError`, where
     is the option): ``out`` a mesh file (.vtk .vtu .obj .msh .json), ``png`` a .png file,
     ``svg`` a .svg file."""
     if out is not None:
         try:
-            mesh_format(out)
+            mesh_format(out, fmt)
         except InputError as e:
+            if e.where == "--format":
+                raise
             raise InputError(f"{e}", "--out") from None
     for opt, path, suffix in (("--png", png, ".png"), ("--svg", svg, ".svg")):
         if path is not None and Path(path).suffix.lower() != suffix:
             raise InputError(f"{path}: picture file must end in {suffix}", opt)
 
 
-def _write(m, out_path, png, svg, draw) -> dict:
-    """Write the mesh ``m`` (a QuadMesh) to ``out_path`` and its pictures (``draw(picture path)``)
-    to ``png``/``svg``, each given one; ``{option: path written}``."""
+def _write(m, out_path, png, svg, draw, writing=None) -> dict:
+    """Write the mesh ``m`` (a QuadMesh) to ``out_path`` (as ``writing`` says) and its pictures
+    (``draw(picture path)``) to ``png``/``svg``, each given one; ``{option: path written}``."""
     written = {}
     if out_path is not None:
-        written["out"] = str(write_mesh(out_path, m))
+        written["out"] = str(write_mesh(out_path, m, writing))
     for key, pic in (("png", png), ("svg", svg)):
         if pic is not None:
             written[key] = str(draw(pic))
@@ -542,7 +562,8 @@ def _load_region(path: Path, corner_angle: float):
     return _quietly(load_region, path, corner_angle=corner_angle)
 
 
-def _mesh_one(path: Path, angle: float, options: dict, sides, sides_file, out_path, png, svg, as_json) -> None:
+def _mesh_one(path: Path, angle: float, options: dict, sides, sides_file, out_path, png, svg, as_json, writing,
+              drawing) -> None:
     region = _load_region(path, angle)
     is_layout = not isinstance(region, Shape)
     counts = None
@@ -568,8 +589,8 @@ def _mesh_one(path: Path, angle: float, options: dict, sides, sides_file, out_pa
             if counts is not None:
                 raise InputError(str(e), "--sides") from None
             raise
-    written = _write(m, out_path, png, svg,
-                     lambda pic: later.plot.draw_quadmesh(pic, m, title=path.name, y_down=_y_down(path)))
+    written = _write(m, out_path, png, svg, lambda pic: later.plot.draw_quadmesh(
+        pic, m, title=path.name, y_down=_y_down(path), **drawing.__dict__), writing)
     rec = report.mesh_record(path, m)
     if as_json:
         if counts is not None:
@@ -580,6 +601,8 @@ def _mesh_one(path: Path, angle: float, options: dict, sides, sides_file, out_pa
         report.print_mesh(out, path, m, rec, defaulted)
         for pic in written.values():
             out.print(f"wrote {pic}", markup=False, highlight=False)
+    for w in rec["warnings"]:  # a poor mesh is never silent (also in --json's record)
+        err.print(f"warning: {path}: {w}", markup=False, highlight=False, soft_wrap=True)
     if not m.valid:
         err.print(f"NOT A MESH OF THE REGION: {m.inverted} inverted quads, {m.missed_corners.shape[0]} corners without a "
                   "vertex; files were written anyway", markup=False, highlight=False)
@@ -591,11 +614,11 @@ def _y_down(path: Path) -> bool:
     return str(path).split("#", 1)[0].lower().endswith(".svg")
 
 
-def _mesh_many(regions: List[Path], out_dir: Optional[Path], fmt: str, angle: float, options: dict, jobs, skip_bad,
+def _mesh_many(regions: List[Path], out_dir: Optional[Path], writing, angle: float, options: dict, jobs, skip_bad,
                resume: bool, region_budget: float, dask: Optional[str]) -> None:
     """Bulk meshing (:func:`jaxmatch.batch.run`): every region read and checked first, then
-    meshed by local workers or Dask; one mesh file each and DIR/summary.jsonl. Exit 3 when a
-    mesh folds or misses a corner."""
+    meshed by local workers or Dask; one mesh file each (as ``writing`` says) and
+    DIR/summary.jsonl. Exit 3 when a mesh folds or misses a corner."""
     if out_dir is None:
         raise InputError("several regions need a folder for their meshes", "--out-dir")
     if dask is not None and jobs is not None:
@@ -607,7 +630,7 @@ def _mesh_many(regions: List[Path], out_dir: Optional[Path], fmt: str, angle: fl
         except Exception:  # noqa: BLE001 - only a head start: the regions themselves report any problem
             pass
 
-    result = later.batch.run(regions, out_dir, fmt, angle, options, jobs=jobs, skip_bad=skip_bad, resume=resume,
+    result = later.batch.run(regions, out_dir, writing, angle, options, jobs=jobs, skip_bad=skip_bad, resume=resume,
                              region_budget=region_budget, dask=dask, read=lambda p: _load_region(Path(p), angle),
                              progress=_progress(), warm=warm, initializer=options["catalogue"].reopen)
     if result.folded:
@@ -628,7 +651,7 @@ def _parse_sides(text: str, n_sides: int) -> list[int]:
     return counts
 
 
-def _mesh_template(shape: Path, *, catalogue, internal, lattice, points, rank_, out_path, png, svg, require_valid,
+def _mesh_template(shape: Path, writing, *, catalogue, internal, lattice, points, rank_, out_path, png, svg, require_valid,
                    min_quality, max_edge_ratio, band, tie_break, corner_angle, as_json) -> None:
     """``mesh --template``: the paper's answer, the best-ranked catalogue mesh placed as is
     (``jaxmatch.mesh(..., template=True)``), with the ranking's report (rank, utility, the
@@ -652,7 +675,7 @@ def _mesh_template(shape: Path, *, catalogue, internal, lattice, points, rank_, 
     choice = m.detail
     title = report.panel_title(choice.rank, choice.match, choice.placement)
     written = _write(m, out_path, png, svg, lambda pic: later.plot.draw_in_shape(
-        pic, shp, choice.ranking.annotation, [(title, m)], title=shape.name))
+        pic, shp, choice.ranking.annotation, [(title, m)], title=shape.name), writing)
     notes = report.template_notes(choice, min_quality=min_quality, max_edge_ratio=max_edge_ratio, band=band)
     if as_json:
         print(json.dumps(report.template_json(shape, choice, lattice_name=lat.name, tie_break=tb, min_quality=min_quality,

@@ -16,6 +16,7 @@ from __future__ import annotations
 import contextlib
 import os
 import re
+import shutil
 import tempfile
 import time
 from pathlib import Path
@@ -95,6 +96,29 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     finally:
         if tmp_path.exists():
             tmp_path.unlink()
+
+
+@contextlib.contextmanager
+def atomic_folder(finals: list) -> Iterator[Path]:
+    """Yield a temporary folder beside ``finals[0]`` for writers that make several files at once
+    (XDMF and its HDF5 file): on success each of ``finals`` (paths) is moved from the folder into
+    place, the ones listed last last; the folder is removed either way. Operating-system errors
+    become :class:`InputError` naming ``finals[0]``."""
+    finals = [Path(f) for f in finals]
+    parent = finals[0].parent
+    try:
+        parent.mkdir(parents=True, exist_ok=True)
+        tmpdir = Path(tempfile.mkdtemp(prefix=f".{finals[0].stem}.{os.getpid()}-", dir=parent))
+    except OSError as err:
+        raise InputError(f"cannot write file: {err.strerror or err}", where=str(finals[0])) from None
+    try:
+        yield tmpdir
+        for f in finals:
+            os.replace(tmpdir / f.name, f)
+    except OSError as err:
+        raise InputError(f"cannot write file: {err.strerror or err}", where=str(finals[0])) from None
+    finally:
+        shutil.rmtree(tmpdir, ignore_errors=True)
 
 
 @contextlib.contextmanager

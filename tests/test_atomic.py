@@ -199,7 +199,7 @@ def _non_atomic_writes(source: str, filename: str) -> list[str]:
         while node in parents:
             node = parents[node]
             if isinstance(node, ast.With) and any(
-                isinstance(item.context_expr, ast.Call) and name_of(item.context_expr.func) in ("atomic_path", "atomic_open")
+                isinstance(item.context_expr, ast.Call) and name_of(item.context_expr.func) in ("atomic_path", "atomic_open", "atomic_folder")
                 for item in node.items
             ):
                 return True

@@ -76,15 +76,15 @@ def check_mesh(shape, m: QuadMesh) -> None:
         mesh_key(m, [c.name for c in m.tried].index(m.chosen))
 
 
-def test_strategy_names_are_the_single_template_then_every_decomposition():
-    assert strategy_names() == ("single",) + tuple(STRATEGIES)
+def test_strategy_names_are_the_single_template_then_every_decomposition_then_the_rings():
+    assert strategy_names() == ("single",) + tuple(STRATEGIES) + ("rings",)
 
 
 def test_l_shape_names_the_rule_and_the_runner_up(cat):
     shp = jaxmatch.load_shape(CONCAVE["L"])
     m = jaxmatch.mesh(shp, size=0.25, catalogue=cat)
     check_mesh(shp, m)
-    assert [c.name for c in m.tried] == list(strategy_names())
+    assert [c.name for c in m.tried] == [n for n in strategy_names() if n != "rings"]  # (rings: only when wanted)
     # the recursive cut meshes the L as two grids (min scaled Jacobian 1); the bisectors split a
     # right-angled corner between two patches (some quad's angle there at most 45 degrees), the
     # continuations' three patches cannot beat two perfect ones, and no template of the single
@@ -112,7 +112,7 @@ def test_candidates_not_meshed_could_not_have_won(cat, name, div):
     h = float(cumulative_length(shp.input_points)[-1]) / div
     m = jaxmatch.mesh(shp, size=h, catalogue=cat)
     alone = []
-    for n in strategy_names():
+    for n in [n for n in strategy_names() if n != "rings" or n in {c.name for c in m.tried}]:  # rings: only when wanted
         one = jaxmatch.mesh(shp, size=h, catalogue=cat, strategies=[n])
         alone.append(next(c for c in one.tried if c.name == n))
     every = choose(alone)
@@ -200,7 +200,9 @@ def test_rectangles_with_sides_multiple_of_h_give_the_plain_grid(cat, w, h, size
 def test_every_side_follows_the_size(cat, path, div):
     shp = jaxmatch.load_shape(path)
     per = float(np.sum(np.linalg.norm(np.roll(shp.input_points, -1, 0) - shp.input_points, axis=1)))
-    m = jaxmatch.mesh(shp, size=per / div, catalogue=cat)
+    # the side counts of the templates and cuts (the ring partition may trade a side off by a
+    # fraction of an edge for no edge longer than 2h: tests/test_rings.py)
+    m = jaxmatch.mesh(shp, size=per / div, catalogue=cat, strategies=[n for n in strategy_names() if n != "rings"])
     assert m.sides_off_size(QUALITY.size_tol) == []
     # independently: count the boundary edges between consecutive corners along the loop
     loop = m.line_sets["boundary"][:, 0]
@@ -261,6 +263,26 @@ def test_kept_measures_are_the_plain_ones(fold):
         assert mm.missed_corners.shape == (0, 2)
     m.scaled_jacobian[:] = 5.0
     assert m.min_scaled_jacobian <= 1.0
+
+
+def test_a_poor_mesh_says_so_and_a_good_one_does_not():
+    """Never a silent bad mesh: below the quality floor, too many irregular vertices or edges
+    longer than the policy allows, each named with what to do; a plain grid has no warning."""
+    from dataclasses import replace
+    from jaxmatch.defaults import Quality
+    good = grid_mesh(3, 3)
+    assert good.warnings() == [] and good.summary()["warnings"] == []
+    bent = grid_mesh(3, 3)
+    xy = bent.xy.copy()
+    xy[5] = [1.9, 1.9]  # vertex (1, 1) pushed towards (2, 2): its quads are poor
+    poor = replace(bent, xy=xy)
+    assert not poor.min_scaled_jacobian >= 0.3
+    (w,) = poor.warnings()
+    assert w.startswith("poor mesh: min scaled Jacobian") and "smaller --size" in w
+    assert poor.warnings(Quality(good_sj=-1.0)) == []  # the floor is the policy's, passed down
+    sized = replace(good, size=0.4)  # every edge 1 = 2.5 x the size
+    (w,) = sized.warnings()
+    assert w.startswith("24 edges longer than 2 x the size")
 
 
 def test_irregular_bound_is_eulers():

@@ -30,9 +30,9 @@ def test_a_split_cuts_as_decompose(name):
     shp = jaxmatch.load_shape(EX / "tshape.json")
     split = S.Split(name)
     assert split.kind(shp) == same_cuts(shp, name)
-    a, b = split.layout(shp), decompose(shp, name, check=False)
+    a, b = split.layout(shp, 1.0), decompose(shp, name, check=False)
     assert np.array_equal(a.points, b.points) and all(np.array_equal(p, q) for p, q in zip(a.patches, b.patches))
-    one = S.Single().layout(shp)
+    one = S.Single().layout(shp, 1.0)
     assert one.n_patches == 1 and np.array_equal(one.points, single_patch(shp).points)
 
 

@@ -1,5 +1,10 @@
 """Write a :class:`~jaxmatch.meshing.result.QuadMesh` to a file (meshio formats and a small JSON format).
 
+:func:`write_mesh` is the front door: first-order quads to the formats below are written here
+(:func:`write_quads`); MSH 4.1 (the default for ``.msh``), the solver formats (``.inp``,
+``.xdmf``, ``.bdf``, ``.e``/``.exo``, ``.mesh``), second order and extrusion go through
+:mod:`jaxmatch.io.elements` and :mod:`jaxmatch.io.solverfiles` (docs/output.md).
+
 The format comes from the file suffix (case-insensitive):
 
 =========  ==============================================  ==========================
@@ -8,7 +13,9 @@ suffix     format                                          keeps ``scaled_jacobi
 ``.vtk``   legacy VTK, binary (meshio)                     yes (cell data)
 ``.vtu``   VTK XML unstructured grid (meshio)              yes (cell data)
 ``.obj``   Wavefront OBJ (meshio)                          no
-``.msh``   Gmsh 2.2, binary (meshio)                       yes (``$ElementData``)
+``.msh``   Gmsh 2.2, binary (meshio; :func:`write_mesh`    no (with line groups)
+           writes MSH 4.1 by default, through
+           :mod:`jaxmatch.io.solverfiles`)
 ``.json``  ``{"points": [[x, y], ...], "quads": [[a, b, c, d], ...],
            "scaled_jacobian": [...]}`` (written here)      yes
 =========  ==============================================  ==========================
@@ -40,14 +47,18 @@ from __future__ import annotations
 
 import json
 import os
+import warnings
 from pathlib import Path
 from typing import TYPE_CHECKING, Mapping, NamedTuple, Sequence
 
 import numpy as np
 
-from jaxmatch.errors import InputError
+from jaxmatch.errors import InputError, InputWarning
 from jaxmatch.files import atomic_open, atomic_path
 from jaxmatch.io import registry
+from jaxmatch.io.elements import solver_mesh
+from jaxmatch.io.output import MeshOutput
+from jaxmatch.io.solverfiles import write_solver_file
 
 if TYPE_CHECKING:  # pragma: no cover - the type only (io stays below meshing)
     from jaxmatch.meshing.result import QuadMesh
@@ -55,16 +66,31 @@ if TYPE_CHECKING:  # pragma: no cover - the type only (io stays below meshing)
 __all__ = ["LineGroup", "MESH_FORMATS", "QUADMESH_FIELDS", "mesh_format", "mesh_groups", "read_json_mesh", "write_mesh",
            "write_quads"]
 
-for _name in ("vtk", "vtu", "obj", "gmsh22", "json"):
-    registry.register_format(_name, "mesh", ("." + {"gmsh22": "msh"}.get(_name, _name),), writer=_name)
+for _name, _suffixes in (("vtk", (".vtk",)), ("vtu", (".vtu",)), ("obj", (".obj",)), ("gmsh", (".msh",)),
+                         ("json", (".json",)), ("abaqus", (".inp",)), ("xdmf", (".xdmf",)), ("nastran", (".bdf", ".nas")),
+                         ("exodus", (".e", ".exo")), ("medit", (".mesh",))):
+    registry.register_format(_name, "mesh", _suffixes, writer=_name)
 
 MESH_FORMATS: dict[str, str] = registry.suffixes("mesh")
 """File suffix -> format name (meshio's name, or ``"json"``), from :mod:`jaxmatch.io.registry`."""
 
+LEGACY = ("vtk", "vtu", "obj", "gmsh", "json")
+"""The formats :func:`write_quads` writes (first-order quads in the plane; ``.msh`` as MSH 2.2)."""
 
-def mesh_format(path: str | os.PathLike) -> str:
-    """The format name for ``path``'s suffix; :class:`InputError` when it is not supported."""
-    return registry.find("mesh", path=path).name
+
+def mesh_format(path: str | os.PathLike, fmt: str | None = None) -> str:
+    """The format name for ``path``'s suffix, or for ``fmt`` (a format's name or suffix, e.g.
+    ``"inp"`` or ``"abaqus"``) when given; :class:`InputError` when it is not supported."""
+    if fmt is None:
+        return registry.find("mesh", path=path).name
+    key = fmt.lower().lstrip(".")
+    if key in {f.name for f in registry.formats("mesh")}:
+        return key
+    try:
+        return registry.find("mesh", path=f"x.{key}").name
+    except InputError:
+        known = ", ".join(s[1:] for s in MESH_FORMATS)
+        raise InputError(f"expected one of {known}, got {fmt!r}", "--format") from None
 
 
 def _points3d(xy: np.ndarray) -> np.ndarray:
@@ -91,7 +117,7 @@ def _meshio_mesh(xy, quads, cell_data, quad_groups, quad_group_names, line_group
         return meshio.Mesh(_points3d(xy), [("quad", quads)])
     cells = [("quad", quads)]
     data: dict[str, list[np.ndarray]] = {k: [np.asarray(v)] for k, v in cell_data.items()}
-    if fmt == "gmsh22":
+    if fmt == "gmsh":
         qtag = (np.asarray(quad_groups, dtype=np.int32) + 1) if quad_groups is not None else np.ones(F, np.int32)
         tags = [qtag]
         field_data = {name: np.array([i + 1, 2]) for i, name in enumerate(quad_group_names)}
@@ -135,17 +161,22 @@ def _json_text(xy, quads, cell_data, quad_groups, quad_group_names, line_groups)
 
 def write_quads(path: str | os.PathLike, xy: np.ndarray, quads: np.ndarray, *,
                 cell_data: Mapping[str, np.ndarray] | None = None, quad_groups: np.ndarray | None = None,
-                quad_group_names: Sequence[str] = (), line_groups: Sequence[LineGroup] = ()) -> Path:
+                quad_group_names: Sequence[str] = (), line_groups: Sequence[LineGroup] = (),
+                binary: bool = True, fmt: str | None = None) -> Path:
     """Write a quad mesh with cell data and named groups to ``path`` atomically.
 
     xy: ``(V, 2) float64`` user coordinates; quads: ``(F, 4) int`` ccw vertex ids;
     cell_data: name -> ``(F,)`` array per quad (floats or ints); quad_groups: ``(F,) int``
     index into ``quad_group_names`` of each quad (``.msh``: physical group ``index + 1``;
     None: every quad in group 1, unnamed); line_groups: named edge sets (see the module
-    docstring for how each format stores them). Raises :class:`InputError` for an unknown
-    suffix, before anything is written. Returns the path written.
+    docstring for how each format stores them); binary: binary ``.msh`` (MSH 2.2, the version
+    this writer writes) and ``.vtk``. Raises :class:`InputError` for an unknown suffix or a
+    format this writer does not write (:func:`write_mesh` writes those), before anything is
+    written. Returns the path written.
     """
-    fmt = mesh_format(path)
+    fmt = fmt or mesh_format(path)
+    if fmt not in LEGACY:
+        raise InputError(f"write_quads writes {', '.join(LEGACY)}; use write_mesh for {fmt}", str(path))
     final = Path(path)
     quads = np.asarray(quads, dtype=np.int64)
     cell_data = dict(cell_data or {})
@@ -157,9 +188,9 @@ def write_quads(path: str | os.PathLike, xy: np.ndarray, quads: np.ndarray, *,
     import meshio
 
     mesh = _meshio_mesh(xy, quads, cell_data, quad_groups, quad_group_names, line_groups, fmt)
-    kwargs = {"binary": True} if fmt in ("vtk", "gmsh22") else {}
+    kwargs = {"binary": binary} if fmt in ("vtk", "gmsh") else {}
     with atomic_path(final) as tmp:
-        meshio.write(tmp, mesh, file_format=fmt, **kwargs)
+        meshio.write(tmp, mesh, file_format="gmsh22" if fmt == "gmsh" else fmt, **kwargs)
     return final
 
 
@@ -177,24 +208,52 @@ def mesh_groups(mesh: "QuadMesh") -> tuple[np.ndarray, list[str], list[LineGroup
     return patch, names, [LineGroup(k, np.asarray(v, np.int64)) for k, v in mesh.line_sets.items()]
 
 
-def write_mesh(path: str | os.PathLike, mesh: "QuadMesh") -> Path:
+def write_mesh(path: str | os.PathLike, mesh: "QuadMesh", output: MeshOutput | None = None, **options) -> Path:
     """Write a :class:`~jaxmatch.meshing.result.QuadMesh` (what :func:`jaxmatch.mesh` returns)
-    to ``path`` atomically: points, quads, cell data (``scaled_jacobian``, ``patch``) and named
-    groups (``"patch p"``, ``"boundary"``, ``"side i-j"``; see :func:`mesh_groups`).
+    to ``path`` atomically: points, cells, cell data (``scaled_jacobian``, ``patch``) and named
+    groups (``"patch p"``, ``"boundary"``, ``"side i-j"``, ``"hole h"``; see :func:`mesh_groups`).
+
+    output (or the same fields as keywords, :class:`~jaxmatch.io.output.MeshOutput`): ``format``
+    (default: from the suffix), ``msh_version`` (``"4.1"`` default, ``"2.2"``), ``binary``,
+    ``element_type`` (Abaqus), ``order`` (2: quad9, quad8 with ``serendipity``), ``extrude``,
+    ``layers``, ``grading`` (hexahedra); see :mod:`jaxmatch.io.elements` and
+    :mod:`jaxmatch.io.solverfiles`. What a format cannot hold is named in one
+    :class:`~jaxmatch.errors.InputWarning`. ``.msh`` 2.2 of first-order quads is written as it
+    always was (:func:`write_quads`), byte for byte.
 
     Other results become a QuadMesh where they are made (:mod:`jaxmatch.meshing.build`:
-    ``from_placement``, ``from_layout``, ``from_refined``). The format comes from the suffix
-    (see the module docstring). Raises :class:`InputError` for an unknown suffix, before
-    anything is written; TypeError for anything but a QuadMesh. Returns the path written.
+    ``from_placement``, ``from_layout``, ``from_refined``). Raises :class:`InputError` for an
+    unknown suffix or an option the format cannot take, before anything is written; TypeError for
+    anything but a QuadMesh. Returns the path written (XDMF: the ``.xdmf`` of the cells).
     """
     missing = [f for f in QUADMESH_FIELDS if not hasattr(mesh, f)]
     if missing:
         raise TypeError(f"write_mesh takes a jaxmatch.QuadMesh (jaxmatch.meshing.build makes one of other results), "
                         f"got {type(mesh).__name__} without {', '.join(missing)}")
-    patch, names, lines = mesh_groups(mesh)
-    cell = {"scaled_jacobian": np.asarray(mesh.scaled_jacobian, dtype=np.float64), "patch": patch}
-    return write_quads(path, mesh.xy, mesh.quads, cell_data=cell, quad_groups=patch, quad_group_names=names,
-                       line_groups=lines)
+    out = output if output is not None else MeshOutput(**options)
+    fmt = mesh_format(path, out.format)
+    final = Path(path)
+    if out.element_type is not None and fmt != "abaqus":
+        raise InputError(f"applies to Abaqus .inp files only, not {fmt}", "--element-type")
+    if fmt in LEGACY and out.plain and (fmt != "gmsh" or out.msh_version == "2.2"):
+        patch, names, lines = mesh_groups(mesh)
+        cell = {"scaled_jacobian": np.asarray(mesh.scaled_jacobian, dtype=np.float64), "patch": patch}
+        if fmt == "obj" and lines:
+            warnings.warn(InputWarning("obj holds the quads only: the groups and cell data were left out", str(path)),
+                          stacklevel=2)
+        write_quads(final, mesh.xy, mesh.quads, cell_data=cell, quad_groups=patch, quad_group_names=names,
+                    line_groups=lines, binary=out.binary, fmt=fmt)
+        return final
+    if fmt in ("obj", "json"):
+        raise InputError(f"{fmt} files hold first-order quads in the plane only (no --order 2, no --extrude)",
+                         "--order" if out.order == 2 else "--extrude")
+    sm = solver_mesh(mesh, order=out.order, serendipity=out.serendipity, extrude_dz=out.extrude, layers=out.layers,
+                     grading=out.grading)
+    notes = list(sm.notes) + write_solver_file(final, sm, fmt, msh_version=out.msh_version, binary=out.binary,
+                                               element_type=out.element_type)
+    if notes:
+        warnings.warn(InputWarning("; ".join(notes), str(path)), stacklevel=2)
+    return final
 
 
 def read_json_mesh(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

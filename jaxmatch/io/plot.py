@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 import os
+import textwrap
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Iterable, Sequence
@@ -38,6 +39,7 @@ __all__ = [
     "draw_in_shape",
     "draw_many",
     "draw_match",
+    "draw_mesh",
     "draw_meshes",
     "draw_quadmesh",
     "figure_format",
@@ -313,15 +315,80 @@ def draw_meshes(path: str | os.PathLike, panels: Sequence[tuple], *, title: str 
     return save_figure(fig, path)
 
 
-def draw_quadmesh(path: str | os.PathLike, mesh, *, title: str = "", y_down: bool = False) -> Path:
-    """Draw one :class:`jaxmatch.meshing.result.QuadMesh` (its patches' shared sides drawn a
-    little thicker, its corners marked) to ``path`` (.png or .svg)."""
+def draw_quadmesh(path: str | os.PathLike, mesh, *, title: str = "", y_down: bool = False,
+                  size: tuple[int, int] | None = None, dpi: int | None = None, color: str = "patch",
+                  histogram: bool = False) -> Path:
+    """Draw one :class:`jaxmatch.meshing.result.QuadMesh` to ``path`` (.png or .svg): its quads
+    (pale by patch, or by scaled Jacobian with a colour bar with ``color="quality"``), the
+    patches' shared sides a little thicker, its corners (black squares), irregular vertices
+    (red dots), inverted quads red; ``histogram`` adds the scaled Jacobians' histogram below.
+
+    size: ``(W, H)`` pixels of the picture, or None: the drawing fitted to the region's aspect
+    (4.2 to 9 inches wide); dpi: dots per inch (default 120). The title is wrapped to the
+    picture's width, never clipped. y_down: the input's y axis points down (SVG input).
+    """
+    figure_format(path)
+    dpi = int(dpi or 120)
+    xy = np.asarray(mesh.xy, np.float64)
+    quads = np.asarray(mesh.quads, np.int64)
+    sj = np.asarray(mesh.scaled_jacobian, np.float64)
+    span = np.ptp(xy, axis=0) if xy.size else np.ones(2)
+    aspect = float(span[0] / span[1]) if span[1] > 0 else 1.0
+    bar = 0.9 if color == "quality" else 0.0
+    if size is None:
+        width = float(np.clip(4.2 * np.sqrt(aspect), 4.2, 9.0)) + bar
+        drawing_h = float(np.clip((width - bar) / aspect, 1.0, 9.0))
+        fig = Figure(figsize=(width, drawing_h + 1.0 + (1.8 if histogram else 0.0)), dpi=dpi, layout="constrained")
+    else:
+        fig = Figure(figsize=(size[0] / dpi, size[1] / dpi), dpi=dpi, layout="constrained")
+    if histogram:
+        ax, hax = fig.subplots(2, 1, height_ratios=[4, 1.3])
+    else:
+        ax, hax = fig.subplots(1, 1), None
     lines = []
     if mesh.n_patches > 1:
         for name, e in mesh.line_sets.items():
             if name.startswith("side "):
-                lines.extend(mesh.xy[np.asarray(e)])
-    head = f"{title}: {mesh.chosen}" if title else mesh.chosen
+                lines.extend(xy[np.asarray(e)])
+    bad = inverted_mask(xy, quads)
+    if color == "quality":
+        pc = PolyCollection(xy[quads], array=sj, cmap="viridis", edgecolors="0.3", linewidths=0.35)
+        pc.set_clim(min(0.0, float(sj.min()) if sj.size else 0.0), 1.0)
+        ax.add_collection(pc)
+        fig.colorbar(pc, ax=ax, label="scaled Jacobian", shrink=0.9)
+    else:
+        face = PATCH_PALETTE[np.asarray(mesh.patch) % len(PATCH_PALETTE)]
+        face = np.where(bad[:, None], np.array([0.95, 0.3, 0.3]), face)
+        ax.add_collection(PolyCollection(xy[quads], facecolors=face, edgecolors="0.3", linewidths=0.35))
+    if lines:
+        ax.add_collection(LineCollection(lines, colors="0.1", linewidths=0.9))
+    irr = np.asarray(mesh.irregular, np.int64)
+    if irr.size:
+        ax.plot(xy[irr, 0], xy[irr, 1], "o", ms=2.5, color="tab:red", zorder=3)
+    if len(mesh.corners):
+        c = np.asarray(mesh.corners, np.float64)
+        ax.plot(c[:, 0], c[:, 1], "s", ms=2.5, color="k", zorder=3)
+    ax.set_aspect("equal")
+    ax.autoscale_view()
+    if y_down:
+        ax.invert_yaxis()
+    ax.set_xticks([])
+    ax.set_yticks([])
+    for spine in ax.spines.values():
+        spine.set_visible(False)
+    head = f"{title}: {mesh.chosen}" if title else (mesh.chosen or "mesh")
     if mesh.n_patches > 1:
         head += f" ({mesh.n_patches} patches)"
-    return draw_meshes(path, [(head, mesh.xy, mesh.quads, mesh.patch, lines, mesh.corners)], y_down=y_down)
+    text = f"{head}. {mesh_quality_line(xy, quads)}, {irr.size} irregular"
+    per_line = max(int(fig.get_figwidth() * 72 / (9 * 0.55)), 12)  # characters of 9 pt that fit the width
+    fig.suptitle(textwrap.fill(text, per_line), fontsize=9)
+    if hax is not None:
+        hax.hist(sj, bins=np.linspace(min(0.0, float(sj.min()) if sj.size else 0.0), 1.0, 21), color="#4c72b0")
+        hax.set_xlabel("scaled Jacobian", fontsize=8)
+        hax.set_ylabel("quads", fontsize=8)
+        hax.tick_params(labelsize=7)
+    return save_figure(fig, path, dpi=dpi)
+
+
+draw_mesh = draw_quadmesh
+"""The Python API's name (``jaxmatch.draw_mesh``)."""

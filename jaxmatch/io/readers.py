@@ -10,7 +10,7 @@ Formats (detected by the file's suffix, else by its content; see :func:`detect_f
   one, a ``MultiPolygon`` / ``FeatureCollection`` holding exactly one polygon (or the one
   chosen by ``element``: a feature's ``id`` or ``properties.name``). The outer ring is the
   boundary, interior rings are holes.
-* ``text`` (``.txt .csv .tsv .xy .dat``): one point per row, ``x y``, ``x,y``, ``x;y`` or
+* ``text`` (``.txt .csv .tsv .xy .xyz .dat`` only): one point per row, ``x y``, ``x,y``, ``x;y`` or
   tab-separated; ``#`` starts a comment; blank lines are skipped. An optional first row of
   column names (a header) is allowed: the columns named ``x`` and ``y`` are read (any other
   columns are ignored), or the two columns when there are only two. (A plain loop, not
@@ -23,12 +23,16 @@ Formats (detected by the file's suffix, else by its content; see :func:`detect_f
   the loop's perimeter, at least :data:`MIN_CURVE_SAMPLES` per curve). With several shape
   elements, ``element`` names the one to read by its ``id``. Coordinates are the SVG's user
   units (y down, as drawn; jaxmatch tries mirror images anyway).
-* ``dxf``: one closed ``LWPOLYLINE`` or 2D ``POLYLINE`` of the model space, read with
-  `ezdxf`; arcs (bulges) are sampled at equal angles, exactly on the arc, as densely as SVG
-  curves. With several,
-  ``element`` names the one to read by its handle or layer.
+* ``dxf``: closed polylines, or a drawing of lines, arcs, circles, ellipses, splines and
+  polylines (blocks inserted), chained into loops and nested into a region with holes
+  (:mod:`jaxmatch.io.dxf`); ``element`` names a layer or an entity's handle.
+* ``step``, ``iges``, ``brep`` (``.step .stp .iges .igs .brep``): one planar face through
+  gmsh's OpenCASCADE reader (:mod:`jaxmatch.io.cad`, the optional extra ``jaxmatch[cad]``);
+  ``element`` names the face's number when there are several.
 
 In every format the loop may be closed (last point = first): the repeated point is dropped.
+Then (:func:`jaxmatch.io.outline.tidy`) repeated consecutive points are merged and outlines over
+:data:`~jaxmatch.shape.MAX_POINTS` points simplified, each said in one warning.
 Corners come from the ``corners`` key of the jaxmatch JSON format only; in the other formats
 they are detected from angles (``corner_angle``).
 
@@ -45,14 +49,21 @@ import os
 import re
 import warnings
 from pathlib import Path
-from typing import Any, NamedTuple
 
 import numpy as np
 
 from jaxmatch.errors import InputError, InputWarning
 from jaxmatch.files import read_limited
 from jaxmatch.io import registry
-from jaxmatch.shape import DEFAULT_CORNER_ANGLE, MAX_BYTES, MAX_POINTS, Shape, check_corner_angle, make_shape
+from jaxmatch.io.outline import MAX_READ_POINTS, MIN_CURVE_SAMPLES, SVG_SAMPLES, Outline, tidy
+from jaxmatch.io.outline import as_text as _text
+from jaxmatch.io.outline import nested as _nested
+from jaxmatch.io.outline import short as _short
+from jaxmatch.lazy import Later
+from jaxmatch.shape import DEFAULT_CORNER_ANGLE, MAX_BYTES, Shape, check_corner_angle, make_shape
+
+later = Later(dxf="jaxmatch.io.dxf",  # ezdxf: only for DXF files
+              cad="jaxmatch.io.cad")  # gmsh (the optional extra jaxmatch[cad]): only for STEP, IGES and BREP files
 
 __all__ = [
     "FORMATS",
@@ -70,9 +81,12 @@ def _formats():
     """Register the shape formats (:mod:`jaxmatch.io.registry`); return their names and suffixes."""
     for name, sfx, reader in (("json", (".json",), lambda d, src, el: _read_json_or_geojson(d, src, el, False)),
                               ("geojson", (".geojson",), lambda d, src, el: _read_json_or_geojson(d, src, el, True)),
-                              ("text", (".txt", ".csv", ".tsv", ".xy", ".dat"), lambda d, src, el: Outline(_read_text(_text(d, src), src))),
+                              ("text", TEXT_SUFFIXES, lambda d, src, el: Outline(_read_text(_text(d, src), src))),
                               ("svg", (".svg",), lambda d, src, el: _read_svg(d, src, el)),
-                              ("dxf", (".dxf",), lambda d, src, el: _read_dxf(d, src, el))):
+                              ("dxf", (".dxf",), lambda d, src, el: later.dxf.read_dxf(d, src, el)),
+                              ("step", (".step", ".stp"), lambda d, src, el: later.cad.read_cad(d, src, el, "step")),
+                              ("iges", (".iges", ".igs"), lambda d, src, el: later.cad.read_cad(d, src, el, "iges")),
+                              ("brep", (".brep",), lambda d, src, el: later.cad.read_cad(d, src, el, "brep"))):
         registry.register_format(name, "shape", sfx, reader=reader)
     return tuple(f.name for f in registry.formats("shape")), registry.suffixes("shape")
 
@@ -83,16 +97,11 @@ FORMATS: tuple[str, ...]
 SUFFIXES: dict[str, str]
 """File suffix (lower case) -> format."""
 
+TEXT_SUFFIXES = (".txt", ".csv", ".tsv", ".xy", ".xyz", ".dat")
+"""The suffixes of point rows (a file of another suffix is never read as rows)."""
+
 JSON_KEYS = ("boundary", "corners", "holes", "hole_corners")
 """Keys of the jaxmatch JSON shape format."""
-
-SVG_SAMPLES = 200
-"""Points per loop perimeter used to sample the curved segments of an SVG shape."""
-
-MIN_CURVE_SAMPLES = 4
-"""Fewest intervals one curved SVG segment is cut into."""
-
-
 
 def split_element(path) -> tuple[str, str | None]:
     """``"a.svg#outline"`` -> ``("a.svg", "outline")`` when no file of the full name exists and
@@ -129,7 +138,7 @@ def parse_shape(data, source: str = "<input>", *, corner_angle: float = DEFAULT_
     Raises :class:`~jaxmatch.errors.InputError` with ``source`` for any problem.
     """
     check_corner_angle(corner_angle)
-    region = read_outline(data, source, fmt=fmt, element=element, _file=_file)
+    region = tidy(read_outline(data, source, fmt=fmt, element=element, _file=_file), source)
     return make_shape(region.points, region.corners, corner_angle=corner_angle, source=source, holes=region.holes,
                       hole_corners=region.hole_corners)
 
@@ -137,34 +146,42 @@ def parse_shape(data, source: str = "<input>", *, corner_angle: float = DEFAULT_
 def detect_format(source: str, data: bytes | str) -> str:
     """Format of a shape file: by suffix (:data:`SUFFIXES`), else by content: ``svg`` when it
     starts with ``<`` (after a byte-order mark and blanks), ``dxf`` when its first line is a
-    group code ``0`` and the second ``SECTION``, ``json``/``geojson`` when it starts with ``{``
-    or ``[`` (``geojson`` if the object has a ``"type"`` key), else ``text``."""
+    group code ``0`` and the second ``SECTION``, ``step`` when it starts with ``ISO-10303-21``,
+    ``json``/``geojson`` when it starts with ``{`` or ``[`` (``geojson`` if the object has a
+    ``"type"`` key), else ``text`` for a name without a suffix. Raises :class:`InputError`
+    (``unsupported format '.sldprt'; supported: ...``) for a file of another suffix that is none
+    of these (point rows are read from :data:`TEXT_SUFFIXES` only) and for binary content
+    without a suffix."""
     suffix = Path(split_element(source)[0]).suffix.lower()
     if suffix in SUFFIXES:
         return SUFFIXES[suffix]
     head = data[:4096]
+    binary = False
     if isinstance(head, bytes):
-        head = head.decode("utf-8", errors="replace")
+        binary = b"\0" in head
+        try:
+            head = head.decode("utf-8")
+        except UnicodeDecodeError as err:
+            binary = binary or err.start < len(head) - 4  # (not a character cut at the end of the head)
+            head = head.decode("utf-8", errors="replace")
     head = head.lstrip("\ufeff \t\r\n")
-    if head.startswith("<"):
-        return "svg"
     lines = head.splitlines()
-    if len(lines) >= 2 and lines[0].strip() == "0" and lines[1].strip().upper() == "SECTION":
-        return "dxf"
-    if head[:1] in ("{", "["):
-        return "geojson" if re.search(r'"type"\s*:', head) and not re.search(r'"boundary"\s*:', head) else "json"
-    return "text"
-
-
-class Outline(NamedTuple):
-    """A region as read, before validation: ``points`` the outer loop ``(P, 2)`` (user
-    coordinates, possibly closed), ``corners`` explicit corner indices or None, ``holes`` the
-    holes' loops, ``hole_corners`` per hole explicit corner indices or None (or None for all)."""
-
-    points: Any
-    corners: Any = None
-    holes: tuple = ()
-    hole_corners: Any = None
+    if binary:
+        fmt = None
+    elif head.startswith("<"):
+        fmt = "svg"
+    elif len(lines) >= 2 and lines[0].strip() == "0" and lines[1].strip().upper() == "SECTION":
+        fmt = "dxf"
+    elif head.startswith("ISO-10303-21"):
+        fmt = "step"
+    elif head[:1] in ("{", "["):
+        fmt = "geojson" if re.search(r'"type"\s*:', head) and not re.search(r'"boundary"\s*:', head) else "json"
+    else:
+        fmt = None if suffix else "text"
+    if fmt is None:
+        what = f"format {suffix!r}" if suffix else "format (a binary file without a suffix)"
+        raise InputError(f"unsupported {what}; supported: {', '.join(SUFFIXES)}", where=split_element(source)[0])
+    return fmt
 
 
 def read_outline(data, source: str, *, fmt: str | None = None, element: str | None = None,
@@ -191,27 +208,13 @@ def _read_json_or_geojson(data, source: str, element: str | None, geojson: bool)
 # helpers
 
 
-def _short(value, limit: int = 40) -> str:
-    r = repr(value)
-    return r if len(r) <= limit else r[: limit - 3] + "..."
-
-
-def _text(data, source: str) -> str:
-    if isinstance(data, str):
-        return data
-    try:
-        return bytes(data).decode("utf-8-sig")
-    except UnicodeDecodeError as err:
-        raise InputError(f"not UTF-8 text (byte {err.start})", where=source) from None
-
-
 def _number_pairs(rows, source: str, what: str) -> list[list[float]]:
     """``rows`` (a JSON list) as ``[[x, y], ...]`` floats; third coordinates are ignored when
     ``what`` allows them (GeoJSON positions)."""
     if not isinstance(rows, list):
         raise InputError(f"{what} must be a list of [x, y] pairs", where=source)
-    if len(rows) > MAX_POINTS + 1:
-        raise InputError(f"{what} has {len(rows)} points, more than the maximum {MAX_POINTS}", where=source)
+    if len(rows) > MAX_READ_POINTS + 1:
+        raise InputError(f"{what} has {len(rows)} points, more than the {MAX_READ_POINTS} read", where=source)
     extra_ok = what != "boundary"
     points = []
     for i, row in enumerate(rows):
@@ -387,8 +390,8 @@ def _read_text(text: str, source: str) -> list[list[float]]:
                                  where=f"{source}:{lineno}")
             width = len(tokens)
             continue
-        if len(points) >= MAX_POINTS + 1:
-            raise InputError(f"more than the maximum {MAX_POINTS} points", where=f"{source}:{lineno}")
+        if len(points) >= MAX_READ_POINTS + 1:
+            raise InputError(f"more than the {MAX_READ_POINTS} points read", where=f"{source}:{lineno}")
         if len(tokens) != width:
             expect = f"{width} columns as in the header" if columns is not None else "two numbers 'x y' or 'x,y'"
             raise InputError(f"expected {expect}, got {_short(body)}", where=f"{source}:{lineno}")
@@ -451,42 +454,6 @@ def _read_svg(data, source: str, element: str | None) -> Outline:
     return _nested(loops_of(shapes[0]), rule, source)
 
 
-def _nested(loops: list[np.ndarray], rule: str, source: str, strict: bool = False) -> Outline:
-    """One region from closed loops: the loop of largest area is the outer one, the loops inside
-    it are holes (``rule`` ``"nonzero"``: only those that run the other way round, as the SVG
-    fill rule says; one that runs the same way is filled and adds nothing). Raises
-    :class:`InputError` for a loop outside the outer one or inside a hole (an island); with
-    ``strict`` (separate drawing elements) also for a loop that is not wholly inside the outer
-    one, clear of its boundary."""
-    if len(loops) == 1:
-        return Outline(loops[0])
-    import shapely
-
-    def signed(p):
-        return 0.5 * float(np.sum(p[:, 0] * np.roll(p[:, 1], -1) - np.roll(p[:, 0], -1) * p[:, 1]))
-
-    areas = [signed(p) for p in loops]
-    order = sorted(range(len(loops)), key=lambda i: -abs(areas[i]))
-    outer = loops[order[0]]
-    outer_poly = shapely.Polygon(outer)
-    if not outer_poly.is_valid:
-        raise InputError("the outer loop crosses itself", where=source)
-    holes = []
-    for i in order[1:]:
-        poly = shapely.Polygon(loops[i])
-        if strict and not (outer_poly.contains(poly) and outer_poly.exterior.distance(poly) > 0):
-            raise InputError(f"loop {i + 1} is not inside the largest loop", where=source)
-        if not outer_poly.contains(poly.representative_point()):
-            raise InputError(f"{len(loops)} loops that are not one region (loop {i + 1} lies outside the largest)",
-                             where=source)
-        if rule == "nonzero" and np.sign(areas[i]) == np.sign(areas[order[0]]):
-            continue  # filled by the nonzero rule: part of the region
-        if any(shapely.Polygon(h).contains(poly.representative_point()) for h in holes):
-            raise InputError(f"loop {i + 1} lies inside a hole (an island): mesh it as a region of its own", where=source)
-        holes.append(loops[i])
-    return Outline(outer, None, tuple(holes))
-
-
 def _svg_loops(path, source: str) -> list[np.ndarray]:
     """The closed loops of an SVG path, one per subpath (``M`` command)."""
     import svgelements as se
@@ -543,100 +510,6 @@ def _by_arc_length(segment, k: int) -> np.ndarray:
     out = np.asarray(segment.npoint(u), dtype=np.float64)
     out[0], out[-1] = xy[0], xy[-1]
     return out
-
-
-# ---------------------------------------------------------------------------------------------
-# DXF
-
-
-def _read_dxf(data, source: str, element: str | None) -> Outline:
-    import ezdxf
-
-    text = _text(data, source) if not isinstance(data, str) else data
-    try:
-        doc = ezdxf.read(io.StringIO(text))
-        found = list(doc.modelspace().query("LWPOLYLINE POLYLINE"))
-    except Exception as err:  # DXFStructureError and whatever a damaged file raises
-        raise InputError(f"not a readable DXF file ({type(err).__name__}: {_short(str(err), 60)})", where=source) from None
-    lines = [e for e in found if e.dxftype() == "LWPOLYLINE" or e.is_2d_polyline]
-    if element is not None:
-        lines = [e for e in lines if element in (e.dxf.handle, e.dxf.layer)]
-        if not lines:
-            names = sorted({f"{e.dxf.handle} (layer {e.dxf.layer})" for e in found})
-            raise InputError(f"no 2D polyline with handle or layer {element!r} (polylines: {', '.join(names[:10]) or 'none'})",
-                             where=source)
-        if len(lines) > 1:
-            raise InputError(f"{len(lines)} polylines on layer {element!r}; choose one by handle: "
-                             f"{', '.join(e.dxf.handle for e in lines[:10])}", where=source)
-    if not lines:
-        other = "" if not found else f" ({len(found)} 3D polylines or polygon meshes, which are not read)"
-        raise InputError(f"no LWPOLYLINE or 2D POLYLINE in the model space{other}", where=source)
-    if len(lines) > 1:  # several: one region only when one polyline holds all the others
-        try:
-            return _nested([_dxf_loop(e, source) for e in lines], "evenodd", source, strict=True)
-        except InputError:
-            raise InputError(f"the DXF has {len(lines)} polylines that are not one region with holes; choose one with "
-                             f"FILE#HANDLE or FILE#LAYER: {', '.join(f'{e.dxf.handle} (layer {e.dxf.layer})' for e in lines[:10])}",
-                             where=source) from None
-    return Outline(_dxf_loop(lines[0], source))
-
-
-def _dxf_loop(e, source: str) -> np.ndarray:
-    """The closed loop of one DXF polyline, arcs sampled."""
-    try:
-        if e.dxftype() == "LWPOLYLINE":
-            xyb = np.array([(x, y, b) for x, y, b in e.get_points("xyb")], dtype=np.float64).reshape(-1, 3)
-            closed = bool(e.closed)
-        else:
-            xyb = np.array([(v.dxf.location.x, v.dxf.location.y, v.dxf.bulge) for v in e.vertices], dtype=np.float64).reshape(-1, 3)
-            closed = bool(e.is_closed)
-    except Exception as err:
-        raise InputError(f"DXF polyline {e.dxf.handle} cannot be read ({type(err).__name__}: {_short(str(err), 60)})",
-                         where=source) from None
-    if xyb.shape[0] > MAX_POINTS + 1:
-        raise InputError(f"DXF polyline {e.dxf.handle} has {xyb.shape[0]} points, more than the maximum {MAX_POINTS}", where=source)
-    if not np.isfinite(xyb).all():
-        raise InputError(f"DXF polyline {e.dxf.handle} has a number that is not finite", where=source)
-    if xyb.shape[0] and not closed and not np.array_equal(xyb[0, :2], xyb[-1, :2]):
-        raise InputError(f"DXF polyline {e.dxf.handle} is open (set its closed flag, or end it at its first point)", where=source)
-    if xyb.shape[0] > 1 and np.array_equal(xyb[0, :2], xyb[-1, :2]):
-        xyb = xyb[:-1]
-    pts = _flatten_bulges(xyb)
-    if pts.shape[0] > MAX_POINTS:
-        raise InputError(f"DXF polyline {e.dxf.handle} has {pts.shape[0]} points after flattening arcs, "
-                         f"more than the maximum {MAX_POINTS}", where=source)
-    return pts
-
-
-def _flatten_bulges(xyb: np.ndarray) -> np.ndarray:
-    """Vertices of a closed polyline ``xyb (P, 3)`` (x, y, bulge of the segment to the next
-    vertex) with every arc segment sampled at equal angles: the same spacing as SVG curves
-    (:data:`SVG_SAMPLES` per perimeter, at least :data:`MIN_CURVE_SAMPLES` per arc). A bulge
-    ``b`` is ``tan(sweep / 4)``, positive counter-clockwise."""
-    p, bulge = xyb[:, :2], xyb[:, 2]
-    q = np.roll(p, -1, axis=0)
-    chord = np.linalg.norm(q - p, axis=1)
-    sweep = 4.0 * np.arctan(bulge)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        radius = np.where(bulge != 0, chord / (2.0 * np.abs(np.sin(sweep / 2.0))), 0.0)
-    length = np.where(bulge != 0, radius * np.abs(sweep), chord)
-    total = float(length.sum())
-    spacing = total / SVG_SAMPLES if math.isfinite(total) and total > 0 else 1.0
-    out = []
-    for i in range(p.shape[0]):
-        out.append(p[i])
-        if bulge[i] == 0 or chord[i] == 0 or not math.isfinite(radius[i]):
-            continue
-        k = max(MIN_CURVE_SAMPLES, math.ceil(length[i] / spacing))
-        mid, d = (p[i] + q[i]) / 2.0, (q[i] - p[i]) / chord[i]
-        normal = np.array([-d[1], d[0]])  # left of the chord
-        # the centre is on the left of the chord for a ccw arc of less than a half turn
-        h = radius[i] * np.cos(sweep[i] / 2.0) * np.sign(sweep[i])
-        centre = mid + normal * h
-        a0 = math.atan2(p[i][1] - centre[1], p[i][0] - centre[0])
-        a = a0 + sweep[i] * np.arange(1, k) / k
-        out.extend(centre + radius[i] * np.c_[np.cos(a), np.sin(a)])
-    return np.array(out, dtype=np.float64).reshape(-1, 2)
 
 
 FORMATS, SUFFIXES = _formats()

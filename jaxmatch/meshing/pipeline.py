@@ -39,8 +39,8 @@ from jaxmatch.meshing.build import from_layout, from_placement, from_refined
 from jaxmatch.meshing.choose import choose
 from jaxmatch.meshing.region import canonical, corner_points, default_size, load_region
 from jaxmatch.meshing.result import Candidate, QuadMesh
-from jaxmatch.meshing.strategies import (SINGLE, Bends, Conforming, Larger, Layouts, Request, Smooth, layout_strategies,
-                                         run)
+from jaxmatch.meshing.strategies import (RINGS, SINGLE, Bends, Conforming, Larger, Layouts, Request, RingPartition, Smooth,
+                                         layout_strategies, run)
 from jaxmatch.inputs import _lattice, check_sizes, load_catalogue
 from jaxmatch.placement.choose import choose_mesh
 from jaxmatch.placement.decompose import STRATEGIES, single_patch
@@ -53,8 +53,9 @@ __all__ = ["SINGLE", "canonical", "default_size", "load_region", "mesh", "strate
 
 
 def strategy_names() -> tuple[str, ...]:
-    """Every candidate strategy, in the order tried: ``"single"``, then the decompositions."""
-    return (SINGLE,) + tuple(STRATEGIES)
+    """Every candidate strategy, in the order tried: ``"single"``, the decompositions, then the
+    ring partition (``"rings"``)."""
+    return (SINGLE,) + tuple(STRATEGIES) + (RINGS,)
 
 
 def _check_size(size) -> float:
@@ -210,7 +211,7 @@ def _mesh_size(shape, cat, lat, h, strategies, quality, budget_s, progress, corn
     if region.n_corners < 2 and not region.holes:
         plan = (Smooth(),)
     else:
-        layouts = Layouts(layout_strategies(names))
+        layouts = Layouts(layout_strategies([n for n in names if n != RINGS]))
 
         def rejudge():  # the bends of a curved outline as corners too (detected corners only)
             if shape.explicit_corners:
@@ -218,7 +219,8 @@ def _mesh_size(shape, cat, lat, h, strategies, quality, budget_s, progress, corn
             finer = canonical(shape, h, corner_angle, held_angle=corner_angle)
             return None if np.array_equal(finer.corners, region.corners) else finer
 
-        plan = (layouts, Larger(), Conforming(), Bends(layouts, rejudge))
+        plan = (layouts, Larger(), Conforming()) + ((RingPartition(),) if RINGS in names else ()) \
+            + (Bends(layouts, rejudge),)
     tried = run(plan, req)
     if not any(c.mesh is not None for c in tried):
         raise InputError("no candidate could be meshed: " + "; ".join(f"{c.name}: {c.note}" for c in tried),

@@ -15,6 +15,7 @@ from typing import Mapping, NamedTuple
 import numpy as np
 
 from jaxmatch.catalogue.mesh import boundary_edges, edges, valences
+from jaxmatch.defaults import QUALITY, Quality
 from jaxmatch.quality import edge_ratios, quad_areas, sj_inverted
 
 __all__ = ["Candidate", "QuadMesh", "boundary_loops", "irregular_bound"]
@@ -264,8 +265,32 @@ class QuadMesh:
         """A mesh of the region: no inverted quad and every corner a vertex."""
         return self.inverted == 0 and self._missed.shape[0] == 0
 
-    def summary(self) -> dict:
-        """JSON-ready figures."""
+    def warnings(self, quality: Quality = QUALITY) -> list[str]:
+        """What is poor about this mesh, each with what the user can do (empty for a good mesh):
+        min scaled Jacobian below the quality floor ``quality.good_sj`` (naming where the worst
+        quad is), more irregular internal vertices than twice Euler's bound (at least 2), edges
+        longer than ``quality.long_edge * size``. ``mesh`` prints them on stderr and
+        ``summary.jsonl`` records them (``warnings``)."""
+        out = []
+        sj = self._sj_inverted[0]
+        if sj.size and not sj.min() >= quality.good_sj:
+            at = self.xy[self.quads[int(np.argmin(sj))]].mean(axis=0)
+            out.append(f"poor mesh: min scaled Jacobian {sj.min():.3f} is below the quality floor {quality.good_sj:g} "
+                       f"(worst quad at ({at[0]:.4g}, {at[1]:.4g})); try a smaller --size, or give the corners "
+                       "explicitly (\"corners\" in the JSON file)")
+        bound = self.irregular_bound
+        if self.irregular.size > 2 * max(bound, 1):
+            out.append(f"{self.irregular.size} irregular internal vertices, more than twice Euler's bound {bound}; "
+                       "try a smaller --size, or give the corners explicitly")
+        long = self.long_edges(quality.long_edge)
+        if long:
+            out.append(f"{long} edges longer than {quality.long_edge:g} x the size {self.size:.4g} (longest "
+                       f"{self._edge_lengths.max() / self.size:.2f} x); the region's patches are wider than its "
+                       "templates can fill at this size")
+        return out
+
+    def summary(self, quality: Quality = QUALITY) -> dict:
+        """JSON-ready figures (``warnings``: :meth:`warnings` under ``quality``)."""
         return {
             "chosen": self.chosen, "rule": self.rule, "runner_up": self.runner_up,
             "quads": int(self.quads.shape[0]), "vertices": int(self.xy.shape[0]), "patches": self.n_patches,
@@ -276,4 +301,5 @@ class QuadMesh:
             "max_edge_ratio": self.max_edge_ratio, "mean_edge_length": self.mean_edge_length,
             "size": self.size, "size_deviation": self.size_deviation,
             "side_counts": {k: int(v) for k, v in self.side_counts.items()}, "templates": list(self.templates),
+            "warnings": self.warnings(quality),
         }

@@ -2,18 +2,21 @@
 per request by :func:`run` in the order of one plan (:func:`jaxmatch.meshing.pipeline.mesh` makes
 it), and chosen once (:func:`jaxmatch.meshing.choose.choose`):
 
-==================== ==================================================================== ==========
-strategy             candidates                                                           when
-==================== ==================================================================== ==========
-:class:`Layouts`     the layout strategies together (:class:`Single`: the region as one   always
-                     template; :class:`Split`: each decomposition), meshed by the one
-                     solve most promising first, a layout that cannot win skipped
-:class:`Larger`      the single patch with each larger template size group               below the quality floor
-:class:`Conforming`  single templates whose side counts follow the size                   no candidate follows it
-:class:`Bends`       the layouts again with a curved outline's bends as corners           every candidate folds
-:class:`Smooth`      a region with fewer than two corners: a refined template and the    (its own plan)
-                     central block (``"disk"``)
-==================== ==================================================================== ==========
+======================= ================================================================= ===========================
+strategy                candidates                                                        when
+======================= ================================================================= ===========================
+:class:`Layouts`        the layout strategies together (:class:`Single`: the region as    always
+                        one template; :class:`Split`: each decomposition), meshed by the
+                        one solve most promising first, a layout that cannot win skipped
+:class:`Larger`         the single patch with each larger template size group            below the quality floor
+:class:`Conforming`     single templates whose side counts follow the size                no candidate follows it
+:class:`RingPartition`  a layer of patches along every loop and an O-grid core            no candidate is at the size
+                        (:class:`Rings`, ``"rings"``)                                     everywhere, or reaches the
+                                                                                          quality floor
+:class:`Bends`          the layouts again with a curved outline's bends as corners        every candidate folds
+:class:`Smooth`         a region with fewer than two corners: a refined template and the  (its own plan)
+                        central block (``"disk"``)
+======================= ================================================================= ===========================
 
 Every strategy has ``wanted(best, tried, request)`` (its condition on the best mesh so far) and
 ``candidates(request, tried)``.
@@ -35,17 +38,21 @@ from jaxmatch.meshing.result import Candidate, QuadMesh
 from jaxmatch.placement.bounds import node_sj_bound, single_sj_bound
 from jaxmatch.placement.decompose import _same, decompose, disk_layout, same_cuts, single_patch
 from jaxmatch.placement.layout import check_layout
+from jaxmatch.placement.rings import ring_layout
 from jaxmatch.placement.refine import DEFAULT_LIMIT, InfeasibleRequest, refine_mesh, side_lengths
 from jaxmatch.placement.solve import ALL_SIZES, TEMPLATE_SIZES, mesh_layout
 from jaxmatch.placement.templates import walk
 from jaxmatch.shape import Shape
 
-__all__ = ["CONFORMING_TRIES", "DISK", "FINER", "SINGLE", "Bends", "Conforming", "Larger", "LayoutStrategy", "Layouts",
-           "Request", "Single", "Smooth", "Split", "conforming_templates", "larger_templates", "layout_strategies", "run",
+__all__ = ["CONFORMING_TRIES", "DISK", "FINER", "RINGS", "SINGLE", "Bends", "Conforming", "Larger", "LayoutStrategy", "Layouts",
+           "Request", "RingPartition", "Rings", "Single", "Smooth", "Split", "conforming_templates", "larger_templates", "layout_strategies", "run",
            "smooth_candidates", "try_layouts"]
 
 SINGLE = "single"
 """Name of the one-template candidate."""
+
+RINGS = "rings"
+"""Name of the ring partition's candidate (:class:`Rings`)."""
 
 
 FINER = " +bends"
@@ -89,7 +96,7 @@ def try_layouts(shape: Shape, strategies: Sequence["LayoutStrategy"], cat, lat, 
         try:
             how = st.kind(shape)
             if how not in made:  # the first strategy of its kind names the layout (its messages' source)
-                made[how] = st.layout(shape)
+                made[how] = st.layout(shape, h)
             lay = made[how]
         except FAILED as e:
             tried[i] = Candidate(name + suffix, None, _why_not(e))
@@ -159,7 +166,8 @@ class LayoutStrategy:
         """What makes two strategies give the same layout (the layout is cut once)."""
         return self.name
 
-    def layout(self, shape: Shape):
+    def layout(self, shape: Shape, h: float):
+        """The layout of ``shape`` at element size ``h`` (user units)."""
         raise NotImplementedError
 
 
@@ -171,7 +179,7 @@ class Single(LayoutStrategy):
     def kind(self, shape: Shape):
         return None
 
-    def layout(self, shape: Shape):
+    def layout(self, shape: Shape, h: float):
         return single_patch(shape)
 
 
@@ -186,8 +194,19 @@ class Split(LayoutStrategy):
     def kind(self, shape: Shape):
         return same_cuts(shape, self.name)
 
-    def layout(self, shape: Shape):
+    def layout(self, shape: Shape, h: float):
         return decompose(shape, self.name, check=False)
+
+
+class Rings(LayoutStrategy):
+    """A layer of patches one ring depth wide along every loop and an O-grid core
+    (``"rings"``, :func:`jaxmatch.placement.rings.ring_layout`): the interior at the size
+    whatever the region's corners."""
+
+    name = RINGS
+
+    def layout(self, shape: Shape, h: float):
+        return ring_layout(shape, h)
 
 
 class Request(NamedTuple):
@@ -285,7 +304,24 @@ class Smooth:
 
 def layout_strategies(names: Sequence[str]) -> tuple[LayoutStrategy, ...]:
     """The layout strategy objects of ``names`` (``"single"`` and the decompositions)."""
-    return tuple(Single() if n == SINGLE else Split(n) for n in names)
+    return tuple(Single() if n == SINGLE else Rings() if n == RINGS else Split(n) for n in names)
+
+
+class RingPartition:
+    """No candidate has every edge at the size (an edge longer than ``Quality.long_edge`` sizes,
+    a side off the size) or reaches the quality floor: the ring partition (:class:`Rings`), meshed
+    by the same solve, at the end; also when nothing else meshed (``when_none_meshed``)."""
+
+    when_none_meshed = True
+
+    def wanted(self, best: QuadMesh | None, tried, req: Request) -> bool:
+        q = req.quality
+        return best is None or bool(best.long_edges(q.long_edge) or best.sides_off_size(q.size_tol)) \
+            or not best.min_scaled_jacobian >= q.good_sj
+
+    def candidates(self, req: Request, tried) -> list[Candidate]:
+        return try_layouts(req.region, (Rings(),), req.cat, req.lat, req.h, req.corners, req.budget_s, req.t0,
+                           req.progress, quality=req.quality)
 
 
 def _best(tried, quality: Quality) -> QuadMesh | None:
@@ -303,8 +339,8 @@ def run(plan: Sequence, req: Request) -> list[Candidate]:
     tried: list[Candidate] = []
     for st in plan:
         best = _best(tried, req.quality)
-        if tried and best is None:
-            break  # nothing meshed: no condition on a best mesh can be judged
+        if tried and best is None and not getattr(st, "when_none_meshed", False):
+            continue  # nothing meshed: no condition on a best mesh can be judged
         if not st.wanted(best, tried, req):
             continue
         more = st.candidates(req, tried)

@@ -1,0 +1,94 @@
+"""The ring partition (``jaxmatch/placement/rings.py``) and the corner rule for drawn polygons:
+the interior at the size, every drawn corner a vertex, measured independently of the mesher
+(edge lengths and scaled Jacobians from the points and quads, corners by distance)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import jaxmatch
+from jaxmatch.placement.layout import check_layout
+from jaxmatch.placement.rings import ring_layout
+from jaxmatch.shape import make_shape, scale_corners
+
+
+def regular(n: int, r: float = 10.0) -> np.ndarray:
+    t = 2 * math.pi * np.arange(n) / n
+    return np.stack([r * np.cos(t), r * np.sin(t)], axis=1)
+
+
+def gear(teeth: int = 12, ro: float = 50.0, ri: float = 42.0) -> np.ndarray:
+    pts, p = [], 2 * math.pi / teeth
+    for k in range(teeth):
+        a0 = k * p
+        for a, r in ((a0, ri), (a0 + 0.45 * p, ri), (a0 + 0.55 * p, ro), (a0 + 0.9 * p, ro)):
+            pts.append((r * math.cos(a), r * math.sin(a)))
+    return np.array(pts)
+
+
+def edge_lengths(xy: np.ndarray, quads: np.ndarray) -> np.ndarray:
+    e = np.concatenate([quads[:, [0, 1]], quads[:, [1, 2]], quads[:, [2, 3]], quads[:, [3, 0]]])
+    e = np.unique(np.sort(e, axis=1), axis=0)
+    return np.linalg.norm(xy[e[:, 0]] - xy[e[:, 1]], axis=1)
+
+
+def perimeter(pts: np.ndarray) -> float:
+    return float(np.sum(np.linalg.norm(np.roll(pts, -1, axis=0) - pts, axis=1)))
+
+
+@pytest.mark.parametrize("n", [8, 12, 16])
+def test_ring_layout_tiles_a_regular_polygon(n):
+    pts = regular(n)
+    shape = make_shape(pts, corners=list(range(n)))
+    lay = ring_layout(shape, perimeter(pts) / 40)
+    check_layout(lay)  # patches simple, inside, covering the region
+    def shoelace(q: np.ndarray) -> float:
+        return abs(float(np.sum(q[:, 0] * np.roll(q[:, 1], -1) - np.roll(q[:, 0], -1) * q[:, 1]))) / 2
+
+    area = sum(shoelace(lay.points[p]) for p in lay.patches)
+    assert area == pytest.approx(n / 2 * 100 * math.sin(2 * math.pi / n), rel=1e-9)
+    assert lay.n_patches == n + 5  # a patch per side, the block and four around it
+
+
+@pytest.mark.parametrize("n,div", [(12, 40), (12, 80), (16, 40)])
+def test_many_sided_polygons_are_at_the_size_inside_too(n, div):
+    """A regular polygon with many corners: no edge longer than 2h and at least 80 % of the
+    edges within [0.5h, 1.5h] (one template alone leaves a central quad several h wide)."""
+    pts = regular(n)
+    h = perimeter(pts) / div
+    m = jaxmatch.mesh(make_shape(pts), size=h)
+    ln = edge_lengths(m.xy, m.quads) / h
+    assert ln.max() <= 2.0
+    assert np.mean((ln >= 0.5) & (ln <= 1.5)) >= 0.8
+    assert m.min_scaled_jacobian >= 0.8 and m.inverted == 0
+    d = np.min(np.linalg.norm(pts[:, None] - m.xy[None], axis=2), axis=1)
+    assert d.max() < 1e-9  # every corner a vertex
+
+
+@pytest.mark.parametrize("teeth,div", [(12, 40), (20, 40), (20, 80)])
+def test_a_drawn_polygon_keeps_every_corner_however_small_its_teeth(teeth, div):
+    """Every vertex of a drawn polygon turning by more than the corner angle is a corner, even
+    where its teeth are smaller than the size (edges at least a quarter of h)."""
+    pts = gear(teeth)
+    h = perimeter(pts) / div
+    assert scale_corners(pts, h).tolist() == list(range(len(pts)))
+
+
+def test_a_densely_traced_outline_keeps_its_judgement_at_the_size():
+    """A circle traced with noise at many points per h: the noise makes no corners."""
+    t = 2 * math.pi * np.arange(2000) / 2000
+    rng = np.random.default_rng(0)
+    r = 10 + 0.02 * rng.standard_normal(t.size)
+    pts = np.stack([r * np.cos(t), r * np.sin(t)], axis=1)
+    assert scale_corners(pts, 2 * math.pi * 10 / 32).size == 0
+
+
+def test_a_gear_meshes_with_every_corner_kept():
+    pts = gear(12)
+    h = perimeter(pts) / 80
+    m = jaxmatch.mesh(make_shape(pts), size=h)
+    assert m.inverted == 0 and m.missed_corners.shape[0] == 0
+    assert abs(m.area_ratio - 1) < 0.01
