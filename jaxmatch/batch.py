@@ -36,6 +36,7 @@ import contextlib
 import ctypes
 import dataclasses
 import hashlib
+import itertools
 import json
 import math
 import multiprocessing
@@ -578,7 +579,7 @@ def _dask_client(address: str):
     except ImportError:
         raise InputError("needs Dask's 'distributed' package: pip install 'jaxmatch[dask]'", "--dask") from None
     try:
-        return distributed, distributed.Client(address, timeout="20s", set_as_default=False)
+        return distributed, distributed.Client(address, timeout="10s", set_as_default=False)
     except (OSError, TimeoutError, ValueError) as e:
         raise InputError(f"cannot reach a Dask scheduler at {address!r}: {e}", "--dask") from None
 
@@ -674,16 +675,19 @@ def run(regions: Sequence[str | os.PathLike], out_dir: Path, writing: MeshOutput
             f"{len(job_list) - len(records)} to mesh")
     _write_summary(summary, [records[i] for i in sorted(records)])
     todo = [j for j in job_list if j.index not in records]
+    unread = [j for j in todo if j.error is not None]  # --skip-bad: their records need no worker
+    readable = [j for j in todo if j.error is None]
     workers = available_cpus() if jobs is None else int(jobs)
-    if dask is not None:
-        results = _dask_results(dask, todo, options, opts, region_budget, writing, suffix, corner_angle)
-    elif todo and can_fork():
+    if dask is not None and readable:
+        meshed = _dask_results(dask, readable, options, opts, region_budget, writing, suffix, corner_angle)
+    elif readable and can_fork():
         if warm is not None:
             warm()
-        warm_kernels(load=len(todo) >= PRELOAD_REGIONS)
-        results = _local_results(todo, loaded, options, opts, region_budget, workers, initializer, writing=writing)
+        warm_kernels(load=len(readable) >= PRELOAD_REGIONS)
+        meshed = _local_results(readable, loaded, options, opts, region_budget, workers, initializer, writing=writing)
     else:
-        results = _inline_results(todo, loaded, options, opts, region_budget, writing)
+        meshed = _inline_results(readable, loaded, options, opts, region_budget, writing)
+    results = itertools.chain(_inline_results(unread, loaded, options, opts, region_budget, writing), meshed)
     appender = _Appender(summary)
     display = progress if progress is not None else contextlib.nullcontext()
     started, done = time.monotonic(), 0
@@ -701,7 +705,7 @@ def run(regions: Sequence[str | os.PathLike], out_dir: Path, writing: MeshOutput
                     prog.update(task, completed=len(records), description=_rate_text(done, len(todo), started))
     finally:
         appender.close()
-        close = getattr(results, "close", None)
+        close = getattr(meshed, "close", None)
         if close is not None:
             close()
     ordered = tuple(records[j.index] for j in job_list)

@@ -156,7 +156,7 @@ def test_a_run_killed_with_sigkill_resumes_with_one_record_and_one_mesh_per_regi
     """One whole run (reference), then the same run killed part-way with SIGKILL and resumed:
     one record and one mesh file per region, the same meshes as the whole run, the regions
     done before the kill not meshed again, and the two runs together within 1.3x the whole one."""
-    paths = _parts(tmp_path / "parts", 40)
+    paths = _parts(tmp_path / "parts", 80)
     opts = ["--divisions", "24", "--jobs", "2"]
     code, err, whole = _run(*paths, "--out-dir", tmp_path / "whole", *opts, *MSH)
     assert code == 0, err
@@ -164,14 +164,14 @@ def test_a_run_killed_with_sigkill_resumes_with_one_record_and_one_mesh_per_regi
     t = time.perf_counter()
     proc = _command(*paths, "--out-dir", out, *opts, *MSH)
     summary = out / "summary.jsonl"
-    while proc.poll() is None and (not summary.exists() or len(summary.read_bytes().splitlines()) < 15):
+    while proc.poll() is None and (not summary.exists() or len(summary.read_bytes().splitlines()) < 30):
         time.sleep(0.02)
     proc.send_signal(signal.SIGKILL)
     proc.communicate()
     first = time.perf_counter() - t
     assert proc.returncode == -signal.SIGKILL
     before = {r["shape"]: r for r in _records(out)}  # every line a whole record
-    assert 15 <= len(before) < len(paths)
+    assert 30 <= len(before) < len(paths)
     code, err, second = _run(*paths, "--out-dir", out, *opts, "--resume", *MSH)
     assert code == 0, err
     assert f"{len(before)} of {len(paths)} regions already meshed" in err
@@ -185,6 +185,8 @@ def test_a_run_killed_with_sigkill_resumes_with_one_record_and_one_mesh_per_regi
     assert [r["quads"] for r in recs] == [r["quads"] for r in _records(tmp_path / "whole")]
     for m in _meshes(out):
         assert m.read_bytes() == (tmp_path / "whole" / m.name).read_bytes()
+    print(f"whole run {whole:.2f} s; killed after {first:.2f} s with {len(before)} of {len(paths)} records, resumed in "
+          f"{second:.2f} s: {(first + second) / whole:.2f}x")
     assert first + second <= 1.3 * whole, (first, second, whole)
 
 
@@ -289,20 +291,44 @@ def test_dask_missing_is_one_line(cli, tmp_path, monkeypatch):
 
 @pytest.mark.slow
 def test_dask_local_cluster_gives_the_local_meshes(tmp_path, monkeypatch):
+    """60 parts on a LocalCluster of two worker processes: the local run's meshes, byte for byte;
+    --skip-bad, --resume and --region-budget as in a local run."""
     distributed = pytest.importorskip("distributed")
     monkeypatch.setenv("PYTHONPATH", str(ROOT))  # the workers import this checkout's jaxmatch, as the client does
     paths = _parts(tmp_path / "parts", 60)
+    bad = tmp_path / "parts" / "bad.json"
+    bad.write_text('{"boundary": [[0, 0], [1, 0]]}')
     code, err, _ = _run(*paths, "--divisions", "16", "--out-dir", tmp_path / "local", "--jobs", "2", *MSH)
     assert code == 0, err
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
-        code, err, _ = _run(*paths, "--divisions", "16", "--out-dir", tmp_path / "dask", "--dask", cluster.scheduler_address,
-                            *MSH)
+        dask = ("--dask", cluster.scheduler_address)
+        code, err, _ = _run(*paths, bad, "--divisions", "16", "--out-dir", tmp_path / "dask", *dask, "--skip-bad", *MSH)
         assert code == 0, err
         workers = len(cluster.workers)
+        remote = _records(tmp_path / "dask")
+        code, err, _ = _run(*paths, bad, "--divisions", "16", "--out-dir", tmp_path / "dask", *dask, "--skip-bad",
+                            "--resume", *MSH)
+        assert code == 0, err
+        assert "60 of 61 regions already meshed" in err and _records(tmp_path / "dask")[:60] == remote[:60]
+        code, err, _ = _run(SLOW, EX / "square.json", "--divisions", "32", "--out-dir", tmp_path / "budget", *dask,
+                            "--region-budget", "1", *MSH)
+        assert code == 0, err
+        assert [r["status"] for r in _records(tmp_path / "budget")] == ["timed out", "meshed"]
     assert workers == 2
-    local, remote = _records(tmp_path / "local"), _records(tmp_path / "dask")
-    assert len(remote) == 60 and all(r["status"] == "meshed" for r in remote)
+    local = _records(tmp_path / "local")
+    assert len(remote) == 61 and remote[60]["status"] == "failed" and str(bad) in remote[60]["error"]
+    remote = remote[:60]
+    assert all(r["status"] == "meshed" for r in remote)
     assert [r["quads"] for r in remote] == [r["quads"] for r in local]
     assert [r["out"] for r in remote] == [str(tmp_path / "dask" / Path(r["out"]).name) for r in local]
     for r in remote:
         assert Path(r["out"]).read_bytes() == (tmp_path / "local" / Path(r["out"]).name).read_bytes()
+
+
+@pytest.mark.slow  # the client waits 10 s for the scheduler
+def test_dask_unreachable_is_one_line(cli, tmp_path):
+    pytest.importorskip("distributed")
+    code, _, err = cli("mesh", EX / "square.json", EX / "lshape.json", "--out-dir", tmp_path / "o",
+                       "--dask", "tcp://127.0.0.1:9", *MSH)
+    assert code == EXIT_BAD_INPUT and "--dask" in err and "cannot reach a Dask scheduler" in err
+    assert len(err.strip().splitlines()) == 1
