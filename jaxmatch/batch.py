@@ -6,8 +6,9 @@ any work unless ``skip_bad``); then the regions are meshed, each by
 :func:`jaxmatch.meshing.pipeline.mesh` with the same options, by one of three runners:
 
 * **local workers** (:func:`_local_results`): ``jobs`` processes forked from this one after it
-  has opened the catalogue, read the lattice and meshed a unit square (so each worker starts in
-  milliseconds with everything loaded, nothing imported again per region); each worker is sent
+  has opened the catalogue, read the lattice, meshed a unit square and (50 regions or more)
+  loaded numba's single-thread scoring kernel (so each worker starts in milliseconds with
+  everything loaded, nothing imported again per region; one BLAS thread each); each worker is sent
   chunks of region numbers, meshes them in order, writes each mesh file and answers one record
   per region. A worker still busy with one region ``grace`` seconds past the region budget is
   killed and replaced (a worker that dies is replaced too); its region gets a record, the
