@@ -558,7 +558,8 @@ def dask_task(job: Job, data: bytes, settings: DaskSettings) -> tuple[int, dict,
     file_name = Path(_file_of(job.shape)).name
     with tempfile.TemporaryDirectory(prefix="jaxmatch-") as tmp:
         local = Path(tmp) / file_name
-        local.write_bytes(data)
+        with atomic_path(local) as part:
+            part.write_bytes(data)
         fragment = "#" + job.shape.split("#", 1)[1] if "#" in job.shape else ""
         try:
             region = later.region.load_region(str(local) + fragment, corner_angle=settings.corner_angle)
