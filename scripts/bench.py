@@ -1062,7 +1062,7 @@ def _bulk_command(root: Path, paths: list[str], divisions: int, jobs: int, out: 
     change least) and the summary's records."""
     cmd = [sys.executable, "-m", "jaxmatch", "mesh", *paths, "--divisions", str(int(divisions)), "--out-dir", str(out),
            "--jobs", str(int(jobs)), "--skip-bad"]
-    if "--msh-version" in (root / "jaxmatch" / "cli.py").read_text():  # (tiny random parts: MSH 4.1 cannot classify every group)
+    if "--msh-version" in (root / "jaxmatch" / "cli.py").read_text():  # (the format references before MSH 4.1 wrote: the same writing cost)
         cmd += ["--msh-version", "2.2"]
     env = {**os.environ, "JAXMATCH_PROGRESS": "0"}
     env.pop("PYTHONPATH", None)

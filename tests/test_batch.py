@@ -25,7 +25,7 @@ from jaxmatch.errors import EXIT_BAD_INPUT
 ROOT = Path(__file__).resolve().parent.parent
 EX = ROOT / "examples"
 MSH = ("--msh-version", "2.2")
-"""Every run here writes MSH 2.2: MSH 4.1 cannot classify every group of the smallest meshes."""
+"""Every run here writes MSH 2.2 (the bench compares with references that wrote it)."""
 SLOW = EX / "dense" / "coastline.json"
 """A region that takes ~3 s at perimeter / 32 on a quiet core."""
 

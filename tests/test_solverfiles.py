@@ -131,6 +131,19 @@ def test_msh_22_is_still_there(tmp_path, region):
     assert (tmp_path / "b.msh").read_bytes().startswith(b"$MeshFormat\n2.2 0")
 
 
+@pytest.mark.parametrize("divisions,version", [(4, "2.2"), (8, "4.1")])
+def test_a_mesh_of_a_few_quads_is_written_by_default_as_msh_22_with_a_note(tmp_path, divisions, version):
+    """MSH 4.1 classifies every group on a node of its own; a mesh with more groups than nodes
+    (one quad of a square: 4 nodes, a region, the boundary and four sides) is written as MSH 2.2,
+    said in one note, and reads back with every quad."""
+    m = jaxmatch.mesh(EXAMPLES / "square.json", divisions=divisions)
+    notes = write(tmp_path / "a.msh", m)
+    back = meshio.read(tmp_path / "a.msh")
+    assert sum(len(c.data) for c in back.cells if c.type == "quad") == len(m.quads)
+    assert (tmp_path / "a.msh").read_bytes().startswith(b"$MeshFormat\n" + version.encode())
+    assert any("written as MSH 2.2" in n for n in notes) == (version == "2.2")
+
+
 def test_exodus_side_sets_are_the_groups_edges(tmp_path, region):
     netCDF4 = pytest.importorskip("netCDF4")
     _, m = region

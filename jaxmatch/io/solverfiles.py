@@ -147,18 +147,19 @@ def _match(sets: list[list[int]]) -> list[int] | None:
     return chosen
 
 
-def _node_entities(n_points: int, cells, dims) -> np.ndarray:
+def _node_entities(n_points: int, cells, dims) -> np.ndarray | None:
     """``(N, 2)`` (dim, tag) of the entity each node is classified on: every entity gets one of
-    its own nodes (a bipartite matching), the other nodes the first cell block holding them."""
+    its own nodes (a bipartite matching), the other nodes the first cell block holding them; None
+    when there are more groups than nodes to give them (a mesh of a few quads)."""
     sets = [np.unique(c).tolist() for _, c in cells]
     # a node of few blocks first: the matching then rarely needs to re-route
     count = np.bincount(np.concatenate([np.asarray(s, np.int64) for s in sets]), minlength=n_points)
     match = _match([sorted(s, key=lambda v: count[v]) for s in sets])
-    if match is None:
-        raise InputError("MSH 4.1: more groups than nodes to classify them on; use --msh-version 2.2")
     owner = np.zeros(n_points, np.int64)
     for b in range(len(cells) - 1, -1, -1):  # the first block holding a node wins
         owner[np.asarray(sets[b], np.int64)] = b
+    if match is None:  # (meshio's MSH 4.1 lists only the entities that own a node)
+        return None
     owner[np.asarray(match, np.int64)] = np.arange(len(cells))
     return np.asarray(dims, np.int64)[owner]
 
@@ -169,12 +170,21 @@ def write_gmsh(path: Path, sm: SolverMesh, version: str, binary: bool) -> list[s
     cells, tags, field, dims = _gmsh_blocks(sm)
     pts = _points(sm, 3)
     data = {"gmsh:physical": tags, "gmsh:geometrical": [t.copy() for t in tags]}
-    point_data = {"gmsh:dim_tags": _node_entities(pts.shape[0], cells, dims)} if version == "4.1" else {}
+    notes = []
+    point_data = {}
+    if version == "4.1":
+        owners = _node_entities(pts.shape[0], cells, dims)
+        if owners is None:
+            version = "2.2"
+            notes.append(f"msh: written as MSH 2.2: {len(cells)} groups and only {pts.shape[0]} nodes, and MSH 4.1 "
+                         "classifies every group on a node of its own")
+        else:
+            point_data = {"gmsh:dim_tags": owners}
     mesh = meshio.Mesh(pts, cells, point_data=point_data, cell_data=data, field_data=field)
     with atomic_path(path) as tmp:
         meshio.write(tmp, mesh, file_format="gmsh" if version == "4.1" else "gmsh22", binary=binary)
-    return ["msh: no scaled_jacobian cell data (meshio 5.3 cannot read $ElementData back beside several element "
-            "blocks)"] if "scaled_jacobian" in sm.cell_data else []
+    return notes + (["msh: no scaled_jacobian cell data (meshio 5.3 cannot read $ElementData back beside several "
+                     "element blocks)"] if "scaled_jacobian" in sm.cell_data else [])
 
 
 # ---------------------------------------------------------------------------------------------
