@@ -333,11 +333,12 @@ corner when it turns by more than the corner angle, however close the next corne
 MIN_STRAIGHT_TURN = 2.0
 """Degrees: the smallest turn between two long straight runs that is a corner."""
 
-TRACED = 0.25
-"""A point whose edges to both neighbours are at least this many ``h`` long is a polygon's vertex
-(drawn, not traced): it is a corner whenever it turns by more than the corner angle, however small
-the feature it belongs to (a gear's tooth, a thin fin); only a densely traced outline (points
-closer than this) has its corners judged over the window."""
+TRACED = 1 / 8
+"""A point with an edge to a neighbour at least this many ``h`` long is a polygon's vertex (drawn:
+a densely traced outline has at least 1 / TRACED points per ``h`` on both sides; the other edge may
+be a sampled curve's, where a straight side meets a fillet): it is a corner whenever it turns by
+more than the corner angle, however small the feature it belongs to (a gear's tooth, a thin fin, a
+key slot); only a densely traced outline has its corners judged over the window."""
 
 
 def scale_corners(points, h: float, corner_angle: float = DEFAULT_CORNER_ANGLE, *,
@@ -353,9 +354,9 @@ def scale_corners(points, h: float, corner_angle: float = DEFAULT_CORNER_ANGLE, 
     the sharpest point among those within ``w`` of its peak and within :data:`PEAK_BAND` of its
     peak turn (a rounded or noisy corner); or
     when it joins two straight runs each at least :data:`STRAIGHT_RUN` ``* h`` long with a turn
-    above :data:`MIN_STRAIGHT_TURN` degrees; or when it turns by more than ``corner_angle`` and its
-    edges to both neighbours are at least :data:`TRACED` ``* h`` long (a drawn polygon's vertex,
-    whatever the size of its feature). With ``h`` small against every feature this finds
+    above :data:`MIN_STRAIGHT_TURN` degrees; or when it turns by more than ``corner_angle`` and an
+    edge to a neighbour is at least :data:`TRACED` ``* h`` long (a drawn polygon's vertex, whatever
+    the size of its feature). With ``h`` small against every feature this finds
     the corners of :func:`make_shape`'s angle rule. held_angle: the threshold of a turn of a
     curved stretch (default :data:`HELD_ANGLE` or ``corner_angle``, the larger).
     """
@@ -401,7 +402,7 @@ def scale_corners(points, h: float, corner_angle: float = DEFAULT_CORNER_ANGLE, 
     e_in = np.linalg.norm(p - roll(p, 1), axis=1)  # the edge arriving at each point
     e_out = roll(e_in, -1)
     straight = np.flatnonzero((np.minimum(e_in, e_out) >= run) & (local > MIN_STRAIGHT_TURN))
-    drawn = np.flatnonzero((np.minimum(e_in, e_out) >= TRACED * float(h)) & (local > corner_angle + _ANGLE_TIE))
+    drawn = np.flatnonzero((np.maximum(e_in, e_out) >= TRACED * float(h)) & (local > corner_angle + _ANGLE_TIE))
     return np.unique(np.concatenate([np.asarray(keep, np.int64), straight.astype(np.int64), drawn.astype(np.int64)]))
 
 

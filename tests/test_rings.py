@@ -77,6 +77,24 @@ def test_a_drawn_polygon_keeps_every_corner_however_small_its_teeth(teeth, div):
     assert scale_corners(pts, h).tolist() == list(range(len(pts)))
 
 
+def test_thin_fins_and_a_key_slot_beside_a_sampled_arc_keep_their_corners():
+    """A heat sink's fins 3 wide at h = 12.5, and a slot's straight sides meeting a finely sampled
+    arc: every turn above the corner angle a corner."""
+    fins = [(0.0, 0.0), (60.0, 0.0), (60.0, 10.0)]
+    for k in range(5, -1, -1):
+        x = 5.0 + 10.0 * k
+        fins += [(x + 3.0, 10.0), (x + 3.0, 40.0), (x, 40.0), (x, 10.0)]
+    fins += [(0.0, 10.0)]
+    pts = np.array(fins)
+    assert scale_corners(pts, 12.5).tolist() == list(range(len(pts)))
+    t = np.radians(np.arange(20, 341, 3.0))  # an arc of radius 10 sampled every 3 degrees, a slot 3.5 wide
+    arc = np.stack([10 * np.cos(t), 10 * np.sin(t)], axis=1)
+    slot = np.array([[12.0, arc[-1, 1]], [12.0, arc[0, 1]]])
+    pts = np.vstack([arc, slot])
+    found = scale_corners(pts, perimeter(pts) / 40)
+    assert {0, len(arc) - 1, len(arc), len(arc) + 1} <= set(found.tolist())
+
+
 def test_a_densely_traced_outline_keeps_its_judgement_at_the_size():
     """A circle traced with noise at many points per h: the noise makes no corners."""
     t = 2 * math.pi * np.arange(2000) / 2000

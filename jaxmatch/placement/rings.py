@@ -22,11 +22,11 @@ import numpy as np
 
 from jaxmatch.errors import InputError
 from jaxmatch.lazy import Later
-from jaxmatch.placement.decompose import DISK_BLOCK, _faces, _layout, _rings, _snap
+from jaxmatch.placement.decompose import DISK_BLOCK, _faces, _layout, _radial_hits, _rings, _snap
 from jaxmatch.placement.layout import Layout
-from jaxmatch.shape import Shape
+from jaxmatch.shape import Shape, make_shape
 
-__all__ = ["CUT_REACH", "MIN_CUTS", "OPENING", "RING_DEPTH", "ring_layout"]
+__all__ = ["CUT_REACH", "MIN_CUTS", "OPENING", "RING_DEPTH", "hole_ring_layout", "ring_layout"]
 
 _later = Later(shapely="shapely")
 
@@ -63,6 +63,8 @@ def ring_layout(shape: Shape, h: float, depth: float = RING_DEPTH) -> Layout:
     """The ring partition of ``shape`` at element size ``h`` (user units): see the module
     docstring. Raises :class:`InputError` when the region has no core at this depth (thinner
     than two ring depths everywhere) or the cuts do not make a valid layout."""
+    if shape.holes:
+        return hole_ring_layout(shape, h, depth)
     shapely = _later.shapely
     rings = _rings(shape)
     region = shapely.Polygon(rings[0], holes=rings[1:])
@@ -236,3 +238,63 @@ def _leave(k, c, on, ring, loops, feet_arr, core, others, ext, far, d) -> list:
                 if len(chosen) == 2:
                     return chosen
     return []
+
+
+def hole_ring_layout(shape: Shape, h: float, depth: float = RING_DEPTH) -> Layout:
+    """A region with holes: a ring of patches one depth ``depth * h`` wide around every hole (an
+    O-grid-like layer: cut at the hole's corners and at evenly spaced points, at least
+    :data:`MIN_CUTS`), and the rest of the region cut to the rings by the ``"radial"`` cuts
+    (:func:`jaxmatch.placement.decompose._radial_hits`) with the rings' feet as its holes'
+    corners. Raises :class:`InputError` when a ring would leave the region or meet another."""
+    shapely = _later.shapely
+    d = depth * float(h)
+    outer = shape.given_points
+    region = shapely.Polygon(outer, holes=[np.asarray(x, np.float64) for x in shape.holes])
+    boundary = shapely.LinearRing(outer)
+    offsets, grown_all, ring_cuts, feet_idx = [], [], [], []
+    for k, (hole, hc) in enumerate(zip(shape.holes, shape.hole_corners)):
+        hole = np.asarray(hole, np.float64)
+        grown = shapely.Polygon(hole).buffer(d, join_style="round", quad_segs=2 * QUAD_SEGMENTS)
+        grown = grown.simplify(0.02 * float(h))
+        if boundary.distance(grown) < 0.5 * d or any(grown.distance(o) < 0.5 * d for o in grown_all) \
+                or not shapely.Polygon(outer).contains(grown):
+            raise InputError(f"hole {k + 1}: no room for a ring {d:.4g} wide around it", where=shape.source)
+        grown_all.append(grown)
+        loop = np.asarray(grown.exterior.coords)[:-1]
+        if shapely.LinearRing(loop).is_ccw:  # holes run clockwise
+            loop = loop[::-1]
+        starts = [int(c) for c in hc]
+        if len(starts) < MIN_CUTS:  # evenly spaced hole points, from the first corner on
+            per = np.concatenate([[0.0], np.cumsum(np.hypot(*(np.roll(hole, -1, axis=0) - hole).T))])
+            first = starts[0] if starts else 0
+            s0 = per[first]
+            for j in range(MIN_CUTS):
+                target = (s0 + j * per[-1] / MIN_CUTS) % per[-1]
+                i = int(np.argmin(np.abs(per[:-1] - target)))
+                if all(min(abs(i - q), len(hole) - abs(i - q)) > 1 for q in starts):
+                    starts.append(i)
+        starts = sorted(set(starts))
+        feet = []
+        for i in starts:
+            j = int(np.argmin(np.linalg.norm(loop - hole[i], axis=1)))
+            if j in feet:
+                raise InputError(f"hole {k + 1}: two ring cuts meet at one point", where=shape.source)
+            feet.append(j)
+            ring_cuts.append(np.array([hole[i], loop[j]]))
+        offsets.append(loop)
+        feet_idx.append(feet)
+    try:
+        rest = make_shape(outer, corners=[int(c) for c in shape.corners], source=shape.source, holes=offsets,
+                          hole_corners=feet_idx, checked=True)
+    except InputError as e:
+        raise InputError(f"the rings around the holes: {e.problem}", where=shape.source) from None
+    cuts, inserts = _radial_hits(rest)
+    n_holes = len(shape.holes)
+    rings = _rings(shape) + [np.asarray(x, np.float64) for x in rest.holes]
+    ins = [(0 if r == 0 else n_holes + r, k, f, e) for (r, k, f, e) in inserts]
+    for (a, b) in ring_cuts:
+        for seg in cuts:
+            if shapely.LineString(seg).crosses(shapely.LineString([a, b])):
+                raise InputError("a radial cut crosses a hole's ring", where=shape.source)
+    faces = _faces(rings, ring_cuts + cuts, ins, [False] * (len(ring_cuts) + len(cuts)), region=region)
+    return _layout(shape, faces, "rings", check=False)
