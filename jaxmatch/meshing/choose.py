@@ -6,9 +6,10 @@
 2. corners kept: every corner of the region is a mesh vertex;
 3. area kept: ``|mesh area / region area - 1| <= Quality.area_tol``;
 4. quality floor: min scaled Jacobian ``>= Quality.good_sj``;
-5. size conformity: fewer sides whose edge count is off ``length / h`` by more than
-   ``max(1, Quality.size_tol * length / h)``, plus edges longer than ``Quality.long_edge * h``
-   (with a target size);
+5. size conformity: fewer boundary stretches between corners whose edge count is off
+   ``length / h`` by more than ``max(1, Quality.size_tol * length / h)`` (the outline as the
+   user sees it, not the pieces between the patches' cut ends), plus edges longer than
+   ``Quality.long_edge * h`` (with a target size);
 6. quality band: min scaled Jacobian ``>= Quality.high_sj``;
 7. irregular vertices: fewer irregular internal vertices beyond Euler's lower bound for the
    boundary valences used (:func:`jaxmatch.meshing.result.irregular_bound`; none below it counts
@@ -70,7 +71,7 @@ def mesh_key(m: QuadMesh, order: int = 0, quality: Quality = QUALITY) -> tuple:
         m.missed_corners.shape[0] > 0,
         not (abs(area - 1.0) <= quality.area_tol),
         not (sj >= quality.good_sj),
-        len(m.sides_off_size(quality.size_tol)) + m.long_edges(quality.long_edge),
+        m.stretches_off_size(quality.size_tol) + m.long_edges(quality.long_edge),
         not (sj >= quality.high_sj),
         max(int(m.irregular.size) - m.irregular_bound, 0),
         -math.floor(sj / quality.sj_step + 1e-9) if math.isfinite(sj) else math.inf,

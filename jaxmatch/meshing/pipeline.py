@@ -208,8 +208,9 @@ def _mesh_size(shape, cat, lat, h, strategies, quality, budget_s, progress, corn
         raise InputError(f"unknown strategy {unknown[0]!r} (expected {', '.join(strategy_names())})")
     region = canonical(shape, h, corner_angle)
     req = Request(region, cat, lat, h, corner_points(region), quality, budget_s, time.perf_counter(), progress)
+    rings = (RingPartition(),) if RINGS in names else ()
     if region.n_corners < 2 and not region.holes:
-        plan = (Smooth(),)
+        plan = (Smooth(),) + rings
     else:
         layouts = Layouts(layout_strategies([n for n in names if n != RINGS]))
 
@@ -219,8 +220,7 @@ def _mesh_size(shape, cat, lat, h, strategies, quality, budget_s, progress, corn
             finer = canonical(shape, h, corner_angle, held_angle=corner_angle)
             return None if np.array_equal(finer.corners, region.corners) else finer
 
-        plan = (layouts, Larger(), Conforming()) + ((RingPartition(),) if RINGS in names else ()) \
-            + (Bends(layouts, rejudge),)
+        plan = (layouts, Larger(), Conforming()) + rings + (Bends(layouts, rejudge),)
     tried = run(plan, req)
     if not any(c.mesh is not None for c in tried):
         raise InputError("no candidate could be meshed: " + "; ".join(f"{c.name}: {c.note}" for c in tried),

@@ -20,7 +20,7 @@ from jaxmatch.quality import edge_ratios, quad_areas, sj_inverted
 
 __all__ = ["Candidate", "QuadMesh", "boundary_loops", "irregular_bound"]
 
-_KEPT = ("_sj_inverted", "_edges", "_edge_lengths", "_valences", "_loops", "_missed", "_area")
+_KEPT = ("_sj_inverted", "_edges", "_edge_lengths", "_valences", "_loops", "_missed", "_area", "_stretches")
 """The :class:`QuadMesh` measures computed once per mesh (``cached_property`` names)."""
 
 
@@ -163,6 +163,39 @@ class QuadMesh:
         ext = float(np.ptp(self.xy, axis=0).max()) or 1.0
         d = np.min(np.linalg.norm(self.corners[:, None, :] - self.xy[None, :, :], axis=2), axis=1)
         return self.corners[d > 1e-9 * ext]
+
+    @cached_property
+    def _stretches(self) -> np.ndarray:
+        """``(S, 2)`` edges and length (user units) of every boundary stretch between consecutive
+        corners of a boundary loop (a loop without a corner: the whole loop), from ``xy``, the
+        quads and the region's corners alone (not from how the mesh was made)."""
+        out = []
+        ext = float(np.ptp(self.xy, axis=0).max()) if self.xy.size else 1.0
+        for loop in self._loops:
+            pts = self.xy[loop]
+            seg = np.linalg.norm(np.roll(pts, -1, axis=0) - pts, axis=1)
+            at = np.zeros(0, np.int64)
+            if self.corners.size:
+                d = np.min(np.linalg.norm(pts[:, None, :] - self.corners[None, :, :], axis=2), axis=1)
+                at = np.flatnonzero(d <= 1e-9 * ext)
+            if at.size == 0:
+                out.append((len(loop), float(seg.sum())))
+                continue
+            csum = np.concatenate([[0.0], np.cumsum(seg)])
+            for a, b in zip(at, np.roll(at, -1)):
+                n = int((b - a) % len(loop)) or len(loop)
+                length = csum[b] - csum[a] if b > a else csum[-1] - csum[a] + csum[b]
+                out.append((n, float(length)))
+        return np.asarray(out, np.float64).reshape(-1, 2)
+
+    def stretches_off_size(self, tol: float) -> int:
+        """Boundary stretches between corners (:attr:`_stretches`) whose edge count ``n`` is off
+        ``L / h`` by more than ``max(1, tol * L / h)`` (0 without a size): what the user sees of
+        the size along the outline, whatever cuts the mesh's patches end on it."""
+        if not self.size or not self._stretches.size:
+            return 0
+        n, want = self._stretches[:, 0], self._stretches[:, 1] / self.size
+        return int(np.sum(np.abs(n - want) > np.maximum(1.0, tol * want) + 1e-9))
 
     # -- sets and data, as meshio names them ---------------------------------------------------
 

@@ -10,9 +10,9 @@ strategy                candidates                                              
                         one solve most promising first, a layout that cannot win skipped
 :class:`Larger`         the single patch with each larger template size group            below the quality floor
 :class:`Conforming`     single templates whose side counts follow the size                no candidate follows it
-:class:`RingPartition`  a layer of patches along every loop and an O-grid core            an edge of every candidate
-                        (:class:`Rings`, ``"rings"``)                                     is longer than 2 h, or none
-                                                                                          reaches the quality floor
+:class:`RingPartition`  a layer of patches along every loop and an O-grid core, or a box  an edge of every candidate
+                        around every hole and a grid through the rest                     is longer than 2 h, or none
+                        (:class:`Rings`, ``"rings"``)                                     reaches the quality band
 :class:`Bends`          the layouts again with a curved outline's bends as corners        every candidate folds
 :class:`Smooth`         a region with fewer than two corners: a refined template and the  (its own plan)
                         central block (``"disk"``)
@@ -309,7 +309,7 @@ def layout_strategies(names: Sequence[str]) -> tuple[LayoutStrategy, ...]:
 
 class RingPartition:
     """Every candidate has an edge longer than ``Quality.long_edge`` sizes, or none reaches the
-    quality floor: the ring partition (:class:`Rings`), meshed by the same solve, at the end; also
+    quality band (``Quality.high_sj``): the ring partition (:class:`Rings`), meshed by the same solve, at the end; also
     when nothing else meshed (``when_none_meshed``). Sides off the size alone are
     :class:`Conforming`'s (docs/meshing.md, "The ring partition": what trying the rings for them
     too cost)."""
@@ -318,7 +318,7 @@ class RingPartition:
 
     def wanted(self, best: QuadMesh | None, tried, req: Request) -> bool:
         q = req.quality
-        return best is None or best.long_edges(q.long_edge) > 0 or not best.min_scaled_jacobian >= q.good_sj
+        return best is None or best.long_edges(q.long_edge) > 0 or not best.min_scaled_jacobian >= q.high_sj
 
     def candidates(self, req: Request, tried) -> list[Candidate]:
         return try_layouts(req.region, (Rings(),), req.cat, req.lat, req.h, req.corners, req.budget_s, req.t0,
