@@ -166,27 +166,29 @@ class QuadMesh:
 
     @cached_property
     def _stretches(self) -> np.ndarray:
-        """``(S, 2)`` edges and length (user units) of every boundary stretch between consecutive
-        corners of a boundary loop (a loop without a corner: the whole loop), from ``xy``, the
-        quads and the region's corners alone (not from how the mesh was made)."""
+        """``(S, 3)`` edges, length (user units) and outer (1: on the outer loop, 0: a hole's) of
+        every boundary stretch between consecutive corners of a boundary loop (a loop without a
+        corner: the whole loop), from ``xy``, the quads and the region's corners alone (not from
+        how the mesh was made)."""
         out = []
         ext = float(np.ptp(self.xy, axis=0).max()) if self.xy.size else 1.0
         for loop in self._loops:
             pts = self.xy[loop]
             seg = np.linalg.norm(np.roll(pts, -1, axis=0) - pts, axis=1)
+            outer = float(np.sum(pts[:, 0] * np.roll(pts[:, 1], -1) - np.roll(pts[:, 0], -1) * pts[:, 1]) > 0)
             at = np.zeros(0, np.int64)
             if self.corners.size:
                 d = np.min(np.linalg.norm(pts[:, None, :] - self.corners[None, :, :], axis=2), axis=1)
                 at = np.flatnonzero(d <= 1e-9 * ext)
             if at.size == 0:
-                out.append((len(loop), float(seg.sum())))
+                out.append((len(loop), float(seg.sum()), outer))
                 continue
             csum = np.concatenate([[0.0], np.cumsum(seg)])
             for a, b in zip(at, np.roll(at, -1)):
                 n = int((b - a) % len(loop)) or len(loop)
                 length = csum[b] - csum[a] if b > a else csum[-1] - csum[a] + csum[b]
-                out.append((n, float(length)))
-        return np.asarray(out, np.float64).reshape(-1, 2)
+                out.append((n, float(length), outer))
+        return np.asarray(out, np.float64).reshape(-1, 3)
 
     def stretches_off_size(self, tol: float) -> int:
         """Boundary stretches between corners (:attr:`_stretches`) whose edge count ``n`` is off

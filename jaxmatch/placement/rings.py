@@ -186,26 +186,28 @@ def hole_ring_layout(shape: Shape, h: float, depth: float = RING_DEPTH) -> Layou
     u = (frame[1] - frame[0]) / np.linalg.norm(frame[1] - frame[0])
     v = np.array([-u[1], u[0]])
     boundary = shapely.LinearRing(outer)
-    boxes, ring_cuts = [], []
+    frame2 = np.stack([u, v], axis=1)
+    ext = []  # per hole: (lo, hi) of its box and (lo, hi) of the hole, along u and v
     for k, hole in enumerate(holes):
-        c = np.asarray(shapely.Polygon(hole).centroid.coords[0])
-        a = np.abs((hole - c) @ np.stack([u, v], axis=1)).max(axis=0)  # the hole's half-extents along u, v
         others = [boundary.distance(shapely.Polygon(hole))] + [shapely.Polygon(hole).distance(shapely.Polygon(o)) / 2
                                                                for j, o in enumerate(holes) if j != k]
-        room = BOX_ROOM * min(others)
-        half = a + min(d, room)
-        corners = np.array([c - half[0] * u - half[1] * v, c + half[0] * u - half[1] * v,
-                            c + half[0] * u + half[1] * v, c - half[0] * u + half[1] * v])
-        box = shapely.Polygon(corners)
-        if min(d, room) <= 0 or not shapely.Polygon(outer).contains(box) or \
-                any(box.intersects(b) for b in boxes) or not box.contains(shapely.Polygon(hole)):
+        gap = min(d, BOX_ROOM * min(others))
+        if gap <= 0:
             raise InputError(f"hole {k + 1}: no room for a box around it", where=shape.source)
-        boxes.append(box)
+        w = hole @ frame2
+        ext.append((w.min(axis=0) - gap, w.max(axis=0) + gap, w.min(axis=0), w.max(axis=0), gap))
+    boxes = _aligned_boxes(ext, float(h), outer, frame2, shapely) or _aligned_boxes(ext, 0.0, outer, frame2, shapely)
+    if boxes is None:
+        raise InputError("no room for a box around every hole", where=shape.source)
+    ring_cuts = []
+    for hole, corners in zip(holes, boxes):
+        c = np.asarray(shapely.Polygon(hole).centroid.coords[0])
         for q in corners:  # the hole's point in the direction of the box's corner
             w = q - c
             ang = np.arctan2(*(hole - c).T[::-1]) - math.atan2(w[1], w[0])
             i = int(np.argmin(np.abs((ang + math.pi) % (2 * math.pi) - math.pi)))
             ring_cuts.append(np.array([hole[i], q]))
+    boxes = [shapely.Polygon(b) for b in boxes]
     box_loops = [np.asarray(b.exterior.coords)[:-1][::-1] if b.exterior.is_ccw else np.asarray(b.exterior.coords)[:-1]
                  for b in boxes]
     try:
@@ -219,3 +221,49 @@ def hole_ring_layout(shape: Shape, h: float, depth: float = RING_DEPTH) -> Layou
     ins = [(0 if r == 0 else n_holes + r, k, f, e) for (r, k, f, e) in inserts]
     faces = _faces(rings, ring_cuts + cuts, ins, [False] * (len(ring_cuts) + len(cuts)), region=region)
     return _layout(shape, faces, "rings", check=False)
+
+
+def _aligned_boxes(ext, snap: float, outer, frame2, shapely):
+    """The boxes' corners ``(4, 2)`` each (user coordinates) from their extents along the frame's
+    axes ``ext`` (:func:`hole_ring_layout`), sides closer than ``0.75 * snap`` along an axis moved
+    to one value, their mean as near as every box keeps a fifth of its gap to its hole (no thin
+    strip of quads between two boxes' nearly aligned sides), or None when a box then leaves the
+    region or meets another."""
+    lo = np.array([e[0] for e in ext], np.float64)
+    hi = np.array([e[1] for e in ext], np.float64)
+    if snap > 0:
+        for axis in (0, 1):
+            vals = np.concatenate([lo[:, axis], hi[:, axis]])
+            order = np.argsort(vals)
+            groups, cur = [], [order[0]]
+            for i in order[1:]:
+                if vals[i] - vals[cur[-1]] < 0.75 * snap:
+                    cur.append(i)
+                else:
+                    groups.append(cur)
+                    cur = [i]
+            groups.append(cur)
+            n = len(ext)
+            for g in groups:  # one value for the group where every box keeps a fifth of its gap to its hole
+                g = np.asarray(g)
+                box = g % n
+                if len(set(box.tolist())) < len(g) or (np.any(g < n) and np.any(g >= n)):
+                    continue  # (both sides of one narrow box; two boxes facing each other: they would touch)
+                ub = [ext[k][2][axis] - 0.2 * ext[k][4] for k, i in zip(box, g) if i < n]  # lo sides: at most
+                lb = [ext[k][3][axis] + 0.2 * ext[k][4] for k, i in zip(box, g) if i >= n]  # hi sides: at least
+                top, bottom = min(ub, default=np.inf), max(lb, default=-np.inf)
+                if bottom <= top:
+                    vals[g] = float(np.clip(vals[g].mean(), bottom, top))
+            lo[:, axis], hi[:, axis] = vals[:n], vals[n:]
+    region = shapely.Polygon(outer)
+    out, polys = [], []
+    for k, (blo, bhi, hlo, hhi, gap) in enumerate(ext):
+        if np.any(lo[k] > hlo - 0.2 * gap) or np.any(hi[k] < hhi + 0.2 * gap):
+            return None
+        corners = np.array([[lo[k, 0], lo[k, 1]], [hi[k, 0], lo[k, 1]], [hi[k, 0], hi[k, 1]], [lo[k, 0], hi[k, 1]]]) @ frame2.T
+        box = shapely.Polygon(corners)
+        if not region.contains(box) or any(box.intersects(p) for p in polys):
+            return None
+        polys.append(box)
+        out.append(corners)
+    return out
