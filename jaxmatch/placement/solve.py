@@ -113,13 +113,24 @@ def mesh_layout(layout: Layout, catalogue: Catalogue, lattice: Lattice, *, size:
                                progress=progress, first_templates=first_templates, quality=quality)
 
 
+FEASIBILITY_TRIES = 40
+"""Integer programs :func:`_advance_for_feasibility` solves at most, looking for the one patch
+whose template change makes a layout's program feasible: past it the layout is given up
+(:class:`LayoutInfeasible`). Each try is a whole program; a ring partition of a 20-tooth gear
+(138 patches) took 219 of them, 7.6 of its 8.6 s, for a mesh that did not win."""
+
+
 def _advance_for_feasibility(sides, cands, choice, want, size, source) -> bool:
     """Switch one patch to another template so that the program becomes feasible; True when
-    one was found (``choice`` is changed in place)."""
+    one was found (``choice`` is changed in place) within :data:`FEASIBILITY_TRIES` programs."""
+    tries = 0
     for p in range(len(cands)):
         for j in range(len(cands[p])):
             if j == choice[p]:
                 continue
+            tries += 1
+            if tries > FEASIBILITY_TRIES:
+                return False
             trial = list(choice)
             trial[p] = j
             try:
