@@ -24,7 +24,7 @@ import numpy as np
 from jaxmatch.errors import InputError
 from jaxmatch.lazy import Later
 from jaxmatch.placement.decompose import DISK_BLOCK, _faces, _hits, _layout, _rings, _snap
-from jaxmatch.placement.layout import Layout
+from jaxmatch.placement.layout import Layout, check_layout
 from jaxmatch.shape import Shape, make_shape
 
 __all__ = ["BOX_ROOM", "CUT_REACH", "MIN_CUTS", "OPENING", "RING_DEPTH", "hole_ring_layout", "ring_layout"]
@@ -196,18 +196,28 @@ def hole_ring_layout(shape: Shape, h: float, depth: float = RING_DEPTH) -> Layou
             raise InputError(f"hole {k + 1}: no room for a box around it", where=shape.source)
         w = hole @ frame2
         ext.append((w.min(axis=0) - gap, w.max(axis=0) + gap, w.min(axis=0), w.max(axis=0), gap))
-    boxes = _aligned_boxes(ext, float(h), outer, frame2, shapely) or _aligned_boxes(ext, 0.0, outer, frame2, shapely)
-    if boxes is None:
-        raise InputError("no room for a box around every hole", where=shape.source)
-    ring_cuts = []
-    for hole, corners in zip(holes, boxes):
-        c = np.asarray(shapely.Polygon(hole).centroid.coords[0])
-        for q in corners:  # the hole's point in the direction of the box's corner
-            w = q - c
-            ang = np.arctan2(*(hole - c).T[::-1]) - math.atan2(w[1], w[0])
-            i = int(np.argmin(np.abs((ang + math.pi) % (2 * math.pi) - math.pi)))
-            ring_cuts.append(np.array([hole[i], q]))
-    boxes = [shapely.Polygon(b) for b in boxes]
+    failed: InputError | None = None
+    for snap in (float(h), 0.0):  # boxes' nearly aligned sides snapped to one line, else as they are
+        boxes_xy = _aligned_boxes(ext, snap, outer, frame2, shapely)
+        if boxes_xy is None:
+            continue
+        for nearest in (True, False):  # cuts to the hole's point nearest each box corner, else in its direction
+            try:
+                lay = _boxed_layout(shape, region, outer, holes, boxes_xy, nearest)
+                check_layout(lay)
+            except InputError as e:
+                failed = e
+                continue
+            return lay
+    raise failed or InputError("no room for a box around every hole", where=shape.source)
+
+
+def _boxed_layout(shape: Shape, region, outer: np.ndarray, holes: list, boxes_xy: list, nearest: bool) -> Layout:
+    """The layout of :func:`hole_ring_layout` for these boxes (corners ``(4, 2)`` each): four cuts
+    from each box's corners to its hole (:func:`_toward_corner`), the continuations of the boxes'
+    sides and of the outline's concave corners."""
+    shapely = _later.shapely
+    boxes = [shapely.Polygon(b) for b in boxes_xy]
     box_loops = [np.asarray(b.exterior.coords)[:-1][::-1] if b.exterior.is_ccw else np.asarray(b.exterior.coords)[:-1]
                  for b in boxes]
     try:
@@ -219,6 +229,8 @@ def hole_ring_layout(shape: Shape, h: float, depth: float = RING_DEPTH) -> Layou
     n_holes = len(holes)
     rings = _rings(shape) + [np.asarray(x, np.float64) for x in rest.holes]
     ins = [(0 if r == 0 else n_holes + r, k, f, e) for (r, k, f, e) in inserts]
+    ring_cuts = [np.array([hole[_toward_corner(hole, q, nearest)], q]) for hole, corners in zip(holes, boxes_xy)
+                 for q in corners]
     faces = _faces(rings, ring_cuts + cuts, ins, [False] * (len(ring_cuts) + len(cuts)), region=region)
     return _layout(shape, faces, "rings", check=False)
 
@@ -267,3 +279,14 @@ def _aligned_boxes(ext, snap: float, outer, frame2, shapely):
         polys.append(box)
         out.append(corners)
     return out
+
+
+def _toward_corner(hole: np.ndarray, q: np.ndarray, nearest: bool) -> int:
+    """Index of the point of ``hole (H, 2)`` a cut from the box corner ``q`` ends on: the nearest
+    one (a thin hole's ends, an airfoil's leading and trailing edges), or the one in the corner's
+    direction from the hole's centroid (a round hole's point at 45 degrees either way)."""
+    if nearest:
+        return int(np.argmin(np.linalg.norm(hole - q, axis=1)))
+    c = hole.mean(axis=0)
+    ang = np.arctan2(hole[:, 1] - c[1], hole[:, 0] - c[0]) - math.atan2(q[1] - c[1], q[0] - c[0])
+    return int(np.argmin(np.abs((ang + math.pi) % (2 * math.pi) - math.pi)))
