@@ -1,18 +1,21 @@
-"""The ring partition (``"rings"``): a layer of patches one ring depth wide along every loop of
-the region (the outline inside, each hole outside: an O-grid-like layer of quads at the size
-around a round hole, along a fillet, a leading edge or a polygon's sides), and the core left
-inside, an O-grid of its own (a central block and four patches) when it has no hole, cut to its
-holes otherwise.
+"""The ring partition (``"rings"``), two layouts that put quads at the size through a region
+whatever its corners:
 
-The core is the region opened and shrunk: eroded by ``depth + opening``, dilated by ``opening``
-(round joins), so features narrower than about twice the opening (teeth, fins, the neck of a
-keyhole) stay in the ring and the core's outline is smooth. A loop's corner is joined to its
-nearest core point by a cut when it is concave, or convex and near the core (not the tip of a
-protrusion); a loop with fewer than :data:`MIN_CUTS` cuts gets cuts from its points nearest the
-corners of its smallest enclosing rectangle too (a rounded rectangle's fillets, an ellipse's
-diagonals). Every piece between the cuts becomes a patch of the one integer program, so each ring
-patch is four-sided where a side of the region is (outline side, two cuts, core arc) and its
-quads are at the size through the layer.
+* :func:`ring_layout`, a region without holes: a layer of patches one ring depth wide along the
+  outline (along a polygon's sides, a fillet, a gear's teeth), and the core left inside meshed
+  as an O-grid (a central block and four patches). The core is the region opened and shrunk:
+  eroded by ``depth + opening``, dilated by ``opening`` (round joins), so features narrower than
+  about twice the opening (teeth, fins, the neck of a keyhole) stay in the layer and the core's
+  outline is smooth. A corner is joined to its nearest core point by a cut when it is concave,
+  or convex and near the core (not the tip of a protrusion); a loop with fewer than
+  :data:`MIN_CUTS` cuts gets cuts from its points nearest the corners of its smallest enclosing
+  rectangle too (a rounded rectangle's fillets, an ellipse's diagonals). Each layer patch is
+  four-sided where a side of the region is (outline side, two cuts, core arc).
+* :func:`hole_ring_layout`, a region with holes: an O-grid box around every hole and a grid of
+  the boxes' side continuations through the rest (block-structured, as a plate with bolt holes is
+  meshed by hand).
+
+Every piece becomes a patch of the one integer program.
 """
 
 from __future__ import annotations
@@ -42,7 +45,7 @@ CUT_REACH = 2.0
 right angle's corner lies ``sqrt(2)`` depths away; the tip of a tooth or fin farther)."""
 
 MIN_CUTS = 4
-"""Fewest cuts per loop (a round hole has no corner: four evenly spaced cuts)."""
+"""Fewest cuts from the outline to the core (a disk has no corner: four)."""
 
 BOX_ROOM = 0.45
 """The box around a hole leaves it at most this fraction of the way to the nearest other loop
