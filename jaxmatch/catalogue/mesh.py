@@ -86,6 +86,25 @@ def boundary_edges(quads: np.ndarray) -> np.ndarray:
     return d[cnt[inv] == 1]
 
 
+def boundary_loops(quads: np.ndarray) -> list[np.ndarray]:
+    """The boundary loops of a quad mesh (edges used by exactly one quad), each ``(B,) int64``
+    in the quads' direction (ccw quads: the outer loop runs ccw, holes cw). Assumes each
+    boundary vertex has one outgoing boundary edge (a manifold mesh)."""
+    b = boundary_edges(quads)
+    nxt = dict(zip(b[:, 0].tolist(), b[:, 1].tolist()))
+    loops, seen = [], set()
+    for start in b[:, 0].tolist():
+        if start in seen:
+            continue
+        loop, v = [], start
+        while v not in seen:
+            seen.add(v)
+            loop.append(v)
+            v = nxt.get(v, start)
+        loops.append(np.asarray(loop, np.int64))
+    return loops
+
+
 def valences(quads: np.ndarray, n_vertices: int | None = None) -> np.ndarray:
     """Vertex valences (number of incident edges), ``(V,) int32``."""
     e = edges(quads)

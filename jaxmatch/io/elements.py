@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING, Mapping
 
 import numpy as np
 
+from jaxmatch.catalogue.mesh import boundary_loops
 from jaxmatch.errors import InputError
 
 if TYPE_CHECKING:  # pragma: no cover - the type only (io stays below meshing)
@@ -191,26 +192,6 @@ def _curve_mid(p, a, b, n) -> np.ndarray:
     return w @ P
 
 
-def _directed_loops(quads: np.ndarray) -> list[np.ndarray]:
-    """The boundary loops in the quads' direction (sides used by one quad)."""
-    s = _sides(quads).reshape(-1, 2)
-    key = np.sort(s, axis=1)
-    _, inv, cnt = np.unique(key, axis=0, return_inverse=True, return_counts=True)
-    b = s[cnt[inv.ravel()] == 1]
-    nxt = dict(zip(b[:, 0].tolist(), b[:, 1].tolist()))
-    loops, seen = [], set()
-    for start in b[:, 0].tolist():
-        if start in seen:
-            continue
-        loop, v = [], start
-        while v not in seen:
-            seen.add(v)
-            loop.append(v)
-            v = nxt[v]
-        loops.append(np.asarray(loop, np.int64))
-    return loops
-
-
 def second_order(mesh: "QuadMesh", *, serendipity: bool = False) -> SolverMesh:
     """The mesh with ``quad9`` cells (``quad8`` with ``serendipity``) and ``line3`` groups."""
     base = first_order(mesh)
@@ -228,7 +209,7 @@ def second_order(mesh: "QuadMesh", *, serendipity: bool = False) -> SolverMesh:
         corner_ids = {int(i) for i in np.argmin(d, axis=1)[d.min(axis=1) <= 1e-9 * ext]}
     curved = straight.copy()
     index = {(int(a), int(b)): k for k, (a, b) in enumerate(uniq.tolist())}
-    for (a, b), p in _outline_midpoints(xy, _directed_loops(quads), corner_ids).items():
+    for (a, b), p in _outline_midpoints(xy, boundary_loops(quads), corner_ids).items():
         curved[index[(min(a, b), max(a, b))]] = p
     cell_type = "quad8" if serendipity else "quad9"
 

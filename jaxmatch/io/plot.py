@@ -270,6 +270,25 @@ def _boundary_mask(quads: np.ndarray, n: int) -> np.ndarray:
     return on_b
 
 
+def _mark_and_frame(ax, xy: np.ndarray, irregular: np.ndarray, corners, y_down: bool) -> None:
+    """Irregular internal vertices (indices into ``xy (V, 2)``) as red dots and the corners
+    ``(C, 2)`` as black squares; equal axes fitted to the data, y down for SVG input, no ticks or
+    frame."""
+    if irregular.size:
+        ax.plot(xy[irregular, 0], xy[irregular, 1], "o", ms=2.5, color="tab:red", zorder=3)
+    if corners is not None and len(corners):
+        c = np.asarray(corners, np.float64)
+        ax.plot(c[:, 0], c[:, 1], "s", ms=2.5, color="k", zorder=3)
+    ax.set_aspect("equal")
+    ax.autoscale_view()
+    if y_down:
+        ax.invert_yaxis()
+    ax.set_xticks([])
+    ax.set_yticks([])
+    for spine in ax.spines.values():
+        spine.set_visible(False)
+
+
 def draw_meshes(path: str | os.PathLike, panels: Sequence[tuple], *, title: str | None = None,
                 ncols: int | None = None, y_down: bool = False) -> Path:
     """Draw quad meshes side by side and save to ``path`` (.png or .svg, atomically).
@@ -296,19 +315,7 @@ def draw_meshes(path: str | os.PathLike, panels: Sequence[tuple], *, title: str 
             ax.add_collection(LineCollection([np.asarray(line) for line in lines], colors="0.1", linewidths=0.9))
         irr = np.flatnonzero(~_boundary_mask(quads, xy.shape[0]) & (valences(quads, xy.shape[0]) != 4)
                              & np.isin(np.arange(xy.shape[0]), quads))
-        if irr.size:
-            ax.plot(xy[irr, 0], xy[irr, 1], "o", ms=2.5, color="tab:red", zorder=3)
-        if corners is not None and len(corners):
-            c = np.asarray(corners, np.float64)
-            ax.plot(c[:, 0], c[:, 1], "s", ms=2.5, color="k", zorder=3)
-        ax.set_aspect("equal")
-        ax.autoscale_view()
-        if y_down:
-            ax.invert_yaxis()
-        ax.set_xticks([])
-        ax.set_yticks([])
-        for spine in ax.spines.values():
-            spine.set_visible(False)
+        _mark_and_frame(ax, xy, irr, corners, y_down)
         ax.set_title(f"{head}\n{mesh_quality_line(xy, quads)}, {irr.size} irregular", fontsize=9)
     if title:
         fig.suptitle(title)
@@ -363,19 +370,7 @@ def draw_quadmesh(path: str | os.PathLike, mesh, *, title: str = "", y_down: boo
     if lines:
         ax.add_collection(LineCollection(lines, colors="0.1", linewidths=0.9))
     irr = np.asarray(mesh.irregular, np.int64)
-    if irr.size:
-        ax.plot(xy[irr, 0], xy[irr, 1], "o", ms=2.5, color="tab:red", zorder=3)
-    if len(mesh.corners):
-        c = np.asarray(mesh.corners, np.float64)
-        ax.plot(c[:, 0], c[:, 1], "s", ms=2.5, color="k", zorder=3)
-    ax.set_aspect("equal")
-    ax.autoscale_view()
-    if y_down:
-        ax.invert_yaxis()
-    ax.set_xticks([])
-    ax.set_yticks([])
-    for spine in ax.spines.values():
-        spine.set_visible(False)
+    _mark_and_frame(ax, xy, irr, mesh.corners, y_down)
     head = f"{title}: {mesh.chosen}" if title else (mesh.chosen or "mesh")
     if mesh.n_patches > 1:
         head += f" ({mesh.n_patches} patches)"

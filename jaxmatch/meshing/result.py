@@ -14,7 +14,7 @@ from typing import Mapping, NamedTuple
 
 import numpy as np
 
-from jaxmatch.catalogue.mesh import boundary_edges, edges, valences
+from jaxmatch.catalogue.mesh import boundary_loops, edges, valences
 from jaxmatch.defaults import QUALITY, Quality
 from jaxmatch.quality import edge_ratios, quad_areas, sj_inverted
 
@@ -34,25 +34,6 @@ class Candidate(NamedTuple):
     mesh: "QuadMesh | None"
     note: str = ""
     bound: tuple | None = None
-
-
-def boundary_loops(quads: np.ndarray) -> list[np.ndarray]:
-    """The boundary loops of a quad mesh (edges used by exactly one quad), each ``(B,) int64``
-    in the quads' direction (ccw quads: the outer loop runs ccw, holes cw). Assumes each
-    boundary vertex has one outgoing boundary edge (a manifold mesh)."""
-    b = boundary_edges(quads)
-    nxt = dict(zip(b[:, 0].tolist(), b[:, 1].tolist()))
-    loops, seen = [], set()
-    for start in b[:, 0].tolist():
-        if start in seen:
-            continue
-        loop, v = [], start
-        while v not in seen:
-            seen.add(v)
-            loop.append(v)
-            v = nxt.get(v, start)
-        loops.append(np.asarray(loop, np.int64))
-    return loops
 
 
 def irregular_bound(quads: np.ndarray, n_vertices: int) -> int:
