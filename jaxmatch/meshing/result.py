@@ -16,6 +16,7 @@ import numpy as np
 
 from jaxmatch.catalogue.mesh import boundary_loops, edges, valences
 from jaxmatch.defaults import QUALITY, Quality
+from jaxmatch.geometry import signed_area
 from jaxmatch.quality import edge_ratios, quad_areas, sj_inverted
 
 __all__ = ["Candidate", "QuadMesh", "boundary_loops", "irregular_bound"]
@@ -156,7 +157,7 @@ class QuadMesh:
         for loop in self._loops:
             pts = self.xy[loop]
             seg = np.linalg.norm(np.roll(pts, -1, axis=0) - pts, axis=1)
-            outer = float(np.sum(pts[:, 0] * np.roll(pts[:, 1], -1) - np.roll(pts[:, 0], -1) * pts[:, 1]) > 0)
+            outer = float(signed_area(pts) > 0)
             at = np.zeros(0, np.int64)
             if self.corners.size:
                 d = np.min(np.linalg.norm(pts[:, None, :] - self.corners[None, :, :], axis=2), axis=1)

@@ -25,6 +25,7 @@ import math
 import numpy as np
 
 from jaxmatch.errors import InputError
+from jaxmatch.geometry import turning_angles
 from jaxmatch.lazy import Later
 from jaxmatch.placement.decompose import DISK_BLOCK, _faces, _hits, _layout, _rings, _snap
 from jaxmatch.placement.layout import Layout, check_layout
@@ -53,13 +54,6 @@ BOX_ROOM = 0.45
 
 QUAD_SEGMENTS = 4
 """Segments per quarter circle of the core's rounded parts (shapely's ``quad_segs``)."""
-
-
-def _turns(ring: np.ndarray) -> np.ndarray:
-    """``(P,)`` signed turn at each point of a closed loop (left turns positive, radians)."""
-    a = ring - np.roll(ring, 1, axis=0)
-    b = np.roll(ring, -1, axis=0) - ring
-    return np.arctan2(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0], np.sum(a * b, axis=1))
 
 
 def _loop_corners(shape: Shape) -> list[np.ndarray]:
@@ -107,7 +101,7 @@ def ring_layout(shape: Shape, h: float, depth: float = RING_DEPTH) -> Layout:
             all(float(np.linalg.norm(q - f)) > 0.2 * d for f in feet)
 
     for r, (ring, corners) in enumerate(zip(rings, _loop_corners(shape))):
-        turn = _turns(ring)
+        turn = turning_angles(ring)
         made = 0
         order = sorted(corners.tolist(), key=lambda c: (turn[c] >= 0, -abs(turn[c])))  # concave first, then sharpest
         for c in order:
