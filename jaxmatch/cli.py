@@ -462,8 +462,8 @@ def mesh(
     Candidates: the region as one catalogue template, and split into patches at its concave
     corners and around its holes (continuations, bisectors, recursive, radial); each is meshed
     with one integer program for all side counts, and the best is kept by one rule (no fold,
-    corners, area, quality floor, size conformity, quality band, irregular vertices, quality,
-    fewer patches); the rule that decided and the runner-up are printed. Corners are judged at
+    corners, area, quality floor, size conformity, quality band, quality, size fit, irregular
+    vertices, fewer patches); the rule that decided and the runner-up are printed. Corners are judged at
     the size (wiggles shorter than about it are no corners). A layout file ({points, patches}) is meshed as that layout. Several
     regions (or --out-dir) mesh in bulk. Exit status 3 when a mesh folds or misses a corner (the
     files are written anyway).

@@ -51,8 +51,13 @@ class Quality:
     high_sj: the choice rule's quality band: a mesh reaching this min scaled Jacobian is preferred
         to one that does not before irregular vertices are counted.
     area_tol: a mesh keeps the region's area when ``|mesh area / region area - 1| <= area_tol``.
-    size_tol: a side conforms to the size ``h`` when its edge count ``n`` and length ``L`` satisfy
-        ``|n - L / h| <= max(1, size_tol * L / h)`` (one edge of rounding, or this fraction).
+    coarse_side: a boundary stretch of ``n`` edges and length ``L`` is coarser than the size ``h``
+        when its mean edge ``L / n`` is longer than this many ``h`` and ``n`` is more than one edge
+        of rounding short of ``L / h``; with ``long_edge``, what size conformity rules out (a
+        stretch finer than ``h`` is allowed: a small feature is meshed finer, not cut off).
+    size_tol: a side fits the size ``h`` when its edge count ``n`` and length ``L`` satisfy
+        ``|n - L / h| <= max(1, size_tol * L / h)`` (one edge of rounding, or this fraction): the
+        choice rule's size fit, after the quality rule.
     long_edge: inside the region too, an edge longer than this many ``h`` breaks size conformity
         (a strip of quads across a region much wider than ``h``).
     sj_step: min scaled Jacobians within one step of this size count as equal (the choice rule's
@@ -66,6 +71,7 @@ class Quality:
     max_edge_ratio: float = 8.0
     band: float = DEFAULT_BAND
     area_tol: float = 0.01
+    coarse_side: float = 1.5
     size_tol: float = 0.25
     long_edge: float = 2.0
     sj_step: float = 0.1

@@ -20,6 +20,7 @@ import numpy as np
 import pytest
 
 import jaxmatch
+from jaxmatch.defaults import QUALITY
 from jaxmatch.errors import EXIT_BAD_INPUT, InputError
 from jaxmatch.io.readers import parse_shape
 
@@ -166,10 +167,8 @@ def test_cuts_that_split_right_angles_are_not_meshed_after_a_grid(cat, name):
     m = jaxmatch.mesh(shp, divisions=16, catalogue=cat)
     notes = {c.name: c.note for c in m.tried}
     assert m.chosen == "continuations" and m.min_scaled_jacobian == pytest.approx(1.0)
-    if m.stretches_off_size(0.25) == 0:  # the grid at the size along the outline: nothing can beat it
-        assert "at most 0.71 cannot beat continuations" in notes["bisectors"]
-    else:  # (the window at P/16: its sides, split at the cuts' ends, take 7 edges for 5 h: the others are meshed)
-        assert next(c for c in m.tried if c.name == "bisectors").mesh.min_scaled_jacobian <= np.sin(np.pi / 4) + 1e-9
+    assert m.coarse_stretches(QUALITY.coarse_side) + m.long_edges(QUALITY.long_edge) == 0  # at the size: nothing can beat it
+    assert "at most 0.71 cannot beat continuations" in notes["bisectors"]
     alone = []
     for n in strategy_names():
         one = jaxmatch.mesh(shp, divisions=16, catalogue=cat, strategies=[n]) if n in ("continuations", "bisectors") else None

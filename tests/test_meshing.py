@@ -308,6 +308,38 @@ def test_the_rule_order():
         choose([Candidate("a", None, "failed")])
 
 
+@pytest.mark.parametrize("n, size, coarse", [
+    (4, 1.0, 0),    # at the size
+    (4, 4.0, 0),    # 4 edges where the size asks for 1: finer, never ruled out
+    (4, 0.7, 0),    # mean edge 1.43 h: within the band
+    (4, 0.5, 4),    # 4 edges for 8 h on each side: every side coarse
+    (1, 0.55, 0),   # 1 edge for 1.8 h: coarser than 1.5 h, but within one edge of rounding
+])
+def test_a_side_is_coarse_only_past_the_band_and_one_edge_of_rounding(n, size, coarse):
+    """Size conformity rules out sides meshed coarser than ``coarse_side * h`` (beyond one edge
+    of rounding), not finer ones: a feature smaller than the size is meshed finer."""
+    import dataclasses
+
+    m = dataclasses.replace(grid_mesh(n, n), size=size)
+    assert m.coarse_stretches(QUALITY.coarse_side) == coarse
+    want = n / size  # independently: each of the 4 sides has n edges of length 1
+    assert coarse == 4 * int(want > QUALITY.coarse_side * n and want - n > 1)
+
+
+def test_quality_comes_before_the_size_fit():
+    """Between two meshes at or finer than the size, the higher quality wins, whatever the
+    fit of their side counts (rule "min scaled Jacobian" before "size fit")."""
+    import dataclasses
+
+    fine = dataclasses.replace(grid_mesh(4, 4), size=2.0)  # a 4 x 4 square, 4 edges per side where 2 are asked
+    two = grid_mesh(2, 2)
+    xy = 2 * two.xy + np.c_[0.8 * two.xy[:, 1], np.zeros(len(two.xy))]  # 2 edges per side, sheared: lower quality
+    sheared = dataclasses.replace(two, xy=xy, corners=xy[[0, 2, 8, 6]], region_area=16.0, size=2.0)
+    assert fine.stretches_off_size(QUALITY.size_tol) > 0 and sheared.stretches_off_size(QUALITY.size_tol) == 0
+    picked = choose([Candidate("at size", sheared), Candidate("finer", fine)])
+    assert picked.chosen == "finer" and picked.rule == "min scaled Jacobian"
+
+
 @settings(max_examples=40, deadline=None)
 @given(st.integers(1, 4), st.integers(1, 4), st.booleans(), st.integers(1, 4), st.integers(0, 6),
        st.sampled_from([None, 0.5, 1.0, 3.0]))

@@ -6,18 +6,21 @@
 2. corners kept: every corner of the region is a mesh vertex;
 3. area kept: ``|mesh area / region area - 1| <= Quality.area_tol``;
 4. quality floor: min scaled Jacobian ``>= Quality.good_sj``;
-5. size conformity: fewer boundary stretches between corners whose edge count is off
-   ``length / h`` by more than ``max(1, Quality.size_tol * length / h)`` (the outline as the
-   user sees it, not the pieces between the patches' cut ends), plus edges longer than
-   ``Quality.long_edge * h`` (with a target size);
+5. size conformity: fewer boundary stretches between corners meshed coarser than the size
+   (mean edge longer than ``Quality.coarse_side * h``, beyond one edge of rounding; the outline
+   as the user sees it, not the pieces between the patches' cut ends), plus edges longer than
+   ``Quality.long_edge * h`` (with a target size). A stretch finer than ``h`` is not ruled out
+   here: a feature smaller than the size is meshed finer, not cut off;
 6. quality band: min scaled Jacobian ``>= Quality.high_sj``;
-7. irregular vertices: fewer irregular internal vertices beyond Euler's lower bound for the
+7. quality: higher min scaled Jacobian, in steps of ``Quality.sj_step``;
+8. size fit: fewer stretches whose edge count is off ``length / h`` by more than
+   ``max(1, Quality.size_tol * length / h)`` either way;
+9. irregular vertices: fewer irregular internal vertices beyond Euler's lower bound for the
    boundary valences used (:func:`jaxmatch.meshing.result.irregular_bound`; none below it counts
    as 0: a valence-6 vertex can make up for two);
-8. quality: higher min scaled Jacobian, in steps of ``Quality.sj_step``;
-9. fewer patches;
-10. higher mean scaled Jacobian (2 decimals);
-11. the order tried (single template first).
+10. fewer patches;
+11. higher mean scaled Jacobian (2 decimals);
+12. the order tried (single template first).
 
 :func:`choose` names the first rule on which the winner beats the runner-up;
 :func:`cannot_win` tells, before a candidate is meshed, that it cannot beat a given key (from its
@@ -58,8 +61,8 @@ from jaxmatch.meshing.result import Candidate, QuadMesh
 
 __all__ = ["RULES", "best_possible_key", "cannot_win", "choose", "mesh_key"]
 
-RULES = ("no fold", "corners kept", "area kept", "quality floor", "size conformity", "quality band", "irregular vertices",
-         "min scaled Jacobian", "fewer patches", "mean scaled Jacobian", "order tried")
+RULES = ("no fold", "corners kept", "area kept", "quality floor", "size conformity", "quality band", "min scaled Jacobian",
+         "size fit", "irregular vertices", "fewer patches", "mean scaled Jacobian", "order tried")
 """The rules of :func:`mesh_key`, in order (the last one: the earlier candidate)."""
 
 def mesh_key(m: QuadMesh, order: int = 0, quality: Quality = QUALITY) -> tuple:
@@ -71,10 +74,11 @@ def mesh_key(m: QuadMesh, order: int = 0, quality: Quality = QUALITY) -> tuple:
         m.missed_corners.shape[0] > 0,
         not (abs(area - 1.0) <= quality.area_tol),
         not (sj >= quality.good_sj),
-        m.stretches_off_size(quality.size_tol) + m.long_edges(quality.long_edge),
+        m.coarse_stretches(quality.coarse_side) + m.long_edges(quality.long_edge),
         not (sj >= quality.high_sj),
-        max(int(m.irregular.size) - m.irregular_bound, 0),
         -math.floor(sj / quality.sj_step + 1e-9) if math.isfinite(sj) else math.inf,
+        m.stretches_off_size(quality.size_tol),
+        max(int(m.irregular.size) - m.irregular_bound, 0),
         m.n_patches,
         -round(mean, 2),
         order,
@@ -84,9 +88,9 @@ def mesh_key(m: QuadMesh, order: int = 0, quality: Quality = QUALITY) -> tuple:
 def best_possible_key(n_patches: int, order: int, max_sj: float = 1.0, quality: Quality = QUALITY) -> tuple:
     """The smallest :func:`mesh_key` any mesh of ``n_patches`` patches tried at ``order`` whose
     min scaled Jacobian is at most ``max_sj`` can have: no fold, every corner, the area, every
-    side at the size, no irregular vertex beyond the bound, min scaled Jacobian ``max_sj``, mean 1."""
-    return (False, False, False, not (max_sj >= quality.good_sj), 0, not (max_sj >= quality.high_sj), 0,
-            -math.floor(max_sj / quality.sj_step + 1e-9), int(n_patches), -1.0, int(order))
+    side at the size, min scaled Jacobian ``max_sj``, no irregular vertex beyond the bound, mean 1."""
+    return (False, False, False, not (max_sj >= quality.good_sj), 0, not (max_sj >= quality.high_sj),
+            -math.floor(max_sj / quality.sj_step + 1e-9), 0, 0, int(n_patches), -1.0, int(order))
 
 
 def cannot_win(best_key: tuple, n_patches: int, order: int, max_sj: float = 1.0, quality: Quality = QUALITY) -> bool:

@@ -181,6 +181,15 @@ class QuadMesh:
         n, want = self._stretches[:, 0], self._stretches[:, 1] / self.size
         return int(np.sum(np.abs(n - want) > np.maximum(1.0, tol * want) + 1e-9))
 
+    def coarse_stretches(self, factor: float) -> int:
+        """Boundary stretches between corners (:attr:`_stretches`) of ``n`` edges and length ``L``
+        whose mean edge ``L / n`` is longer than ``factor * h`` and whose ``n`` is more than one
+        edge short of ``L / h`` (0 without a size): sides meshed coarser than the size asked."""
+        if not self.size or not self._stretches.size:
+            return 0
+        n, want = self._stretches[:, 0], self._stretches[:, 1] / self.size
+        return int(np.sum((want > factor * n + 1e-9) & (want - n > 1.0 + 1e-9)))
+
     # -- sets and data, as meshio names them ---------------------------------------------------
 
     @property
