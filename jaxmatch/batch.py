@@ -82,7 +82,7 @@ RECORD_FIELDS: dict[str, str] = {
     "shape": "the region as given on the command line (a path, or FILE#ID)",
     "status": '"meshed", "failed" (see error) or "timed out" (past the region budget; no mesh file)',
     "error": "failed records only: the one-line reason (bad input, or no mesh meets the request)",
-    "chosen": "the candidate kept: single, continuations, bisectors, recursive, radial (or a refinement of one)",
+    "chosen": "the candidate kept: single, continuations, bisectors, recursive, radial, fillets, rings (or a refinement of one)",
     "rule": "the step of the choice rule that decided between the chosen candidate and the runner-up",
     "runner_up": "the second-best candidate (null: none other was meshed)",
     "quads": "quads in the mesh",

@@ -436,7 +436,7 @@ def mesh(
                                        help="With many regions: run them as tasks of the Dask scheduler at ADDRESS "
                                        "(or $JAXMATCH_DASK; needs pip install 'jaxmatch[dask]')."),
     strategy: Optional[str] = typer.Option(None, "--strategy", metavar="NAMES", help="Candidates to try, comma-separated: "
-                                           "single, continuations, bisectors, recursive, radial (default: all)."),
+                                           "single, continuations, bisectors, recursive, radial, fillets, rings (default: all)."),
     budget: float = typer.Option(DEFAULT_BUDGET_S, "--budget", metavar="SECONDS", help="Stop trying candidates after "
                                  "this long once one valid mesh exists (the best so far is kept)."),
     catalogue: Optional[Path] = typer.Option(None, metavar="FILE", help=CATALOGUE_HELP),
@@ -460,7 +460,7 @@ def mesh(
     """Mesh a region with quads of about --size: the best of one template and every decomposition.
 
     Candidates: the region as one catalogue template, and split into patches at its concave
-    corners and around its holes (continuations, bisectors, recursive, radial); each is meshed
+    corners and around its holes (continuations, bisectors, recursive, radial, fillets: also from the ends of a rounded inner corner); each is meshed
     with one integer program for all side counts, and the best is kept by one rule (no fold,
     corners, area, quality floor, size conformity, quality band, quality, size fit, irregular
     vertices, fewer patches); the rule that decided and the runner-up are printed. Corners are judged at

@@ -149,3 +149,62 @@ def test_close_to_any_is_allclose_to_one_either_way(a, ds, tol, flips):
     cuts = [(seg + np.array(d).reshape(2, 2))[::-1 if f else 1] for d, f in zip(ds, flips)]
     plain = any(np.allclose(seg, c, atol=tol) or np.allclose(seg, c[::-1], atol=tol) for c in cuts)
     assert _close_to_any(seg, cuts, tol) == plain
+
+def filleted_l(r: float, step_deg: float, angle_deg: float = 0.0) -> np.ndarray:
+    """An L of legs 20 thick (80 x 60) whose inner corner at (20, 20) is rounded to radius ``r``
+    (sampled every ``step_deg`` degrees), counter-clockwise, turned by ``angle_deg``."""
+    t = np.radians(np.linspace(-90.0, -180.0, int(round(90 / step_deg)) + 1))
+    arc = np.c_[20 + r + r * np.cos(t), 20 + r + r * np.sin(t)]
+    pts = np.vstack([[[0, 0], [80, 0], [80, 20]], arc, [[20, 60], [0, 60]]])
+    a = np.radians(angle_deg)
+    return pts @ np.array([[np.cos(a), np.sin(a)], [-np.sin(a), np.cos(a)]])
+
+
+@pytest.mark.parametrize("r, step, angle", [(10, 3, 0), (5, 10, 30), (15, 1.5, -120)])
+def test_a_fillet_gives_the_legs_and_the_corner_block(r, step, angle):
+    """``fillets``: the tangent points of a filleted inner corner are its ends; a cut from each,
+    along the inward normal of the straight side it meets, splits the L into its two legs and a
+    corner block holding the fillet (checked with plain numpy: areas, cut directions)."""
+    from jaxmatch.placement.decompose import fillet_ends
+    from jaxmatch.shape import make_shape
+
+    pts = filleted_l(r, step, angle)
+    shp = make_shape(pts)
+    assert bool(np.all(shp.convex))  # a fillet is no corner: no concave corner to cut at
+    ends = fillet_ends(shp)
+    assert len(ends) == 1
+    got = shp.given_points[list(ends[0])]
+    rot = filleted_l(r, 90.0, angle)[[3, 4]]  # the two tangent points, (20 + r, 20) and (20, 20 + r)
+    assert np.allclose(got, rot, atol=1e-9)
+    lay = decompose(shp, "fillets")
+    assert lay.n_patches == 3
+    assert sum(area(lay.points[loop]) for loop in lay.patches) == pytest.approx(abs(area(pts)), rel=1e-12)
+    for a, b in cut_segments(shp, "fillets"):
+        d = (b - a) / np.linalg.norm(b - a)
+        ex = np.array([np.cos(np.radians(angle)), np.sin(np.radians(angle))])
+        assert min(abs(d @ ex), abs(abs(d @ ex) - 1)) < 1e-9  # along one leg's axis or across it
+        assert np.linalg.norm(b - a) == pytest.approx(20.0, rel=1e-9)  # across a leg, 20 thick
+    assert same_cuts(shp, "fillets") == "fillets" and same_cuts(shp, "continuations") is None
+
+
+@pytest.mark.parametrize("path", [LAB / "quarter-annulus.json", EX / "hexagon.json", LAB / "notched-rectangle.json"])
+def test_no_fillet_where_a_curve_ends_at_a_corner_or_nothing_is_rounded(path):
+    """A concave arc that ends at corners (a quarter annulus's inner side) is no fillet, nor is a
+    polygon's concave corner: ``fillets`` then makes the continuations' patches."""
+    from jaxmatch.placement.decompose import fillet_ends
+
+    shp = load_shape(path)
+    assert fillet_ends(shp) == []
+    assert same_cuts(shp, "fillets") == same_cuts(shp, "continuations")
+
+
+def test_the_l_bracket_meshes_as_its_blocks(cat):
+    """The pipeline tries ``fillets``; on the L-bracket part (fillet r 10 at the inner corner, a
+    hole r 6 in the horizontal leg) at h = outer perimeter / 80 it beats every other candidate on
+    quality: the legs and the corner block, no fan from the fillet, no edge longer than 2h."""
+    import jaxmatch
+
+    m = jaxmatch.mesh(EX / "parts" / "l-bracket.json", size=275.70616898472394 / 80, catalogue=cat)
+    assert m.chosen == "fillets" and m.valid and m.long_edges(2.0) == 0
+    others = [c.mesh.min_scaled_jacobian for c in m.tried if c.mesh is not None and c.name != "fillets"]
+    assert m.min_scaled_jacobian >= 0.8 and all(s < m.min_scaled_jacobian for s in others)

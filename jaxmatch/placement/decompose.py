@@ -7,6 +7,9 @@ the first point where they meet its boundary again:
 * ``"continuations"``: both sides at the corner, continued past it (a rectilinear shape becomes
   rectangles; every piece is convex, since each reflex angle is split in three);
 * ``"bisectors"``: one cut along the bisector of the reflex angle (fewer, larger pieces);
+* ``"fillets"``: the continuations, and from both ends of every fillet (a concave rounded stretch
+  of the outer loop between straight sides, :func:`fillet_ends`) a cut along the outline's inward
+  normal (an L with a filleted inner corner becomes its two legs and the corner block);
 * ``"recursive"``: one concave corner at a time, along the shorter continuation of its sides to
   the boundary of the piece it is in, until no piece has a concave corner (fewest pieces; a cut
   may end on an earlier one, a T-junction, which the layout handles).
@@ -29,13 +32,14 @@ import numpy as np
 
 from jaxmatch.errors import InputError
 from jaxmatch.arrays import roll
+from jaxmatch.geometry import turning_angles
 from jaxmatch.placement.layout import Layout, make_layout
 from jaxmatch.shape import Shape
 
 
-__all__ = ["STRATEGIES", "cut_segments", "decompose", "same_cuts", "single_patch"]
+__all__ = ["STRATEGIES", "cut_segments", "decompose", "fillet_ends", "same_cuts", "single_patch"]
 
-STRATEGIES = ("continuations", "bisectors", "recursive", "radial")
+STRATEGIES = ("continuations", "bisectors", "recursive", "radial", "fillets")
 """The ways :func:`decompose` cuts at concave corners (and, for regions with holes, from the
 holes: ``radial`` cuts each hole to the outer loop's convex corners and to its nearest hole)."""
 
@@ -60,6 +64,56 @@ def _reflex_corners(shape: Shape) -> list[tuple[np.ndarray, int]]:
     return out
 
 
+FILLET_TURN = 45.0
+"""Degrees: a fillet (:func:`fillet_ends`) turns the outline by at least this much."""
+
+FILLET_TANGENT = 4.0
+"""A fillet meets a straight side at each end: the outline's edges just before and after it are at
+least this many times the fillet's longest edge."""
+
+
+def fillet_ends(shape: Shape) -> list[tuple[int, int]]:
+    """``(a, b)`` outer-loop point indices of the first and last point of every fillet: a run of
+    consecutive points of ``shape.given_points`` that are no corners and turn right (concave, the
+    loop being counter-clockwise), turning by :data:`FILLET_TURN` degrees or more in all, between
+    edges :data:`FILLET_TANGENT` times longer than its own (straight sides, not a curved stretch
+    that ends at a corner)."""
+    pts = shape.given_points
+    P = pts.shape[0]
+    turn = np.degrees(turning_angles(pts))
+    concave = turn < -1e-6
+    concave[shape.corners] = False
+    if concave.all() or not concave.any():
+        return []
+    seg = np.linalg.norm(roll(pts, -1) - pts, axis=1)  # seg[i]: from point i to i + 1
+    out = []
+    starts = [i for i in range(P) if concave[i] and not concave[i - 1]]
+    for a in starts:
+        b = a
+        while concave[(b + 1) % P]:
+            b += 1
+        run = np.arange(a, b + 1) % P
+        if b == a or turn[run].sum() > -FILLET_TURN:
+            continue
+        longest = float(seg[run[:-1]].max())
+        if min(seg[(a - 1) % P], seg[b % P]) >= FILLET_TANGENT * longest:
+            out.append((a % P, b % P))
+    return out
+
+
+def _fillet_rays(shape: Shape) -> list[tuple[np.ndarray, np.ndarray]]:
+    """From both ends of every fillet (:func:`fillet_ends`), the inward normal of the straight
+    side it meets there."""
+    pts = shape.given_points
+    P = pts.shape[0]
+    out = []
+    for a, b in fillet_ends(shape):
+        for v, e in ((pts[a], pts[a] - pts[(a - 1) % P]), (pts[b], pts[(b + 1) % P] - pts[b])):
+            n = np.array([-e[1], e[0]]) / np.linalg.norm(e)  # the left normal: into the region
+            out.append((v, n))
+    return out
+
+
 def _axis_rays(ring: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
     """Four cuts from a hole without corners: from its leftmost, rightmost, lowest and highest
     points, outwards along the axes (a round hole in a square becomes four patches)."""
@@ -74,15 +128,15 @@ def _axis_rays(ring: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
 
 def _rays(shape: Shape, strategy: str) -> list[tuple[np.ndarray, np.ndarray]]:
     """(start (2,), unit direction (2,)) of every cut, user coordinates."""
-    if strategy not in ("continuations", "bisectors"):
-        raise ValueError(f"strategy must be 'continuations' or 'bisectors', got {strategy!r}")
-    out = []
+    if strategy not in ("continuations", "bisectors", "fillets"):
+        raise ValueError(f"strategy must be 'continuations', 'bisectors' or 'fillets', got {strategy!r}")
+    out = _fillet_rays(shape) if strategy == "fillets" else []
     for pts, c in _reflex_corners(shape):
         P = pts.shape[0]
         v, prev, nxt = pts[c], pts[(c - 1) % P], pts[(c + 1) % P]
         u1 = (prev - v) / np.linalg.norm(prev - v)
         u2 = (nxt - v) / np.linalg.norm(nxt - v)
-        if strategy == "continuations":
+        if strategy in ("continuations", "fillets"):
             dirs = [-u1, -u2]
         else:
             b = -(u1 + u2)
@@ -412,12 +466,15 @@ def _recursive(shape: Shape, check: bool = True) -> Layout:
 
 def same_cuts(shape: Shape, strategy: str) -> str | None:
     """The strategy whose cuts :func:`decompose` makes in ``shape`` for ``strategy`` (the same
-    patches; only the layout's ``source`` names the strategy): None (no cut, the shape whole,
-    :func:`single_patch`) for every strategy when the shape has no hole and no concave corner,
+    patches; only the layout's ``source`` names the strategy): ``"continuations"`` for
+    ``"fillets"`` without a fillet; None (no cut, the shape whole, :func:`single_patch`) for
+    every strategy when the shape has no hole, no concave corner and no fillet,
     ``"continuations"`` for ``"radial"`` without holes (its cuts are then the concave corners'
     continuations alone), else ``strategy``."""
+    if strategy == "fillets" and not fillet_ends(shape):
+        strategy = "continuations"
     if not shape.holes:
-        if bool(np.all(shape.convex)):
+        if bool(np.all(shape.convex)) and strategy != "fillets":
             return None
         if strategy == "radial":
             return "continuations"
