@@ -340,6 +340,24 @@ def test_quality_comes_before_the_size_fit():
     assert picked.chosen == "finer" and picked.rule == "min scaled Jacobian"
 
 
+def test_size_conformity_is_a_yes_or_no():
+    """Two meshes that both have an edge longer than 2h: the count of such edges does not decide
+    before quality (rule "min scaled Jacobian"); a mesh without any beats both (rule "size
+    conformity")."""
+    import dataclasses
+
+    coarse_good = dataclasses.replace(grid_mesh(2, 2), size=0.4)  # every edge 2.5 h: 12 long edges
+    two = grid_mesh(2, 2)
+    xy = two.xy + np.c_[0.4 * two.xy[:, 1], np.zeros(len(two.xy))]
+    coarse_poor = dataclasses.replace(two, xy=xy, corners=xy[[0, 2, 8, 6]], size=0.52)  # sheared, 6 long edges
+    assert 0 < coarse_poor.long_edges(QUALITY.long_edge) < coarse_good.long_edges(QUALITY.long_edge)
+    picked = choose([Candidate("fewer long, poorer", coarse_poor), Candidate("more long, better", coarse_good)])
+    assert picked.chosen == "more long, better" and picked.rule == "min scaled Jacobian"
+    at_size = dataclasses.replace(coarse_poor, size=1.0)
+    picked = choose([Candidate("long", coarse_good), Candidate("at size", at_size)])
+    assert picked.chosen == "at size" and picked.rule == "size conformity"
+
+
 @settings(max_examples=40, deadline=None)
 @given(st.integers(1, 4), st.integers(1, 4), st.booleans(), st.integers(1, 4), st.integers(0, 6),
        st.sampled_from([None, 0.5, 1.0, 3.0]))

@@ -6,15 +6,17 @@
 2. corners kept: every corner of the region is a mesh vertex;
 3. area kept: ``|mesh area / region area - 1| <= Quality.area_tol``;
 4. quality floor: min scaled Jacobian ``>= Quality.good_sj``;
-5. size conformity: fewer boundary stretches between corners meshed coarser than the size
-   (mean edge longer than ``Quality.coarse_side * h``, beyond one edge of rounding; the outline
-   as the user sees it, not the pieces between the patches' cut ends), plus edges longer than
-   ``Quality.long_edge * h`` (with a target size). A stretch finer than ``h`` is not ruled out
-   here: a feature smaller than the size is meshed finer, not cut off;
+5. size conformity: no boundary stretch between corners meshed coarser than the size (mean
+   edge longer than ``Quality.coarse_side * h``, beyond one edge of rounding; the outline as the
+   user sees it, not the pieces between the patches' cut ends) and no edge longer than
+   ``Quality.long_edge * h`` (with a target size). A yes or no: between two meshes that both
+   miss it, quality decides and the counts go to the size fit. A stretch finer than ``h`` is not
+   ruled out here: a feature smaller than the size is meshed finer, not cut off;
 6. quality band: min scaled Jacobian ``>= Quality.high_sj``;
 7. quality: higher min scaled Jacobian, in steps of ``Quality.sj_step``;
 8. size fit: fewer stretches whose edge count is off ``length / h`` by more than
-   ``max(1, Quality.size_tol * length / h)`` either way;
+   ``max(1, Quality.size_tol * length / h)`` either way, plus edges longer than
+   ``Quality.long_edge * h``;
 9. irregular vertices: fewer irregular internal vertices beyond Euler's lower bound for the
    boundary valences used (:func:`jaxmatch.meshing.result.irregular_bound`; none below it counts
    as 0: a valence-6 vertex can make up for two);
@@ -69,15 +71,16 @@ def mesh_key(m: QuadMesh, order: int = 0, quality: Quality = QUALITY) -> tuple:
     """The sort key of :data:`RULES` for mesh ``m`` (``order``: its place among the candidates)."""
     sj, mean = m.min_scaled_jacobian, m.mean_scaled_jacobian  # of the (Q,) array the mesh keeps
     area = m.area_ratio
+    long = m.long_edges(quality.long_edge)
     return (
         m.inverted > 0,
         m.missed_corners.shape[0] > 0,
         not (abs(area - 1.0) <= quality.area_tol),
         not (sj >= quality.good_sj),
-        m.coarse_stretches(quality.coarse_side) + m.long_edges(quality.long_edge),
+        m.coarse_stretches(quality.coarse_side) + long > 0,
         not (sj >= quality.high_sj),
         -math.floor(sj / quality.sj_step + 1e-9) if math.isfinite(sj) else math.inf,
-        m.stretches_off_size(quality.size_tol),
+        m.stretches_off_size(quality.size_tol) + long,
         max(int(m.irregular.size) - m.irregular_bound, 0),
         m.n_patches,
         -round(mean, 2),
