@@ -100,7 +100,7 @@ SUFFIXES: dict[str, str]
 TEXT_SUFFIXES = (".txt", ".csv", ".tsv", ".xy", ".xyz", ".dat")
 """The suffixes of point rows (a file of another suffix is never read as rows)."""
 
-JSON_KEYS = ("boundary", "corners", "holes", "hole_corners")
+JSON_KEYS = ("boundary", "corners", "holes", "hole_corners", "tags", "periodic")
 """Keys of the jaxmatch JSON shape format."""
 
 def split_element(path) -> tuple[str, str | None]:
@@ -140,7 +140,7 @@ def parse_shape(data, source: str = "<input>", *, corner_angle: float = DEFAULT_
     check_corner_angle(corner_angle)
     region = tidy(read_outline(data, source, fmt=fmt, element=element, _file=_file), source)
     return make_shape(region.points, region.corners, corner_angle=corner_angle, source=source, holes=region.holes,
-                      hole_corners=region.hole_corners)
+                      hole_corners=region.hole_corners, tags=region.tags, periodic=region.periodic)
 
 
 def detect_format(source: str, data: bytes | str) -> str:
@@ -296,7 +296,7 @@ def _read_json(doc, source: str):
     if unknown:  # warned once the file is known to be good (a bad file gets its one error line only)
         warnings.warn(InputWarning(f"ignored key{'s' if len(unknown) > 1 else ''} {names} (known keys: {', '.join(JSON_KEYS)})",
                                    where=source), stacklevel=2)
-    return Outline(points, corners, tuple(holes), hole_corners)
+    return Outline(points, corners, tuple(holes), hole_corners, doc.get("tags"), doc.get("periodic"))
 
 
 def _read_geojson(doc, source: str, element: str | None):
@@ -324,7 +324,8 @@ def _read_geojson(doc, source: str, element: str | None):
         geom = doc.get("geometry")
         if not isinstance(geom, dict):
             raise InputError('GeoJSON Feature has no "geometry" object', where=source)
-        return _read_geojson(geom, source, None)
+        props = doc.get("properties") if isinstance(doc.get("properties"), dict) else {}
+        return _read_geojson(geom, source, None)._replace(tags=props.get("tags"), periodic=props.get("periodic"))
     if kind == "MultiPolygon":
         polys = doc.get("coordinates")
         if not isinstance(polys, list) or len(polys) != 1:
