@@ -138,6 +138,8 @@ def test_side_groups_lie_on_and_cover_the_files_sides(case, tmp_path):
     groups = check_file(tmp_path / "m.msh", doc, m)
     assert m.side_counts == {k.removeprefix("side "): len(v) for k, v in groups.items()
                              if k.startswith("side ") or " side " in k}
+    for name, poly in expected_sides(doc).items():  # the lengths the size test reads: the file's sides'
+        assert m.side_lengths[name.removeprefix("side ")] == pytest.approx(shapely.LineString(poly).length, rel=1e-12)
 
 
 STRATEGIES = ("single", "continuations", "bisectors", "recursive", "rings")

@@ -3,13 +3,16 @@
 Formats (detected by the file's suffix, else by its content; see :func:`detect_format`):
 
 * ``json``: ``{"boundary": [[x, y], ...], "corners": [i, ...], "holes": [[[x, y], ...], ...],
-  "hole_corners": [[i, ...] or null, ...]}`` (all but ``boundary`` optional).
+  "hole_corners": [[i, ...] or null, ...], "tags": {"name": ["i-j", "hole h", ...]},
+  "periodic": [["i-j", "k-l"], ...]}`` (all but ``boundary`` optional; sides named as the output's
+  ``side i-j`` groups, :func:`jaxmatch.shape.check_groups`).
   Other keys (``"name"``, ``"units"``, ...) are ignored with one :class:`InputWarning` naming
   them.
 * ``geojson`` (``.geojson``, or JSON with a ``"type"`` key): a ``Polygon``, a ``Feature`` of
   one, a ``MultiPolygon`` / ``FeatureCollection`` holding exactly one polygon (or the one
   chosen by ``element``: a feature's ``id`` or ``properties.name``). The outer ring is the
-  boundary, interior rings are holes.
+  boundary, interior rings are holes; a Feature's ``properties.tags`` / ``properties.periodic``
+  as the JSON keys.
 * ``text`` (``.txt .csv .tsv .xy .xyz .dat`` only): one point per row, ``x y``, ``x,y``, ``x;y`` or
   tab-separated; ``#`` starts a comment; blank lines are skipped. An optional first row of
   column names (a header) is allowed: the columns named ``x`` and ``y`` are read (any other

@@ -405,8 +405,8 @@ def write_solver_file(path: Path, sm: SolverMesh, fmt: str, *, msh_version: str 
                       element_type: str | None = None) -> list[str]:
     """Write ``sm`` to ``path`` in format ``fmt`` (a registered mesh format's name); the notes."""
     lost = [] if fmt in ("abaqus", "exodus") or not sm.node_groups else \
-        [f"{fmt}: no node groups ({', '.join(sm.node_groups)} left out)" + ("; the periodic pairs are in $Periodic"
-                                                                             if fmt == "gmsh" else "")]
+        ["msh: the periodic pairs are in $Periodic (no node groups)"] if fmt == "gmsh" else \
+        [f"{fmt}: no node groups ({', '.join(sm.node_groups)} left out)"]
     if fmt == "gmsh":
         return write_gmsh(path, sm, msh_version, binary) + lost
     if fmt in ("vtu", "vtk"):

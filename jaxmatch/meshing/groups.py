@@ -19,7 +19,6 @@ from dataclasses import replace
 import numpy as np
 
 from jaxmatch.errors import InputError
-from jaxmatch.geometry import cumulative_length
 from jaxmatch.meshing.result import _KEPT, QuadMesh
 from jaxmatch.placement.refine import harmonic_displacement
 from jaxmatch.shape import NamedSide, Shape, named_sides, resolve_side, side_polyline
@@ -83,7 +82,7 @@ def name_groups(mesh: QuadMesh, region: Shape) -> QuadMesh:
     for side in sides:
         key = side.name[len("side "):] if side.loop == 0 else side.name
         counts[key] = int(len(edges_of[side.name]))
-        lengths[key] = float(cumulative_length(side_polyline(region, side))[-1])
+        lengths[key] = float(np.linalg.norm(np.diff(side_polyline(region, side), axis=0), axis=1).sum())
         if side.loop == 0:
             sets[side.name] = edges_of[side.name]
     hole_sets: dict[int, dict[str, np.ndarray]] = {}
