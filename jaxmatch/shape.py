@@ -905,7 +905,8 @@ def check_groups(shape: Shape, tags, periodic) -> tuple[tuple, tuple]:
                     hit, _ = resolve_side(shape, mem, sides)
                 except InputError as e:
                     raise InputError(f"tag {name!r}: {e.problem}", where=src) from None
-                names += [mem.strip()] if re.fullmatch(r"hole \d+", " ".join(mem.split())) else [s.name for s in hit]
+                whole = " ".join(mem.split())
+                names += [whole] if re.fullmatch(r"hole \d+", whole) else [s.name for s in hit]
             out_tags.append((name, tuple(dict.fromkeys(names))))
     out_pairs = []
     if periodic is not None:

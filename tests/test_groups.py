@@ -235,6 +235,17 @@ def test_tags_in_every_format_with_groups(tmp_path):
     assert sorted(map(sorted, groups["lip"])) == sorted(map(sorted, m.line_sets["hole 1 side 0-1"].tolist()))
 
 
+def test_a_tag_of_a_round_hole(tmp_path):
+    doc = json.loads((EXAMPLES / "holes" / "plate-bolt.json").read_text())
+    doc["tags"] = {"bolt": ["hole 1"]}
+    src = tmp_path / "p.json"
+    src.write_text(json.dumps(doc))
+    m = jaxmatch.mesh(src, size=0.4)
+    hole = shapely.LinearRing(doc["holes"][0])
+    assert len(m.line_sets["bolt"]) == len(m.line_sets["hole 1"]) > 8
+    assert np.max(shapely.distance(hole, shapely.points(m.xy[np.unique(m.line_sets["bolt"])]))) < 1e-9
+
+
 def test_geojson_properties_tags(tmp_path):
     src = tmp_path / "g.geojson"
     src.write_text(json.dumps({"type": "Feature", "properties": {"tags": {"bottom": ["0-1"]}},

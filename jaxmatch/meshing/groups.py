@@ -102,8 +102,10 @@ def name_groups(mesh: QuadMesh, region: Shape) -> QuadMesh:
             except InputError as err:
                 raise InputError(f"tag {tag!r}: {err.problem}; at this size the corners are judged again: give them "
                                  "explicitly (\"corners\") to keep the file's sides", where=region.source) from None
-            parts += [sets[mem]] if mem in sets and mem.startswith("hole ") and " side " not in mem \
-                else [edges_of[s.name] for s in hit]
+            whole = mem.startswith("hole ") and " side " not in mem
+            if whole and mem not in sets:  # (a placed template covers the outer loop only)
+                raise InputError(f"tag {tag!r}: the mesh has no {mem}", where=region.source)
+            parts += [sets[mem]] if whole else [edges_of[s.name] for s in hit]
         sets[tag] = np.concatenate(parts) if len(parts) > 1 else parts[0]
     out = replace(mesh, line_sets=sets, side_counts=counts, side_lengths=lengths,
                   point_sets=periodic_nodes(region, edges_of, sides))
@@ -127,7 +129,8 @@ def make_periodic(mesh: QuadMesh) -> QuadMesh:
     translates of its ``a`` nodes (the translation of the pair's first nodes), the move carried
     into the interior harmonically with every boundary vertex fixed
     (:func:`jaxmatch.placement.refine.harmonic_displacement`): the outline does not change,
-    ``b[i] = a[i] + t`` exactly. A mesh without pairs is returned as it is."""
+    ``b[i] = a[i] + t`` (the ends are the sides' corners, translates within round-off). A mesh
+    without pairs is returned as it is."""
     pairs = sorted({name.rsplit(" ", 1)[0] for name in mesh.point_sets if name.startswith("periodic ")})
     if not pairs:
         return mesh
@@ -139,9 +142,9 @@ def make_periodic(mesh: QuadMesh) -> QuadMesh:
         t = xy[b[0]] - xy[a[0]]
         disp[b] = xy[a] + t - xy[b]
     moved = xy + harmonic_displacement(np.asarray(mesh.quads, np.int64), len(xy), bverts, disp[bverts])
-    for p in pairs:  # exactly: the translate of a, not a sum with round-off
+    for p in pairs:  # the inner nodes exactly on the translates of a's (the end corners stay where they are)
         a, b = mesh.point_sets[f"{p} a"], mesh.point_sets[f"{p} b"]
-        moved[b] = xy[a] + (xy[b[0]] - xy[a[0]])
+        moved[b[1:-1]] = xy[a[1:-1]] + (xy[b[0]] - xy[a[0]])
     return replace(mesh, xy=moved)
 
 
