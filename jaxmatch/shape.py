@@ -47,13 +47,14 @@ from __future__ import annotations
 
 import math
 import re
+import warnings
 from dataclasses import dataclass, replace
 from functools import cached_property
 from typing import NamedTuple
 
 import numpy as np
 
-from jaxmatch.errors import InputError
+from jaxmatch.errors import InputError, InputWarning
 from jaxmatch.arrays import roll
 from jaxmatch.geometry import cumulative_length, first_crossing, point_at, ring_is_simple, signed_area, turning_angles
 
@@ -477,6 +478,7 @@ def make_shape(points, corners=None, *, corner_angle: float = DEFAULT_CORNER_ANG
         shape = _make_shape(points, corners, angle, str(source), checked)
         if holes is not None and len(holes) > 0:
             shape = _with_holes(shape, holes, hole_corners, angle, str(source))
+    _warn_unordered(shape)
     if tags is None and periodic is None:
         return shape
     return replace(shape, **dict(zip(("tags", "periodic"), check_groups(shape, tags, periodic))))
@@ -782,7 +784,8 @@ def named_sides(shape: Shape) -> list[NamedSide]:
     numbering (:class:`NamedSide`), outer sides first, then each hole's in the file's hole
     order, each loop's sides in the file's order. A loop without corners has no sides.
 
-    Raises :class:`InputError` when a loop's explicit corners are not listed in boundary order."""
+    A loop whose explicit corners are not listed in boundary order (``[0, 2, 1, 3]``) has its
+    sides named by point numbers instead (:func:`make_shape` warns once)."""
     out: list[tuple[tuple[int, int], NamedSide]] = []
     loops = [(shape.points, shape.corners)] + list(zip(shape.holes, shape.hole_corners))
     for loop, (ring, corners) in enumerate(loops):
@@ -804,10 +807,8 @@ def named_sides(shape: Shape) -> list[NamedSide]:
                 forward = True
             elif np.all(step == n - 1):
                 forward = False
-            else:
-                what = "corners" if loop == 0 else f"hole {nb.hole}'s corners"
-                raise InputError(f"{what} are not listed in boundary order (side i must run from corner i to corner "
-                                 "i + 1)", where=shape.source)
+            else:  # no side runs from corner i to i + 1: point numbers
+                labels = numbers
         prefix = "side" if loop == 0 else f"hole {nb.hole} side"
         for k in range(n):
             a, b = int(labels[k]), int(labels[(k + 1) % n])
@@ -815,6 +816,24 @@ def named_sides(shape: Shape) -> list[NamedSide]:
             out.append(((nb.hole, first), NamedSide(f"{prefix} {first}-{second}", loop, int(corners[k]),
                                                     int(corners[(k + 1) % n]))))
     return [side for _, side in sorted(out, key=lambda kv: kv[0])]
+
+
+def _warn_unordered(shape: Shape) -> None:
+    """One :class:`InputWarning` when a loop's explicit corners are not listed in boundary order."""
+    loops = [(shape.corners, 0)] + [(hc, k + 1) for k, hc in enumerate(shape.hole_corners)]
+    bad = []
+    for corners, loop in loops:
+        if loop >= len(shape.numbering) or shape.numbering[loop].corners is None or len(corners) < 3:
+            continue
+        nb = shape.numbering[loop]
+        place = {int(c): i for i, c in enumerate(nb.corners)}
+        labels = np.array([place.get(int(c), -1) for c in np.asarray(nb.numbers)[np.sort(corners)]])
+        step = (roll(labels, -1) - labels) % len(labels)
+        if not (np.all(step == 1) or np.all(step == len(labels) - 1)):
+            bad.append("corners" if loop == 0 else f"hole {nb.hole}'s corners")
+    if bad:
+        warnings.warn(InputWarning(f"{' and '.join(bad)} are not listed in boundary order: the output's side groups "
+                                   "are named by point numbers", where=shape.source), stacklevel=3)
 
 
 RESERVED_GROUP = re.compile(r"^(boundary|(side|hole|patch|cut|periodic) .*)$")

@@ -348,3 +348,13 @@ def test_periodic_sides_of_a_concave_region_for_several_strategies(tmp_path):
         assert m.side_counts["1-2"] == m.side_counts["3-4"]
         a, b = m.point_sets["periodic 1 a"], m.point_sets["periodic 1 b"]
         assert np.allclose(m.xy[b] - m.xy[a], [-1.0, 1.0], atol=1e-9, rtol=0) and m.inverted == 0
+
+
+def test_corners_out_of_boundary_order_name_sides_by_point_numbers(tmp_path):
+    src = tmp_path / "s.json"
+    src.write_text(json.dumps({"boundary": [[0, 0], [1, 0], [2, 0], [2, 1], [0, 1]], "corners": [0, 3, 2, 4]}))
+    with pytest.warns(jaxmatch.InputWarning, match="not listed in boundary order: the output's side groups are named by "
+                                                   "point numbers"):
+        shape = jaxmatch.load_shape(src)
+    m = jaxmatch.mesh(shape, size=0.5)
+    assert sorted(k for k in m.line_sets if k.startswith("side ")) == ["side 0-2", "side 2-3", "side 3-4", "side 4-0"]
