@@ -5,7 +5,7 @@ the file's hole number), the user's tags, and the periodic pairs' node groups.
 Every strategy builds its mesh from the canonical region (:func:`jaxmatch.meshing.region.canonical`:
 one loop direction, one start, patch cuts); :func:`name_groups` names the chosen mesh's groups once,
 after the choice, from the numbering the shape carries from its reader
-(:attr:`jaxmatch.shape.Shape.numbering`, :func:`jaxmatch.shape.named_sides`): the mesh vertex of
+(:attr:`jaxmatch.shape.Shape.numbering`, :func:`jaxmatch.sides.named_sides`): the mesh vertex of
 each corner of the region is found on the mesh's boundary loops, and a side's group is the run of
 boundary edges between its two corners, in the loop's direction (the region on the left). Cuts
 between patches are in no group (their numbering would be the strategy's, not the file's). Nodes
@@ -21,7 +21,8 @@ import numpy as np
 from jaxmatch.errors import InputError
 from jaxmatch.meshing.result import _KEPT, QuadMesh
 from jaxmatch.placement.refine import harmonic_displacement
-from jaxmatch.shape import NamedSide, Shape, named_sides, resolve_side, side_polyline
+from jaxmatch.shape import Shape
+from jaxmatch.sides import NamedSide, named_sides, resolve_side, side_polyline
 
 __all__ = ["make_periodic", "name_groups", "periodic_mismatch", "periodic_nodes"]
 

@@ -18,7 +18,8 @@ from jaxmatch.files import read_limited
 from jaxmatch.io.readers import load_shape
 from jaxmatch.placement.decompose import _corner_points
 from jaxmatch.placement.layout import MAX_BYTES, layout_sides, parse_layout
-from jaxmatch.shape import DEFAULT_CORNER_ANGLE, LoopNumbers, Shape, make_shape, scale_corners
+from jaxmatch.shape import DEFAULT_CORNER_ANGLE, Shape, make_shape, scale_corners
+from jaxmatch.sides import LoopNumbers
 
 __all__ = ["DEDUPE", "canonical", "corner_points", "default_size", "load_region"]
 

@@ -42,7 +42,8 @@ from jaxmatch.placement.rings import ring_layout
 from jaxmatch.placement.refine import DEFAULT_LIMIT, InfeasibleRequest, refine_mesh, side_lengths
 from jaxmatch.placement.solve import ALL_SIZES, TEMPLATE_SIZES, mesh_layout
 from jaxmatch.placement.templates import walk
-from jaxmatch.shape import Shape, periodic_lines
+from jaxmatch.shape import Shape
+from jaxmatch.sides import periodic_lines
 
 __all__ = ["CONFORMING_TRIES", "DISK", "FINER", "RINGS", "SINGLE", "Bends", "Conforming", "Larger", "LayoutStrategy", "Layouts",
            "Request", "RingPartition", "Rings", "Single", "Smooth", "Split", "conforming_templates", "larger_templates", "layout_strategies", "run",
