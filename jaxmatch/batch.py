@@ -102,7 +102,8 @@ RECORD_FIELDS: dict[str, str] = {
     "size_deviation": "largest abs(n / (L / h) - 1) over the sides: n the side's edges, L its length. A side far "
                       "shorter than h still gets one edge, so a 0.0006 h side gives about 1660; the choice rule's "
                       "size test allows max(1, 25 %) of L / h edges off, so such a side passes",
-    "side_counts": 'edges per side, keyed "i-j" as the mesh file\'s "side i-j" groups (i, j: the side\'s end points)',
+    "side_counts": 'edges per side, keyed "i-j" as the mesh file\'s "side i-j" groups (from the input\'s corner i to the '
+                   'next, j: point numbers, or positions in "corners") and "hole h side i-j" as its hole sides',
     "templates": "the catalogue mesh id of each patch's template",
     "warnings": "what is poor about the mesh, each with what to try (empty for a good mesh): min scaled Jacobian "
                 "below the quality floor, irregular vertices beyond twice Euler's bound, edges far longer than h",

@@ -394,9 +394,10 @@ def mesh(
                                          "(default: the outer perimeter / 32, printed)."),
     divisions: Optional[int] = typer.Option(None, "--divisions", min=1, metavar="N", help="Instead of --size: edge "
                                             "length = each region's outer perimeter / N (one size per region in bulk)."),
-    sides: Optional[str] = typer.Option(None, "--sides", help="Edges per side, e.g. 4,2,4,2: side i runs from corner i to "
-                                        "corner i+1 in the file's order (see 'jaxmatch annotate'); one total count for a "
-                                        "shape without corners. One template meets them exactly."),
+    sides: Optional[str] = typer.Option(None, "--sides", help="Edges per side, e.g. 4,2,4,2: the sides in the file's order, "
+                                        "each from a corner to the next (the output's groups 'side i-j': i, j point numbers, "
+                                        "or positions in \"corners\"); one total count for a shape without corners. One "
+                                        "template meets them exactly."),
     sides_file: Optional[Path] = typer.Option(None, "--sides-file", help='Layouts: JSON {"i-j": count, ...}, edges on the '
                                               "named sides (i, j: the side's end points)."),
     template: bool = typer.Option(False, "--template", help="The paper's answer instead: the best-ranked catalogue mesh "

@@ -46,7 +46,7 @@ units; multiply by ``shape.scale`` for user units, and map positions with
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cached_property
 from typing import NamedTuple
 
@@ -54,10 +54,12 @@ import numpy as np
 
 from jaxmatch.errors import InputError
 from jaxmatch.arrays import roll
+from jaxmatch.sides import LoopNumbers, check_groups, warn_unordered
 from jaxmatch.geometry import cumulative_length, first_crossing, point_at, ring_is_simple, signed_area, turning_angles
 
 __all__ = [
     "scale_corners",
+    "LoopNumbers",
     "Annotation",
     "DEFAULT_CORNER_ANGLE",
     "MAX_ANNOTATED",
@@ -141,6 +143,10 @@ class Shape:
     hole_corners: per hole, ``(c_k,) int64`` sorted indices into ``holes[k]``: its corners.
     explicit_corners: the corners were given (the JSON ``corners`` key or ``corners=``), not
         detected from angles; the meshing pipeline re-judges detected corners at its size.
+    numbering: the file's numbering of each loop (:class:`jaxmatch.sides.LoopNumbers`: the outer
+        loop, then each hole in the order of ``holes``); empty: the stored order is the file's.
+    tags: ``((name, (side, ...)), ...)`` user line groups (:func:`jaxmatch.sides.check_groups`).
+    periodic: ``((side a, side b), ...)`` pairs of outer sides meshed as translates.
     """
 
     points: np.ndarray
@@ -155,6 +161,9 @@ class Shape:
     holes: tuple = ()
     hole_corners: tuple = ()
     explicit_corners: bool = False
+    numbering: tuple = ()
+    tags: tuple = ()
+    periodic: tuple = ()
 
     @property
     def n_points(self) -> int:
@@ -423,7 +432,7 @@ def check_corner_angle(corner_angle) -> float:
 
 
 def make_shape(points, corners=None, *, corner_angle: float = DEFAULT_CORNER_ANGLE, source: str = "<shape>",
-               holes=None, hole_corners=None, checked: bool = False) -> Shape:
+               holes=None, hole_corners=None, checked: bool = False, tags=None, periodic=None) -> Shape:
     """Validate and normalise a loop into a :class:`Shape` (see the module docstring).
 
     points: ``(P, 2)`` numbers in user coordinates, a loop in either orientation; a closed
@@ -434,6 +443,9 @@ def make_shape(points, corners=None, *, corner_angle: float = DEFAULT_CORNER_ANG
     holes: optional list of loops ``(H_k, 2)`` (either orientation, closed rings allowed), each
         checked like the outer loop and against it: inside it, not touching it or another hole.
     hole_corners: optional list (one entry per hole, each None or indices into that hole).
+    tags: optional ``{name: [side, ...]}`` user line groups; periodic: optional ``[[side a,
+        side b], ...]`` pairs of sides that are translates (see :func:`jaxmatch.sides.check_groups`;
+        sides are named in the file's numbering, :func:`jaxmatch.sides.named_sides`).
     checked: the outer loop is known to be simple, of distinct points and non-zero area (a patch
         of a checked :class:`~jaxmatch.placement.layout.Layout`, or a shape's own loop listed
         from another point): its crossing and repeated-point checks are left out (a third of
@@ -444,9 +456,12 @@ def make_shape(points, corners=None, *, corner_angle: float = DEFAULT_CORNER_ANG
     angle = check_corner_angle(corner_angle)
     with np.errstate(over="ignore", invalid="ignore", divide="ignore", under="ignore"):
         shape = _make_shape(points, corners, angle, str(source), checked)
-        if holes is None or len(holes) == 0:
-            return shape
-        return _with_holes(shape, holes, hole_corners, angle, str(source))
+        if holes is not None and len(holes) > 0:
+            shape = _with_holes(shape, holes, hole_corners, angle, str(source))
+    warn_unordered(shape)
+    if tags is None and periodic is None:
+        return shape
+    return replace(shape, **dict(zip(("tags", "periodic"), check_groups(shape, tags, periodic))))
 
 
 def _with_holes(shape: Shape, holes, hole_corners, angle: float, source: str) -> Shape:
@@ -459,7 +474,7 @@ def _with_holes(shape: Shape, holes, hole_corners, angle: float, source: str) ->
     if len(hole_corners) != len(holes):
         raise InputError(f"hole_corners has {len(hole_corners)} entries for {len(holes)} holes", where=source)
     outer = shapely.Polygon(shape.input_points)
-    rings, corner_lists, polys = [], [], []
+    rings, corner_lists, polys, numbers = [], [], [], []
     for k, (h, hc) in enumerate(zip(holes, hole_corners)):
         try:
             hs = _make_shape(h, hc, angle, source)
@@ -482,9 +497,9 @@ def _with_holes(shape: Shape, holes, hole_corners, angle: float, source: str) ->
         rings.append(np.ascontiguousarray(ring))
         corner_lists.append(corners_k.astype(np.int64))
         polys.append(poly)
-    from dataclasses import replace
-
-    return replace(shape, holes=tuple(rings), hole_corners=tuple(corner_lists))
+        nb = hs.numbering[0]
+        numbers.append(nb._replace(numbers=np.roll(nb.numbers[::-1], 1), hole=k + 1))
+    return replace(shape, holes=tuple(rings), hole_corners=tuple(corner_lists), numbering=shape.numbering + tuple(numbers))
 
 
 def _make_shape(points, corners, angle: float, source: str, checked: bool = False) -> Shape:
@@ -507,7 +522,8 @@ def _make_shape(points, corners, angle: float, source: str, checked: bool = Fals
     if n >= 3 and not checked and _closes(p):  # closed ring (last point = first): drop the repeated point
         p, n = p[:-1], n - 1
         if corner_idx is not None:
-            corner_idx = np.unique(np.where(corner_idx == n, 0, corner_idx))
+            listed = np.where(corner_idx == n, 0, corner_idx)
+            corner_idx = listed[np.sort(np.unique(listed, return_index=True)[1])]  # in the file's order
     if n < 3:
         raise InputError(f"boundary needs at least 3 points, got {n}", where=source)
 
@@ -588,6 +604,8 @@ def _make_shape(points, corners, angle: float, source: str, checked: bool = Fals
         corner_order=corner_of_point[position[np.asarray(user_list, np.int64)]],
         input_clockwise=bool(area < 0),
         explicit_corners=corner_idx is not None,
+        numbering=(LoopNumbers(index.astype(np.int64), None if corner_idx is None else tuple(int(c) for c in corner_idx),
+                               bool(area < 0), 0),),
     )
 
 

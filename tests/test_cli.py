@@ -260,7 +260,7 @@ def test_extra_json_keys_warn_on_stderr_only(tmp_path, small_cat):
     r = run("score", f, "--catalogue", small_cat, "--internal", "1", "--top", "1", "--json")
     assert r.returncode == 0, r.stderr
     json.loads(r.stdout)
-    assert r.stderr.strip() == f"warning: {f}: ignored keys 'name', 'units' (known keys: boundary, corners, holes, hole_corners)"
+    assert r.stderr.strip() == f"warning: {f}: ignored keys 'name', 'units' (known keys: boundary, corners, holes, hole_corners, tags, periodic)"
 
 
 def test_heartbeat_lines_when_not_a_terminal():

@@ -511,8 +511,8 @@ def check_msh(path, m):
         assert groups[f"patch {p}"][0] == 2
         assert elems[f"patch {p}"] == ({"Quadrilateral 4"}, int(np.sum(m.patch == p)))
     assert groups["boundary"][0] == 1 and elems["boundary"] == ({"Line 2"}, int(m.outer.size))
-    for name, c in zip(m.sides.names, m.counts):
-        assert elems[f"side {name}"] == ({"Line 2"}, int(c))
+    for name, c, outer in zip(m.sides.names, m.counts, m.sides.outer):  # a side between patches: "cut i-j"
+        assert elems[f"{'side' if outer else 'cut'} {name}"] == ({"Line 2"}, int(c))
     assert len(groups) == P + 1 + len(m.sides.names)
 
 
@@ -576,7 +576,8 @@ def test_cli_layout_msh_png_json(cli, tmp_path):
 
     r = meshio.read(out)
     assert r.cells_dict["quad"].shape[0] == d["quads"]
-    assert {"boundary", "patch 0", "patch 1", "side 1-4"} <= set(r.field_data)
+    assert {"boundary", "patch 0", "patch 1", "side 0-1", "cut 1-4"} <= set(r.field_data)
+    assert "side 1-4" not in r.field_data  # the side between the patches is no side group
 
 
 def test_cli_shape_one_strategy(cli, tmp_path):

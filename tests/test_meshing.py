@@ -669,6 +669,7 @@ def test_dedupe_merges_near_points_as_a_plain_loop(n, dup, seed):
     for d in sorted({d % n for d in dup if d % n}, reverse=True):  # a copy a hair after point d - 1
         ring = np.insert(ring, d, ring[d - 1] + 1e-12, axis=0)
     corners = sorted(set(rng.integers(0, len(ring), 3).tolist()))
-    got_ring, got_corners = _dedupe(ring, np.array(corners), 1e-9)
+    got_ring, got_corners, kept = _dedupe(ring, np.array(corners), 1e-9)
+    assert np.array_equal(ring[kept], got_ring)  # the kept points' indices (the file's numbering goes with them)
     want_ring, want_corners = _dedupe_plain(ring, corners, 1e-9)
     assert np.array_equal(got_ring, want_ring) and list(got_corners) == want_corners

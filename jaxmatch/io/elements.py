@@ -24,6 +24,7 @@ Jacobian determinant is not positive at every sample point keeps straight sides 
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Mapping
 
@@ -50,7 +51,10 @@ class SolverMesh:
     the patch of each cell, named ``region_names[region]``; groups: facet group name ->
     ``(F, kf) int64`` facets of :attr:`facet_type`, each oriented outwards from its owner;
     owners: the same names -> ``(F, 2) int64`` (owning cell, local side); cell_data: name ->
-    ``(C,)`` per cell; notes: what was changed or left out on the way (one line each).
+    ``(C,)`` per cell; notes: what was changed or left out on the way (one line each);
+    node_groups: name -> ``(N,) int64`` node ids in their order (the periodic pairs' ``periodic k
+    a`` / ``periodic k b``); periodic: per pair ``(line group a, line group b, (n,) nodes a, (n,)
+    nodes b, (2,) translation a -> b)`` (``.msh``: ``$Periodic``).
     """
 
     points: np.ndarray
@@ -62,6 +66,8 @@ class SolverMesh:
     owners: Mapping[str, np.ndarray]
     cell_data: Mapping[str, np.ndarray] = field(default_factory=dict)
     notes: tuple[str, ...] = ()
+    node_groups: Mapping[str, np.ndarray] = field(default_factory=dict)
+    periodic: tuple = ()
 
     @property
     def dim(self) -> int:
@@ -110,8 +116,27 @@ def first_order(mesh: "QuadMesh") -> SolverMesh:
         groups[name] = _sides(quads)[own[:, 0], own[:, 1]]
         owners[name] = own
     sj = np.asarray(mesh.scaled_jacobian, np.float64)
-    return SolverMesh(np.asarray(mesh.xy, np.float64), "quad", quads, patch, names, groups, owners,
-                      {"patch": patch, "scaled_jacobian": sj})
+    xy = np.asarray(mesh.xy, np.float64)
+    nodes = {k: np.asarray(v, np.int64) for k, v in getattr(mesh, "point_sets", {}).items()}
+    return SolverMesh(xy, "quad", quads, patch, names, groups, owners, {"patch": patch, "scaled_jacobian": sj},
+                      node_groups=nodes, periodic=_periodic_pairs(mesh.line_sets, nodes, xy))
+
+
+def _periodic_pairs(line_sets, nodes, xy: np.ndarray) -> tuple:
+    """:attr:`SolverMesh.periodic` from the node groups ``periodic k a`` / ``periodic k b`` and the
+    side groups holding exactly their nodes."""
+    out = []
+    sides = {name: set(np.unique(np.asarray(e, np.int64)).tolist()) for name, e in line_sets.items()
+             if name.startswith("side ") or (name.startswith("hole ") and " side " in name)}
+    k = 1
+    while f"periodic {k} a" in nodes:
+        a, b = nodes[f"periodic {k} a"], nodes[f"periodic {k} b"]
+        ga = next((n for n, v in sides.items() if v == set(a.tolist())), None)
+        gb = next((n for n, v in sides.items() if v == set(b.tolist())), None)
+        if ga is not None and gb is not None:
+            out.append((ga, gb, a, b, xy[b[0]] - xy[a[0]]))
+        k += 1
+    return tuple(out)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -316,4 +341,8 @@ def solver_mesh(mesh: "QuadMesh", *, order: int = 1, serendipity: bool = False, 
     ``extrude_dz`` in ``layers`` layers (``grading``: the top layer's thickness over the bottom
     one's) when given."""
     base = second_order(mesh, serendipity=serendipity) if order == 2 else first_order(mesh)
-    return base if extrude_dz is None else extrude(base, extrude_dz, layers, grading)
+    out = base if extrude_dz is None else extrude(base, extrude_dz, layers, grading)
+    if getattr(mesh, "point_sets", None) and (order == 2 or extrude_dz is not None):
+        out = dataclasses.replace(out, notes=out.notes + (f"the node groups {', '.join(mesh.point_sets)} (periodic pairs) "
+                                                          "are written for first-order quads only: left out",))
+    return out

@@ -145,7 +145,7 @@ def _meshio_mesh(xy, quads, cell_data, quad_groups, quad_group_names, line_group
     return meshio.Mesh(_points3d(xy), cells, cell_data=data)
 
 
-def _json_text(xy, quads, cell_data, quad_groups, quad_group_names, line_groups) -> str:
+def _json_text(xy, quads, cell_data, quad_groups, quad_group_names, line_groups, node_groups=None) -> str:
     data = {
         "points": np.asarray(xy, dtype=np.float64).tolist(),
         "quads": np.asarray(quads, dtype=np.int64).tolist(),
@@ -156,20 +156,23 @@ def _json_text(xy, quads, cell_data, quad_groups, quad_group_names, line_groups)
         data["quad_groups"] = {"names": list(quad_group_names), "group": np.asarray(quad_groups, dtype=np.int64).tolist()}
     if line_groups:
         data["groups"] = {g.name: np.asarray(g.edges, dtype=np.int64).reshape(-1, 2).tolist() for g in line_groups}
+    if node_groups:
+        data["node_groups"] = {k: np.asarray(v, np.int64).tolist() for k, v in node_groups.items()}
     return json.dumps(data, allow_nan=False) + "\n"
 
 
 def write_quads(path: str | os.PathLike, xy: np.ndarray, quads: np.ndarray, *,
                 cell_data: Mapping[str, np.ndarray] | None = None, quad_groups: np.ndarray | None = None,
                 quad_group_names: Sequence[str] = (), line_groups: Sequence[LineGroup] = (),
-                binary: bool = True, fmt: str | None = None) -> Path:
+                binary: bool = True, fmt: str | None = None, node_groups: Mapping[str, np.ndarray] | None = None) -> Path:
     """Write a quad mesh with cell data and named groups to ``path`` atomically.
 
     xy: ``(V, 2) float64`` user coordinates; quads: ``(F, 4) int`` ccw vertex ids;
     cell_data: name -> ``(F,)`` array per quad (floats or ints); quad_groups: ``(F,) int``
     index into ``quad_group_names`` of each quad (``.msh``: physical group ``index + 1``;
     None: every quad in group 1, unnamed); line_groups: named edge sets (see the module
-    docstring for how each format stores them); binary: binary ``.msh`` (MSH 2.2, the version
+    docstring for how each format stores them); node_groups: name -> ``(N,) int`` node ids in
+    their order (``.json`` only: ``"node_groups"``); binary: binary ``.msh`` (MSH 2.2, the version
     this writer writes) and ``.vtk``. Raises :class:`InputError` for an unknown suffix or a
     format this writer does not write (:func:`write_mesh` writes those), before anything is
     written. Returns the path written.
@@ -181,7 +184,7 @@ def write_quads(path: str | os.PathLike, xy: np.ndarray, quads: np.ndarray, *,
     quads = np.asarray(quads, dtype=np.int64)
     cell_data = dict(cell_data or {})
     if fmt == "json":
-        text = _json_text(xy, quads, cell_data, quad_groups, quad_group_names, line_groups)
+        text = _json_text(xy, quads, cell_data, quad_groups, quad_group_names, line_groups, node_groups or {})
         with atomic_open(final, "w") as fh:
             fh.write(text)
         return final
@@ -235,14 +238,17 @@ def write_mesh(path: str | os.PathLike, mesh: "QuadMesh", output: MeshOutput | N
     final = Path(path)
     if out.element_type is not None and fmt != "abaqus":
         raise InputError(f"applies to Abaqus .inp files only, not {fmt}", "--element-type")
-    if fmt in LEGACY and out.plain and (fmt != "gmsh" or out.msh_version == "2.2"):
+    nodes = dict(getattr(mesh, "point_sets", {}))
+    if fmt in LEGACY and out.plain and (fmt != "gmsh" or (out.msh_version == "2.2" and not nodes)):
         patch, names, lines = mesh_groups(mesh)
         cell = {"scaled_jacobian": np.asarray(mesh.scaled_jacobian, dtype=np.float64), "patch": patch}
         if fmt == "obj" and lines:
             warnings.warn(InputWarning("obj holds the quads only: the groups and cell data were left out", str(path)),
                           stacklevel=2)
         write_quads(final, mesh.xy, mesh.quads, cell_data=cell, quad_groups=patch, quad_group_names=names,
-                    line_groups=lines, binary=out.binary, fmt=fmt)
+                    line_groups=lines, binary=out.binary, fmt=fmt, node_groups=nodes)
+        if nodes and fmt in ("vtk", "vtu", "obj"):
+            warnings.warn(InputWarning(f"{fmt}: no node groups ({', '.join(nodes)} left out)", str(path)), stacklevel=2)
         return final
     if fmt in ("obj", "json"):
         raise InputError(f"{fmt} files hold first-order quads in the plane only (no --order 2, no --extrude)",

@@ -94,12 +94,15 @@ corners, which stand out of the chords by more, stay); beyond it the limit stand
 class Outline(NamedTuple):
     """A region as read, before validation: ``points`` the outer loop ``(P, 2)`` (user
     coordinates, possibly closed), ``corners`` explicit corner indices or None, ``holes`` the
-    holes' loops, ``hole_corners`` per hole explicit corner indices or None (or None for all)."""
+    holes' loops, ``hole_corners`` per hole explicit corner indices or None (or None for all),
+    ``tags`` and ``periodic`` as the file gives them (or None; :func:`jaxmatch.shape.check_groups`)."""
 
     points: Any
     corners: Any = None
     holes: tuple = ()
     hole_corners: Any = None
+    tags: Any = None
+    periodic: Any = None
 
 
 class Piece(NamedTuple):
@@ -385,7 +388,7 @@ def tidy(outline: Outline, source: str) -> Outline:
 
     if max(count(p) for p in loops) > MAX_POINTS and corners is None and not any(c is not None for c in hole_corners or ()):
         outer, holes = _simplify(loops, size, source)
-    return Outline(outer, corners, tuple(holes), hole_corners)
+    return Outline(outer, corners, tuple(holes), hole_corners, outline.tags, outline.periodic)
 
 
 def _simplify(loops: list[np.ndarray], size: float, source: str) -> tuple[np.ndarray, list[np.ndarray]]:

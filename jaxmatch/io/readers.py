@@ -3,13 +3,16 @@
 Formats (detected by the file's suffix, else by its content; see :func:`detect_format`):
 
 * ``json``: ``{"boundary": [[x, y], ...], "corners": [i, ...], "holes": [[[x, y], ...], ...],
-  "hole_corners": [[i, ...] or null, ...]}`` (all but ``boundary`` optional).
+  "hole_corners": [[i, ...] or null, ...], "tags": {"name": ["i-j", "hole h", ...]},
+  "periodic": [["i-j", "k-l"], ...]}`` (all but ``boundary`` optional; sides named as the output's
+  ``side i-j`` groups, :func:`jaxmatch.shape.check_groups`).
   Other keys (``"name"``, ``"units"``, ...) are ignored with one :class:`InputWarning` naming
   them.
 * ``geojson`` (``.geojson``, or JSON with a ``"type"`` key): a ``Polygon``, a ``Feature`` of
   one, a ``MultiPolygon`` / ``FeatureCollection`` holding exactly one polygon (or the one
   chosen by ``element``: a feature's ``id`` or ``properties.name``). The outer ring is the
-  boundary, interior rings are holes.
+  boundary, interior rings are holes; a Feature's ``properties.tags`` / ``properties.periodic``
+  as the JSON keys.
 * ``text`` (``.txt .csv .tsv .xy .xyz .dat`` only): one point per row, ``x y``, ``x,y``, ``x;y`` or
   tab-separated; ``#`` starts a comment; blank lines are skipped. An optional first row of
   column names (a header) is allowed: the columns named ``x`` and ``y`` are read (any other
@@ -100,7 +103,7 @@ SUFFIXES: dict[str, str]
 TEXT_SUFFIXES = (".txt", ".csv", ".tsv", ".xy", ".xyz", ".dat")
 """The suffixes of point rows (a file of another suffix is never read as rows)."""
 
-JSON_KEYS = ("boundary", "corners", "holes", "hole_corners")
+JSON_KEYS = ("boundary", "corners", "holes", "hole_corners", "tags", "periodic")
 """Keys of the jaxmatch JSON shape format."""
 
 def split_element(path) -> tuple[str, str | None]:
@@ -140,7 +143,7 @@ def parse_shape(data, source: str = "<input>", *, corner_angle: float = DEFAULT_
     check_corner_angle(corner_angle)
     region = tidy(read_outline(data, source, fmt=fmt, element=element, _file=_file), source)
     return make_shape(region.points, region.corners, corner_angle=corner_angle, source=source, holes=region.holes,
-                      hole_corners=region.hole_corners)
+                      hole_corners=region.hole_corners, tags=region.tags, periodic=region.periodic)
 
 
 def detect_format(source: str, data: bytes | str) -> str:
@@ -296,7 +299,7 @@ def _read_json(doc, source: str):
     if unknown:  # warned once the file is known to be good (a bad file gets its one error line only)
         warnings.warn(InputWarning(f"ignored key{'s' if len(unknown) > 1 else ''} {names} (known keys: {', '.join(JSON_KEYS)})",
                                    where=source), stacklevel=2)
-    return Outline(points, corners, tuple(holes), hole_corners)
+    return Outline(points, corners, tuple(holes), hole_corners, doc.get("tags"), doc.get("periodic"))
 
 
 def _read_geojson(doc, source: str, element: str | None):
@@ -324,7 +327,8 @@ def _read_geojson(doc, source: str, element: str | None):
         geom = doc.get("geometry")
         if not isinstance(geom, dict):
             raise InputError('GeoJSON Feature has no "geometry" object', where=source)
-        return _read_geojson(geom, source, None)
+        props = doc.get("properties") if isinstance(doc.get("properties"), dict) else {}
+        return _read_geojson(geom, source, None)._replace(tags=props.get("tags"), periodic=props.get("periodic"))
     if kind == "MultiPolygon":
         polys = doc.get("coordinates")
         if not isinstance(polys, list) or len(polys) != 1:

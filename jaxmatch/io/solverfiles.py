@@ -9,15 +9,19 @@ joins them into one warning). How each format stores the groups:
 format    groups
 ========  ==========================================================================================
 msh       every region and group a named physical group (regions of the cells' dimension, groups
-          one below); MSH 4.1 gets one entity per group (each with at least one of its nodes)
+          one below); MSH 4.1 gets one entity per group (each with at least one of its nodes);
+          periodic pairs in ``$Periodic`` (side ``b``'s entity slave of side ``a``'s, the
+          translation as the affine map, the node pairs)
 inp       every region and group an element set (``*ELSET``) and a node set (``*NSET``); every
           group also a ``*SURFACE`` (its elements' faces ``S1``..); names with ``_`` for other
-          characters (``side 4-3`` -> ``side_4_3``)
+          characters (``side 4-3`` -> ``side_4_3``); node groups (``periodic k a`` / ``b``) as
+          ``*NSET, UNSORTED`` in their order
 xdmf      ``NAME.xdmf`` the cells with cell tags ``patch`` (patch ``p`` -> ``p + 1``),
           ``NAME_facets.xdmf`` the facets with tags ``group`` (group ``j`` -> ``j + 1``): what
           dolfinx's ``read_meshtags`` reads; one tag per facet (the smallest group holding it)
 e/exo     one element block per region (``eb_names``), every group a node set and a side set
-          (``ss_names``, sides numbered as Exodus does)
+          (``ss_names``, sides numbered as Exodus does); node groups (``periodic k a`` / ``b``) node
+          sets in their order
 mesh      references: cells ``p + 1``, facets as in XDMF (Medit stores no names)
 bdf       regions as property ids (``PID = p + 1``); the groups are left out (no named sets)
 vtu/vtk   cells and facets, cell data ``patch``, ``line_group``/``face_group`` (the group's index)
@@ -164,6 +168,20 @@ def _node_entities(n_points: int, cells, dims) -> np.ndarray | None:
     return np.asarray(dims, np.int64)[owner]
 
 
+def _gmsh_periodic(sm: SolverMesh) -> list:
+    """meshio's ``gmsh_periodic`` of ``sm.periodic``: per pair ``[1, (tag of b, tag of a), the 4 x 4
+    affine map a -> b (row-major), (n, 2) node pairs (b, a)]``; a group's entity tag is its
+    physical tag (:func:`_gmsh_blocks`)."""
+    first = len(sm.region_names) + 1
+    tag = {name: first + j for j, name in enumerate(sm.groups)}
+    out = []
+    for ga, gb, a, b, t in sm.periodic:
+        affine = np.eye(4)
+        affine[:2, 3] = t
+        out.append([1, (tag[gb], tag[ga]), affine.ravel(), np.column_stack([b, a]).astype(np.int64)])
+    return out
+
+
 def write_gmsh(path: Path, sm: SolverMesh, version: str, binary: bool) -> list[str]:
     """MSH ``version`` (``"4.1"`` or ``"2.2"``) with every region and group a physical group."""
     meshio = _meshio()
@@ -179,8 +197,14 @@ def write_gmsh(path: Path, sm: SolverMesh, version: str, binary: bool) -> list[s
             notes.append(f"msh: written as MSH 2.2: {len(cells)} groups and only {pts.shape[0]} nodes, and MSH 4.1 "
                          "classifies every group on a node of its own")
         else:
+            first = len(sm.region_names) + 1
+            tag = {name: first + j for j, name in enumerate(sm.groups)}
+            for ga, gb, a, b, _ in sm.periodic:  # a periodic side's inner nodes on its own curve, as gmsh classifies them
+                owners[np.asarray(a[1:-1], np.int64)] = (sm.dim - 1, tag[ga])
+                owners[np.asarray(b[1:-1], np.int64)] = (sm.dim - 1, tag[gb])
             point_data = {"gmsh:dim_tags": owners}
-    mesh = meshio.Mesh(pts, cells, point_data=point_data, cell_data=data, field_data=field)
+    mesh = meshio.Mesh(pts, cells, point_data=point_data, cell_data=data, field_data=field,
+                       gmsh_periodic=_gmsh_periodic(sm) or None)
     with atomic_path(path) as tmp:
         meshio.write(tmp, mesh, file_format="gmsh" if version == "4.1" else "gmsh22", binary=binary)
     return notes + (["msh: no scaled_jacobian cell data (meshio 5.3 cannot read $ElementData back beside several "
@@ -265,6 +289,10 @@ def write_abaqus(path: Path, sm: SolverMesh, element_type: str | None) -> list[s
                             ",\n".join(",".join(map(str, ids[i:i + 8])) for i in range(0, len(ids), 8)))
             lines.append(f"_{key}_S{s}, S{s}")
         surfaces.append("\n".join(lines))
+    for name, ids in sm.node_groups.items():  # in their order (Abaqus sorts a set unless it is UNSORTED)
+        ids = (np.asarray(ids, np.int64) + 1).tolist()
+        surfaces.append(f"*NSET, NSET={abaqus_name(name)}, UNSORTED\n" +
+                        ",\n".join(",".join(map(str, ids[i:i + 8])) for i in range(0, len(ids), 8)))
     mesh = meshio.Mesh(_points(sm, dim), [(sm.cell_type, sm.cells)], cell_sets=cell_sets, point_sets=point_sets)
     mesh.cells[0].type = et  # written as given (translate_cell_names=False); meshio's Mesh knows its own names only
     with atomic_path(path) as tmp:
@@ -314,6 +342,7 @@ def write_exodus(path: Path, sm: SolverMesh) -> list[str]:
     blocks = [(sm.cell_type, sm.cells[order[sm.region[order] == r]]) for r in range(len(sm.region_names))]
     keep = [i for i, b in enumerate(blocks) if len(b[1])]
     point_sets = {name: np.unique(f).astype(np.int64) for name, f in sm.groups.items() if len(f)}
+    point_sets.update({name: np.asarray(ids, np.int64) for name, ids in sm.node_groups.items()})  # in their order
     mesh = meshio.Mesh(_points(sm, sm.dim), [blocks[i] for i in keep], point_sets=point_sets)
     with atomic_path(path) as tmp:
         meshio.write(tmp, mesh, file_format="exodus")
@@ -375,13 +404,16 @@ def write_nastran(path: Path, sm: SolverMesh) -> list[str]:
 def write_solver_file(path: Path, sm: SolverMesh, fmt: str, *, msh_version: str = "4.1", binary: bool = True,
                       element_type: str | None = None) -> list[str]:
     """Write ``sm`` to ``path`` in format ``fmt`` (a registered mesh format's name); the notes."""
+    lost = [] if fmt in ("abaqus", "exodus") or not sm.node_groups else \
+        ["msh: the periodic pairs are in $Periodic (no node groups)"] if fmt == "gmsh" else \
+        [f"{fmt}: no node groups ({', '.join(sm.node_groups)} left out)"]
     if fmt == "gmsh":
-        return write_gmsh(path, sm, msh_version, binary)
+        return write_gmsh(path, sm, msh_version, binary) + lost
     if fmt in ("vtu", "vtk"):
-        return write_vtk(path, sm, fmt)
+        return write_vtk(path, sm, fmt) + lost
     writers = {"abaqus": lambda: write_abaqus(path, sm, element_type), "xdmf": lambda: write_xdmf(path, sm),
                "exodus": lambda: write_exodus(path, sm), "medit": lambda: write_medit(path, sm),
                "nastran": lambda: write_nastran(path, sm)}
     if fmt not in writers:
         raise InputError(f"{fmt} files hold first-order quads only (no --order 2, no --extrude)", str(path))
-    return writers[fmt]()
+    return writers[fmt]() + lost

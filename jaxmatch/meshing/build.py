@@ -41,8 +41,8 @@ def from_layout(lm, *, size: float | None = None, corners: np.ndarray | None = N
     for h, loop in enumerate(getattr(lm, "holes", ()), start=1):
         line_sets[f"hole {h}"] = _loop_edges(loop)
     names, outer = lm.sides.names, lm.sides.outer
-    for name, ids in zip(lm.sides.names, lm.side_vertices):
-        line_sets[f"side {name}"] = np.stack([ids[:-1], ids[1:]], axis=1)
+    for name, ids, o in zip(lm.sides.names, lm.side_vertices, outer):  # cuts between patches: "cut i-j"
+        line_sets[f"{'side' if o else 'cut'} {name}"] = np.stack([ids[:-1], ids[1:]], axis=1)
     return QuadMesh(xy=lm.xy, quads=np.asarray(lm.quads, np.int64), patch=np.asarray(lm.patch, np.int64),
                     line_sets=line_sets, region_area=float(lm.region_area), corners=np.asarray(corners, np.float64),
                     size=size, side_lengths={n: float(v) for n, v, o in zip(names, lm.sides.lengths, outer) if o},

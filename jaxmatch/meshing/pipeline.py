@@ -37,6 +37,7 @@ from jaxmatch.defaults import DEFAULT_LATTICE, QUALITY, Quality
 from jaxmatch.errors import InputError
 from jaxmatch.meshing.build import from_layout, from_placement, from_refined
 from jaxmatch.meshing.choose import choose
+from jaxmatch.meshing.groups import make_periodic, name_groups, periodic_mismatch
 from jaxmatch.meshing.region import canonical, corner_points, default_size, load_region
 from jaxmatch.meshing.result import Candidate, QuadMesh
 from jaxmatch.meshing.strategies import (RINGS, SINGLE, Bends, Conforming, Larger, Layouts, Request, RingPartition, Smooth,
@@ -175,7 +176,7 @@ def _mesh_template(shape, cat, lat, options, progress, quality) -> QuadMesh:
     scored = None if progress is None else (lambda done, total: progress(done, total, "template"))
     choice = choose_mesh(shape, cat, lat, progress=scored, quality=quality, **opts)
     m = from_placement(shape, choice.placement, choice.match.mesh_id, detail=choice)
-    return m.with_choice("template", "", None, (Candidate("template", m),))
+    return _named(m.with_choice("template", "", None, (Candidate("template", m),)), shape)
 
 
 def _mesh_sides(shape, cat, lat, sides, quality) -> QuadMesh:
@@ -198,7 +199,7 @@ def _mesh_sides(shape, cat, lat, sides, quality) -> QuadMesh:
             raise InfeasibleRequest(f"edge counts {','.join(map(str, counts.tolist()))} cannot be met: {odd}"
                                     f"{e.problem}{near}", shape.source) from None
         m = from_layout(lm, corners=corner_points(shape))
-    return m.with_choice(SINGLE, "", None, (Candidate(SINGLE, m),))
+    return _named(m.with_choice(SINGLE, "", None, (Candidate(SINGLE, m),)), shape)
 
 
 def _mesh_size(shape, cat, lat, h, strategies, quality, budget_s, progress, corner_angle) -> QuadMesh:
@@ -222,7 +223,20 @@ def _mesh_size(shape, cat, lat, h, strategies, quality, budget_s, progress, corn
 
         plan = (layouts, Larger(), Conforming()) + rings + (Bends(layouts, rejudge),)
     tried = run(plan, req)
+    if region.periodic:  # a candidate whose periodic sides got different counts (no equal-count program) is out
+        tried = [c if c.mesh is None or not periodic_mismatch(c.mesh, region) else
+                 Candidate(c.name, None, periodic_mismatch(c.mesh, region)) for c in tried]
     if not any(c.mesh is not None for c in tried):
         raise InputError("no candidate could be meshed: " + "; ".join(f"{c.name}: {c.note}" for c in tried),
                          where=region.source)
-    return choose(tried, quality)
+    return _named(choose(tried, quality), region)
+
+
+def _named(m: QuadMesh, region: Shape) -> QuadMesh:
+    """``m`` with the groups of the input's numbering (:func:`jaxmatch.meshing.groups.name_groups`)
+    and its periodic sides made translates (:func:`~jaxmatch.meshing.groups.make_periodic`).
+    Raises :class:`InputError` when a periodic pair's sides got different edge counts."""
+    why = periodic_mismatch(m, region)
+    if why:
+        raise InputError(f"{why}: periodic sides need equal counts (give equal --sides)", where=region.source)
+    return make_periodic(name_groups(m, region))

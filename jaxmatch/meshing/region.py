@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import os
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -18,6 +19,7 @@ from jaxmatch.io.readers import load_shape
 from jaxmatch.placement.decompose import _corner_points
 from jaxmatch.placement.layout import MAX_BYTES, layout_sides, parse_layout
 from jaxmatch.shape import DEFAULT_CORNER_ANGLE, Shape, make_shape, scale_corners
+from jaxmatch.sides import LoopNumbers
 
 __all__ = ["DEDUPE", "canonical", "corner_points", "default_size", "load_region"]
 
@@ -63,12 +65,12 @@ DEDUPE = 1e-8
 before meshing (a corner among them stays, at the first point): layouts need distinct points."""
 
 
-def _dedupe(ring: np.ndarray, corners: np.ndarray, tol: float) -> tuple[np.ndarray, np.ndarray]:
-    """``ring (P, 2)`` without points within ``tol`` of the previous kept point, and ``corners``
-    (indices) mapped onto the kept points."""
+def _dedupe(ring: np.ndarray, corners: np.ndarray, tol: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``ring (P, 2)`` without points within ``tol`` of the previous kept point, ``corners``
+    (indices) mapped onto the kept points, and the kept points' indices into ``ring``."""
     step = np.hypot(*(roll(ring, -1) - ring).T)  # to the next point, the last to the first
     if np.all(step > tol):  # (the common case: nothing to merge, no loop over the points)
-        return ring, np.asarray(corners, np.int64)
+        return ring, np.asarray(corners, np.int64), np.arange(len(ring))
     keep = [0]
     owner = np.zeros(len(ring), np.int64)
     for i in range(1, len(ring)):
@@ -79,8 +81,8 @@ def _dedupe(ring: np.ndarray, corners: np.ndarray, tol: float) -> tuple[np.ndarr
         owner[owner == len(keep) - 1] = 0
         keep.pop()
     if len(keep) == len(ring):
-        return ring, np.asarray(corners, np.int64)
-    return ring[keep], np.unique(owner[np.asarray(corners, np.int64)])
+        return ring, np.asarray(corners, np.int64), np.arange(len(ring))
+    return ring[keep], np.unique(owner[np.asarray(corners, np.int64)]), np.asarray(keep, np.int64)
 
 
 def canonical(shape: Shape, size: float | None = None, corner_angle: float = DEFAULT_CORNER_ANGLE,
@@ -106,19 +108,29 @@ def canonical(shape: Shape, size: float | None = None, corner_angle: float = DEF
 
     pts = shape.given_points
     tol = DEDUPE * float(np.ptp(pts, axis=0).max())
-    holes, hole_corners = [], []
-    for ring, hc in sorted(zip(shape.holes, shape.hole_corners), key=lambda rc: tuple(rc[0][first(rc[0])])):
-        ring, hc = _dedupe(ring, corners_of(ring, hc), tol)
+    numbering = shape.numbering or (LoopNumbers(np.arange(len(pts)), None, shape.input_clockwise, 0),)
+    holes, hole_corners, passed = [], [], []  # passed: per loop, the file's numbers of the points handed on
+    order = sorted(range(len(shape.holes)), key=lambda k: tuple(shape.holes[k][first(shape.holes[k])]))
+    for i in order:
+        ring, hc = shape.holes[i], shape.hole_corners[i]
+        nb = numbering[i + 1] if i + 1 < len(numbering) else LoopNumbers(np.arange(len(ring)), None, True, i + 1)
+        ring, hc, keep = _dedupe(ring, corners_of(ring, hc), tol)
         k = first(ring)
         holes.append(np.roll(ring, -k, axis=0))
         hole_corners.append(sorted(int(c) for c in (hc - k) % len(ring)))
-    pts2, outer = _dedupe(pts, corners_of(pts, shape.corners), tol)
+        passed.append(nb._replace(numbers=np.roll(np.asarray(nb.numbers)[keep], -k)))
+    pts2, outer, keep = _dedupe(pts, corners_of(pts, shape.corners), tol)
     start = first(pts2)
     if start == 0 and shape.corner_order is None and not holes and len(pts2) == len(pts) \
             and np.array_equal(outer, shape.corners):
         return shape
     same_points = len(pts2) == len(pts)  # the checked loop from another point: simple, distinct points
     pts = pts2
+    passed.insert(0, numbering[0]._replace(numbers=np.roll(np.asarray(numbering[0].numbers)[keep], -start)))
     corners = sorted(int(c) for c in (outer - start) % len(pts))
-    return make_shape(np.roll(pts, -start, axis=0), corners=corners, source=shape.source, holes=holes or None,
-                      hole_corners=hole_corners or None, checked=same_points)
+    region = make_shape(np.roll(pts, -start, axis=0), corners=corners, source=shape.source, holes=holes or None,
+                        hole_corners=hole_corners or None, checked=same_points)
+    # the region's loops index the points handed on; the file's numbers are those points' numbers
+    carried = tuple(p._replace(numbers=np.asarray(p.numbers)[np.asarray(r.numbers)])
+                    for p, r in zip(passed, region.numbering))
+    return replace(region, numbering=carried, tags=shape.tags, periodic=shape.periodic)

@@ -63,11 +63,15 @@ class QuadMesh:
     xy: ``(V, 2) float64`` user coordinates; quads: ``(Q, 4) int64`` counter-clockwise.
     patch: ``(Q,) int64`` the patch of each quad (all 0 for one template).
     line_sets: name -> ``(E, 2) int64`` edges: ``"boundary"`` (the outer loop), ``"side i-j"``
-        (each side between corners/layout points ``i`` and ``j``), ``"hole h"``.
+        (the side from the input's corner ``i`` to ``j``: :mod:`jaxmatch.meshing.groups`; a
+        layout file's side between its points ``i`` and ``j``), ``"hole h"``, ``"hole h side
+        i-j"``, ``"cut k"`` (between patches), the user's tags.
     region_area: area of the region (user units squared); corners: ``(C, 2) float64`` the
         region's corners, each of which must be a mesh vertex.
     size: the target edge length (user units) or None; side_lengths / side_counts: name ->
         length of a side on the region's boundary and its number of mesh edges (``"i-j"``).
+    point_sets: name -> ``(N,) int64`` node ids (the periodic pairs' ``"periodic k a"`` /
+        ``"periodic k b"``, in matching order).
     chosen: the candidate that won (``"single"``, a decomposition, ``"template"``, ``"layout"``);
     rule: the rule of :mod:`jaxmatch.meshing.choose` that decided (empty with one candidate);
     runner_up: the best other candidate's name or None; tried: every :class:`Candidate`;
@@ -91,6 +95,7 @@ class QuadMesh:
     side_lengths: Mapping[str, float] = field(default_factory=dict)
     side_counts: Mapping[str, int] = field(default_factory=dict)
     templates: tuple[str, ...] = ()
+    point_sets: Mapping[str, np.ndarray] = field(default_factory=dict)
     chosen: str = ""
     rule: str = ""
     runner_up: str | None = None

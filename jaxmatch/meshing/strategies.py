@@ -43,6 +43,7 @@ from jaxmatch.placement.refine import DEFAULT_LIMIT, InfeasibleRequest, refine_m
 from jaxmatch.placement.solve import ALL_SIZES, TEMPLATE_SIZES, mesh_layout
 from jaxmatch.placement.templates import walk
 from jaxmatch.shape import Shape
+from jaxmatch.sides import periodic_lines
 
 __all__ = ["CONFORMING_TRIES", "DISK", "FINER", "RINGS", "SINGLE", "Bends", "Conforming", "Larger", "LayoutStrategy", "Layouts",
            "Request", "RingPartition", "Rings", "Single", "Smooth", "Split", "conforming_templates", "larger_templates", "layout_strategies", "run",
@@ -136,7 +137,8 @@ def try_layouts(shape: Shape, strategies: Sequence["LayoutStrategy"], cat, lat, 
         else:
             try:
                 check_layout(lay)  # (the cuts' layouts are checked only when meshed)
-                lm = mesh_layout(lay, cat, lat, size=h, smooth_cuts=lay.n_patches > 1, sizes=sizes, quality=quality)
+                lm = mesh_layout(lay, cat, lat, size=h, smooth_cuts=lay.n_patches > 1, sizes=sizes, quality=quality,
+                                 periodic=periodic_lines(shape))
             except FAILED as e:
                 tried[i] = Candidate(label, None, _why_not(e))
             else:
@@ -255,7 +257,7 @@ class Larger:
 
     def candidates(self, req: Request, tried) -> list[Candidate]:
         return larger_templates(single_patch(req.region), req.cat, req.lat, req.h, req.corners, _single(tried),
-                                req.quality)
+                                req.quality, periodic_lines(req.region))
 
 
 class Conforming:
@@ -353,14 +355,15 @@ def run(plan: Sequence, req: Request) -> list[Candidate]:
     return tried
 
 
-def larger_templates(lay, cat, lat, h, corners, first: QuadMesh, quality: Quality = QUALITY) -> list[Candidate]:
+def larger_templates(lay, cat, lat, h, corners, first: QuadMesh, quality: Quality = QUALITY,
+                     periodic=()) -> list[Candidate]:
     """Single-patch candidates from the larger template sizes: the best template of each size
     group of :data:`~jaxmatch.placement.solve.ALL_SIZES` after the first (the single candidate
     takes the first group that has one), named ``"single <template id>"``."""
     out, seen = [], {first.templates}
     for group in ALL_SIZES[1:]:
         try:
-            lm = mesh_layout(lay, cat, lat, size=h, sizes=(group,), quality=quality)
+            lm = mesh_layout(lay, cat, lat, size=h, sizes=(group,), quality=quality, periodic=periodic)
         except (InputError, SolverError, IndexError):
             continue
         m = from_layout(lm, size=h, corners=corners)

@@ -55,20 +55,22 @@ about the size too) against the primary one (edges per side close to ``length / 
 def solve_counts(sides, matrices: Sequence[np.ndarray], *, counts: Mapping[int, int] | None = None,
                  size: float | None = None, widths: Sequence[np.ndarray] | None = None,
                  source: str = "<layout>", floors: np.ndarray | None = None,
-                 chord_weight: float = CHORD_WEIGHT) -> tuple[list[np.ndarray], np.ndarray]:
+                 chord_weight: float = CHORD_WEIGHT, equal: Sequence = ()) -> tuple[list[np.ndarray], np.ndarray]:
     """Chord multiplicities of every patch from ONE integer program (``scipy.optimize.milp``).
 
     matrices: per patch ``(n_p, c_p) int64`` side matrix (edges of chord ``c`` on the patch's
     side ``i``); counts: ``{side id: count}`` required exactly; size: target edge length (user
     units; default: the requested sides' total length over their total count); widths: per
     patch ``(c_p,)`` chord widths (user units, :meth:`PatchTemplate.chord_widths`); floors:
-    ``(S,)`` the fewest edges of each side not requested (:func:`curve_floors`).
+    ``(S,)`` the fewest edges of each side not requested (:func:`curve_floors`); equal: pairs
+    ``(side ids A, side ids B)`` whose total counts must be equal (periodic sides: a side of
+    the input may be several layout sides where cuts end on it).
 
     Variables: ``m_p >= 1`` integer per patch and chord, ``n_s >= 1`` integer per side.
     Constraints: ``A_p[i] @ m_p = sum of n_s over the layout sides along patch side i`` for
     every patch side (so a shared side has one count in both patches, a side along which two
     neighbours meet is split between them, and each patch's total is even), ``n_s = counts[s]``
-    when requested. Objective: ``sum_s |n_s - length_s / size|`` over the sides not requested, plus
+    when requested, ``sum n_A = sum n_B`` for each pair of ``equal``. Objective: ``sum_s |n_s - length_s / size|`` over the sides not requested, plus
     :data:`CHORD_WEIGHT` ``* sum_c |m_c - max(width_c / size, 1)|``; each ``|x - tau|`` is a
     continuous variable bounded below by the two lines of the absolute value and by its chord
     between the integers around ``tau`` (:func:`_chord_row`: a tight relaxation, the same
@@ -115,6 +117,13 @@ def solve_counts(sides, matrices: Sequence[np.ndarray], *, counts: Mapping[int, 
                 r[M + parts] = -1.0
                 lo.append(0.0)
                 hi.append(0.0)
+        for ids_a, ids_b in equal:  # periodic sides: one count
+            r = row()
+            r[M + np.asarray(ids_a, np.int64)] += 1.0
+            r[M + np.asarray(ids_b, np.int64)] -= 1.0
+            lo.append(0.0)
+            hi.append(0.0)
+
         def deviation(x: int, d: int, tau: float) -> None:
             """Rows making variable ``d`` at least ``|x - tau|`` for integer ``x``: the two
             lines of the absolute value, and the chord through its values at the integers on

@@ -86,7 +86,8 @@ def _fitted(refined_mesh, xy: np.ndarray):
 def mesh_layout(layout: Layout, catalogue: Catalogue, lattice: Lattice, *, size: float | None = None,
                 counts: Mapping[int, int] | None = None, templates_per_patch: int = TEMPLATES_PER_PATCH,
                 sizes=TEMPLATE_SIZES, smooth_cuts: bool = False, progress=None,
-                first_templates: Sequence[int] | None = None, quality: Quality = QUALITY) -> LayoutMesh:
+                first_templates: Sequence[int] | None = None, quality: Quality = QUALITY,
+                periodic: Sequence = ()) -> LayoutMesh:
     """Mesh every patch of ``layout`` and merge them into one conforming :class:`LayoutMesh`.
 
     size: target edge length (user units) for sides without a requested count; counts:
@@ -95,6 +96,9 @@ def mesh_layout(layout: Layout, catalogue: Catalogue, lattice: Lattice, *, size:
     quality: the policy (:class:`~jaxmatch.defaults.Quality`): a refined patch below
     ``quality.good_sj`` (or with inverted quads) gets its next template in the next round;
     ``quality.area_tol`` bounds a curved side's chords.
+    periodic: pairs of polylines ``(pa (k, 2), pb (j, 2))`` (user units) on the outer boundary:
+    the layout sides along ``pa`` get as many edges in total as those along ``pb`` (one equality
+    of the integer program, :func:`_equal_sides`).
     first_templates: per patch, the index of the candidate template to start from (default 0,
     the best-ranked; a patch with fewer candidates raises IndexError).
     smooth_cuts: after merging, untangle/smooth all vertices except the outer boundary
@@ -110,7 +114,32 @@ def mesh_layout(layout: Layout, catalogue: Catalogue, lattice: Lattice, *, size:
     """
     return _mesh_layout_cached(layout, catalogue, lattice, size=size, counts=counts,
                                templates_per_patch=templates_per_patch, sizes=sizes, smooth_cuts=smooth_cuts,
-                               progress=progress, first_templates=first_templates, quality=quality)
+                               progress=progress, first_templates=first_templates, quality=quality,
+                               periodic=tuple(periodic))
+
+
+def _equal_sides(layout: Layout, sides: Sides, periodic) -> tuple:
+    """``((side ids along pa, side ids along pb), ...)``: the boundary sides of ``layout`` whose
+    points all lie on each polyline of ``periodic`` (within ``1e-9`` of the layout's extent;
+    shapely distances). Raises :class:`InputError` when a polyline has no side along it."""
+    if not periodic:
+        return ()
+    import shapely
+
+    tol = 1e-9 * float(np.ptp(layout.points, axis=0).max())
+    outer = np.flatnonzero(sides.outer)
+    out = []
+    for pair in periodic:
+        ids = []
+        for poly in pair:
+            line = shapely.LineString(np.asarray(poly, np.float64))
+            on = [int(s) for s in outer
+                  if float(np.max(shapely.distance(line, shapely.points(layout.points[sides.chains[s]])))) <= tol]
+            if not on:
+                raise InputError("a periodic side is no side of the layout", where=layout.source)
+            ids.append(tuple(on))
+        out.append(tuple(ids))
+    return tuple(out)
 
 
 FEASIBILITY_TRIES = 40
@@ -120,7 +149,7 @@ whose template change makes a layout's program feasible: past it the layout is g
 (138 patches) took 219 of them, 7.6 of its 8.6 s, for a mesh that did not win."""
 
 
-def _advance_for_feasibility(sides, cands, choice, want, size, source) -> bool:
+def _advance_for_feasibility(sides, cands, choice, want, size, source, equal=()) -> bool:
     """Switch one patch to another template so that the program becomes feasible; True when
     one was found (``choice`` is changed in place) within :data:`FEASIBILITY_TRIES` programs."""
     tries = 0
@@ -136,7 +165,7 @@ def _advance_for_feasibility(sides, cands, choice, want, size, source) -> bool:
             try:
                 solve_counts(sides, [cands[q][trial[q]].side_matrix() for q in range(len(cands))], counts=want,
                              size=size, widths=[cands[q][trial[q]].chord_widths() for q in range(len(cands))],
-                             source=source)
+                             source=source, equal=equal)
             except LayoutInfeasible:
                 continue
             choice[p] = j
@@ -163,14 +192,14 @@ def patch_shapes_kept(layout: Layout, catalogue: Catalogue, lkey: tuple | None =
 
 
 def _solve_counts_cached(layout: Layout, sides: Sides, matrices, want, size, widths, floors, cache: Cache,
-                         lkey: tuple):
+                         lkey: tuple, equal: tuple = ()):
     """:func:`solve_counts` of ``layout`` (whose ``sides`` these are, ``lkey`` its
     :func:`layout_key`), from ``cache`` (store ``solves``) when the same program was solved
     before; fresh copies of the arrays either way."""
     k = (lkey,) + cache_key(matrices, {int(a): int(b) for a, b in want.items()}, None if size is None else float(size),
-                            widths, floors)
+                            widths, floors) + ((equal,) if equal else ())
     mults, n = cache.get("solves", k, lambda: solve_counts(sides, matrices, counts=want, size=size, widths=widths,
-                                                          source=layout.source, floors=floors),
+                                                          source=layout.source, floors=floors, equal=equal),
                          keep_errors=(InputError, LayoutInfeasible))
     return [np.array(m) for m in mults], np.array(n)
 
@@ -199,13 +228,14 @@ def _smooth_cuts(xy: np.ndarray, quads: np.ndarray, fixed: np.ndarray, sides: Si
 
 
 def _mesh_layout_cached(layout: Layout, catalogue, lattice, *, size, counts, templates_per_patch, sizes, smooth_cuts,
-                        progress, first_templates, quality) -> LayoutMesh:
+                        progress, first_templates, quality, periodic=()) -> LayoutMesh:
     """:func:`_mesh_layout` from the catalogue's cache (store ``layouts``) when the same layout was
     meshed with the same options (the answer names the given layout; its arrays are copies)."""
     lkey = layout_key(layout)
     k = (lkey,) + cache_key(lattice, None if size is None else float(size),
                             None if counts is None else {int(a): int(b) for a, b in dict(counts).items()},
-                            int(templates_per_patch), sizes, bool(smooth_cuts), first_templates, quality)
+                            int(templates_per_patch), sizes, bool(smooth_cuts), first_templates, quality) \
+        + ((cache_key(*[np.asarray(x, np.float64) for pair in periodic for x in pair]),) if periodic else ())
     cache = catalogue.cache
     done = cache.lookup("layouts", k)  # (an error kept for these options is raised again)
     if done is not None:
@@ -216,7 +246,8 @@ def _mesh_layout_cached(layout: Layout, catalogue, lattice, *, size, counts, tem
     lm = cache.get("layouts", k, lambda: _mesh_layout(layout, catalogue, lattice, size=size, counts=counts,
                                                       templates_per_patch=templates_per_patch, sizes=sizes,
                                                       smooth_cuts=smooth_cuts, progress=progress,
-                                                      first_templates=first_templates, quality=quality, lkey=lkey),
+                                                      first_templates=first_templates, quality=quality, lkey=lkey,
+                                                      periodic=periodic),
                    quads=lambda m: m.quads.shape[0], keep_errors=(LayoutInfeasible, InputError))
     return _copied(lm, layout)
 
@@ -237,12 +268,13 @@ def _copied(lm: LayoutMesh, layout: Layout) -> LayoutMesh:
 
 
 def _mesh_layout(layout: Layout, catalogue: Catalogue, lattice: Lattice, *, size, counts, templates_per_patch, sizes,
-                 smooth_cuts, progress, first_templates, quality: Quality, lkey: tuple) -> LayoutMesh:
+                 smooth_cuts, progress, first_templates, quality: Quality, lkey: tuple, periodic=()) -> LayoutMesh:
     """The work of :func:`mesh_layout` (see there; ``lkey``: :func:`layout_key` of ``layout``)."""
     cache = catalogue.cache
     sides = layout_sides_kept(layout, catalogue, lkey)
     want = {s: c for s, c in parse_counts(dict(layout.requested), sides, layout.source).items()}
     want.update(counts or {})
+    equal = _equal_sides(layout, sides, periodic)
     shapes = patch_shapes_kept(layout, catalogue, lkey)
     moved = _translates(layout)
     cands = []
@@ -272,9 +304,9 @@ def _mesh_layout(layout: Layout, catalogue: Catalogue, lattice: Lattice, *, size
         tmpl = [cands[p][choice[p]] for p in range(len(shapes))]
         try:
             mults, n = _solve_counts_cached(layout, sides, [t.side_matrix() for t in tmpl], want, size,
-                                            [t.chord_widths() for t in tmpl], floors, cache, lkey)
+                                            [t.chord_widths() for t in tmpl], floors, cache, lkey, equal)
         except LayoutInfeasible:
-            if not _advance_for_feasibility(sides, cands, choice, want, size, layout.source):
+            if not _advance_for_feasibility(sides, cands, choice, want, size, layout.source, equal):
                 raise
             continue
         refined = []
