@@ -122,6 +122,10 @@ def parse_args(argv=None):
     ap.add_argument("--mesh-bulk-no-gmsh", action="store_true", help="--mesh-bulk: leave out the gmsh reference")
     ap.add_argument("--mesh-profile", default="", metavar="SHAPE:DIV",
                     help="--mesh: only profile one warm jaxmatch.mesh call (cProfile: top 10 by cumulative and by own time), e.g. T:32")
+    ap.add_argument("--mesh-bulk-profile", default="", metavar="N[:DIV]",
+                    help="--mesh: only the bulk path's per-part work in one process, as a worker does it: the first N "
+                         "random parts of scripts/make_bulk_parts.py at perimeter / DIV (default 32), CPU time per part "
+                         "and per strategy, and cProfile's top 15 by cumulative and by own time, e.g. 60:32")
     return ap.parse_args(argv)
 
 
@@ -1178,6 +1182,68 @@ def profile_mesh(name: str, div: int, top: int = 10) -> dict:
     return {"shape": name, "div": div, "wall_s": wall, "profiled_s": st.total_tt, "top": entries(3), "top_own": entries(2)}
 
 
+def profile_bulk(parts: int, div: int = 32, top: int = 15) -> dict:
+    """The bulk path's per-part work in this one process, as a ``--jobs`` worker does it (the
+    catalogue opened once, the kernels warmed, BLAS on one thread; one part meshed untimed): the
+    first ``parts`` random parts of ``scripts/make_bulk_parts.py`` meshed at perimeter / ``div``
+    twice, every meshing cache cleared before each pass. ``cpu_s``: the first pass's CPU time
+    (``time.process_time``); ``profiled_s``: the second's, under cProfile with that CPU clock
+    (Python code is slowed, compiled code is not: read shares, not seconds). ``strategies``: per
+    strategy of :mod:`jaxmatch.meshing.strategies`, the parts it ran for, the profiled seconds of
+    its candidates; ``chosen_by``: how many chosen meshes each kind of candidate made (a larger or
+    a conforming single template are both named ``single <id>``); ``top``, ``top_own``: as
+    :func:`profile_mesh`."""
+    import cProfile
+    import pstats
+
+    import jaxmatch
+    from jaxmatch.batch import one_core, warm_kernels
+    from jaxmatch.meshing import strategies
+
+    with tempfile.TemporaryDirectory() as tmp:
+        docs = _script("make_bulk_parts").parts(int(parts) + 1)
+        for i, doc in enumerate(docs):
+            (Path(tmp) / f"part-{i:03d}.json").write_text(json.dumps(doc) + "\n")
+        shapes = [jaxmatch.load_shape(Path(tmp) / f"part-{i:03d}.json") for i in range(len(docs))]
+    cat = jaxmatch.load_catalogue()
+    warm_kernels(True)
+    one_core()
+    jaxmatch.mesh(shapes[-1], divisions=div, catalogue=cat)  # (a part not measured: the code paths warm)
+    shapes = shapes[:-1]
+    cat.cache.forget_shapes()
+    t = time.process_time()
+    meshes = [jaxmatch.mesh(s, divisions=div, catalogue=cat) for s in shapes]
+    cpu = time.process_time() - t
+    cat.cache.forget_shapes()
+    prof = cProfile.Profile(time.process_time)
+    prof.enable()
+    for s in shapes:
+        jaxmatch.mesh(s, divisions=div, catalogue=cat)
+    prof.disable()
+    st = pstats.Stats(prof)
+    per = {}
+    for cls in (strategies.Layouts, strategies.Larger, strategies.Conforming, strategies.RingPartition,
+                strategies.Bends, strategies.Smooth):
+        code = cls.candidates.__code__
+        _, nc, _, ct, _ = st.stats.get((code.co_filename, code.co_firstlineno, code.co_name), (0, 0, 0.0, 0.0, {}))
+        per[cls.__name__] = {"parts": nc, "profiled_s": ct}
+    chosen_by: dict = {}
+    for m in meshes:  # the kind of the chosen candidate, by its name
+        c = m.chosen
+        who = ("RingPartition" if c == strategies.RINGS else "Smooth" if c == strategies.DISK
+               else "Bends" if c.endswith(strategies.FINER) else "Larger or Conforming" if c.startswith(strategies.SINGLE + " ")
+               else "Layouts")
+        chosen_by[who] = chosen_by.get(who, 0) + 1
+
+    def entries(col):
+        rows = sorted(st.stats.items(), key=lambda kv: -kv[1][col])[:top]
+        return [[f"{Path(f).name}:{line}({fn})" if f != "~" else fn, nc, tt, ct] for (f, line, fn), (_, nc, tt, ct, _) in rows]
+
+    return {"parts": len(shapes), "div": int(div), "cpu_s": cpu, "cpu_s_per_part": cpu / max(len(shapes), 1),
+            "profiled_s": st.total_tt, "strategies": per, "chosen_by": chosen_by, "top": entries(3), "top_own": entries(2),
+            "load": list(os.getloadavg())}
+
+
 def _report(line: str, result: dict, as_json: bool) -> int:
     """Print a benchmark's one-line summary (to stderr with --json) and, with --json, its JSON
     object on the last line; exit status 0."""
@@ -1207,6 +1273,23 @@ def main(argv=None) -> int:
                        f"in the workers: median {r['per_region_s']['median']:.3f} s, max {r['per_region_s']['max']:.3f} s, "
                        f"sum {r['per_region_s']['sum']:.1f} s){ref}{gm}; load "
                        f"{r['load']['before'][0]:.2f} -> {r['load']['after'][0]:.2f}", r, args.json)
+    if args.mesh and args.mesh_bulk_profile:
+        n, _, div = args.mesh_bulk_profile.partition(":")
+        r = profile_bulk(int(n), int(div or 32))
+        out = sys.stderr if args.json else sys.stdout
+        print(f"bulk path, {r['parts']} random parts at perimeter / {r['div']} in one process: {r['cpu_s']:.2f} CPU s "
+              f"({r['cpu_s_per_part']:.3f} s a part); under cProfile (CPU clock) {r['profiled_s']:.2f} s; load "
+              f"{r['load'][0]:.2f}", file=out)
+        for name, v in r["strategies"].items():
+            print(f"  {name:>13}: ran for {v['parts']:3d} parts, {v['profiled_s']:6.2f} s profiled", file=out)
+        print("  chosen: " + ", ".join(f"{k} {v}" for k, v in r["chosen_by"].items()), file=out)
+        for title, key in (("cumulative", "top"), ("own", "top_own")):
+            print(f"top {len(r[key])} by {title} time:", file=out)
+            for fn, nc, tt, ct in r[key]:
+                print(f"  {ct:7.3f} s cumulative {tt:7.3f} s own {nc:7d} calls  {fn}", file=out)
+        if args.json:
+            print(json.dumps({"bulk_profile": r}))
+        return 0
     if args.mesh and args.mesh_profile:
         name, _, div = args.mesh_profile.partition(":")
         r = profile_mesh(name, int(div or 32))

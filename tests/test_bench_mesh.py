@@ -123,3 +123,17 @@ def test_the_parts_generator_is_fixed_and_star_shaped(bench):
         assert len(d["holes"][0]) == gen.HOLE_POINTS and outer.contains(hole)
         c = hole.centroid
         assert all(outer.buffer(1e-9).contains(shapely.LineString([p, (c.x, c.y)])) for p in d["boundary"])
+
+
+def test_the_bulk_profile_counts_every_part_and_the_strategies_that_ran(bench):
+    """--mesh-bulk-profile N: the first N random parts meshed as a worker meshes them; every part
+    meshed once by the Layouts strategy, each chosen mesh attributed to one kind of candidate,
+    the profiled strategies within the profiled total."""
+    r = json.loads(json.dumps(bench.profile_bulk(3, 8, top=5)))
+    assert (r["parts"], r["div"]) == (3, 8) and r["cpu_s"] > 0
+    assert r["cpu_s_per_part"] == pytest.approx(r["cpu_s"] / 3)
+    assert r["strategies"]["Layouts"]["parts"] == 3 and sum(r["chosen_by"].values()) == 3
+    ran = [v["profiled_s"] for v in r["strategies"].values()]
+    assert all(s >= 0 for s in ran) and sum(ran) <= r["profiled_s"] * 1.01
+    assert len(r["top"]) == len(r["top_own"]) == 5 and r["top"][0][3] >= r["top"][-1][3]
+    assert r["top"][0][1] >= 3  # the outermost entry: at least one call per part
