@@ -102,7 +102,8 @@ def first_order(mesh: "QuadMesh") -> SolverMesh:
     """The QuadMesh's quads, patches and line groups (each edge oriented as its quad's side)."""
     quads = np.asarray(mesh.quads, np.int64)
     patch = np.asarray(mesh.patch, np.int64)
-    names = tuple(f"patch {p}" for p in range(int(patch.max()) + 1)) if patch.size else ()
+    names = tuple(getattr(mesh, "regions", ())) or (tuple(f"patch {p}" for p in range(int(patch.max()) + 1))
+                                                     if patch.size else ())
     groups, owners = {}, {}
     for name, e in mesh.line_sets.items():
         e = np.asarray(e, np.int64).reshape(-1, 2)

@@ -204,7 +204,8 @@ def mesh_groups(mesh: "QuadMesh") -> tuple[np.ndarray, list[str], list[LineGroup
     :class:`~jaxmatch.meshing.result.QuadMesh`: its ``patch`` (groups ``"patch p"``) and its
     ``line_sets`` (``"boundary"``, ``"side i-j"``, ``"hole h"``), in their order."""
     patch = np.asarray(mesh.patch, np.int64)
-    names = [f"patch {p}" for p in range(int(np.max(patch)) + 1)] if patch.size else []
+    names = list(getattr(mesh, "regions", ())) or ([f"patch {p}" for p in range(int(np.max(patch)) + 1)]
+                                                    if patch.size else [])
     return patch, names, [LineGroup(k, np.asarray(v, np.int64)) for k, v in mesh.line_sets.items()]
 
 

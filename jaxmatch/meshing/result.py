@@ -74,7 +74,10 @@ class QuadMesh:
     templates: catalogue ids of the templates used, per patch; detail: the strategy's own record
     of its choice where it has one (``template=True``: the
     :class:`~jaxmatch.placement.choose.MeshChoice`, with the ranking, rank, utility and quality
-    band that the command line reports), else None.
+    band that the command line reports; an assembly: per region its pieces' strategies), else None.
+    regions: an assembly's region names: ``patch`` is then the region of each quad (each region a
+    cell group of its name; empty: the groups are ``"patch p"``); point_sets: name -> ``(k,)
+    int64`` vertex ids (an assembly's ``"point k"``, its embedded points).
 
     The measures of ``xy`` and ``quads`` (scaled Jacobians, edges, valences, boundary loops,
     missed corners) are computed once per mesh and kept (:data:`_KEPT`): the choice rule reads
@@ -96,6 +99,8 @@ class QuadMesh:
     runner_up: str | None = None
     tried: tuple[Candidate, ...] = ()
     detail: object = None
+    regions: tuple[str, ...] = ()
+    point_sets: Mapping[str, np.ndarray] = field(default_factory=dict)
 
     def with_choice(self, chosen: str, rule: str, runner_up: str | None, tried) -> "QuadMesh":
         """This mesh, labelled with how it was chosen (the measures kept so far kept with it)."""
@@ -189,7 +194,9 @@ class QuadMesh:
 
     @property
     def cell_sets(self) -> dict[str, np.ndarray]:
-        """``"patch p"`` -> ``(Q_p,) int64`` quad indices."""
+        """``"patch p"`` (an assembly: each region's name) -> ``(Q_p,) int64`` quad indices."""
+        if self.regions:
+            return {name: np.flatnonzero(self.patch == r) for r, name in enumerate(self.regions)}
         return {f"patch {p}": np.flatnonzero(self.patch == p) for p in range(self.n_patches)}
 
     @property

@@ -1,0 +1,454 @@
+"""An assembly (a :class:`~jaxmatch.model.Model`: named regions, embedded points and curves)
+meshed as one conforming quad mesh.
+
+1. **Pieces.** Each region is cut along the embedded curves inside it, each curve extended
+   straight from an end inside the region to the region's boundary (shapely's polygonize); the
+   pieces of one region keep its name. Every piece's loops get the points of the other pieces
+   that lie on them (a corner of one region on another's side becomes a point of both; it is
+   no corner of the other, which runs straight there).
+2. **Each piece's strategy.** Each piece is meshed on its own by the pipeline
+   (:func:`jaxmatch.meshing.pipeline.mesh`: every candidate, the one choice rule) and the layout
+   of the candidate that won is made again (the single patch, a decomposition, the ring
+   partition or the disk's O-grid).
+3. **One solve.** The pieces' layouts are merged into one layout (coincident points one point;
+   a point of one layout on a patch side of another inserted there: a T-junction, where the
+   patches along the side change) and meshed by the one solve
+   (:func:`jaxmatch.placement.solve.mesh_layout`): ONE integer program for every side count of
+   every patch of every region, so an interface side has one count and one set of vertices for
+   both its regions; the merge gives each side's vertices one id (no hanging node;
+   :func:`~jaxmatch.placement.layout.check_layout` refuses a layout that would have one).
+4. **Smoothing and embedded points.** The merged mesh is smoothed with the outline, the holes,
+   every interface and every embedded curve kept; then each embedded point (and each curve end
+   inside a region) becomes a vertex: the nearest vertex free to move there (on the same side,
+   for a point on a side) is moved onto it and the mesh smoothed again around it.
+
+The result is the one :class:`~jaxmatch.meshing.result.QuadMesh`: ``patch`` is the region of each
+quad and ``regions`` their names (each region a cell group named after it), line groups
+``boundary``, ``hole h`` (holes of the union), ``NAME1|NAME2`` (names sorted) per interface and
+``curve k`` per embedded curve, and vertex groups ``point k`` per embedded point.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import NamedTuple, Sequence
+
+import numpy as np
+
+from jaxmatch.defaults import DEFAULT_DIVISIONS, DEFAULT_LATTICE, QUALITY, Quality
+from jaxmatch.errors import InputError
+from jaxmatch.geometry import turning_angles
+from jaxmatch.inputs import _lattice, load_catalogue
+from jaxmatch.meshing import pipeline
+from jaxmatch.meshing.build import from_layout
+from jaxmatch.meshing.region import canonical, corner_points, default_size
+from jaxmatch.meshing.result import Candidate, QuadMesh
+from jaxmatch.meshing.strategies import DISK, FINER, SINGLE, layout_strategies
+from jaxmatch.model import TOUCH_TOL, Model, Region, make_model, region_polygon
+from jaxmatch.placement.decompose import disk_layout, single_patch
+from jaxmatch.placement.embed import smooth_in_frame
+from jaxmatch.placement.layout import Layout, check_layout
+from jaxmatch.placement.solve import ALL_SIZES, TEMPLATE_SIZES, mesh_layout
+from jaxmatch.quality import quad_areas, sj_inverted
+from jaxmatch.shape import DEFAULT_CORNER_ANGLE, Shape, make_shape
+
+__all__ = ["Piece", "mesh_model", "pieces", "region_quality"]
+
+SNAP_TOL = 1e-8
+"""Relative (to the model's extent) distance within which points are the same point or lie on a
+line (:data:`jaxmatch.model.TOUCH_TOL` times 10: points the readers computed from the same input
+numbers differ by round-off only)."""
+
+
+class Piece(NamedTuple):
+    """A part of a region: ``region`` its index in the model, ``shape`` its loops (user
+    coordinates), ``cut``: made by cutting or inserting points (else the region's own shape)."""
+
+    region: int
+    shape: Shape
+    cut: bool
+
+
+# ---------------------------------------------------------------------------------------------
+# 1. pieces
+
+
+def _extended(curve: np.ndarray, poly, tol: float) -> np.ndarray:
+    """``curve (k, 2)`` with each end inside ``poly`` extended straight (along its end segment)
+    to the first point of ``poly``'s boundary."""
+    import shapely
+
+    out = [np.asarray(curve, np.float64)]
+    boundary = poly.boundary
+    far = 4.0 * max(poly.bounds[2] - poly.bounds[0], poly.bounds[3] - poly.bounds[1])
+    for first in (True, False):
+        c = out[0] if first else out[-1]
+        end, prev = (c[0], c[1]) if first else (c[-1], c[-2])
+        if boundary.distance(shapely.Point(end)) <= tol:
+            continue
+        d = (end - prev) / np.linalg.norm(end - prev)
+        hits = shapely.get_coordinates(boundary.intersection(shapely.LineString([end, end + far * d])))
+        dist = np.linalg.norm(hits - end, axis=1) if len(hits) else np.zeros(0)
+        if not np.any(dist > tol):  # pragma: no cover - a point inside a polygon sees its boundary
+            raise InputError("an embedded curve's end cannot be extended to the region's boundary")
+        hit = hits[int(np.argmin(np.where(dist > tol, dist, np.inf)))]
+        if first:
+            out.insert(0, hit[None])
+        else:
+            out.append(hit[None])
+    return np.concatenate(out)
+
+
+def _region_pieces(poly, lines: list, tol: float) -> list:
+    """``poly`` cut along ``lines`` (shapely LineStrings from boundary to boundary): the faces."""
+    import shapely
+    from shapely.ops import polygonize
+
+    if not lines:
+        return [poly]
+    noded = shapely.union_all([poly.boundary] + lines)
+    faces = list(polygonize(shapely.get_parts(noded)))
+    inside = [f for f in faces if poly.buffer(tol).contains(f.representative_point()) and f.area > tol * tol]
+    return inside
+
+
+def _on_rings(p: np.ndarray, rings: Sequence[np.ndarray], tol: float) -> bool:
+    import shapely
+
+    pt = shapely.Point(p)
+    return any(shapely.LinearRing(r).distance(pt) <= tol for r in rings)
+
+
+def _with_points(ring: np.ndarray, tree, allpts: np.ndarray, tol: float) -> np.ndarray:
+    """``ring (k, 2)`` with every point of ``allpts`` that lies on one of its segments (within
+    ``tol``, not at its ends) inserted in order along it."""
+    import shapely
+
+    out = []
+    k = ring.shape[0]
+    for i in range(k):
+        a, b = ring[i], ring[(i + 1) % k]
+        out.append(a)
+        near = tree.query(shapely.LineString([a, b]), predicate="dwithin", distance=tol)
+        if not len(near):
+            continue
+        q = allpts[near]
+        ab = b - a
+        t = (q - a) @ ab / float(ab @ ab)
+        keep = (np.linalg.norm(q - a, axis=1) > tol) & (np.linalg.norm(q - b, axis=1) > tol) & (t > 0) & (t < 1)
+        for j in np.argsort(t[keep]):
+            out.append(q[keep][j])
+    out = np.array(out)
+    keep = np.ones(len(out), bool)  # (the same point found twice)
+    keep[1:] = np.linalg.norm(np.diff(out, axis=0), axis=1) > tol
+    return out[keep]
+
+
+def _piece_corners(ring: np.ndarray, region: Shape, own: np.ndarray, cuts: list, tol: float, angle: float) -> list[int]:
+    """The corners of a piece's loop ``ring (k, 2)``: the region's own corners ``own (C, 2)``,
+    and points off the region's loops or on a cut where the loop turns by more than ``angle``
+    degrees (points of other regions inserted on a straight side are none)."""
+    import shapely
+
+    turn = np.degrees(np.abs(turning_angles(ring)))
+    rings = [region.given_points] + [np.asarray(h) for h in region.holes]
+    out = []
+    for i, p in enumerate(ring):
+        if own.size and np.min(np.linalg.norm(own - p, axis=1)) <= tol:
+            out.append(i)
+        elif turn[i] > angle and (not _on_rings(p, rings, tol)
+                                  or any(c.distance(shapely.Point(p)) <= tol for c in cuts)):
+            out.append(i)
+    return out
+
+
+def pieces(model: Model, corner_angle: float = DEFAULT_CORNER_ANGLE) -> tuple[list[Piece], list[np.ndarray], float]:
+    """The model's pieces (step 1 of the module docstring), the embedded curves as extended to
+    their regions' boundaries ``(k, 2)`` each, and the tolerance used (user units)."""
+    import shapely
+
+    polys = [region_polygon(r.shape) for r in model.regions]
+    b = np.array([p.bounds for p in polys])
+    extent = float(max(b[:, 2].max() - b[:, 0].min(), b[:, 3].max() - b[:, 1].min()))
+    tol = SNAP_TOL * extent
+    extended, by_region = [], {}
+    for k, c in enumerate(model.embedded.curves):
+        line = shapely.LineString(c)
+        r = next(i for i, p in enumerate(polys) if line.difference(p.buffer(10 * TOUCH_TOL * extent)).length
+                 <= 10 * TOUCH_TOL * extent)
+        ext = _extended(c, polys[r], tol)
+        extended.append(ext)
+        by_region.setdefault(r, []).append(shapely.LineString(ext))
+    faces = []
+    for r, poly in enumerate(polys):
+        cuts = by_region.get(r, [])
+        for f in _region_pieces(poly, cuts, tol):
+            faces.append((r, f, cuts))
+    allpts = np.concatenate([shapely.get_coordinates(f.boundary) for _, f, _ in faces])
+    tree = shapely.STRtree(shapely.points(allpts))
+    out = []
+    for r, f, cuts in faces:
+        reg = model.regions[r].shape
+        outer = np.asarray(f.exterior.coords)[:-1]
+        holes = [np.asarray(h.coords)[:-1] for h in f.interiors]
+        new_outer = _with_points(outer, tree, allpts, tol)
+        new_holes = [_with_points(h, tree, allpts, tol) for h in holes]
+        if not cuts and len(new_outer) == len(outer) and all(len(a) == len(h) for a, h in zip(new_holes, holes)):
+            out.append(Piece(r, reg, False))
+            continue
+        own = np.concatenate([reg.given_points[reg.corners]]
+                             + [np.asarray(h)[c] for h, c in zip(reg.holes, reg.hole_corners)]).reshape(-1, 2)
+        name = model.regions[r].name
+        corners = _piece_corners(new_outer, reg, own, cuts, tol, corner_angle)
+        hole_corners = [_piece_corners(h, reg, own, cuts, tol, corner_angle) for h in new_holes]
+        shape = make_shape(new_outer, corners, corner_angle=corner_angle, source=f"{model.source}#{name}",
+                           holes=new_holes or None, hole_corners=hole_corners or None)
+        out.append(Piece(r, shape, True))
+    return out, extended, tol
+
+
+# ---------------------------------------------------------------------------------------------
+# 2. each piece's layout
+
+
+def _layout_of(shape: Shape, chosen: str, h: float, corner_angle: float) -> tuple[Layout, bool]:
+    """The layout of the candidate ``chosen`` of ``shape`` at size ``h`` (made again as the
+    pipeline made it), and whether it is a single patch (every template size group)."""
+    bends = chosen.endswith(FINER)
+    base = chosen[: -len(FINER)] if bends else chosen
+    region = canonical(shape, h, corner_angle, held_angle=corner_angle if bends else None)
+    if base == DISK or (region.n_corners < 2 and not region.holes):
+        return disk_layout(region), False
+    if base.split(" ")[0] == SINGLE:
+        return single_patch(region), True
+    return layout_strategies([base])[0].layout(region, h), False
+
+
+# ---------------------------------------------------------------------------------------------
+# 3. one layout
+
+
+def _merge(layouts: Sequence[Layout], tol: float, source: str) -> tuple[Layout, np.ndarray]:
+    """One :class:`Layout` of every patch of ``layouts`` (points within ``tol`` one point; every
+    point inserted in the patch sides it lies on) and ``(patches,) int64`` the layout each patch
+    came from."""
+    import shapely
+
+    pts = np.concatenate([lay.points for lay in layouts])
+    offsets = np.cumsum([0] + [lay.points.shape[0] for lay in layouts])
+    geoms = shapely.points(pts)
+    i, j = shapely.STRtree(geoms).query(geoms, predicate="dwithin", distance=tol)
+    parent = np.arange(len(pts))
+
+    def find(a: int) -> int:
+        while parent[a] != a:
+            parent[a] = parent[parent[a]]
+            a = parent[a]
+        return a
+
+    for a, b in zip(i.tolist(), j.tolist()):
+        ra, rb = find(a), find(b)
+        if ra != rb:
+            parent[max(ra, rb)] = min(ra, rb)
+    root = np.array([find(a) for a in range(len(pts))])
+    uniq, gid = np.unique(root, return_inverse=True)
+    points = pts[uniq]
+    tree = shapely.STRtree(shapely.points(points))
+    loops, pcs, owner = [], [], []
+    for li, lay in enumerate(layouts):
+        for loop, pc in zip(lay.patches, lay.patch_corner):
+            g = gid[loop + offsets[li]]
+            new, newpc = [], []
+            for k in range(len(g)):
+                a, b = int(g[k]), int(g[(k + 1) % len(g)])
+                new.append(a)
+                newpc.append(bool(pc[k]))
+                near = tree.query(shapely.LineString([points[a], points[b]]), predicate="dwithin", distance=tol)
+                near = [n for n in near.tolist() if n != a and n != b]
+                if near:
+                    ab = points[b] - points[a]
+                    t = (points[near] - points[a]) @ ab / float(ab @ ab)
+                    for n in np.asarray(near)[np.argsort(t)][(np.sort(t) > 0) & (np.sort(t) < 1)].tolist():
+                        new.append(n)
+                        newpc.append(False)
+            if len(set(new)) < len(new):
+                raise InputError("two points of a patch coincide after merging the regions' layouts (regions closer "
+                                 "than the tolerance without sharing their points)", where=source)
+            loops.append(np.array(new, np.int64))
+            pcs.append(np.array(newpc, bool))
+            owner.append(li)
+    corner = np.zeros(len(points), bool)
+    for loop, pc in zip(loops, pcs):
+        corner[loop[pc]] = True
+    merged = Layout(points=points, patches=tuple(loops), corner=corner, patch_corner=tuple(pcs), requested={},
+                    source=source)
+    check_layout(merged)
+    return merged, np.asarray(owner, np.int64)
+
+
+# ---------------------------------------------------------------------------------------------
+# 4. smoothing, embedded points
+
+
+def _smoothed(xy: np.ndarray, quads: np.ndarray, fixed: np.ndarray) -> np.ndarray:
+    """``xy`` smoothed with ``fixed`` kept, when that raises the min scaled Jacobian and folds
+    nothing (else ``xy``)."""
+    if fixed.size == xy.shape[0]:
+        return xy
+    new = smooth_in_frame(xy, quads, fixed)
+    sj0, inv0 = sj_inverted(xy, quads)
+    sj1, inv1 = sj_inverted(new, quads)
+    return new if (int(inv1.sum()), -float(sj1.min())) <= (int(inv0.sum()), -float(sj0.min())) else xy
+
+
+def _snap(xy: np.ndarray, p: np.ndarray, chains: Sequence[np.ndarray], fixed: np.ndarray, tol: float,
+          taken: set) -> int:
+    """Make point ``p`` a vertex: an existing vertex within ``tol``, else the nearest movable
+    vertex of the side chain ``p`` lies on (its interior vertices, in order), else the nearest
+    vertex not ``fixed``; that vertex is moved onto ``p`` (``xy`` changed in place). Returns its
+    id."""
+    d = np.linalg.norm(xy - p, axis=1)
+    if d.min() <= tol:
+        return int(np.argmin(d))
+    for ch in chains:
+        seg_a, seg_b = xy[ch[:-1]], xy[ch[1:]]
+        ab = seg_b - seg_a
+        t = np.clip(np.einsum("ij,ij->i", p - seg_a, ab) / np.einsum("ij,ij->i", ab, ab), 0, 1)
+        dist = np.linalg.norm(seg_a + t[:, None] * ab - p, axis=1)
+        s = int(np.argmin(dist))
+        if dist[s] <= tol:
+            inner = [v for v in ch[1:-1].tolist() if v not in taken]
+            if not inner:
+                raise InputError(f"embedded point ({p[0]:g}, {p[1]:g}): no vertex of its side is free to move onto it "
+                                 "(try a smaller --size)")
+            v = min(inner, key=lambda v: d[v])
+            xy[v] = p
+            return v
+    free = np.ones(len(xy), bool)
+    free[fixed] = False
+    free[list(taken)] = False
+    if not free.any():  # pragma: no cover - a mesh with no interior vertex and a point inside
+        raise InputError(f"embedded point ({p[0]:g}, {p[1]:g}): no interior vertex to move onto it (try a smaller --size)")
+    v = int(np.flatnonzero(free)[np.argmin(d[free])])
+    xy[v] = p
+    return v
+
+
+def _on_curve(xy: np.ndarray, edges: np.ndarray, curve: np.ndarray, tol: float) -> np.ndarray:
+    """The rows of ``edges (E, 2)`` whose ends and midpoint lie on the polyline ``curve``."""
+    import shapely
+
+    line = shapely.LineString(curve)
+    ends = shapely.distance(line, shapely.points(xy[edges[:, 0]])) <= tol
+    ends &= shapely.distance(line, shapely.points(xy[edges[:, 1]])) <= tol
+    mid = shapely.distance(line, shapely.points(0.5 * (xy[edges[:, 0]] + xy[edges[:, 1]]))) <= max(tol, 1e-3 * line.length)
+    return edges[ends & mid]
+
+
+def region_quality(mesh: QuadMesh) -> dict[str, dict]:
+    """Per region of an assembly's mesh: ``{"quads", "min_scaled_jacobian", "area"}``."""
+    sj = mesh.scaled_jacobian
+    areas = quad_areas(mesh.xy, mesh.quads)
+    return {name: {"quads": int((mesh.patch == r).sum()), "min_scaled_jacobian": float(sj[mesh.patch == r].min()),
+                   "area": float(areas[mesh.patch == r].sum())}
+            for r, name in enumerate(mesh.regions)}
+
+
+def mesh_model(model: Model, *, size: float | None = None, divisions: int | None = None, catalogue=None,
+               lattice=DEFAULT_LATTICE, quality: Quality = QUALITY, corner_angle: float = DEFAULT_CORNER_ANGLE,
+               strategies: Sequence[str] | None = None, budget_s: float | None = None, progress=None) -> QuadMesh:
+    """Mesh ``model`` as one conforming quad mesh (see the module docstring).
+
+    size: target edge length (user units; default the union's outline / ``divisions``, itself
+    default :data:`~jaxmatch.defaults.DEFAULT_DIVISIONS`). The other options are those of
+    :func:`jaxmatch.meshing.pipeline.mesh`, used for every piece.
+
+    Returns a :class:`QuadMesh` (``chosen="assembly"``; ``detail``: per region its pieces'
+    strategies). Raises :class:`InputError` naming the model's file for a model that cannot be
+    meshed.
+    """
+    t0 = time.perf_counter()
+    if size is not None and divisions is not None:
+        raise InputError("give divisions or a size, not both")
+    h = float(size) if size is not None else default_size(model, int(divisions or DEFAULT_DIVISIONS))
+    if not (h > 0 and math.isfinite(h)):
+        raise InputError(f"element size must be a positive number, got {size!r}")
+    cat, lat = load_catalogue(catalogue), _lattice(lattice)
+    parts, curves, tol = pieces(model, corner_angle)
+    layouts, singles, chosen = [], [], []
+    for n, piece in enumerate(parts):
+        m = pipeline.mesh(piece.shape, size=h, catalogue=cat, lattice=lat, quality=quality, corner_angle=corner_angle,
+                          strategies=strategies, budget_s=budget_s)
+        try:
+            lay, single = _layout_of(piece.shape, m.chosen, h, corner_angle)
+        except InputError as e:
+            raise InputError(f"region {model.regions[piece.region].name!r}: its {m.chosen} mesh is no layout "
+                             f"({e.problem})", where=model.source) from None
+        layouts.append(lay)
+        singles.append(single)
+        chosen.append(m.chosen)
+        if progress is not None:
+            progress(n + 1, len(parts) + 1, model.regions[piece.region].name)
+    merged, owner = _merge(layouts, tol, model.source)
+    piece_of = owner  # (one layout per piece)
+    region_of_patch = np.array([parts[p].region for p in piece_of], np.int64)
+    lm = mesh_layout(merged, cat, lat, size=h, sizes=ALL_SIZES if any(singles) else TEMPLATE_SIZES, quality=quality)
+    sides, quads = lm.sides, np.asarray(lm.quads, np.int64)
+    xy = np.array(lm.xy, np.float64)
+    fixed_sides, interfaces, cut_sides = [], {}, []
+    for s in range(len(sides.chains)):
+        u0, u1 = sides.users[s]
+        if u1 < 0:
+            continue
+        r0, r1 = region_of_patch[u0], region_of_patch[u1]
+        if r0 != r1:
+            key = "|".join(sorted((model.regions[r0].name, model.regions[r1].name)))
+            interfaces.setdefault(key, []).append(s)
+            fixed_sides.append(s)
+        elif piece_of[u0] != piece_of[u1]:
+            cut_sides.append(s)
+            fixed_sides.append(s)
+    chains = [np.asarray(lm.side_vertices[s], np.int64) for s in range(len(sides.chains))]
+    loops = [np.asarray(lm.outer, np.int64)] + [np.asarray(hl, np.int64) for hl in lm.holes]
+    fixed = np.unique(np.concatenate(loops + [chains[s] for s in fixed_sides]))
+    xy = _smoothed(xy, quads, fixed)
+    # embedded points and curve ends inside their regions: vertices
+    targets = [np.asarray(p, np.float64) for p in model.embedded.points]
+    ends = [c[i] for c in model.embedded.curves for i in (0, -1)]
+    taken: set = set()
+    point_ids = []
+    moved = False
+    for k, p in enumerate(targets + ends):
+        on = [chains[s] for s in range(len(chains))]  # every side: a point on a side moves a vertex along it
+        v = _snap(xy, p, on, fixed, tol, taken)
+        moved = moved or float(np.linalg.norm(lm.xy[v] - p)) > tol
+        taken.add(v)
+        if k < len(targets):
+            point_ids.append(v)
+    if taken and moved:
+        xy = _smoothed(xy, quads, np.unique(np.concatenate([fixed, np.array(sorted(taken), np.int64)])))
+    base = from_layout(lm, size=h, corners=np.zeros((0, 2)))
+    line_sets = {"boundary": base.line_sets["boundary"]}
+    line_sets.update({k: v for k, v in base.line_sets.items() if k.startswith("hole ")})
+    for key in sorted(interfaces):
+        line_sets[key] = np.concatenate([np.stack([chains[s][:-1], chains[s][1:]], axis=1) for s in interfaces[key]])
+    cut_edges = (np.concatenate([np.stack([chains[s][:-1], chains[s][1:]], axis=1) for s in cut_sides])
+                 if cut_sides else np.zeros((0, 2), np.int64))
+    for k, c in enumerate(model.embedded.curves):
+        line_sets[f"curve {k + 1}"] = _on_curve(xy, cut_edges, c, tol) if cut_edges.size else cut_edges
+    corners = np.concatenate([corner_points(canonical(p.shape, h, corner_angle)) for p in parts] + [np.asarray(model.embedded.points).reshape(-1, 2)])
+    regions = tuple(r.name for r in model.regions)
+    detail = {r.name: [c for p, c in zip(parts, chosen) if model.regions[p.region] is r] for r in model.regions}
+    out = QuadMesh(xy=xy, quads=quads, patch=region_of_patch[np.asarray(lm.patch, np.int64)], line_sets=line_sets,
+                   region_area=float(lm.region_area), corners=corners, size=h, side_lengths=base.side_lengths,
+                   side_counts=base.side_counts, templates=tuple(lm.templates), detail=detail, regions=regions,
+                   point_sets={f"point {k + 1}": np.array([v], np.int64) for k, v in enumerate(point_ids)})
+    rule = "; ".join(f"{name}: {', '.join(c)}" for name, c in detail.items())
+    result = out.with_choice("assembly", rule, None, ())
+    return result.with_choice("assembly", rule, None, (Candidate("assembly", result),))
+
+
+def mesh_regions(regions: Sequence[Region], **options) -> QuadMesh:
+    """:func:`mesh_model` of a model made of ``regions`` (:func:`jaxmatch.model.make_model`)."""
+    return mesh_model(make_model(regions), **options)
