@@ -140,7 +140,7 @@ def _svg_names(data) -> list[tuple[str, str]]:
 
 def several_regions(err: InputError) -> bool:
     """The single-region reader refused a file because it holds several regions."""
-    return bool(re.search(r"has \d+ (regions|shape elements|polygon features)", err.problem))
+    return bool(re.search(r"has \d+ (regions|shape elements|polygon features|polylines)", err.problem))
 
 
 def read_model(data, source: str, fmt: str, corner_angle: float = DEFAULT_CORNER_ANGLE) -> Model | None:

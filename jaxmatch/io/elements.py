@@ -24,7 +24,7 @@ Jacobian determinant is not positive at every sample point keeps straight sides 
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Mapping
 
 import numpy as np
@@ -50,7 +50,8 @@ class SolverMesh:
     the patch of each cell, named ``region_names[region]``; groups: facet group name ->
     ``(F, kf) int64`` facets of :attr:`facet_type`, each oriented outwards from its owner;
     owners: the same names -> ``(F, 2) int64`` (owning cell, local side); cell_data: name ->
-    ``(C,)`` per cell; notes: what was changed or left out on the way (one line each).
+    ``(C,)`` per cell; notes: what was changed or left out on the way (one line each);
+    node_groups: name -> ``(k,) int64`` node ids (an assembly's embedded points, ``"point k"``).
     """
 
     points: np.ndarray
@@ -62,6 +63,7 @@ class SolverMesh:
     owners: Mapping[str, np.ndarray]
     cell_data: Mapping[str, np.ndarray] = field(default_factory=dict)
     notes: tuple[str, ...] = ()
+    node_groups: Mapping[str, np.ndarray] = field(default_factory=dict)
 
     @property
     def dim(self) -> int:
@@ -111,8 +113,9 @@ def first_order(mesh: "QuadMesh") -> SolverMesh:
         groups[name] = _sides(quads)[own[:, 0], own[:, 1]]
         owners[name] = own
     sj = np.asarray(mesh.scaled_jacobian, np.float64)
+    nodes = {k: np.asarray(v, np.int64) for k, v in getattr(mesh, "point_sets", {}).items()}
     return SolverMesh(np.asarray(mesh.xy, np.float64), "quad", quads, patch, names, groups, owners,
-                      {"patch": patch, "scaled_jacobian": sj})
+                      {"patch": patch, "scaled_jacobian": sj}, node_groups=nodes)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -317,4 +320,8 @@ def solver_mesh(mesh: "QuadMesh", *, order: int = 1, serendipity: bool = False, 
     ``extrude_dz`` in ``layers`` layers (``grading``: the top layer's thickness over the bottom
     one's) when given."""
     base = second_order(mesh, serendipity=serendipity) if order == 2 else first_order(mesh)
-    return base if extrude_dz is None else extrude(base, extrude_dz, layers, grading)
+    out = base if extrude_dz is None else extrude(base, extrude_dz, layers, grading)
+    if getattr(mesh, "point_sets", None) and (order == 2 or extrude_dz is not None):
+        out = replace(out, node_groups={}, notes=out.notes + (f"the vertex groups ({', '.join(mesh.point_sets)}) are "
+                                                               "written with first-order quads only",))
+    return out

@@ -239,6 +239,9 @@ def write_mesh(path: str | os.PathLike, mesh: "QuadMesh", output: MeshOutput | N
     if fmt in LEGACY and out.plain and (fmt != "gmsh" or out.msh_version == "2.2"):
         patch, names, lines = mesh_groups(mesh)
         cell = {"scaled_jacobian": np.asarray(mesh.scaled_jacobian, dtype=np.float64), "patch": patch}
+        if getattr(mesh, "point_sets", None):
+            warnings.warn(InputWarning(f"the vertex groups ({', '.join(mesh.point_sets)}) are left out of {fmt} "
+                                       "(msh 4.1, inp and exo hold them)", str(path)), stacklevel=2)
         if fmt == "obj" and lines:
             warnings.warn(InputWarning("obj holds the quads only: the groups and cell data were left out", str(path)),
                           stacklevel=2)

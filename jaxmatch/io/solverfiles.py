@@ -30,6 +30,7 @@ import os
 import re
 import shutil
 import tempfile
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -121,6 +122,12 @@ def _gmsh_blocks(sm: SolverMesh):
             tags.append(np.full(len(f), first + j, np.int32))
             field[name] = np.array([first + j, sm.dim - 1])
             dims.append((sm.dim - 1, first + j))
+    first += len(sm.groups)
+    for j, (name, ids) in enumerate(sm.node_groups.items()):
+        cells.append(("vertex", np.asarray(ids, np.int64).reshape(-1, 1)))
+        tags.append(np.full(len(ids), first + j, np.int32))
+        field[name] = np.array([first + j, 0])
+        dims.append((0, first + j))
     return cells, tags, field, dims
 
 
@@ -249,6 +256,8 @@ def write_abaqus(path: Path, sm: SolverMesh, element_type: str | None) -> list[s
         sel = np.flatnonzero(sm.region == r)
         cell_sets[abaqus_name(name)] = [sel]
         point_sets[abaqus_name(name)] = np.unique(sm.cells[sel])
+    for name, ids in sm.node_groups.items():
+        point_sets[abaqus_name(name)] = np.asarray(ids, np.int64)
     surfaces = []
     for name, f in sm.groups.items():
         if not len(f):
@@ -314,6 +323,7 @@ def write_exodus(path: Path, sm: SolverMesh) -> list[str]:
     blocks = [(sm.cell_type, sm.cells[order[sm.region[order] == r]]) for r in range(len(sm.region_names))]
     keep = [i for i, b in enumerate(blocks) if len(b[1])]
     point_sets = {name: np.unique(f).astype(np.int64) for name, f in sm.groups.items() if len(f)}
+    point_sets.update({name: np.asarray(ids, np.int64) for name, ids in sm.node_groups.items()})
     mesh = meshio.Mesh(_points(sm, sm.dim), [blocks[i] for i in keep], point_sets=point_sets)
     with atomic_path(path) as tmp:
         meshio.write(tmp, mesh, file_format="exodus")
@@ -377,6 +387,11 @@ def write_solver_file(path: Path, sm: SolverMesh, fmt: str, *, msh_version: str 
     """Write ``sm`` to ``path`` in format ``fmt`` (a registered mesh format's name); the notes."""
     if fmt == "gmsh":
         return write_gmsh(path, sm, msh_version, binary)
+    if sm.node_groups and fmt not in ("abaqus", "exodus"):  # (msh: vertex groups; inp: node sets; exo: node sets)
+        sm = replace(sm, node_groups={}, notes=sm.notes + (f"{fmt}: the vertex groups ({', '.join(sm.node_groups)}) "
+                                                           "are left out (msh, inp and exo hold them)",))
+        return write_solver_file(path, sm, fmt, msh_version=msh_version, binary=binary, element_type=element_type) + [
+            sm.notes[-1]]
     if fmt in ("vtu", "vtk"):
         return write_vtk(path, sm, fmt)
     writers = {"abaqus": lambda: write_abaqus(path, sm, element_type), "xdmf": lambda: write_xdmf(path, sm),

@@ -229,10 +229,11 @@ def _layout_of(shape: Shape, chosen: str, h: float, corner_angle: float) -> tupl
 # 3. one layout
 
 
-def _merge(layouts: Sequence[Layout], tol: float, source: str) -> tuple[Layout, np.ndarray]:
+def _merge(layouts: Sequence[Layout], tol: float, source: str, regions: Sequence[int] | None = None
+           ) -> tuple[Layout, np.ndarray]:
     """One :class:`Layout` of every patch of ``layouts`` (points within ``tol`` one point; every
     point inserted in the patch sides it lies on) and ``(patches,) int64`` the layout each patch
-    came from."""
+    came from; ``regions``: the region of each layout (the merged layout's ``regions``)."""
     import shapely
 
     pts = np.concatenate([lay.points for lay in layouts])
@@ -282,7 +283,7 @@ def _merge(layouts: Sequence[Layout], tol: float, source: str) -> tuple[Layout, 
     for loop, pc in zip(loops, pcs):
         corner[loop[pc]] = True
     merged = Layout(points=points, patches=tuple(loops), corner=corner, patch_corner=tuple(pcs), requested={},
-                    source=source)
+                    source=source, regions=None if regions is None else np.asarray(regions)[np.asarray(owner)])
     check_layout(merged)
     return merged, np.asarray(owner, np.int64)
 
@@ -390,7 +391,7 @@ def mesh_model(model: Model, *, size: float | None = None, divisions: int | None
         chosen.append(m.chosen)
         if progress is not None:
             progress(n + 1, len(parts) + 1, model.regions[piece.region].name)
-    merged, owner = _merge(layouts, tol, model.source)
+    merged, owner = _merge(layouts, tol, model.source, [p.region for p in parts])
     piece_of = owner  # (one layout per piece)
     region_of_patch = np.array([parts[p].region for p in piece_of], np.int64)
     lm = mesh_layout(merged, cat, lat, size=h, sizes=ALL_SIZES if any(singles) else TEMPLATE_SIZES, quality=quality)
