@@ -242,3 +242,29 @@ def test_svg_shapes_with_ids_are_an_assembly(tmp_path):
     assert isinstance(model, Model) and model.names == ("left", "right")
     m = jaxmatch.mesh(model, size=0.25)
     assert "left|right" in m.line_sets and m.valid
+
+
+@pytest.mark.parametrize("doc", [TWO_L, LUG], ids=["two L shapes", "lug on a side"])
+def test_region_side_groups_cover_the_input_sides(tmp_path, doc):
+    """``NAME side i-j``: the region's cells' edges along its side from point i to i + 1 (every
+    point of these polygons a corner), on the outline or on an interface."""
+    m = jaxmatch.mesh(load_region(_file(tmp_path, doc)), size=0.1)
+    for r in doc["regions"]:
+        pts = np.asarray(r["boundary"], float)
+        for i in range(len(pts)):
+            j = (i + 1) % len(pts)
+            side = shapely.LineString([pts[i], pts[j]])
+            e = m.line_sets[f"{r['name']} side {i}-{j}"]
+            assert np.all(shapely.distance(side, shapely.points(m.xy[e.ravel()])) < 1e-9)
+            assert abs(_length(m.xy, e) - side.length) < 1e-9 * side.length
+
+
+@pytest.mark.slow
+def test_motor_section(cli, tmp_path):
+    """Rotor, air gap, stator and 6 coils (72-gons and arcs): one mesh, 8 interfaces."""
+    out = tmp_path / "motor.msh"
+    code, _, err = cli("mesh", EXAMPLES / "assembly-motor.json", "--size", 0.1, "--out", out)
+    assert code == 0, err
+    xy, quads, region, lines, _ = _read(out)
+    assert len(set(region)) == 9 and sum("|" in k for k in lines) == 8
+    assert _scaled_jacobian(xy, quads).min() >= 0.3

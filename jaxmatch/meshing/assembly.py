@@ -24,8 +24,9 @@ meshed as one conforming quad mesh.
 
 The result is the one :class:`~jaxmatch.meshing.result.QuadMesh`: ``patch`` is the region of each
 quad and ``regions`` their names (each region a cell group named after it), line groups
-``boundary``, ``hole h`` (holes of the union), ``NAME1|NAME2`` (names sorted) per interface and
-``curve k`` per embedded curve, and vertex groups ``point k`` per embedded point.
+``boundary``, ``hole h`` (holes of the union), ``NAME1|NAME2`` (names sorted) per interface,
+``NAME side i-j`` per side of each region (from its corner ``i`` to ``i + 1``, numbered in the
+file's order; on the outline or an interface) and ``curve k`` per embedded curve, and vertex groups ``point k`` per embedded point.
 """
 
 from __future__ import annotations
@@ -347,6 +348,27 @@ def _on_curve(xy: np.ndarray, edges: np.ndarray, curve: np.ndarray, tol: float) 
     return edges[ends & mid]
 
 
+def _region_sides(model: Model, xy: np.ndarray, quads: np.ndarray, region: np.ndarray, tol: float) -> dict:
+    """``"NAME side i-j"`` -> ``(E, 2)`` the edges of region NAME's cells along its side from its
+    corner ``i`` to ``j = i + 1`` (corners numbered in the file's order,
+    :attr:`~jaxmatch.shape.Shape.side_frame`), on the outline or on an interface."""
+    out = {}
+    for r, reg in enumerate(model.regions):
+        shape = reg.shape
+        n = shape.n_corners
+        if n < 2:
+            continue
+        e = np.stack([quads[region == r], np.roll(quads[region == r], -1, axis=1)], axis=-1).reshape(-1, 2)
+        key, first, count = np.unique(np.sort(e, axis=1), axis=0, return_index=True, return_counts=True)
+        edges = e[first[count == 1]]
+        ring, c = shape.given_points, np.asarray(shape.corners, np.int64)
+        for i, (k, _) in enumerate(shape.side_frame):
+            a, b = int(c[k]), int(c[(k + 1) % n])
+            poly = ring[np.arange(a, a + (b - a) % len(ring) + 1) % len(ring)]
+            out[f"{reg.name} side {i}-{(i + 1) % n}"] = _on_curve(xy, edges, poly, tol)
+    return out
+
+
 def region_quality(mesh: QuadMesh) -> dict[str, dict]:
     """Per region of an assembly's mesh: ``{"quads", "min_scaled_jacobian", "area"}``."""
     sj = mesh.scaled_jacobian
@@ -436,12 +458,14 @@ def mesh_model(model: Model, *, size: float | None = None, divisions: int | None
         line_sets[key] = np.concatenate([np.stack([chains[s][:-1], chains[s][1:]], axis=1) for s in interfaces[key]])
     cut_edges = (np.concatenate([np.stack([chains[s][:-1], chains[s][1:]], axis=1) for s in cut_sides])
                  if cut_sides else np.zeros((0, 2), np.int64))
+    region_of_quad = region_of_patch[np.asarray(lm.patch, np.int64)]
+    line_sets.update(_region_sides(model, xy, quads, region_of_quad, tol))
     for k, c in enumerate(model.embedded.curves):
         line_sets[f"curve {k + 1}"] = _on_curve(xy, cut_edges, c, tol) if cut_edges.size else cut_edges
     corners = np.concatenate([corner_points(canonical(p.shape, h, corner_angle)) for p in parts] + [np.asarray(model.embedded.points).reshape(-1, 2)])
     regions = tuple(r.name for r in model.regions)
     detail = {r.name: [c for p, c in zip(parts, chosen) if model.regions[p.region] is r] for r in model.regions}
-    out = QuadMesh(xy=xy, quads=quads, patch=region_of_patch[np.asarray(lm.patch, np.int64)], line_sets=line_sets,
+    out = QuadMesh(xy=xy, quads=quads, patch=region_of_quad, line_sets=line_sets,
                    region_area=float(lm.region_area), corners=corners, size=h, side_lengths=base.side_lengths,
                    side_counts=base.side_counts, templates=tuple(lm.templates), detail=detail, regions=regions,
                    point_sets={f"point {k + 1}": np.array([v], np.int64) for k, v in enumerate(point_ids)})

@@ -21,7 +21,8 @@ from jaxmatch.quality import edge_ratios, quad_areas, sj_inverted
 
 __all__ = ["Candidate", "QuadMesh", "boundary_loops", "irregular_bound"]
 
-_KEPT = ("_sj_inverted", "_edges", "_edge_lengths", "_valences", "_loops", "_missed", "_area", "_stretches")
+_KEPT = ("_sj_inverted", "_edges", "_edge_lengths", "_valences", "_loops", "_missed", "_area", "_stretches",
+         "_region_parts")
 """The :class:`QuadMesh` measures computed once per mesh (``cached_property`` names)."""
 
 
@@ -238,17 +239,30 @@ class QuadMesh:
 
     @property
     def irregular(self) -> np.ndarray:
-        """``(I,) int64`` internal vertices (on no boundary loop) whose valence is not 4."""
+        """``(I,) int64`` internal vertices (on no boundary loop) whose valence is not 4 (an
+        assembly: on no region's boundary, interfaces included)."""
         val = self._valences
         internal = np.ones(self.xy.shape[0], bool)
-        for loop in self._loops:
+        for loop in self._loops + [lp for _, _, loops in self._region_parts for lp in loops]:
             internal[loop] = False
         return np.flatnonzero(internal & (val != 4) & (val > 0))
 
     @property
     def irregular_bound(self) -> int:
-        """Euler's lower bound on irregular internal vertices for these boundary valences."""
+        """Euler's lower bound on irregular internal vertices for these boundary valences (an
+        assembly: the sum of its regions' bounds, each region's cells on their own)."""
+        if self.regions:
+            return sum(_irregular_bound(val, loops) for _, val, loops in self._region_parts)
         return _irregular_bound(self._valences, self._loops)
+
+    @cached_property
+    def _region_parts(self) -> list[tuple[int, np.ndarray, list[np.ndarray]]]:
+        """An assembly's regions: ``(region, valences (V,) of its cells, its cells' boundary loops)``."""
+        out = []
+        for r in range(len(self.regions)):
+            q = np.asarray(self.quads, np.int64)[self.patch == r]
+            out.append((r, valences(q, self.xy.shape[0]), boundary_loops(q)))
+        return out
 
     @property
     def missed_corners(self) -> np.ndarray:
