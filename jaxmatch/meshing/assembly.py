@@ -41,12 +41,11 @@ from jaxmatch.defaults import DEFAULT_DIVISIONS, DEFAULT_LATTICE, QUALITY, Quali
 from jaxmatch.errors import InputError
 from jaxmatch.geometry import turning_angles
 from jaxmatch.inputs import _lattice, load_catalogue
-from jaxmatch.meshing import pipeline
 from jaxmatch.meshing.build import from_layout
 from jaxmatch.meshing.region import canonical, corner_points, default_size
 from jaxmatch.meshing.result import Candidate, QuadMesh
 from jaxmatch.meshing.strategies import DISK, FINER, SINGLE, layout_strategies
-from jaxmatch.model import TOUCH_TOL, Model, Region, make_model, region_polygon
+from jaxmatch.model import TOUCH_TOL, Model, region_polygon
 from jaxmatch.placement.decompose import disk_layout, single_patch
 from jaxmatch.placement.embed import smooth_in_frame
 from jaxmatch.placement.layout import Layout, check_layout
@@ -378,11 +377,14 @@ def region_quality(mesh: QuadMesh) -> dict[str, dict]:
             for r, name in enumerate(mesh.regions)}
 
 
-def mesh_model(model: Model, *, size: float | None = None, divisions: int | None = None, catalogue=None,
+def mesh_model(model: Model, mesh_one, *, size: float | None = None, divisions: int | None = None, catalogue=None,
                lattice=DEFAULT_LATTICE, quality: Quality = QUALITY, corner_angle: float = DEFAULT_CORNER_ANGLE,
                strategies: Sequence[str] | None = None, budget_s: float | None = None, progress=None) -> QuadMesh:
     """Mesh ``model`` as one conforming quad mesh (see the module docstring).
 
+    mesh_one: the pipeline's front door (:func:`jaxmatch.meshing.pipeline.mesh`, which calls
+    this function with itself: this module does not import the pipeline that dispatches to it),
+    called once per piece to choose its strategy.
     size: target edge length (user units; default the union's outline / ``divisions``, itself
     default :data:`~jaxmatch.defaults.DEFAULT_DIVISIONS`). The other options are those of
     :func:`jaxmatch.meshing.pipeline.mesh`, used for every piece.
@@ -401,7 +403,7 @@ def mesh_model(model: Model, *, size: float | None = None, divisions: int | None
     parts, curves, tol = pieces(model, corner_angle)
     layouts, singles, chosen = [], [], []
     for n, piece in enumerate(parts):
-        m = pipeline.mesh(piece.shape, size=h, catalogue=cat, lattice=lat, quality=quality, corner_angle=corner_angle,
+        m = mesh_one(piece.shape, size=h, catalogue=cat, lattice=lat, quality=quality, corner_angle=corner_angle,
                           strategies=strategies, budget_s=budget_s)
         try:
             lay, single = _layout_of(piece.shape, m.chosen, h, corner_angle)
@@ -472,8 +474,3 @@ def mesh_model(model: Model, *, size: float | None = None, divisions: int | None
     rule = "; ".join(f"{name}: {', '.join(c)}" for name, c in detail.items())
     result = out.with_choice("assembly", rule, None, ())
     return result.with_choice("assembly", rule, None, (Candidate("assembly", result),))
-
-
-def mesh_regions(regions: Sequence[Region], **options) -> QuadMesh:
-    """:func:`mesh_model` of a model made of ``regions`` (:func:`jaxmatch.model.make_model`)."""
-    return mesh_model(make_model(regions), **options)

@@ -43,7 +43,7 @@ from jaxmatch.meshing.strategies import (RINGS, SINGLE, Bends, Conforming, Large
                                          layout_strategies, run)
 from jaxmatch.inputs import _lattice, check_sizes, load_catalogue
 from jaxmatch.lazy import Later
-from jaxmatch.model import Model
+from jaxmatch.model import Model, Region, make_model
 from jaxmatch.placement.choose import choose_mesh
 from jaxmatch.placement.decompose import STRATEGIES, single_patch
 from jaxmatch.placement.layout import Layout, LayoutInfeasible, layout_sides
@@ -51,7 +51,7 @@ from jaxmatch.placement.refine import InfeasibleRequest, _check_counts, refine_m
 from jaxmatch.placement.solve import ALL_SIZES, mesh_layout
 from jaxmatch.shape import DEFAULT_CORNER_ANGLE, Shape, make_shape
 
-later = Later(assembly="jaxmatch.meshing.assembly", models="jaxmatch.io.assembly")  # assemblies mesh their regions here
+later = Later(assembly="jaxmatch.meshing.assembly", models="jaxmatch.io.assembly")  # only for assemblies
 
 __all__ = ["SINGLE", "canonical", "default_size", "load_region", "mesh", "strategy_names", "warm_up"]
 
@@ -129,7 +129,7 @@ def mesh(region=None, *, regions=None, size: float | None = None, divisions: int
     if regions is not None:
         if region is not None:
             raise InputError("give region or regions, not both")
-        region = (later.assembly.make_model(regions) if all(isinstance(r, later.assembly.Region) for r in regions)
+        region = (make_model(regions) if all(isinstance(r, Region) for r in regions)
                   else later.models.model_from_json({"regions": list(regions)}, "<regions>", corner_angle))
     if isinstance(region, (str, os.PathLike)):
         region = load_region(region, corner_angle=corner_angle)
@@ -137,7 +137,7 @@ def mesh(region=None, *, regions=None, size: float | None = None, divisions: int
         if sides is not None or counts or template or template_options:
             raise InputError("an assembly is meshed at a size (size= or divisions=); sides, counts and template are "
                              "for one region")
-        return later.assembly.mesh_model(region, size=size, divisions=divisions, catalogue=catalogue, lattice=lattice,
+        return later.assembly.mesh_model(region, mesh, size=size, divisions=divisions, catalogue=catalogue, lattice=lattice,
                                          quality=quality, corner_angle=corner_angle, strategies=strategies,
                                          budget_s=budget_s, progress=progress)
     if sides is not None and size is not None:
