@@ -33,12 +33,13 @@ from __future__ import annotations
 
 import math
 import time
+import warnings
 from typing import NamedTuple, Sequence
 
 import numpy as np
 
 from jaxmatch.defaults import DEFAULT_DIVISIONS, DEFAULT_LATTICE, QUALITY, Quality
-from jaxmatch.errors import InputError
+from jaxmatch.errors import InputError, InputWarning
 from jaxmatch.geometry import turning_angles
 from jaxmatch.inputs import _lattice, load_catalogue
 from jaxmatch.meshing.build import from_layout
@@ -284,7 +285,12 @@ def _merge(layouts: Sequence[Layout], tol: float, source: str, regions: Sequence
         corner[loop[pc]] = True
     merged = Layout(points=points, patches=tuple(loops), corner=corner, patch_corner=tuple(pcs), requested={},
                     source=source, regions=None if regions is None else np.asarray(regions)[np.asarray(owner)])
-    check_layout(merged)
+    try:
+        check_layout(merged)
+    except InputError as e:
+        raise InputError(f"the regions do not fit together point for point: {e.problem} (regions that share a "
+                         "boundary need its points on both, or each one's points on the other's segments; regions "
+                         "must touch along sides, not at a point only)", where=source) from None
     return merged, np.asarray(owner, np.int64)
 
 
@@ -390,7 +396,8 @@ def mesh_model(model: Model, mesh_one, *, size: float | None = None, divisions: 
     :func:`jaxmatch.meshing.pipeline.mesh`, used for every piece.
 
     Returns a :class:`QuadMesh` (``chosen="assembly"``; ``detail``: per region its pieces'
-    strategies). Raises :class:`InputError` naming the model's file for a model that cannot be
+    strategies; ``tried``: per region a :class:`Candidate` named ``"region NAME (strategies)"``
+    whose mesh is that region's cells, for its figures). Raises :class:`InputError` naming the model's file for a model that cannot be
     meshed.
     """
     t0 = time.perf_counter()
@@ -421,7 +428,7 @@ def mesh_model(model: Model, mesh_one, *, size: float | None = None, divisions: 
     lm = mesh_layout(merged, cat, lat, size=h, sizes=ALL_SIZES if any(singles) else TEMPLATE_SIZES, quality=quality)
     sides, quads = lm.sides, np.asarray(lm.quads, np.int64)
     xy = np.array(lm.xy, np.float64)
-    fixed_sides, interfaces, cut_sides = [], {}, []
+    fixed_sides, interfaces = [], {}
     for s in range(len(sides.chains)):
         u0, u1 = sides.users[s]
         if u1 < 0:
@@ -431,8 +438,7 @@ def mesh_model(model: Model, mesh_one, *, size: float | None = None, divisions: 
             key = "|".join(sorted((model.regions[r0].name, model.regions[r1].name)))
             interfaces.setdefault(key, []).append(s)
             fixed_sides.append(s)
-        elif piece_of[u0] != piece_of[u1]:
-            cut_sides.append(s)
+        elif piece_of[u0] != piece_of[u1]:  # an embedded curve's cut
             fixed_sides.append(s)
     chains = [np.asarray(lm.side_vertices[s], np.int64) for s in range(len(sides.chains))]
     loops = [np.asarray(lm.outer, np.int64)] + [np.asarray(hl, np.int64) for hl in lm.holes]
@@ -458,12 +464,17 @@ def mesh_model(model: Model, mesh_one, *, size: float | None = None, divisions: 
     line_sets.update({k: v for k, v in base.line_sets.items() if k.startswith("hole ")})
     for key in sorted(interfaces):
         line_sets[key] = np.concatenate([np.stack([chains[s][:-1], chains[s][1:]], axis=1) for s in interfaces[key]])
-    cut_edges = (np.concatenate([np.stack([chains[s][:-1], chains[s][1:]], axis=1) for s in cut_sides])
-                 if cut_sides else np.zeros((0, 2), np.int64))
+    all_edges = np.unique(np.sort(np.stack([quads, np.roll(quads, -1, axis=1)], axis=-1).reshape(-1, 2), axis=1), axis=0)
     region_of_quad = region_of_patch[np.asarray(lm.patch, np.int64)]
     line_sets.update(_region_sides(model, xy, quads, region_of_quad, tol))
     for k, c in enumerate(model.embedded.curves):
-        line_sets[f"curve {k + 1}"] = _on_curve(xy, cut_edges, c, tol) if cut_edges.size else cut_edges
+        e = _on_curve(xy, all_edges, c, tol)
+        line_sets[f"curve {k + 1}"] = e
+        length = float(np.sum(np.linalg.norm(np.diff(c, axis=0), axis=1)))
+        covered = float(np.sum(np.linalg.norm(xy[e[:, 0]] - xy[e[:, 1]], axis=1)))
+        if abs(covered - length) > 0.01 * length:  # (a curve that bends between its mesh vertices)
+            warnings.warn(InputWarning(f"embedded curve {k + 1} is covered by mesh edges over {covered:.4g} of its "
+                                       f"length {length:.4g}", model.source), stacklevel=2)
     corners = np.concatenate([corner_points(canonical(p.shape, h, corner_angle)) for p in parts] + [np.asarray(model.embedded.points).reshape(-1, 2)])
     regions = tuple(r.name for r in model.regions)
     detail = {r.name: [c for p, c in zip(parts, chosen) if model.regions[p.region] is r] for r in model.regions}
@@ -472,5 +483,11 @@ def mesh_model(model: Model, mesh_one, *, size: float | None = None, divisions: 
                    side_counts=base.side_counts, templates=tuple(lm.templates), detail=detail, regions=regions,
                    point_sets={f"point {k + 1}": np.array([v], np.int64) for k, v in enumerate(point_ids)})
     rule = "; ".join(f"{name}: {', '.join(c)}" for name, c in detail.items())
-    result = out.with_choice("assembly", rule, None, ())
-    return result.with_choice("assembly", rule, None, (Candidate("assembly", result),))
+    per_region = []
+    for r, reg in enumerate(model.regions):  # each region's cells as a mesh of their own: its figures
+        q = quads[region_of_quad == r]
+        patches = np.unique(np.asarray(lm.patch, np.int64)[region_of_quad == r], return_inverse=True)[1]
+        sub = QuadMesh(xy=xy, quads=q, patch=patches.reshape(-1).astype(np.int64), line_sets={},
+                       region_area=float(region_polygon(reg.shape).area), corners=corner_points(reg.shape), size=h)
+        per_region.append(Candidate(f"region {reg.name} ({', '.join(detail[reg.name])})", sub))
+    return out.with_choice("assembly", rule, None, per_region)
