@@ -45,6 +45,8 @@ CASES = {  # name: (document or example file, size)
     "lug on a side": (LUG, 0.1),
     "two L shapes": (TWO_L, 0.2),
     "crack and point": (EXAMPLES / "assembly-crack.json", 0.1),
+    "a point one side lacks": ({"regions": [{"name": "a", "boundary": SQUARE},  # (1, 0.4): inserted into a's side
+                                            {"name": "b", "boundary": [[1, 0], [2, 0], [2, 1], [1, 1], [1, 0.4]]}]}, 0.2),
 }
 
 
@@ -191,6 +193,8 @@ def test_embedded_point_is_a_vertex_and_curve_is_covered_by_edges(cli, tmp_path)
     ({"boundary": SQUARE, "embedded": {"points": [[2, 2]]}}, "embedded point 1 (2, 2) lies outside"),
     ({"boundary": SQUARE, "embedded": {"curves": [[[0.5, 0.5], [1.5, 0.5]]]}}, "embedded curve 1 leaves the regions"),
     ({"regions": [{"name": "a", "boundary": SQUARE}], "colour": 1}, "unknown key 'colour'"),
+    ({"regions": [{"name": "a", "boundary": SQUARE}, {"name": "b", "boundary": [[2, 0], [3, 0], [3, 1], [2, 1]]}]},
+     "region 'b' does not meet region 'a'"),
 ])
 def test_bad_models_are_one_line_errors(cli, tmp_path, doc, what):
     code, stdout, err = cli("mesh", _file(tmp_path, doc), "--size", 0.25, "--out", tmp_path / "x.msh")

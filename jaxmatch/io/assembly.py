@@ -27,13 +27,15 @@ import warnings
 import numpy as np
 
 from jaxmatch.errors import InputError
-from jaxmatch.io.dxf import CURVES, read_dxf
 from jaxmatch.io.outline import Outline, tidy
 from jaxmatch.io.readers import JSON_KEYS, _load_json, _read_geojson, _read_json, _read_svg, _text
+from jaxmatch.lazy import Later
 from jaxmatch.model import Embedded, Model, Region, join_embedded, make_model, parse_embedded
 from jaxmatch.shape import DEFAULT_CORNER_ANGLE, make_shape
 
 __all__ = ["model_from_json", "read_model", "several_regions"]
+
+later = Later(dxf="jaxmatch.io.dxf")  # ezdxf: only for DXF assemblies
 
 _REGION_KEYS = JSON_KEYS + ("name", "embedded")
 
@@ -116,7 +118,7 @@ def _dxf_layers(data, source: str) -> list[str]:
         return []
     layers: list[str] = []
     for e in doc.modelspace():
-        if (e.dxftype() in CURVES or e.dxftype() == "INSERT") and e.dxf.layer not in layers:
+        if (e.dxftype() in later.dxf.CURVES or e.dxftype() == "INSERT") and e.dxf.layer not in layers:
             layers.append(e.dxf.layer)
     return layers
 
@@ -156,7 +158,7 @@ def read_model(data, source: str, fmt: str, corner_angle: float = DEFAULT_CORNER
         layers = _dxf_layers(data, source)
         if len(layers) < 2:
             return None
-        return make_model([_region(read_dxf(data, source, layer), layer, source, corner_angle) for layer in layers],
+        return make_model([_region(later.dxf.read_dxf(data, source, layer), layer, source, corner_angle) for layer in layers],
                           source=source)
     if fmt == "svg":
         names = _svg_names(data)

@@ -209,6 +209,22 @@ def pieces(model: Model, corner_angle: float = DEFAULT_CORNER_ANGLE) -> tuple[li
     return out, extended, tol
 
 
+def _connected(model: Model) -> None:
+    """InputError unless the regions' union is one region (regions meet along sides)."""
+    import shapely
+
+    polys = [region_polygon(r.shape) for r in model.regions]
+    union = shapely.union_all(polys)
+    if union.geom_type == "Polygon":
+        return
+    first = union.geoms[0]
+    apart = [r.name for r, p in zip(model.regions, polys) if not first.covers(p.representative_point())]
+    inside = [r.name for r, p in zip(model.regions, polys) if first.covers(p.representative_point())]
+    raise InputError(f"region {apart[0]!r} does not meet region {inside[0]!r} or the others along a side: the "
+                     "regions of an assembly form one connected region (mesh separate parts one by one)",
+                     where=model.source)
+
+
 # ---------------------------------------------------------------------------------------------
 # 2. each piece's layout
 
@@ -407,6 +423,7 @@ def mesh_model(model: Model, mesh_one, *, size: float | None = None, divisions: 
     if not (h > 0 and math.isfinite(h)):
         raise InputError(f"element size must be a positive number, got {size!r}")
     cat, lat = load_catalogue(catalogue), _lattice(lattice)
+    _connected(model)
     parts, curves, tol = pieces(model, corner_angle)
     layouts, singles, chosen = [], [], []
     for n, piece in enumerate(parts):
