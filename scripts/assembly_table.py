@@ -28,8 +28,8 @@ INLINE = {
                                  {"name": "b", "boundary": [[2, 0], [3, 0], [3, 2], [1, 2], [1, 1], [2, 1]]}]},
 }
 CASES = [("two rectangles", 0.25), ("lug on a block's side", 0.1), ("two L shapes", 0.2),
-         ("examples/assembly-inclusion.json", 0.1), ("examples/assembly-laminate.json", 0.1),
-         ("examples/assembly-crack.json", 0.1), ("examples/assembly-motor.json", 0.1), ("SVG: two rects", 0.25)]
+         ("examples/assemblies/inclusion.json", 0.1), ("examples/assemblies/laminate.json", 0.1),
+         ("examples/assemblies/crack.json", 0.1), ("examples/assemblies/motor.json", 0.1), ("SVG: two rects", 0.25)]
 SVG = ('<svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 3 1"><rect id="left" width="1" height="1"/>'
        '<rect id="right" x="1" width="2" height="1"/></svg>')
 

@@ -40,11 +40,11 @@ TWO = {"regions": [{"name": "left", "boundary": SQUARE},
 
 CASES = {  # name: (document or example file, size)
     "two rectangles": (TWO, 0.25),
-    "inclusion": (EXAMPLES / "assembly-inclusion.json", 0.15),
-    "laminate": (EXAMPLES / "assembly-laminate.json", 0.1),
+    "inclusion": (EXAMPLES / "assemblies" / "inclusion.json", 0.15),
+    "laminate": (EXAMPLES / "assemblies" / "laminate.json", 0.1),
     "lug on a side": (LUG, 0.1),
     "two L shapes": (TWO_L, 0.2),
-    "crack and point": (EXAMPLES / "assembly-crack.json", 0.1),
+    "crack and point": (EXAMPLES / "assemblies" / "crack.json", 0.1),
     "a point one side lacks": ({"regions": [{"name": "a", "boundary": SQUARE},  # (1, 0.4): inserted into a's side
                                             {"name": "b", "boundary": [[1, 0], [2, 0], [2, 1], [1, 1], [1, 0.4]]}]}, 0.2),
 }
@@ -166,7 +166,7 @@ def _is_corner(poly, c) -> bool:
 
 
 def test_embedded_point_is_a_vertex_and_curve_is_covered_by_edges(cli, tmp_path):
-    src = EXAMPLES / "assembly-crack.json"
+    src = EXAMPLES / "assemblies" / "crack.json"
     doc = json.loads(src.read_text())
     out = tmp_path / "c.msh"
     code, _, err = cli("mesh", src, "--size", 0.1, "--out", out)
@@ -267,7 +267,7 @@ def test_region_side_groups_cover_the_input_sides(tmp_path, doc):
 def test_motor_section(cli, tmp_path):
     """Rotor, air gap, stator and 6 coils (72-gons and arcs): one mesh, 8 interfaces."""
     out = tmp_path / "motor.msh"
-    code, _, err = cli("mesh", EXAMPLES / "assembly-motor.json", "--size", 0.1, "--out", out)
+    code, _, err = cli("mesh", EXAMPLES / "assemblies" / "motor.json", "--size", 0.1, "--out", out)
     assert code == 0, err
     xy, quads, region, lines, _ = _read(out)
     assert len(set(region)) == 9 and sum("|" in k for k in lines) == 8
