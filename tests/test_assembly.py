@@ -10,12 +10,15 @@ from __future__ import annotations
 
 import json
 import math
+import tempfile
 from pathlib import Path
 
 import meshio
 import numpy as np
 import pytest
 import shapely
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import jaxmatch
 from jaxmatch.errors import EXIT_BAD_INPUT, InputError
@@ -47,20 +50,40 @@ CASES = {  # name: (document or example file, size)
     "crack and point": (EXAMPLES / "assemblies" / "crack.json", 0.1),
     "a point one side lacks": ({"regions": [{"name": "a", "boundary": SQUARE},  # (1, 0.4): inserted into a's side
                                             {"name": "b", "boundary": [[1, 0], [2, 0], [2, 1], [1, 1], [1, 0.4]]}]}, 0.2),
+    "DXF layers: lug": (("dxf", LUG), 0.1),
+    "SVG ids: two L shapes": (("svg", TWO_L), 0.2),
 }
 
 
 def _file(tmp_path: Path, doc, name="model.json") -> Path:
+    """``doc`` written as JSON (a Path: as it is; ``("dxf", doc)``: each region a closed polyline on
+    its own layer; ``("svg", doc)``: each region a polygon element with its name as id)."""
     if isinstance(doc, Path):
         return doc
+    if isinstance(doc, tuple) and doc[0] == "dxf":
+        import ezdxf
+
+        dxf = ezdxf.new()
+        for r in doc[1]["regions"]:
+            dxf.modelspace().add_lwpolyline(r["boundary"], close=True, dxfattribs={"layer": r["name"]})
+        path = tmp_path / "model.dxf"
+        dxf.saveas(path)
+        return path
+    if isinstance(doc, tuple) and doc[0] == "svg":
+        shapes = "".join(f'<polygon id="{r["name"]}" points="{" ".join(f"{x},{y}" for x, y in r["boundary"])}"/>'
+                         for r in doc[1]["regions"])
+        path = tmp_path / "model.svg"
+        path.write_text(f'<svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 10 10">{shapes}</svg>')
+        return path
     path = tmp_path / name
     path.write_text(json.dumps(doc))
     return path
 
 
-def _regions(path: Path) -> dict[str, shapely.Polygon]:
-    """The regions of a JSON assembly as shapely polygons (read here, not by jaxmatch)."""
-    doc = json.loads(path.read_text())
+def _regions(doc) -> dict[str, shapely.Polygon]:
+    """The regions of an assembly document (or JSON file) as shapely polygons (read here, not by
+    jaxmatch; SVG coordinates are read as they are written)."""
+    doc = doc[1] if isinstance(doc, tuple) else json.loads(doc.read_text()) if isinstance(doc, Path) else doc
     items = doc["regions"] if "regions" in doc else [dict(doc, name="region")]
     return {r["name"]: shapely.Polygon(r["boundary"], holes=r.get("holes", [])) for r in items}
 
@@ -116,8 +139,12 @@ def test_assembly_is_one_conforming_mesh(cli, tmp_path, case):
     out = tmp_path / "a.msh"
     code, stdout, err = cli("mesh", src, "--size", size, "--out", out)
     assert code == 0, err
+    _check_conforming(out, _regions(doc), size)
+
+
+def _check_conforming(out: Path, polys: dict, size: float) -> None:
+    """The checks of the module docstring on the mesh file ``out`` of the regions ``polys``."""
     xy, quads, region, lines, _ = _read(out)
-    polys = _regions(src)
     assert set(region) == set(polys)
     sj = _scaled_jacobian(xy, quads)
     area = 0.5 * np.abs(np.sum(xy[quads, 0] * np.roll(xy[quads, 1], -1, axis=1)
@@ -183,6 +210,24 @@ def test_embedded_point_is_a_vertex_and_curve_is_covered_by_edges(cli, tmp_path)
         assert np.min(np.linalg.norm(xy - end, axis=1)) < 1e-9
     assert set(map(tuple, np.sort(e, axis=1).tolist())) <= {tuple(x) for x in _edges(quads).tolist()}
     assert _scaled_jacobian(xy, quads).min() >= 0.3
+
+
+@settings(max_examples=12, deadline=None)
+@given(x0=st.floats(0.05, 3.0), width=st.floats(0.3, 1.0), height=st.floats(0.2, 1.0),
+       cut=st.floats(0.2, 0.8))
+def test_a_lug_anywhere_on_a_split_block_is_conforming(x0, width, height, cut):
+    """A lug whose corners fall anywhere on the top of a block made of two regions side by side
+    (T-junctions on both of them, and the lug across their interface or not): conforming."""
+    x1 = min(x0 + width, 3.95)
+    regions = {"left": [[0, 0], [4 * cut, 0], [4 * cut, 1], [0, 1]], "right": [[4 * cut, 0], [4, 0], [4, 1], [4 * cut, 1]],
+               "lug": [[x0, 1], [x1, 1], [x1, 1 + height], [x0, 1 + height]]}
+    if any(abs(4 * cut - x) < 0.05 for x in (x0, x1)):  # (a lug corner within 1/20 of the interface: slivers)
+        return
+    m = jaxmatch.mesh(regions=[{"name": k, "boundary": v} for k, v in regions.items()], size=0.1)
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "m.msh"
+        jaxmatch.write_mesh(out, m)
+        _check_conforming(out, {k: shapely.Polygon(v) for k, v in regions.items()}, 0.1)
 
 
 @pytest.mark.parametrize("doc, what", [

@@ -325,12 +325,33 @@ def _smoothed(xy: np.ndarray, quads: np.ndarray, fixed: np.ndarray) -> np.ndarra
     return new if (int(inv1.sum()), -float(sj1.min())) <= (int(inv0.sum()), -float(sj0.min())) else xy
 
 
-def _snap(xy: np.ndarray, p: np.ndarray, chains: Sequence[np.ndarray], fixed: np.ndarray, tol: float,
-          taken: set) -> int:
-    """Make point ``p`` a vertex: an existing vertex within ``tol``, else the nearest movable
-    vertex of the side chain ``p`` lies on (its interior vertices, in order), else the nearest
-    vertex not ``fixed``; that vertex is moved onto ``p`` (``xy`` changed in place). Returns its
-    id."""
+SNAP_TRIES = 8
+"""Vertices tried for an embedded point (the nearest that may move there): the one whose quads
+are best shaped once it is there is moved."""
+
+
+def _best_move(xy: np.ndarray, quads: np.ndarray, p: np.ndarray, cands: Sequence[int]) -> int:
+    """The vertex of ``cands`` (the nearest first) whose quads have the highest min scaled
+    Jacobian once it is moved to ``p`` (ties: the nearer)."""
+    best, key = int(cands[0]), None
+    for v in cands:
+        around = quads[np.any(quads == v, axis=1)]
+        old = xy[v].copy()
+        xy[v] = p
+        sj, _ = sj_inverted(xy, around)
+        xy[v] = old
+        k = round(float(sj.min()), 6) if len(around) else -1.0
+        if key is None or k > key:
+            best, key = int(v), k
+    return best
+
+
+def _snap(xy: np.ndarray, quads: np.ndarray, p: np.ndarray, chains: Sequence[np.ndarray], fixed: np.ndarray,
+          tol: float, taken: set) -> int:
+    """Make point ``p`` a vertex: an existing vertex within ``tol``, else a movable vertex of the
+    side chain ``p`` lies on (its interior vertices), else a vertex not ``fixed``: of the
+    :data:`SNAP_TRIES` nearest, the one whose quads are best shaped there (:func:`_best_move`) is
+    moved onto ``p`` (``xy`` changed in place). Returns its id."""
     d = np.linalg.norm(xy - p, axis=1)
     if d.min() <= tol:
         return int(np.argmin(d))
@@ -345,7 +366,7 @@ def _snap(xy: np.ndarray, p: np.ndarray, chains: Sequence[np.ndarray], fixed: np
             if not inner:
                 raise InputError(f"embedded point ({p[0]:g}, {p[1]:g}): no vertex of its side is free to move onto it "
                                  "(try a smaller --size)")
-            v = min(inner, key=lambda v: d[v])
+            v = _best_move(xy, quads, p, sorted(inner, key=lambda v: d[v])[:3])
             xy[v] = p
             return v
     free = np.ones(len(xy), bool)
@@ -353,7 +374,8 @@ def _snap(xy: np.ndarray, p: np.ndarray, chains: Sequence[np.ndarray], fixed: np
     free[list(taken)] = False
     if not free.any():  # pragma: no cover - a mesh with no interior vertex and a point inside
         raise InputError(f"embedded point ({p[0]:g}, {p[1]:g}): no interior vertex to move onto it (try a smaller --size)")
-    v = int(np.flatnonzero(free)[np.argmin(d[free])])
+    ids = np.flatnonzero(free)
+    v = _best_move(xy, quads, p, ids[np.argsort(d[ids])[:SNAP_TRIES]].tolist())
     xy[v] = p
     return v
 
@@ -469,13 +491,20 @@ def mesh_model(model: Model, mesh_one, *, size: float | None = None, divisions: 
     moved = False
     for k, p in enumerate(targets + ends):
         on = [chains[s] for s in range(len(chains))]  # every side: a point on a side moves a vertex along it
-        v = _snap(xy, p, on, fixed, tol, taken)
+        v = _snap(xy, quads, p, on, fixed, tol, taken)
         moved = moved or float(np.linalg.norm(lm.xy[v] - p)) > tol
         taken.add(v)
         if k < len(targets):
             point_ids.append(v)
     if taken and moved:
         xy = _smoothed(xy, quads, np.unique(np.concatenate([fixed, np.array(sorted(taken), np.int64)])))
+        _, inverted = sj_inverted(xy, quads)
+        for k, v in enumerate(point_ids):
+            if np.any(inverted & np.any(quads == v, axis=1)):
+                x, y = model.embedded.points[k]
+                warnings.warn(InputWarning(f"embedded point {k + 1} ({x:g}, {y:g}): the quads around its vertex fold at "
+                                           "this size (it is too near a corner or another point); try a smaller size",
+                                           model.source), stacklevel=2)
     base = from_layout(lm, size=h, corners=np.zeros((0, 2)))
     line_sets = {"boundary": base.line_sets["boundary"]}
     line_sets.update({k: v for k, v in base.line_sets.items() if k.startswith("hole ")})
