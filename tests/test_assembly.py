@@ -317,3 +317,14 @@ def test_motor_section(cli, tmp_path):
     xy, quads, region, lines, _ = _read(out)
     assert len(set(region)) == 9 and sum("|" in k for k in lines) == 8
     assert _scaled_jacobian(xy, quads).min() >= 0.3
+
+
+def test_abaqus_file_has_region_element_sets_and_point_node_sets(cli, tmp_path):
+    out = tmp_path / "c.inp"
+    code, _, err = cli("mesh", EXAMPLES / "assemblies" / "crack.json", "--size", 0.1, "--out", out)
+    assert code == 0, err
+    m = meshio.read(out)
+    (p,) = json.loads((EXAMPLES / "assemblies" / "crack.json").read_text())["embedded"]["points"]
+    (v,) = m.point_sets["point_1"]
+    assert np.linalg.norm(m.points[v, :2] - p) < 1e-9
+    assert sum(len(c) for c in m.cell_sets["region"]) == len(m.cells[0].data)

@@ -95,7 +95,9 @@ def facet_partition(sm: SolverMesh) -> tuple[np.ndarray, np.ndarray, list[str]]:
 
 def _marker_note(fmt: str, sm: SolverMesh, lost: list[str]) -> str:
     table = ", ".join(f"{n}={j + 1}" for j, n in enumerate(sm.groups))
-    note = f"{fmt} stores no group names: cell markers 'patch p' = p + 1; facet markers {table}"
+    cells = ("'patch p' = p + 1" if all(n == f"patch {p}" for p, n in enumerate(sm.region_names))
+             else ", ".join(f"{n}={r + 1}" for r, n in enumerate(sm.region_names)))
+    note = f"{fmt} stores no group names: cell markers {cells}; facet markers {table}"
     if lost:
         note += f"; one marker per facet, so {', '.join(lost)} has none of its own (the union of others)"
     return note
