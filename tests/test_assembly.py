@@ -50,6 +50,10 @@ CASES = {  # name: (document or example file, size)
     "crack and point": (EXAMPLES / "assemblies" / "crack.json", 0.1),
     "a point one side lacks": ({"regions": [{"name": "a", "boundary": SQUARE},  # (1, 0.4): inserted into a's side
                                             {"name": "b", "boundary": [[1, 0], [2, 0], [2, 1], [1, 1], [1, 0.4]]}]}, 0.2),
+    "holed plate, block, edge crack": ({"regions": [
+        {"name": "plate", "boundary": [[0, 0], [2, 0], [2, 1], [0, 1]],
+         "holes": [[[0.4, 0.3], [0.8, 0.3], [0.8, 0.7], [0.4, 0.7]]], "embedded": {"curves": [[[2, 0.5], [1.4, 0.5]]]}},
+        {"name": "block", "boundary": [[2, 0], [3, 0], [3, 1], [2, 1]]}]}, 0.1),
     "DXF layers: lug": (("dxf", LUG), 0.1),
     "SVG ids: two L shapes": (("svg", TWO_L), 0.2),
 }
