@@ -346,6 +346,53 @@ def _best_move(xy: np.ndarray, quads: np.ndarray, p: np.ndarray, cands: Sequence
     return best
 
 
+SLIDE_ROUNDS = 4
+"""Rounds of :func:`_slid`: interface vertices slid along their sides, then the rest smoothed."""
+
+
+def _slid(xy: np.ndarray, quads: np.ndarray, fixed: np.ndarray, sides: Sequence[tuple[np.ndarray, np.ndarray]],
+          rounds: int = SLIDE_ROUNDS, pinned: np.ndarray = np.zeros(0, np.int64)) -> np.ndarray:
+    """``xy`` with the vertices inside each interface side slid along it: each toward the mean
+    of its neighbours, projected onto the side's polyline and kept between its two neighbours on
+    the side (the side's end nodes stay), then every vertex not ``fixed`` smoothed; after each of
+    ``rounds`` rounds the mesh is kept when its min scaled Jacobian rose and nothing folds.
+    Layouts chosen region by region put their nodes at different places on the two sides of a
+    thin region (an air gap): sliding takes out the shear that leaves between them.
+
+    sides: ``(vertex ids (k,), polyline (p, 2))`` per side, ids in the polyline's direction;
+    pinned: vertex ids that stay where they are (an embedded curve's ends)."""
+    import shapely
+
+    if not sides:
+        return xy
+    e = np.unique(np.sort(np.stack([quads, np.roll(quads, -1, axis=1)], axis=-1).reshape(-1, 2), axis=1), axis=0)
+    deg = np.bincount(e.ravel(), minlength=len(xy)).astype(np.float64)
+    lines = [(ids, shapely.LineString(poly)) for ids, poly in sides if len(ids) > 2]
+    sj, inv = sj_inverted(xy, quads)
+    best, key = xy, (int(inv.sum()), -float(sj.min()))
+    cur = xy.copy()
+    for _ in range(rounds):
+        total = np.zeros_like(cur)
+        np.add.at(total, e[:, 0], cur[e[:, 1]])
+        np.add.at(total, e[:, 1], cur[e[:, 0]])
+        mean = total / np.maximum(deg, 1)[:, None]
+        for ids, line in lines:
+            t = np.asarray(line.project(shapely.points(cur[ids])))
+            want = np.asarray(line.project(shapely.points(mean[ids[1:-1]])))
+            lo, hi = t[:-2], t[2:]
+            gap = 0.2 * (hi - lo)
+            t_new = np.clip(want, lo + gap, hi - gap)
+            keep = np.isin(ids[1:-1], pinned)
+            t_new[keep] = t[1:-1][keep]
+            cur[ids[1:-1]] = shapely.get_coordinates(line.interpolate(t_new))
+        cur = smooth_in_frame(cur, quads, fixed)
+        sj, inv = sj_inverted(cur, quads)
+        k = (int(inv.sum()), -float(sj.min()))
+        if k < key:
+            best, key = cur.copy(), k
+    return best
+
+
 def _snap(xy: np.ndarray, quads: np.ndarray, p: np.ndarray, chains: Sequence[np.ndarray], fixed: np.ndarray,
           tol: float, taken: set) -> int:
     """Make point ``p`` a vertex: an existing vertex within ``tol``, else a movable vertex of the
@@ -467,7 +514,7 @@ def mesh_model(model: Model, mesh_one, *, size: float | None = None, divisions: 
     lm = mesh_layout(merged, cat, lat, size=h, sizes=ALL_SIZES if any(singles) else TEMPLATE_SIZES, quality=quality)
     sides, quads = lm.sides, np.asarray(lm.quads, np.int64)
     xy = np.array(lm.xy, np.float64)
-    fixed_sides, interfaces = [], {}
+    fixed_sides, interfaces, curve_sides = [], {}, []
     for s in range(len(sides.chains)):
         u0, u1 = sides.users[s]
         if u1 < 0:
@@ -477,25 +524,37 @@ def mesh_model(model: Model, mesh_one, *, size: float | None = None, divisions: 
             key = "|".join(sorted((model.regions[r0].name, model.regions[r1].name)))
             interfaces.setdefault(key, []).append(s)
             fixed_sides.append(s)
-        elif piece_of[u0] != piece_of[u1]:  # an embedded curve's cut
-            fixed_sides.append(s)
+        elif piece_of[u0] != piece_of[u1]:  # an embedded curve's cut (or its extension to the boundary)
+            curve_sides.append(s)
     chains = [np.asarray(lm.side_vertices[s], np.int64) for s in range(len(sides.chains))]
     loops = [np.asarray(lm.outer, np.int64)] + [np.asarray(hl, np.int64) for hl in lm.holes]
-    fixed = np.unique(np.concatenate(loops + [chains[s] for s in fixed_sides]))
-    xy = _smoothed(xy, quads, fixed)
-    # embedded points and curve ends inside their regions: vertices
-    targets = [np.asarray(p, np.float64) for p in model.embedded.points]
-    ends = [c[i] for c in model.embedded.curves for i in (0, -1)]
     taken: set = set()
-    point_ids = []
     moved = False
-    for k, p in enumerate(targets + ends):
-        on = [chains[s] for s in range(len(chains))]  # every side: a point on a side moves a vertex along it
-        v = _snap(xy, quads, p, on, fixed, tol, taken)
+    kept = np.unique(np.concatenate(loops + [chains[s] for s in fixed_sides]))
+    for c in model.embedded.curves:  # a curve's ends: vertices, slid along their cuts while these are straight
+        for p in (c[0], c[-1]):
+            v = _snap(xy, quads, p, [chains[s] for s in curve_sides], kept, tol, taken)
+            moved = moved or float(np.linalg.norm(lm.xy[v] - p)) > tol
+            taken.add(v)
+    ends = np.array(sorted(taken), np.int64)
+    on_curves = np.zeros(len(xy), bool)  # the cuts' vertices on the curves stay; their extensions' are free
+    if curve_sides:
+        import shapely
+
+        cut = np.unique(np.concatenate([chains[s] for s in curve_sides]))
+        near = shapely.distance(shapely.MultiLineString([c for c in model.embedded.curves]), shapely.points(xy[cut]))
+        on_curves[cut[near <= tol]] = True
+    fixed = np.unique(np.concatenate([kept, np.flatnonzero(on_curves), ends]))
+    xy = _smoothed(xy, quads, fixed)
+    xy = _slid(xy, quads, fixed, [(chains[s], merged.points[sides.chains[s]]) for s in fixed_sides + curve_sides],
+               pinned=ends)
+    # embedded points: vertices
+    point_ids = []
+    for k, p in enumerate(model.embedded.points):
+        v = _snap(xy, quads, np.asarray(p, np.float64), chains, fixed, tol, taken)
         moved = moved or float(np.linalg.norm(lm.xy[v] - p)) > tol
         taken.add(v)
-        if k < len(targets):
-            point_ids.append(v)
+        point_ids.append(v)
     if taken and moved:
         xy = _smoothed(xy, quads, np.unique(np.concatenate([fixed, np.array(sorted(taken), np.int64)])))
         _, inverted = sj_inverted(xy, quads)
