@@ -23,7 +23,7 @@ from hypothesis import strategies as st
 import jaxmatch
 from jaxmatch.errors import EXIT_BAD_INPUT, InputError
 from jaxmatch.meshing.region import load_region
-from jaxmatch.model import Model
+from jaxmatch.model import Embedded, Model
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 
@@ -263,6 +263,25 @@ def test_python_api_regions_and_loaded_model(tmp_path):
     assert np.array_equal(again.quads, m.quads) and "left|right" in again.line_sets
     with pytest.raises(InputError, match="an assembly is meshed at a size"):
         jaxmatch.mesh(model, sides=[4, 4, 4, 4])
+    regions = [jaxmatch.Region(r["name"], jaxmatch.make_shape(r["boundary"])) for r in TWO["regions"]]
+    assert np.array_equal(jaxmatch.mesh(regions=regions, size=0.25).quads, m.quads)
+
+
+def test_points_on_the_outline_and_on_an_interface_are_vertices_on_them():
+    """A point on a side moves a vertex along that side: the side stays straight and covered."""
+    doc = dict(TWO, embedded={"points": [[3, 0.37], [1, 0.61], [2.3, 0]]})
+    m = jaxmatch.mesh(jaxmatch.make_model([jaxmatch.Region(r["name"], jaxmatch.make_shape(r["boundary"]))
+                                           for r in doc["regions"]], Embedded(np.array(doc["embedded"]["points"]))),
+                      size=0.25)
+    for k, p in enumerate(doc["embedded"]["points"], start=1):
+        (v,) = m.point_sets[f"point {k}"]
+        assert np.linalg.norm(m.xy[v] - p) < 1e-9
+    for name, line in (("right side 1-2", [[3, 0], [3, 1]]), ("left|right", [[1, 0], [1, 1]]),
+                       ("right side 0-1", [[1, 0], [3, 0]])):
+        e = m.line_sets[name]
+        assert np.all(shapely.distance(shapely.LineString(line), shapely.points(m.xy[e.ravel()])) < 1e-9)
+        assert abs(_length(m.xy, e) - shapely.LineString(line).length) < 1e-9
+    assert m.valid and m.min_scaled_jacobian >= 0.3
 
 
 def test_geojson_feature_collection_and_dxf_layers_are_assemblies(tmp_path):
