@@ -15,7 +15,6 @@ region's cells is on the union's outline or on exactly one other region's), area
 from __future__ import annotations
 
 import json
-import math
 import sys
 import tempfile
 import time

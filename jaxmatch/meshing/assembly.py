@@ -32,7 +32,6 @@ file's order; on the outline or an interface) and ``curve k`` per embedded curve
 from __future__ import annotations
 
 import math
-import time
 import warnings
 from typing import NamedTuple, Sequence
 
@@ -485,7 +484,6 @@ def mesh_model(model: Model, mesh_one, *, size: float | None = None, divisions: 
     whose mesh is that region's cells, for its figures). Raises :class:`InputError` naming the model's file for a model that cannot be
     meshed.
     """
-    t0 = time.perf_counter()
     if size is not None and divisions is not None:
         raise InputError("give divisions or a size, not both")
     h = float(size) if size is not None else default_size(model, int(divisions or DEFAULT_DIVISIONS))
@@ -493,11 +491,11 @@ def mesh_model(model: Model, mesh_one, *, size: float | None = None, divisions: 
         raise InputError(f"element size must be a positive number, got {size!r}")
     cat, lat = load_catalogue(catalogue), _lattice(lattice)
     _connected(model)
-    parts, curves, tol = pieces(model, corner_angle)
+    parts, _, tol = pieces(model, corner_angle)
     layouts, singles, chosen = [], [], []
     for n, piece in enumerate(parts):
         m = mesh_one(piece.shape, size=h, catalogue=cat, lattice=lat, quality=quality, corner_angle=corner_angle,
-                          strategies=strategies, budget_s=budget_s)
+                     strategies=strategies, budget_s=budget_s)
         try:
             lay, single = _layout_of(piece.shape, m.chosen, h, corner_angle)
         except InputError as e:
@@ -508,13 +506,47 @@ def mesh_model(model: Model, mesh_one, *, size: float | None = None, divisions: 
         chosen.append(m.chosen)
         if progress is not None:
             progress(n + 1, len(parts) + 1, model.regions[piece.region].name)
-    merged, owner = _merge(layouts, tol, model.source, [p.region for p in parts])
-    piece_of = owner  # (one layout per piece)
+    merged, piece_of = _merge(layouts, tol, model.source, [p.region for p in parts])
     region_of_patch = np.array([parts[p].region for p in piece_of], np.int64)
     lm = mesh_layout(merged, cat, lat, size=h, sizes=ALL_SIZES if any(singles) else TEMPLATE_SIZES, quality=quality)
-    sides, quads = lm.sides, np.asarray(lm.quads, np.int64)
-    xy = np.array(lm.xy, np.float64)
-    fixed_sides, interfaces, curve_sides = [], {}, []
+    interfaces, curve_sides = _kinds(model, lm.sides, region_of_patch, piece_of)
+    xy, point_ids = _placed(model, lm, merged, [s for ss in interfaces.values() for s in ss], curve_sides, tol)
+    quads = np.asarray(lm.quads, np.int64)
+    region_of_quad = region_of_patch[np.asarray(lm.patch, np.int64)]
+    base = from_layout(lm, size=h, corners=np.zeros((0, 2)))
+    line_sets = {k: v for k, v in base.line_sets.items() if k == "boundary" or k.startswith("hole ")}
+    for key in sorted(interfaces):
+        line_sets[key] = np.concatenate([_chain_edges(lm.side_vertices[s]) for s in interfaces[key]])
+    line_sets.update(_region_sides(model, xy, quads, region_of_quad, tol))
+    line_sets.update(_curve_groups(model, xy, quads, tol))
+    corners = np.concatenate([corner_points(canonical(p.shape, h, corner_angle)) for p in parts]
+                             + [np.asarray(model.embedded.points).reshape(-1, 2)])
+    detail = {r.name: [c for p, c in zip(parts, chosen) if model.regions[p.region] is r] for r in model.regions}
+    out = QuadMesh(xy=xy, quads=quads, patch=region_of_quad, line_sets=line_sets,
+                   region_area=float(lm.region_area), corners=corners, size=h, side_lengths=base.side_lengths,
+                   side_counts=base.side_counts, templates=tuple(lm.templates), detail=detail, regions=model.names,
+                   point_sets={f"point {k + 1}": np.array([v], np.int64) for k, v in enumerate(point_ids)})
+    rule = "; ".join(f"{name}: {', '.join(c)}" for name, c in detail.items())
+    per_region = []
+    for r, reg in enumerate(model.regions):  # each region's cells as a mesh of their own: its figures
+        mine = region_of_quad == r
+        patches = np.unique(np.asarray(lm.patch, np.int64)[mine], return_inverse=True)[1].reshape(-1)
+        sub = QuadMesh(xy=xy, quads=quads[mine], patch=patches.astype(np.int64), line_sets={},
+                       region_area=float(region_polygon(reg.shape).area), corners=corner_points(reg.shape), size=h)
+        per_region.append(Candidate(f"region {reg.name} ({', '.join(detail[reg.name])})", sub))
+    return out.with_choice("assembly", rule, None, per_region)
+
+
+def _chain_edges(ids) -> np.ndarray:
+    """``(k - 1, 2) int64`` the edges of a side's vertex chain ``(k,)``."""
+    ids = np.asarray(ids, np.int64)
+    return np.stack([ids[:-1], ids[1:]], axis=1)
+
+
+def _kinds(model: Model, sides, region_of_patch: np.ndarray, piece_of: np.ndarray) -> tuple[dict, list[int]]:
+    """The merged layout's inner sides by kind: ``({"NAME1|NAME2": [side ids]}, [side ids of the
+    embedded curves' cuts])`` (the other inner sides are a region's own cuts)."""
+    interfaces, curve_sides = {}, []
     for s in range(len(sides.chains)):
         u0, u1 = sides.users[s]
         if u1 < 0:
@@ -523,39 +555,43 @@ def mesh_model(model: Model, mesh_one, *, size: float | None = None, divisions: 
         if r0 != r1:
             key = "|".join(sorted((model.regions[r0].name, model.regions[r1].name)))
             interfaces.setdefault(key, []).append(s)
-            fixed_sides.append(s)
         elif piece_of[u0] != piece_of[u1]:  # an embedded curve's cut (or its extension to the boundary)
             curve_sides.append(s)
+    return interfaces, curve_sides
+
+
+def _placed(model: Model, lm, merged: Layout, interface_sides: list[int], curve_sides: list[int],
+            tol: float) -> tuple[np.ndarray, list[int]]:
+    """Step 4 of the module docstring: the merged mesh's ``xy (V, 2)`` smoothed, interface
+    vertices slid, embedded curves' ends and points made vertices; and the vertex of each
+    embedded point."""
+    import shapely
+
+    sides, quads = lm.sides, np.asarray(lm.quads, np.int64)
+    xy = np.array(lm.xy, np.float64)
     chains = [np.asarray(lm.side_vertices[s], np.int64) for s in range(len(sides.chains))]
     loops = [np.asarray(lm.outer, np.int64)] + [np.asarray(hl, np.int64) for hl in lm.holes]
+    kept = np.unique(np.concatenate(loops + [chains[s] for s in interface_sides]))
     taken: set = set()
-    moved = False
-    kept = np.unique(np.concatenate(loops + [chains[s] for s in fixed_sides]))
     for c in model.embedded.curves:  # a curve's ends: vertices, slid along their cuts while these are straight
         for p in (c[0], c[-1]):
-            v = _snap(xy, quads, p, [chains[s] for s in curve_sides], kept, tol, taken)
-            moved = moved or float(np.linalg.norm(lm.xy[v] - p)) > tol
-            taken.add(v)
+            taken.add(_snap(xy, quads, p, [chains[s] for s in curve_sides], kept, tol, taken))
     ends = np.array(sorted(taken), np.int64)
     on_curves = np.zeros(len(xy), bool)  # the cuts' vertices on the curves stay; their extensions' are free
     if curve_sides:
-        import shapely
-
         cut = np.unique(np.concatenate([chains[s] for s in curve_sides]))
-        near = shapely.distance(shapely.MultiLineString([c for c in model.embedded.curves]), shapely.points(xy[cut]))
+        near = shapely.distance(shapely.MultiLineString(list(model.embedded.curves)), shapely.points(xy[cut]))
         on_curves[cut[near <= tol]] = True
     fixed = np.unique(np.concatenate([kept, np.flatnonzero(on_curves), ends]))
     xy = _smoothed(xy, quads, fixed)
-    xy = _slid(xy, quads, fixed, [(chains[s], merged.points[sides.chains[s]]) for s in fixed_sides + curve_sides],
+    xy = _slid(xy, quads, fixed, [(chains[s], merged.points[sides.chains[s]]) for s in interface_sides + curve_sides],
                pinned=ends)
-    # embedded points: vertices
     point_ids = []
-    for k, p in enumerate(model.embedded.points):
+    for p in model.embedded.points:
         v = _snap(xy, quads, np.asarray(p, np.float64), chains, fixed, tol, taken)
-        moved = moved or float(np.linalg.norm(lm.xy[v] - p)) > tol
         taken.add(v)
         point_ids.append(v)
-    if taken and moved:
+    if point_ids:
         xy = _smoothed(xy, quads, np.unique(np.concatenate([fixed, np.array(sorted(taken), np.int64)])))
         _, inverted = sj_inverted(xy, quads)
         for k, v in enumerate(point_ids):
@@ -563,36 +599,21 @@ def mesh_model(model: Model, mesh_one, *, size: float | None = None, divisions: 
                 x, y = model.embedded.points[k]
                 warnings.warn(InputWarning(f"embedded point {k + 1} ({x:g}, {y:g}): the quads around its vertex fold at "
                                            "this size (it is too near a corner or another point); try a smaller size",
-                                           model.source), stacklevel=2)
-    base = from_layout(lm, size=h, corners=np.zeros((0, 2)))
-    line_sets = {"boundary": base.line_sets["boundary"]}
-    line_sets.update({k: v for k, v in base.line_sets.items() if k.startswith("hole ")})
-    for key in sorted(interfaces):
-        line_sets[key] = np.concatenate([np.stack([chains[s][:-1], chains[s][1:]], axis=1) for s in interfaces[key]])
+                                           model.source), stacklevel=3)
+    return xy, point_ids
+
+
+def _curve_groups(model: Model, xy: np.ndarray, quads: np.ndarray, tol: float) -> dict:
+    """``"curve k"`` -> ``(E, 2)`` the mesh edges on embedded curve ``k`` (a warning when they
+    cover less or more than its length, 1 %)."""
     all_edges = np.unique(np.sort(np.stack([quads, np.roll(quads, -1, axis=1)], axis=-1).reshape(-1, 2), axis=1), axis=0)
-    region_of_quad = region_of_patch[np.asarray(lm.patch, np.int64)]
-    line_sets.update(_region_sides(model, xy, quads, region_of_quad, tol))
+    out = {}
     for k, c in enumerate(model.embedded.curves):
         e = _on_curve(xy, all_edges, c, tol)
-        line_sets[f"curve {k + 1}"] = e
+        out[f"curve {k + 1}"] = e
         length = float(np.sum(np.linalg.norm(np.diff(c, axis=0), axis=1)))
         covered = float(np.sum(np.linalg.norm(xy[e[:, 0]] - xy[e[:, 1]], axis=1)))
         if abs(covered - length) > 0.01 * length:  # (a curve that bends between its mesh vertices)
             warnings.warn(InputWarning(f"embedded curve {k + 1} is covered by mesh edges over {covered:.4g} of its "
-                                       f"length {length:.4g}", model.source), stacklevel=2)
-    corners = np.concatenate([corner_points(canonical(p.shape, h, corner_angle)) for p in parts] + [np.asarray(model.embedded.points).reshape(-1, 2)])
-    regions = tuple(r.name for r in model.regions)
-    detail = {r.name: [c for p, c in zip(parts, chosen) if model.regions[p.region] is r] for r in model.regions}
-    out = QuadMesh(xy=xy, quads=quads, patch=region_of_quad, line_sets=line_sets,
-                   region_area=float(lm.region_area), corners=corners, size=h, side_lengths=base.side_lengths,
-                   side_counts=base.side_counts, templates=tuple(lm.templates), detail=detail, regions=regions,
-                   point_sets={f"point {k + 1}": np.array([v], np.int64) for k, v in enumerate(point_ids)})
-    rule = "; ".join(f"{name}: {', '.join(c)}" for name, c in detail.items())
-    per_region = []
-    for r, reg in enumerate(model.regions):  # each region's cells as a mesh of their own: its figures
-        q = quads[region_of_quad == r]
-        patches = np.unique(np.asarray(lm.patch, np.int64)[region_of_quad == r], return_inverse=True)[1]
-        sub = QuadMesh(xy=xy, quads=q, patch=patches.reshape(-1).astype(np.int64), line_sets={},
-                       region_area=float(region_polygon(reg.shape).area), corners=corner_points(reg.shape), size=h)
-        per_region.append(Candidate(f"region {reg.name} ({', '.join(detail[reg.name])})", sub))
-    return out.with_choice("assembly", rule, None, per_region)
+                                       f"length {length:.4g}", model.source), stacklevel=3)
+    return out
