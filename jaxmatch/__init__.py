@@ -47,6 +47,9 @@ _API = {
     # the meshing pipeline (the front door)
     "mesh": "jaxmatch.meshing.pipeline",
     "load_region": "jaxmatch.meshing.pipeline",
+    "Model": "jaxmatch.model",
+    "Region": "jaxmatch.model",
+    "make_model": "jaxmatch.model",
     "QuadMesh": "jaxmatch.meshing.result",
     "Quality": "jaxmatch.defaults",
     # sizes, concave shapes, layouts

@@ -26,6 +26,7 @@ from jaxmatch.io.output import MeshOutput, PictureOutput, parse_png_size
 from jaxmatch.lazy import Later
 from jaxmatch.meshing.region import canonical, default_size, load_region
 from jaxmatch.scoring import distributed
+from jaxmatch.model import Model
 from jaxmatch.shape import DEFAULT_CORNER_ANGLE, Shape, check_corner_angle, default_points
 from jaxmatch.shape import annotate as annotate_shape
 
@@ -566,7 +567,7 @@ def _load_region(path: Path, corner_angle: float):
 def _mesh_one(path: Path, angle: float, options: dict, sides, sides_file, out_path, png, svg, as_json, writing,
               drawing) -> None:
     region = _load_region(path, angle)
-    is_layout = not isinstance(region, Shape)
+    is_layout = not isinstance(region, (Shape, Model))  # (an assembly is meshed at a size, like a shape)
     counts = None
     if sides is not None:
         if is_layout:

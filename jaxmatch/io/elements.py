@@ -52,9 +52,10 @@ class SolverMesh:
     ``(F, kf) int64`` facets of :attr:`facet_type`, each oriented outwards from its owner;
     owners: the same names -> ``(F, 2) int64`` (owning cell, local side); cell_data: name ->
     ``(C,)`` per cell; notes: what was changed or left out on the way (one line each);
-    node_groups: name -> ``(N,) int64`` node ids in their order (the periodic pairs' ``periodic k
-    a`` / ``periodic k b``); periodic: per pair ``(line group a, line group b, (n,) nodes a, (n,)
-    nodes b, (2,) translation a -> b)`` (``.msh``: ``$Periodic``).
+    node_groups: name -> ``(N,) int64`` node ids in their order (an assembly's embedded points,
+    ``"point k"``; the periodic pairs' ``periodic k a`` / ``periodic k b``); periodic: per pair
+    ``(line group a, line group b, (n,) nodes a, (n,) nodes b, (2,) translation a -> b)`` (``.msh``:
+    ``$Periodic``).
     """
 
     points: np.ndarray
@@ -108,7 +109,8 @@ def first_order(mesh: "QuadMesh") -> SolverMesh:
     """The QuadMesh's quads, patches and line groups (each edge oriented as its quad's side)."""
     quads = np.asarray(mesh.quads, np.int64)
     patch = np.asarray(mesh.patch, np.int64)
-    names = tuple(f"patch {p}" for p in range(int(patch.max()) + 1)) if patch.size else ()
+    names = tuple(getattr(mesh, "regions", ())) or (tuple(f"patch {p}" for p in range(int(patch.max()) + 1))
+                                                     if patch.size else ())
     groups, owners = {}, {}
     for name, e in mesh.line_sets.items():
         e = np.asarray(e, np.int64).reshape(-1, 2)
@@ -343,6 +345,6 @@ def solver_mesh(mesh: "QuadMesh", *, order: int = 1, serendipity: bool = False, 
     base = second_order(mesh, serendipity=serendipity) if order == 2 else first_order(mesh)
     out = base if extrude_dz is None else extrude(base, extrude_dz, layers, grading)
     if getattr(mesh, "point_sets", None) and (order == 2 or extrude_dz is not None):
-        out = dataclasses.replace(out, notes=out.notes + (f"the node groups {', '.join(mesh.point_sets)} (periodic pairs) "
-                                                          "are written for first-order quads only: left out",))
+        out = dataclasses.replace(out, node_groups={}, periodic=(), notes=out.notes + (
+            f"the node groups ({', '.join(mesh.point_sets)}) are written with first-order quads only: left out",))
     return out

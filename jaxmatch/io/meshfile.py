@@ -207,7 +207,8 @@ def mesh_groups(mesh: "QuadMesh") -> tuple[np.ndarray, list[str], list[LineGroup
     :class:`~jaxmatch.meshing.result.QuadMesh`: its ``patch`` (groups ``"patch p"``) and its
     ``line_sets`` (``"boundary"``, ``"side i-j"``, ``"hole h"``), in their order."""
     patch = np.asarray(mesh.patch, np.int64)
-    names = [f"patch {p}" for p in range(int(np.max(patch)) + 1)] if patch.size else []
+    names = list(getattr(mesh, "regions", ())) or ([f"patch {p}" for p in range(int(np.max(patch)) + 1)]
+                                                    if patch.size else [])
     return patch, names, [LineGroup(k, np.asarray(v, np.int64)) for k, v in mesh.line_sets.items()]
 
 
@@ -242,6 +243,9 @@ def write_mesh(path: str | os.PathLike, mesh: "QuadMesh", output: MeshOutput | N
     if fmt in LEGACY and out.plain and (fmt != "gmsh" or (out.msh_version == "2.2" and not nodes)):
         patch, names, lines = mesh_groups(mesh)
         cell = {"scaled_jacobian": np.asarray(mesh.scaled_jacobian, dtype=np.float64), "patch": patch}
+        if getattr(mesh, "point_sets", None):
+            warnings.warn(InputWarning(f"the vertex groups ({', '.join(mesh.point_sets)}) are left out of {fmt} "
+                                       "(msh 4.1, inp and exo hold them)", str(path)), stacklevel=2)
         if fmt == "obj" and lines:
             warnings.warn(InputWarning("obj holds the quads only: the groups and cell data were left out", str(path)),
                           stacklevel=2)

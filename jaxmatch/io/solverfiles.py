@@ -98,7 +98,9 @@ def facet_partition(sm: SolverMesh) -> tuple[np.ndarray, np.ndarray, list[str]]:
 
 def _marker_note(fmt: str, sm: SolverMesh, lost: list[str]) -> str:
     table = ", ".join(f"{n}={j + 1}" for j, n in enumerate(sm.groups))
-    note = f"{fmt} stores no group names: cell markers 'patch p' = p + 1; facet markers {table}"
+    cells = ("'patch p' = p + 1" if all(n == f"patch {p}" for p, n in enumerate(sm.region_names))
+             else ", ".join(f"{n}={r + 1}" for r, n in enumerate(sm.region_names)))
+    note = f"{fmt} stores no group names: cell markers {cells}; facet markers {table}"
     if lost:
         note += f"; one marker per facet, so {', '.join(lost)} has none of its own (the union of others)"
     return note
@@ -125,6 +127,13 @@ def _gmsh_blocks(sm: SolverMesh):
             tags.append(np.full(len(f), first + j, np.int32))
             field[name] = np.array([first + j, sm.dim - 1])
             dims.append((sm.dim - 1, first + j))
+    first += len(sm.groups)
+    points = {name: ids for name, ids in sm.node_groups.items() if not name.startswith("periodic ")}  # ($Periodic)
+    for j, (name, ids) in enumerate(points.items()):
+        cells.append(("vertex", np.asarray(ids, np.int64).reshape(-1, 1)))
+        tags.append(np.full(len(ids), first + j, np.int32))
+        field[name] = np.array([first + j, 0])
+        dims.append((0, first + j))
     return cells, tags, field, dims
 
 
@@ -404,9 +413,10 @@ def write_nastran(path: Path, sm: SolverMesh) -> list[str]:
 def write_solver_file(path: Path, sm: SolverMesh, fmt: str, *, msh_version: str = "4.1", binary: bool = True,
                       element_type: str | None = None) -> list[str]:
     """Write ``sm`` to ``path`` in format ``fmt`` (a registered mesh format's name); the notes."""
+    periodic = [n for n in sm.node_groups if n.startswith("periodic ")]
     lost = [] if fmt in ("abaqus", "exodus") or not sm.node_groups else \
-        ["msh: the periodic pairs are in $Periodic (no node groups)"] if fmt == "gmsh" else \
-        [f"{fmt}: no node groups ({', '.join(sm.node_groups)} left out)"]
+        (["msh: the periodic pairs are in $Periodic (no node groups)"] if periodic else []) if fmt == "gmsh" else \
+        [f"{fmt}: no node groups ({', '.join(sm.node_groups)} left out; msh, inp and exo hold them)"]
     if fmt == "gmsh":
         return write_gmsh(path, sm, msh_version, binary) + lost
     if fmt in ("vtu", "vtk"):

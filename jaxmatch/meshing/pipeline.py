@@ -43,12 +43,16 @@ from jaxmatch.meshing.result import Candidate, QuadMesh
 from jaxmatch.meshing.strategies import (RINGS, SINGLE, Bends, Conforming, Larger, Layouts, Request, RingPartition, Smooth,
                                          layout_strategies, run)
 from jaxmatch.inputs import _lattice, check_sizes, load_catalogue
+from jaxmatch.lazy import Later
+from jaxmatch.model import Model, Region, make_model
 from jaxmatch.placement.choose import choose_mesh
 from jaxmatch.placement.decompose import STRATEGIES, single_patch
 from jaxmatch.placement.layout import Layout, LayoutInfeasible, layout_sides
 from jaxmatch.placement.refine import InfeasibleRequest, _check_counts, refine_mesh
 from jaxmatch.placement.solve import ALL_SIZES, mesh_layout
 from jaxmatch.shape import DEFAULT_CORNER_ANGLE, Shape, make_shape
+
+later = Later(assembly="jaxmatch.meshing.assembly", models="jaxmatch.io.assembly")  # only for assemblies
 
 __all__ = ["SINGLE", "canonical", "default_size", "load_region", "mesh", "strategy_names", "warm_up"]
 
@@ -85,7 +89,7 @@ def _side_ids(shape: Shape, layout) -> list[int]:
     return out
 
 
-def mesh(region, *, size: float | None = None, divisions: int | None = None, sides: Sequence[int] | None = None,
+def mesh(region=None, *, regions=None, size: float | None = None, divisions: int | None = None, sides: Sequence[int] | None = None,
          counts: Mapping[int, int] | None = None, template: bool = False,
          catalogue=None, lattice=DEFAULT_LATTICE, strategies: Sequence[str] | None = None,
          quality: Quality = QUALITY, corner_angle: float = DEFAULT_CORNER_ANGLE, budget_s: float | None = None,
@@ -94,7 +98,11 @@ def mesh(region, *, size: float | None = None, divisions: int | None = None, sid
 
     Args:
       region: a :class:`~jaxmatch.shape.Shape`, a :class:`~jaxmatch.placement.layout.Layout`,
-        or a path (a shape file of any format, or a layout JSON file).
+        a :class:`~jaxmatch.model.Model` (an assembly), or a path (a shape file of any format, a
+        layout JSON file, an assembly file).
+      regions: instead of ``region``: an assembly's regions, each a :class:`~jaxmatch.model.Region`
+        or a dict ``{"name": ..., "boundary": ..., "holes": ..., "embedded": ...}`` (the JSON
+        file's entries); meshed as one conforming mesh (:mod:`jaxmatch.meshing.assembly`).
       size: target edge length (user units); default perimeter / :data:`DEFAULT_DIVISIONS`.
       divisions: instead of ``size``: edge length = the region's perimeter / ``divisions``
         (a whole number >= 1; each region of a batch gets its own size).
@@ -119,8 +127,20 @@ def mesh(region, *, size: float | None = None, divisions: int | None = None, sid
       InputError: a bad request (unreadable file, bad size, counts no template meets: the
         message names the nearest feasible counts), or no candidate could be meshed.
     """
+    if regions is not None:
+        if region is not None:
+            raise InputError("give region or regions, not both")
+        region = (make_model(regions) if all(isinstance(r, Region) for r in regions)
+                  else later.models.model_from_json({"regions": list(regions)}, "<regions>", corner_angle))
     if isinstance(region, (str, os.PathLike)):
         region = load_region(region, corner_angle=corner_angle)
+    if isinstance(region, Model):
+        if sides is not None or counts or template or template_options:
+            raise InputError("an assembly is meshed at a size (size= or divisions=); sides, counts and template are "
+                             "for one region")
+        return later.assembly.mesh_model(region, mesh, size=size, divisions=divisions, catalogue=catalogue, lattice=lattice,
+                                         quality=quality, corner_angle=corner_angle, strategies=strategies,
+                                         budget_s=budget_s, progress=progress)
     if sides is not None and size is not None:
         raise InputError("give either sides or size, not both")
     if divisions is not None:

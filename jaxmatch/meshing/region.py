@@ -15,7 +15,10 @@ from jaxmatch.arrays import roll
 from jaxmatch.defaults import DEFAULT_DIVISIONS
 from jaxmatch.geometry import cumulative_length
 from jaxmatch.files import read_limited
-from jaxmatch.io.readers import load_shape
+from jaxmatch.errors import InputError
+from jaxmatch.io.assembly import read_model, several_regions
+from jaxmatch.io.readers import detect_format, load_shape, split_element
+from jaxmatch.model import Model, region_polygon
 from jaxmatch.placement.decompose import _corner_points
 from jaxmatch.placement.layout import MAX_BYTES, layout_sides, parse_layout
 from jaxmatch.shape import DEFAULT_CORNER_ANGLE, Shape, make_shape, scale_corners
@@ -25,7 +28,14 @@ __all__ = ["DEDUPE", "canonical", "corner_points", "default_size", "load_region"
 
 
 def default_size(region, divisions: int = DEFAULT_DIVISIONS) -> float:
-    """Perimeter of the region's outer boundary / ``divisions`` (user units)."""
+    """Perimeter of the region's outer boundary / ``divisions`` (user units); of a
+    :class:`~jaxmatch.model.Model`, the outline of the union of its regions."""
+    if isinstance(region, Model):
+        import shapely
+
+        union = shapely.union_all([region_polygon(r.shape) for r in region.regions])
+        return float(shapely.get_exterior_ring(union).length if union.geom_type == "Polygon"
+                     else sum(g.exterior.length for g in union.geoms)) / divisions
     if isinstance(region, Shape):
         pts = region.user_points
     else:  # a Layout: its outer sides
@@ -36,10 +46,11 @@ def default_size(region, divisions: int = DEFAULT_DIVISIONS) -> float:
 
 
 def load_region(path: str | os.PathLike, *, corner_angle: float = DEFAULT_CORNER_ANGLE):
-    """A shape or a layout from a file: a JSON object with ``"patches"`` is a layout
-    (:func:`jaxmatch.placement.layout.parse_layout`), anything else a shape of any format
-    jaxmatch reads (``file#element`` chooses an element). Raises :class:`InputError` naming the
-    file."""
+    """A shape, a layout or an assembly from a file: a JSON object with ``"patches"`` is a layout
+    (:func:`jaxmatch.placement.layout.parse_layout`), one with ``"regions"`` or ``"embedded"``
+    (or a GeoJSON, SVG or DXF file of several regions) an assembly
+    (:func:`jaxmatch.io.assembly.read_model`), anything else a shape of any format jaxmatch
+    reads (``file#element`` chooses an element). Raises :class:`InputError` naming the file."""
 
     p = Path(path)
     if p.suffix.lower() == ".json" and p.is_file():
@@ -51,7 +62,23 @@ def load_region(path: str | os.PathLike, *, corner_angle: float = DEFAULT_CORNER
             doc = None
         if isinstance(doc, dict) and "patches" in doc:
             return parse_layout(raw, str(path))
-    return load_shape(path, corner_angle=corner_angle)
+        if isinstance(doc, dict) and ("regions" in doc or "embedded" in doc):
+            return read_model(raw, str(path), "json", corner_angle)
+    file, element = split_element(path)
+    if element is None and p.suffix.lower() == ".geojson" and p.is_file():
+        model = read_model(read_limited(p, MAX_BYTES, "shape file"), str(path), "geojson", corner_angle)
+        if model is not None:
+            return model
+    try:
+        return load_shape(path, corner_angle=corner_angle)
+    except InputError as err:  # an SVG or DXF file of several regions: an assembly
+        if element is not None or not several_regions(err) or not Path(file).is_file():
+            raise
+        data = read_limited(file, MAX_BYTES, "shape file")
+        model = read_model(data, str(path), detect_format(str(file), data), corner_angle)
+        if model is None:
+            raise
+        return model
 
 
 def corner_points(shape: Shape) -> np.ndarray:

@@ -21,7 +21,8 @@ from jaxmatch.quality import edge_ratios, quad_areas, sj_inverted
 
 __all__ = ["Candidate", "QuadMesh", "boundary_loops", "irregular_bound"]
 
-_KEPT = ("_sj_inverted", "_edges", "_edge_lengths", "_valences", "_loops", "_missed", "_area", "_stretches")
+_KEPT = ("_sj_inverted", "_edges", "_edge_lengths", "_valences", "_loops", "_missed", "_area", "_stretches",
+         "_region_parts")
 """The :class:`QuadMesh` measures computed once per mesh (``cached_property`` names)."""
 
 
@@ -78,7 +79,10 @@ class QuadMesh:
     templates: catalogue ids of the templates used, per patch; detail: the strategy's own record
     of its choice where it has one (``template=True``: the
     :class:`~jaxmatch.placement.choose.MeshChoice`, with the ranking, rank, utility and quality
-    band that the command line reports), else None.
+    band that the command line reports; an assembly: per region its pieces' strategies), else None.
+    regions: an assembly's region names: ``patch`` is then the region of each quad (each region a
+    cell group of its name; empty: the groups are ``"patch p"``); point_sets: name -> ``(k,)
+    int64`` vertex ids (an assembly's ``"point k"``, its embedded points).
 
     The measures of ``xy`` and ``quads`` (scaled Jacobians, edges, valences, boundary loops,
     missed corners) are computed once per mesh and kept (:data:`_KEPT`): the choice rule reads
@@ -101,6 +105,8 @@ class QuadMesh:
     runner_up: str | None = None
     tried: tuple[Candidate, ...] = ()
     detail: object = None
+    regions: tuple[str, ...] = ()
+    point_sets: Mapping[str, np.ndarray] = field(default_factory=dict)
 
     def with_choice(self, chosen: str, rule: str, runner_up: str | None, tried) -> "QuadMesh":
         """This mesh, labelled with how it was chosen (the measures kept so far kept with it)."""
@@ -203,7 +209,9 @@ class QuadMesh:
 
     @property
     def cell_sets(self) -> dict[str, np.ndarray]:
-        """``"patch p"`` -> ``(Q_p,) int64`` quad indices."""
+        """``"patch p"`` (an assembly: each region's name) -> ``(Q_p,) int64`` quad indices."""
+        if self.regions:
+            return {name: np.flatnonzero(self.patch == r) for r, name in enumerate(self.regions)}
         return {f"patch {p}": np.flatnonzero(self.patch == p) for p in range(self.n_patches)}
 
     @property
@@ -245,17 +253,30 @@ class QuadMesh:
 
     @property
     def irregular(self) -> np.ndarray:
-        """``(I,) int64`` internal vertices (on no boundary loop) whose valence is not 4."""
+        """``(I,) int64`` internal vertices (on no boundary loop) whose valence is not 4 (an
+        assembly: on no region's boundary, interfaces included)."""
         val = self._valences
         internal = np.ones(self.xy.shape[0], bool)
-        for loop in self._loops:
+        for loop in self._loops + [lp for _, _, loops in self._region_parts for lp in loops]:
             internal[loop] = False
         return np.flatnonzero(internal & (val != 4) & (val > 0))
 
     @property
     def irregular_bound(self) -> int:
-        """Euler's lower bound on irregular internal vertices for these boundary valences."""
+        """Euler's lower bound on irregular internal vertices for these boundary valences (an
+        assembly: the sum of its regions' bounds, each region's cells on their own)."""
+        if self.regions:
+            return sum(_irregular_bound(val, loops) for _, val, loops in self._region_parts)
         return _irregular_bound(self._valences, self._loops)
+
+    @cached_property
+    def _region_parts(self) -> list[tuple[int, np.ndarray, list[np.ndarray]]]:
+        """An assembly's regions: ``(region, valences (V,) of its cells, its cells' boundary loops)``."""
+        out = []
+        for r in range(len(self.regions)):
+            q = np.asarray(self.quads, np.int64)[self.patch == r]
+            out.append((r, valences(q, self.xy.shape[0]), boundary_loops(q)))
+        return out
 
     @property
     def missed_corners(self) -> np.ndarray:

@@ -100,6 +100,9 @@ class Layout:
         a patch, e.g. where two neighbours meet along its side, is not its corner).
     requested: ``{side name: edge count}`` as given in the file (names checked).
     source: where the layout came from (used in messages).
+    regions: ``(patches,) int64`` the region of each patch of an assembly
+        (:mod:`jaxmatch.meshing.assembly`): a side between two regions keeps both regions' areas
+        like a boundary side keeps the region's (:func:`curve_floors`); None: one region.
     """
 
     points: np.ndarray
@@ -108,6 +111,7 @@ class Layout:
     patch_corner: tuple[np.ndarray, ...]
     requested: Mapping[str, int]
     source: str = "<layout>"
+    regions: np.ndarray | None = None
 
     @property
     def n_patches(self) -> int:
@@ -610,14 +614,39 @@ def region_area(layout: Layout) -> float:
     return float(shapely.union_all([shapely.Polygon(layout.points[lp]) for lp in layout.patches]).area)
 
 
+def _region_shares(layout: Layout, sides: Sides) -> np.ndarray:
+    """``(S,) float64`` per side on a region's boundary (the outline, or between two regions of
+    an assembly): the smallest over its regions of area / boundary length; inf for the others."""
+    reg = np.asarray(layout.regions, np.int64)
+    n = int(reg.max()) + 1
+    area = np.zeros(n)
+    for p, loop in enumerate(layout.patches):
+        area[reg[p]] += abs(polygon_area(layout.points[loop]))
+    users = sides.users
+    r0 = reg[users[:, 0]]
+    r1 = np.where(users[:, 1] >= 0, reg[np.maximum(users[:, 1], 0)], -1)
+    on = r0 != r1
+    length = np.zeros(n)
+    np.add.at(length, r0[on], sides.lengths[on])
+    inner = on & (r1 >= 0)
+    np.add.at(length, r1[inner], sides.lengths[inner])
+    share = np.full(len(users), np.inf)
+    share[on] = area[r0[on]] / length[r0[on]]
+    share[inner] = np.minimum(share[inner], area[r1[inner]] / length[r1[inner]])
+    return share
+
+
 def curve_floors(layout: Layout, sides: Sides, area_tol: float, region: float | None = None) -> np.ndarray:
     """``(S,) int64`` the fewest edges each side may have so that its chords keep the region's
     area: a boundary side whose points do not lie on one line gets at least the edges that keep
     the area between it and its chords within its share (its length over the boundary's) of
     :data:`CURVE_SHARE` ``* area_tol`` of the region's area; every other side 1. ``region``:
-    :func:`region_area` of ``layout`` when the caller has it."""
+    :func:`region_area` of ``layout`` when the caller has it. An assembly's layout
+    (``layout.regions``): a side between two regions is kept like a boundary side of each, its
+    budget the smaller of the two regions' shares."""
     floors = np.ones(len(sides.chains), np.int64)
-    bound = np.flatnonzero(sides.outer)
+    own = _region_shares(layout, sides) if layout.regions is not None else None
+    bound = np.flatnonzero(sides.outer if own is None else ~np.isinf(own))
     if not bound.size:
         return floors
     total = float(np.sum(sides.lengths[bound]))
@@ -625,9 +654,12 @@ def curve_floors(layout: Layout, sides: Sides, area_tol: float, region: float | 
         poly = layout.points[sides.chains[s]]
         if poly.shape[0] <= 2:
             continue
-        if region is None:
-            region = region_area(layout)
-        budget = CURVE_SHARE * area_tol * region * float(sides.lengths[s]) / total
+        if own is not None:
+            budget = CURVE_SHARE * area_tol * float(own[s]) * float(sides.lengths[s])
+        else:
+            if region is None:
+                region = region_area(layout)
+            budget = CURVE_SHARE * area_tol * region * float(sides.lengths[s]) / total
         if chord_area_error(poly, 1) <= budget:
             continue
         lo, hi = 1, 2
