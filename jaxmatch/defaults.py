@@ -58,6 +58,10 @@ class Quality:
     sj_step: min scaled Jacobians within one step of this size count as equal (the choice rule's
         quality rule, and the template size's band of ``mesh --template``): a mesh with fewer
         irregular vertices, patches or quads is not given up for a few hundredths of quality.
+    field: the size field the mesh follows (a bound :class:`jaxmatch.field.SizeField` or
+        :class:`~jaxmatch.field.CallableSize`: ``(n, 2)`` points to ``(n,)`` sizes), or None: one size
+        ``h`` everywhere. With a field, side counts are its integrals, side vertices are spaced by it
+        and size conformity is judged against it (the pipeline sets it from ``mesh(size=...)``).
     """
 
     min_sj: float = 0.2
@@ -69,6 +73,7 @@ class Quality:
     size_tol: float = 0.25
     long_edge: float = 2.0
     sj_step: float = 0.1
+    field: object = None
 
 
 QUALITY = Quality()
