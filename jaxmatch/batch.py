@@ -99,7 +99,7 @@ RECORD_FIELDS: dict[str, str] = {
     "max_edge_ratio": "largest longest/shortest edge ratio of a quad",
     "mean_edge_length": "mean length of the mesh's edges (the region's units)",
     "size": "the target edge length h (the region's units; --size, or perimeter / --divisions; with --size-field "
-            "the field's smallest size)",
+            "the outline's length over the field's integral of 1 / size along it)",
     "size_deviation": "largest abs(n / (L / h) - 1) over the sides: n the side's edges, L its length. A side far "
                       "shorter than h still gets one edge, so a 0.0006 h side gives about 1660; the choice rule's "
                       "size test allows max(1, 25 %) of L / h edges off, so such a side passes",

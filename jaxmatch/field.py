@@ -43,7 +43,7 @@ import numpy as np
 from jaxmatch.errors import InputError
 
 __all__ = ["KINDS", "CallableSize", "Field", "Near", "SizeField", "bind", "distance_to_segments", "edge_ratios",
-           "field_share", "graded_points", "line_integral", "load_field", "parse_field", "resolve_name",
+           "field_share", "graded_points", "line_integral", "load_field", "outline_size", "parse_field", "resolve_name",
            "smallest_size"]
 
 KINDS = ("hole", "point", "side", "curve")
@@ -297,6 +297,20 @@ def smallest_size(f) -> float:
     """The least size a bound field takes (:class:`SizeField`: exact; :class:`CallableSize`: on
     the outline)."""
     return float(f.smallest)
+
+
+def outline_size(f, shape) -> float:
+    """The one size that stands for a bound field where the meshing needs one number (the
+    corners judged at the size, a ring layer's depth, the record's ``size``): the region's loops'
+    total length over the integral of ``1 / f`` along them, the mean edge length the outline
+    gets."""
+    loops = [np.asarray(shape.given_points, np.float64)] + [np.asarray(h, np.float64) for h in getattr(shape, "holes", ())]
+    length = wanted = 0.0
+    for ring in loops:
+        closed = np.concatenate([ring, ring[:1]])
+        length += float(np.linalg.norm(np.diff(closed, axis=0), axis=1).sum())
+        wanted += float(line_integral(f, closed)[-1])
+    return length / wanted
 
 
 def line_integral(f, polyline: np.ndarray, *, per_size: int = 4) -> np.ndarray:

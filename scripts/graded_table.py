@@ -8,7 +8,8 @@ is meshed in the same run by
 * gmsh, frontal-Delaunay for quads + Blossom recombination (``Mesh.Algorithm 8``,
   ``RecombineAll``, ``Mesh.RecombinationAlgorithm 1``),
 
-gmsh with the same field: per entry a ``Distance`` field (the entity sampled every ``s / 8``) and a
+gmsh with the same field: per entry a ``Distance`` field (to the hole's or side's own curves, 200
+samples each; a point, or a curve sampled every ``s / 8``, as free points) and a
 ``Threshold`` field (``SizeMin s``, ``SizeMax H``, ``DistMin 0``, ``DistMax d``), their ``Min``
 as the background field (sizes from points, curvature and the boundary off).
 
@@ -132,24 +133,33 @@ def gmsh_worker(name: str, recipe: str, out: str) -> None:
         gmsh.option.setNumber("General.Terminal", 0)
         gmsh.model.add(name)
         geo = gmsh.model.geo
-        loops = []
+        loops, lines_of = [], []
         for ring in rings(region):
             tags = [geo.addPoint(float(x), float(y), 0.0, H) for x, y in ring]
             lines = [geo.addLine(tags[i], tags[(i + 1) % len(tags)]) for i in range(len(tags))]
+            lines_of.append(lines)
             loops.append(geo.addCurveLoop(lines))
         geo.addPlaneSurface(loops)
-        samples = []
-        for e in field["near"]:
-            g = entity_geometry(e, region)
-            step = e["size"] / 8
-            n = max(int(math.ceil(g.length / step)), 1) if g.length > 0 else 0
-            pts = [g.interpolate(t, normalized=True) for t in np.linspace(0, 1, n + 1)] if n else [g]
-            samples.append([geo.addPoint(p.x, p.y, 0.0) for p in pts])
         geo.synchronize()
         thresholds = []
-        for e, tags in zip(field["near"], samples):
+        for e in field["near"]:
             d = gmsh.model.mesh.field.add("Distance")
-            gmsh.model.mesh.field.setNumbers(d, "PointsList", tags)
+            if "hole" in e:  # the hole's own curves
+                gmsh.model.mesh.field.setNumbers(d, "CurvesList", lines_of[e["hole"]])
+                gmsh.model.mesh.field.setNumber(d, "Sampling", 200)
+            elif "side" in e:  # the outline's lines from point i to point j
+                i, j = (int(v) for v in e["side"].split("-"))
+                n = len(region["boundary"])
+                a, b = (i, j) if (j - i) % n <= (i - j) % n else (j, i)
+                gmsh.model.mesh.field.setNumbers(d, "CurvesList", [lines_of[0][k % n] for k in range(a, a + (b - a) % n)])
+                gmsh.model.mesh.field.setNumber(d, "Sampling", 200)
+            else:  # a point or a curve: points sampled on it every s / 8 (free points, not in the surface)
+                g = entity_geometry(e, region)
+                n = max(int(math.ceil(g.length / (e["size"] / 8))), 1) if g.length > 0 else 0
+                pts = [g.interpolate(t, normalized=True) for t in np.linspace(0, 1, n + 1)] if n else [g]
+                tags = [geo.addPoint(p.x, p.y, 0.0) for p in pts]
+                geo.synchronize()
+                gmsh.model.mesh.field.setNumbers(d, "PointsList", tags)
             t = gmsh.model.mesh.field.add("Threshold")
             gmsh.model.mesh.field.setNumber(t, "InField", d)
             gmsh.model.mesh.field.setNumber(t, "SizeMin", e["size"])

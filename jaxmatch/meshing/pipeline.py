@@ -36,7 +36,7 @@ import numpy as np
 
 from jaxmatch.defaults import DEFAULT_LATTICE, QUALITY, Quality
 from jaxmatch.errors import InputError
-from jaxmatch.field import CallableSize, Field, SizeField, bind, smallest_size
+from jaxmatch.field import CallableSize, Field, SizeField, bind, outline_size
 from jaxmatch.meshing.build import from_layout, from_placement, from_refined
 from jaxmatch.meshing.choose import choose
 from jaxmatch.meshing.region import canonical, corner_points, default_size, load_region
@@ -139,7 +139,7 @@ def mesh(region, *, size: float | None = None, divisions: int | None = None, sid
             raise InputError("a size field is for a shape meshed to a size (not a layout, --template or --divisions)")
         f = bind(size, region, "size field" if isinstance(size, Field) else "size")
         quality = replace(quality, field=f)
-        size = smallest_size(f)
+        size = outline_size(f, region)
     if divisions is not None:
         if size is not None or sides is not None:
             raise InputError("give divisions or a size or sides, not two of them")
