@@ -39,6 +39,7 @@ from jaxmatch.errors import InputError
 from jaxmatch.field import CallableSize, Field, SizeField, bind, outline_size
 from jaxmatch.meshing.build import from_layout, from_placement, from_refined
 from jaxmatch.meshing.choose import choose
+from jaxmatch.meshing.grading import follow_field
 from jaxmatch.meshing.region import canonical, corner_points, default_size, load_region
 from jaxmatch.meshing.result import Candidate, QuadMesh
 from jaxmatch.meshing.strategies import (RINGS, SINGLE, Bends, Conforming, Larger, Layouts, Request, RingPartition, Smooth,
@@ -243,4 +244,5 @@ def _mesh_size(shape, cat, lat, h, strategies, quality, budget_s, progress, corn
     if not any(c.mesh is not None for c in tried):
         raise InputError("no candidate could be meshed: " + "; ".join(f"{c.name}: {c.note}" for c in tried),
                          where=region.source)
-    return choose(tried, quality)
+    best = choose(tried, quality)
+    return best if quality.field is None else follow_field(best, quality)
