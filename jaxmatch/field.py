@@ -36,13 +36,15 @@ import json
 import math
 import os
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Callable, Sequence
 
 import numpy as np
+import shapely
 
 from jaxmatch.errors import InputError
 
-__all__ = ["KINDS", "CallableSize", "Field", "Near", "SizeField", "bind", "distance_to_segments", "edge_ratios",
+__all__ = ["KINDS", "CallableSize", "Field", "Near", "SizeField", "bind", "edge_ratios",
            "field_share", "graded_points", "line_integral", "load_field", "outline_size", "parse_field", "resolve_name",
            "smallest_size"]
 
@@ -195,25 +197,8 @@ def _segments(e: Near, shape, where: str) -> np.ndarray:
     return np.stack([poly[:-1], poly[1:]], axis=1)
 
 
-def distance_to_segments(points: np.ndarray, segments: np.ndarray, chunk: int = 4096) -> np.ndarray:
-    """``(n,) float64`` distance from each of ``points (n, 2)`` to the nearest of ``segments
-    (m, 2, 2)`` (a segment of length 0: a point), in chunks of ``chunk`` points."""
-    pts = np.asarray(points, np.float64).reshape(-1, 2)
-    a, b = segments[:, 0], segments[:, 1]
-    ab = b - a
-    L2 = np.einsum("ij,ij->i", ab, ab)
-    inv = np.where(L2 > 0, 1.0 / np.where(L2 > 0, L2, 1.0), 0.0)
-    out = np.empty(pts.shape[0])
-    for s in range(0, pts.shape[0], chunk):
-        p = pts[s:s + chunk, None, :]  # (c, 1, 2)
-        t = np.clip(np.einsum("cmd,md->cm", p - a[None], ab) * inv[None], 0.0, 1.0)
-        d = p - (a[None] + t[..., None] * ab[None])
-        out[s:s + chunk] = np.sqrt(np.min(np.einsum("cmd,cmd->cm", d, d), axis=1))
-    return out
-
-
 @dataclass(frozen=True, eq=False)
-class SizeField:
+class SizeField:  # (eq=False: hashed by identity, so a Quality holding one is a cache key)
     """A :class:`Field` bound to a region: ``field(points (n, 2)) -> (n,) float64`` sizes (user
     units). entries: per refinement ``(s, d, segments (m, 2, 2))``; smallest: the least size it
     can take (``min(H, every s)``)."""
@@ -226,10 +211,25 @@ class SizeField:
         pts = np.asarray(points, np.float64).reshape(-1, 2)
         out = np.full(pts.shape[0], self.size)
         H = self.size
-        for s, d, seg in self.entries:
-            dist = distance_to_segments(pts, seg)
+        if not self.entries or not pts.shape[0]:
+            return out
+        where = shapely.points(pts)
+        for (s, d, _), geom in zip(self.entries, self._geometries):
+            dist = shapely.distance(where, geom)
             out = np.minimum(out, s + (H - s) * np.minimum(1.0, dist / d))
         return out
+
+    @cached_property
+    def _geometries(self) -> tuple:
+        """Per entry its segments as one shapely geometry (a point, or a multi-line string):
+        shapely's vectorised distances, in C."""
+        out = []
+        for _, _, seg in self.entries:
+            if seg.shape[0] == 1 and np.array_equal(seg[0, 0], seg[0, 1]):
+                out.append(shapely.Point(seg[0, 0]))
+            else:
+                out.append(shapely.MultiLineString([s for s in seg]))
+        return tuple(out)
 
 
 @dataclass(frozen=True, eq=False)

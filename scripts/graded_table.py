@@ -272,7 +272,7 @@ def picture(rows: list[dict], path: Path) -> None:
     from matplotlib.collections import PolyCollection
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=(12, 3.0 * len(rows)), dpi=90, layout="constrained")
+    fig = Figure(figsize=(12, 3.0 * len(rows)), dpi=64, layout="constrained")
     axes = fig.subplots(len(rows), 3, squeeze=False)
     pc = None
     for i, row in enumerate(rows):

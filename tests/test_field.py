@@ -1,8 +1,8 @@
 """Size fields (:mod:`jaxmatch.field`): the formula, its JSON form and errors, the integrals the
 meshing reads, and graded meshes that follow it.
 
-The field is checked against a plain per-point loop that measures distances with shapely
-(independent of the module's vectorised segment distances)."""
+The field is checked against a plain per-point, per-segment Python loop (independent of the
+module's vectorised distances, shapely's)."""
 
 from __future__ import annotations
 
@@ -14,7 +14,6 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from shapely.geometry import LineString, Point
 
 from jaxmatch.errors import EXIT_BAD_INPUT, InputError
 from jaxmatch.field import (CallableSize, Field, Near, bind, field_share, graded_points, line_integral, load_field,
@@ -29,28 +28,41 @@ PLATE = EXAMPLES / "holes" / "plate-bolt.json"
 SQUARE = make_shape([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
 
 
+def _polyline(e: Near, shape) -> list[tuple[float, float]]:
+    if e.kind == "point":
+        return [e.entity]
+    if e.kind == "curve":
+        return list(e.entity)
+    if e.kind == "hole":
+        ring = [tuple(map(float, p)) for p in shape.holes[e.entity - 1]]
+        return ring + ring[:1]
+    i, j = map(int, e.entity.split("-"))
+    pts = [tuple(map(float, p)) for p in shape.given_points]
+    idx = list(range(i, j + 1)) if j > i else list(range(i, len(pts))) + list(range(0, j + 1))
+    return [pts[k] for k in idx]
+
+
+def _distance(x: float, y: float, line: list) -> float:
+    """Distance from (x, y) to a polyline, segment by segment, in plain Python."""
+    if len(line) == 1:
+        return math.hypot(x - line[0][0], y - line[0][1])
+    best = math.inf
+    for (ax, ay), (bx, by) in zip(line, line[1:]):
+        dx, dy = bx - ax, by - ay
+        L2 = dx * dx + dy * dy
+        t = 0.0 if L2 == 0 else min(1.0, max(0.0, ((x - ax) * dx + (y - ay) * dy) / L2))
+        best = min(best, math.hypot(x - ax - t * dx, y - ay - t * dy))
+    return best
+
+
 def reference(f: Field, shape, points: np.ndarray) -> np.ndarray:
-    """The field's definition, one point at a time, distances by shapely."""
-    geoms = []
-    for e in f.near:
-        if e.kind == "point":
-            g = Point(e.entity)
-        elif e.kind == "curve":
-            g = LineString(e.entity)
-        elif e.kind == "hole":
-            ring = np.asarray(shape.holes[e.entity - 1])
-            g = LineString(np.vstack([ring, ring[:1]]))
-        else:
-            i, j = map(int, e.entity.split("-"))
-            pts = np.asarray(shape.given_points)
-            idx = list(range(i, j + 1)) if j > i else list(range(i, len(pts))) + list(range(0, j + 1))
-            g = LineString(pts[idx])
-        geoms.append((e.size, e.distance, g))
+    """The field's definition, one point and one segment at a time (plain Python)."""
+    lines = [(e.size, e.distance, _polyline(e, shape)) for e in f.near]
     out = []
-    for x, y in points:
+    for x, y in points.tolist():
         v = f.size
-        for s, d, g in geoms:
-            v = min(v, s + (f.size - s) * min(1.0, g.distance(Point(x, y)) / d))
+        for s, d, line in lines:
+            v = min(v, s + (f.size - s) * min(1.0, _distance(x, y, line) / d))
         out.append(v)
     return np.array(out)
 

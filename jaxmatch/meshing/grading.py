@@ -20,10 +20,13 @@ from jaxmatch.defaults import QUALITY, Quality
 from jaxmatch.meshing.result import QuadMesh
 from jaxmatch.quality import sj_inverted
 
-__all__ = ["FOLLOW_ITERS", "FOLLOW_STEP", "REVERTS", "follow_field"]
+__all__ = ["FOLLOW_ITERS", "FOLLOW_STEP", "REVERTS", "SETTLED", "follow_field"]
 
 FOLLOW_ITERS = 60
 """Relaxation steps of :func:`follow_field`."""
+
+SETTLED = 1e-3
+"""The relaxation stops when no vertex moves by more than this fraction of the field there."""
 
 REVERTS = 8
 """Rounds of putting back the vertices of quads a step took below their floor."""
@@ -40,9 +43,10 @@ def _quad_floor(sj0: np.ndarray, quality: Quality) -> np.ndarray:
 
 
 def follow_field(m: QuadMesh, quality: Quality = QUALITY, iters: int = FOLLOW_ITERS, step: float = FOLLOW_STEP) -> QuadMesh:
-    """``m`` with its inner vertices relaxed towards edges as long as the field at their
-    midpoints (``m.field``; ``m`` itself without one). Each step moves every inner vertex by
-    ``step`` times the mean over its edges of ``(L - f) / L * (other end - it)``; a vertex whose
+    """``m`` with its inner vertices relaxed towards edges as long as the field along them
+    (``m.field``, the mean of its values at the edge's ends; ``m`` itself without one). Each step
+    moves every inner vertex by ``step`` times the mean over its edges of ``(L - f) / L * (other
+    end - it)``, until none moves by more than :data:`SETTLED` of the field there; a vertex whose
     move would fold a quad around it or take one below its floor (:func:`_quad_floor`: the
     quality band is kept where it was reached) stays. The outline's vertices do not move, so
     corners, sides and area along them are kept. Returns a new :class:`QuadMesh` (its choice
@@ -65,13 +69,14 @@ def follow_field(m: QuadMesh, quality: Quality = QUALITY, iters: int = FOLLOW_IT
         a, b = xy[e[:, 0]], xy[e[:, 1]]
         d = b - a
         L = np.linalg.norm(d, axis=1)
-        t = np.asarray(m.field(0.5 * (a + b)), np.float64)
+        fv = np.asarray(m.field(xy), np.float64)  # at the vertices: an edge's rest length is its ends' mean
+        t = 0.5 * (fv[e[:, 0]] + fv[e[:, 1]])
         pull = ((L - t) / np.maximum(L, 1e-300))[:, None] * d  # moves a towards b when too long
         force = np.zeros_like(xy)
         np.add.at(force, e[:, 0], pull)
         np.add.at(force, e[:, 1], -pull)
         move = np.where(free[:, None], step * force / np.maximum(deg, 1.0)[:, None], 0.0)
-        if not np.any(move):
+        if not np.any(np.linalg.norm(move, axis=1) > SETTLED * fv):
             break
         trial = xy + move
         for _ in range(REVERTS):  # the vertices of a quad below its floor stay where they were
