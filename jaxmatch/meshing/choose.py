@@ -9,7 +9,9 @@
 5. size conformity: fewer boundary stretches between corners whose edge count is off
    ``length / h`` by more than ``max(1, Quality.size_tol * length / h)`` (the outline as the
    user sees it, not the pieces between the patches' cut ends), plus edges longer than
-   ``Quality.long_edge * h`` (with a target size);
+   ``Quality.long_edge * h`` (with a target size); with a size field, ``h`` is the field at each
+   edge's midpoint (a stretch's ``length / h`` its integral of ``1 / size``) and edges shorter
+   than the field over ``Quality.short_edge`` count too (:meth:`QuadMesh.size_conformity`);
 6. quality band: min scaled Jacobian ``>= Quality.high_sj``;
 7. irregular vertices: fewer irregular internal vertices beyond Euler's lower bound for the
    boundary valences used (:func:`jaxmatch.meshing.result.irregular_bound`; none below it counts
@@ -71,7 +73,7 @@ def mesh_key(m: QuadMesh, order: int = 0, quality: Quality = QUALITY) -> tuple:
         m.missed_corners.shape[0] > 0,
         not (abs(area - 1.0) <= quality.area_tol),
         not (sj >= quality.good_sj),
-        m.stretches_off_size(quality.size_tol) + m.long_edges(quality.long_edge),
+        m.size_conformity(quality),
         not (sj >= quality.high_sj),
         max(int(m.irregular.size) - m.irregular_bound, 0),
         -math.floor(sj / quality.sj_step + 1e-9) if math.isfinite(sj) else math.inf,

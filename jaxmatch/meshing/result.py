@@ -313,6 +313,20 @@ class QuadMesh:
             return 0
         return int(np.sum(self._edge_lengths > factor * self.size))
 
+    def short_edges(self, factor: float) -> int:
+        """With a size field: edges shorter than the field at their midpoint over ``factor`` (a
+        graded mesh refined where the field does not ask for it); 0 without a field."""
+        if self.field is None:
+            return 0
+        return int(np.sum(self._edge_lengths * factor < self._edge_targets))
+
+    def size_conformity(self, quality: Quality = QUALITY) -> int:
+        """The choice rule's size conformity count: boundary stretches off the size
+        (:meth:`stretches_off_size`), edges longer than ``quality.long_edge`` sizes and, with a
+        size field, shorter than the field over ``quality.short_edge`` (:meth:`short_edges`)."""
+        return (self.stretches_off_size(quality.size_tol) + self.long_edges(quality.long_edge)
+                + self.short_edges(quality.short_edge))
+
     def _side_wanted(self, name: str) -> float:
         """Edges the field wants along side ``name`` (its ``"side NAME"`` edges as meshed)."""
         e = self.line_sets.get(f"side {name}")

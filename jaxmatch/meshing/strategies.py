@@ -8,7 +8,8 @@ strategy                candidates                                              
 :class:`Layouts`        the layout strategies together (:class:`Single`: the region as    always
                         one template; :class:`Split`: each decomposition), meshed by the
                         one solve most promising first, a layout that cannot win skipped
-:class:`Larger`         the single patch with each larger template size group            below the quality floor
+:class:`Larger`         the single patch with each larger template size group            below the quality floor;
+                                                                                         graded: off the field
 :class:`Conforming`     single templates whose side counts follow the size                no candidate follows it
 :class:`RingPartition`  a layer of patches along every loop and an O-grid core, or a box  an edge of every candidate
                         around every hole and a grid through the rest                     is longer than 2 h, or none
@@ -246,13 +247,18 @@ def _single(tried) -> QuadMesh | None:
 
 
 class Larger:
-    """Below the quality floor: the single patch with each larger template size group
-    (:func:`larger_templates`), after the single candidate."""
+    """Below the quality floor, or a graded mesh (a size field) whose edges do not all conform to
+    it: the single patch with each larger template size group (:func:`larger_templates`), after
+    the single candidate."""
 
     after_single = True
 
     def wanted(self, best: QuadMesh | None, tried, req: Request) -> bool:
-        return _single(tried) is not None and not best.min_scaled_jacobian >= req.quality.good_sj
+        if _single(tried) is None:
+            return False
+        if req.quality.field is not None and best.size_conformity(req.quality) > 0:
+            return True  # graded: a larger template's irregular vertices are transitions of size
+        return not best.min_scaled_jacobian >= req.quality.good_sj
 
     def candidates(self, req: Request, tried) -> list[Candidate]:
         return larger_templates(single_patch(req.region), req.cat, req.lat, req.h, req.corners, _single(tried),
