@@ -45,7 +45,7 @@ import shapely
 from jaxmatch.errors import InputError
 
 __all__ = ["KINDS", "CallableSize", "Field", "Near", "SizeField", "bind", "edge_ratios",
-           "field_share", "graded_points", "line_integral", "load_field", "outline_size", "parse_field", "resolve_name",
+           "field_share", "graded_points", "line_integral", "load_field", "outline_size", "parse_field",
            "smallest_size"]
 
 KINDS = ("hole", "point", "side", "curve")
@@ -425,10 +425,3 @@ def load_field(path: str | os.PathLike) -> Field:
     except json.JSONDecodeError as e:
         raise InputError(f"not valid JSON: {e.msg} (line {e.lineno})", where) from None
     return parse_field(obj, where)
-
-
-def resolve_name(f) -> str:
-    """A short description of a bound field for reports."""
-    if isinstance(f, SizeField):
-        return f"size field: H {f.size:g}, {len(f.entries)} refinement{'s' if len(f.entries) != 1 else ''}"
-    return "size function"
