@@ -52,6 +52,10 @@ _API = {
     "make_model": "jaxmatch.model",
     "QuadMesh": "jaxmatch.meshing.result",
     "Quality": "jaxmatch.defaults",
+    # size fields (graded meshes: mesh(region, size=Field(...)))
+    "Field": "jaxmatch.field",
+    "Near": "jaxmatch.field",
+    "load_field": "jaxmatch.field",
     # sizes, concave shapes, layouts
     "refine_mesh": "jaxmatch.api",
     "mesh_concave": "jaxmatch.api",

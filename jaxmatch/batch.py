@@ -98,10 +98,13 @@ RECORD_FIELDS: dict[str, str] = {
     "irregular_bound": "Euler's lower bound on irregular internal vertices for the mesh's boundary valences",
     "max_edge_ratio": "largest longest/shortest edge ratio of a quad",
     "mean_edge_length": "mean length of the mesh's edges (the region's units)",
-    "size": "the target edge length h (the region's units; --size, or perimeter / --divisions)",
+    "size": "the target edge length h (the region's units; --size, or perimeter / --divisions; with --size-field "
+            "the outline's length over the field's integral of 1 / size along it)",
     "size_deviation": "largest abs(n / (L / h) - 1) over the sides: n the side's edges, L its length. A side far "
                       "shorter than h still gets one edge, so a 0.0006 h side gives about 1660; the choice rule's "
                       "size test allows max(1, 25 %) of L / h edges off, so such a side passes",
+    "field_share": "share of the edges whose length / the size at their midpoint lies in [0.5, 1.6]: the size "
+                   "field's value there with --size-field, else h; null without a size (--template)",
     "side_counts": 'edges per side, keyed "i-j" as the mesh file\'s "side i-j" groups (from the input\'s corner i to the '
                    'next, j: point numbers, or positions in "corners") and "hole h side i-j" as its hole sides',
     "templates": "the catalogue mesh id of each patch's template",

@@ -22,6 +22,7 @@ from jaxmatch.catalogue import store as cat_mod
 from jaxmatch.errors import EXIT_BAD_INPUT, EXIT_INVERTED, EXIT_UNMATCHABLE, InputError, InputWarning, SolverError, UnmatchableError
 from jaxmatch.defaults import DEFAULT_BUDGET_S, DEFAULT_LATTICE, DEFAULT_TIE_BREAK, DEFAULT_TOP, QUALITY, TIE_BREAKS
 from jaxmatch.io.meshfile import MESH_FORMATS, mesh_format, write_mesh
+from jaxmatch.field import load_field
 from jaxmatch.io.output import MeshOutput, PictureOutput, parse_png_size
 from jaxmatch.lazy import Later
 from jaxmatch.meshing.region import canonical, default_size, load_region
@@ -395,6 +396,10 @@ def mesh(
                                          "(default: the outer perimeter / 32, printed)."),
     divisions: Optional[int] = typer.Option(None, "--divisions", min=1, metavar="N", help="Instead of --size: edge "
                                             "length = each region's outer perimeter / N (one size per region in bulk)."),
+    size_field: Optional[Path] = typer.Option(None, "--size-field", metavar="FIELD.json", help='Instead of --size: a '
+                                              'graded mesh, {"size": H, "near": [{"hole": k | "point": [x, y] | "side": '
+                                              '"i-j" | "curve": [[x, y], ...], "size": s, "distance": d}, ...]} '
+                                              "(docs/graded.md)."),
     sides: Optional[str] = typer.Option(None, "--sides", help="Edges per side, e.g. 4,2,4,2: the sides in the file's order, "
                                         "each from a corner to the next (the output's groups 'side i-j': i, j point numbers, "
                                         "or positions in \"corners\"); one total count for a shape without corners. One "
@@ -420,7 +425,8 @@ def mesh(
     grading: float = typer.Option(1.0, "--grading", metavar="R", help="--extrude: top layer / bottom layer thickness."),
     png_size: Optional[str] = typer.Option(None, "--png-size", metavar="W,H", help="Picture size in pixels."),
     dpi: Optional[int] = typer.Option(None, "--dpi", help="Picture resolution (default 120; the size then fits the region)."),
-    color: str = typer.Option("patch", "--color", metavar="patch|quality", help="Picture: quads by patch or by scaled Jacobian."),
+    color: str = typer.Option("patch", "--color", metavar="patch|quality|size", help="Picture: quads by patch, by scaled "
+                              "Jacobian or by edge length / size (the size field's where one is given)."),
     histogram: bool = typer.Option(False, "--histogram", help="Picture: add the scaled Jacobians' histogram."),
     png: Optional[Path] = typer.Option(None, "--png", help="Picture of the mesh (.png)."),
     svg: Optional[Path] = typer.Option(None, "--svg", help="Picture of the mesh (.svg)."),
@@ -483,6 +489,12 @@ def mesh(
         raise InputError("give either --sides or --size, not both", "--size")
     if not budget > 0:
         raise InputError(f"must be a positive number of seconds, got {budget:g}", "--budget")
+    if size_field is not None:
+        for opt, given in (("--size", size is not None), ("--divisions", divisions is not None), ("--sides", sides is not None),
+                           ("--sides-file", sides_file is not None), ("--template", template)):
+            if given:
+                raise InputError(f"give --size-field or {opt}, not both", "--size-field")
+        size = load_field(size_field)
     if template:
         for opt, given in (("--size", size is not None), ("--divisions", divisions is not None),
                            ("--sides", sides is not None),

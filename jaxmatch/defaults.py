@@ -63,6 +63,13 @@ class Quality:
     sj_step: min scaled Jacobians within one step of this size count as equal (the choice rule's
         quality rule, and the template size's band of ``mesh --template``): a mesh with fewer
         irregular vertices, patches or quads is not given up for a few hundredths of quality.
+    short_edge: with a size field, an edge shorter than the field at its midpoint over this
+        breaks size conformity too (a graded mesh refined where the field does not ask for it;
+        more lenient than ``long_edge``: too fine costs quads, too coarse misses the refinement).
+    field: the size field the mesh follows (a bound :class:`jaxmatch.field.SizeField` or
+        :class:`~jaxmatch.field.CallableSize`: ``(n, 2)`` points to ``(n,)`` sizes), or None: one size
+        ``h`` everywhere. With a field, side counts are its integrals, side vertices are spaced by it
+        and size conformity is judged against it (the pipeline sets it from ``mesh(size=...)``).
     """
 
     min_sj: float = 0.2
@@ -75,6 +82,8 @@ class Quality:
     size_tol: float = 0.25
     long_edge: float = 2.0
     sj_step: float = 0.1
+    short_edge: float = 3.0
+    field: object = None
 
 
 QUALITY = Quality()

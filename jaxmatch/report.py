@@ -99,7 +99,10 @@ def print_mesh(out, path, m, rec: dict, defaulted: bool) -> None:
     decided = (f" (rule that decided: {m.rule}; runner-up {m.runner_up}"
                f"{', not meshed: at its best' if unmeshed else ''})") if m.rule else ""
     say(out, f"chosen: {m.chosen}{decided}")
-    if m.size:
+    if m.field is not None:
+        say(out, f"size field (mean edge on the outline {m.size:.4g}): {100 * m.field_share:.0f}% of the edges within [0.5, 1.6] x the "
+                 f"field at their midpoints, worst side {100 * m.size_deviation:.0f}% off its integral of 1 / size")
+    elif m.size:
         how = " (default: perimeter / 32)" if defaulted else ""
         say(out, f"size {m.size:.4g}{how}: mean edge {m.mean_edge_length:.4g}, worst side {100 * m.size_deviation:.0f}% "
                  "off length / size")

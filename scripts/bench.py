@@ -36,6 +36,9 @@ Printed, from one run:
 quasi-structured quad mesher on every shape of ``scripts/mesh_table.py`` at h = perimeter / 16 and
 / 32, times and qualities of both.
 
+``--mesh --mesh-graded`` runs only :func:`bench_graded`: graded (a size field) against uniform
+meshing of ``examples/graded``, time per quad.
+
 ``--json`` prints one JSON object on the last line. ``--cli`` also times a cold and a warm
 ``jaxmatch score examples/lshape.json`` (fresh persistent compilation cache), and the same job
 scored through ``jaxmatch.scoring.bulk.top_k`` (pruned and exhaustive) for comparison. Run from the
@@ -45,6 +48,7 @@ repository root: ``.venv/bin/python scripts/bench.py``.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import platform
@@ -120,6 +124,11 @@ def parse_args(argv=None):
                          "alternated with this one in the same run (ratio: vs_ref)")
     ap.add_argument("--mesh-bulk-reps", type=int, default=1, help="--mesh-bulk: timed runs of each command (default 1)")
     ap.add_argument("--mesh-bulk-no-gmsh", action="store_true", help="--mesh-bulk: leave out the gmsh reference")
+    ap.add_argument("--mesh-graded", action="store_true",
+                    help="--mesh: only graded against uniform meshing (bench_graded): time per quad of jaxmatch.mesh "
+                         "with each examples/graded size field over a uniform size giving about as many quads")
+    ap.add_argument("--mesh-graded-finer", type=float, default=1.0,
+                    help="--mesh-graded: divide every size of the fields by this (default 1: as in docs/graded.md)")
     ap.add_argument("--mesh-profile", default="", metavar="SHAPE:DIV",
                     help="--mesh: only profile one warm jaxmatch.mesh call (cProfile: top 10 by cumulative and by own time), e.g. T:32")
     ap.add_argument("--mesh-bulk-profile", default="", metavar="N[:DIV]",
@@ -1154,6 +1163,47 @@ def mesh_bulk(divisions: int = 16, jobs: int = 2, parts: int = 0, ref: Path | No
     return out
 
 
+def bench_graded(reps: int = 3, finer: float = 1.0) -> dict:
+    """Graded against uniform meshing of the same regions (``scripts/graded_table.py``'s cases,
+    ``examples/graded``): per case the best of ``reps`` first calls (caches cleared,
+    :func:`clear_mesh_caches`) of ``jaxmatch.mesh(shape, size=Field)`` and of
+    ``jaxmatch.mesh(shape, size=h)`` at the uniform ``h = sqrt(area / graded quads)`` (about as
+    many quads), in the same run; ``ratio``: the graded run's seconds per quad over the uniform
+    run's (the issue asks for at most 2). finer: every size of the fields (H, s) divided by this
+    (distances kept): larger meshes, where the per-quad work outweighs the fixed costs."""
+    import math as _math
+
+    import jaxmatch
+    from jaxmatch.field import load_field
+
+    folder = ROOT / "examples" / "graded"
+    jaxmatch.mesh(jaxmatch.load_shape(folder / "square.json"), size=0.5)  # warm (kernels, catalogue)
+    cases = []
+    for fpath in sorted(folder.glob("*.field.json")):
+        name = fpath.name[: -len(".field.json")]
+        shp, field = jaxmatch.load_shape(folder / f"{name}.json"), load_field(fpath)
+        field = dataclasses.replace(field, size=field.size / finer,
+                                    near=tuple(dataclasses.replace(e, size=e.size / finer) for e in field.near))
+
+        def first(size):
+            clear_mesh_caches()
+            return jaxmatch.mesh(shp, size=size)
+
+        try:
+            gt, gm = _best_of(lambda: first(field), reps)
+            h = _math.sqrt(abs(shp.user_area) / gm.quads.shape[0])
+            ut, um = _best_of(lambda: first(h), reps)
+        except jaxmatch.InputError as e:  # (named in the record, not timed)
+            cases.append({"case": name, "error": str(e)[:200]})
+            continue
+        g_per, u_per = min(gt) / gm.quads.shape[0], min(ut) / um.quads.shape[0]
+        cases.append({"case": name, "graded_s": min(gt), "graded_quads": int(gm.quads.shape[0]), "uniform_h": h,
+                      "uniform_s": min(ut), "uniform_quads": int(um.quads.shape[0]), "ratio": g_per / u_per})
+    ratios = [c["ratio"] for c in cases if "ratio" in c] or [float("nan")]
+    return {"cases": cases, "median_ratio": statistics.median(ratios), "max_ratio": max(ratios), "reps": reps, "finer": finer,
+            "load": os.getloadavg()}
+
+
 def profile_mesh(name: str, div: int, top: int = 10) -> dict:
     """cProfile of one warm ``jaxmatch.mesh(shape, size=h)`` call (after one untimed call): the
     wall time, the ``top`` entries by cumulative time (``"top"``) and by own time (``"top_own"``),
@@ -1290,6 +1340,17 @@ def main(argv=None) -> int:
         if args.json:
             print(json.dumps({"bulk_profile": r}))
         return 0
+    if args.mesh and args.mesh_graded:
+        r = bench_graded(args.mesh_reps, args.mesh_graded_finer)
+        for c in r["cases"]:
+            if "error" in c:
+                print(f"{c['case']}: {c['error']}", file=sys.stderr if args.json else sys.stdout)
+                continue
+            print(f"{c['case']}: graded {c['graded_quads']} quads in {c['graded_s']:.3f} s; uniform h {c['uniform_h']:.4g} "
+                  f"{c['uniform_quads']} quads in {c['uniform_s']:.3f} s; time per quad graded / uniform {c['ratio']:.2f}",
+                  file=sys.stderr if args.json else sys.stdout)
+        return _report(f"graded / uniform time per quad: median {r['median_ratio']:.2f}, max {r['max_ratio']:.2f} "
+                       f"(first calls, best of {r['reps']}; sizes / {r['finer']:g}); load {r['load'][0]:.2f}", r, args.json)
     if args.mesh and args.mesh_profile:
         name, _, div = args.mesh_profile.partition(":")
         r = profile_mesh(name, int(div or 32))

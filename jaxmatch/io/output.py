@@ -83,7 +83,8 @@ class PictureOutput:
 
     size: ``(W, H)`` pixels of the whole picture or None (fitted to the region's aspect);
     dpi: dots per inch (None: 120); color: ``"patch"`` (pale colour per patch) or ``"quality"``
-    (scaled Jacobian, with a colour bar); histogram: add the scaled Jacobians' histogram.
+    (scaled Jacobian, with a colour bar) or ``"size"`` (edge length / size, the size field's where
+    the mesh has one: :func:`jaxmatch.io.plot.size_ratios`); histogram: add the scaled Jacobians' histogram.
     """
 
     size: tuple[int, int] | None = None
@@ -94,5 +95,5 @@ class PictureOutput:
     def __post_init__(self) -> None:
         if self.dpi is not None and not (10 <= self.dpi <= 1200):
             raise InputError(f"must lie in 10..1200, got {self.dpi}", "--dpi")
-        if self.color not in ("patch", "quality"):
-            raise InputError(f"expected patch or quality, got {self.color!r}", "--color")
+        if self.color not in ("patch", "quality", "size"):
+            raise InputError(f"expected patch, quality or size, got {self.color!r}", "--color")

@@ -24,6 +24,7 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 
 from jaxmatch.catalogue.mesh import edges, valences
+from jaxmatch.errors import InputError
 from jaxmatch.files import atomic_path
 from jaxmatch.io import registry
 from jaxmatch.quality import inverted_mask, quality
@@ -45,6 +46,7 @@ __all__ = [
     "figure_format",
     "new_figure",
     "quality_line",
+    "size_ratios",
     "save_figure",
 ]
 
@@ -341,7 +343,7 @@ def draw_quadmesh(path: str | os.PathLike, mesh, *, title: str = "", y_down: boo
     sj = np.asarray(mesh.scaled_jacobian, np.float64)
     span = np.ptp(xy, axis=0) if xy.size else np.ones(2)
     aspect = float(span[0] / span[1]) if span[1] > 0 else 1.0
-    bar = 0.9 if color == "quality" else 0.0
+    bar = 0.9 if color in ("quality", "size") else 0.0
     if size is None:
         width = float(np.clip(4.2 * np.sqrt(aspect), 4.2, 9.0)) + bar
         drawing_h = float(np.clip((width - bar) / aspect, 1.0, 9.0))
@@ -363,6 +365,13 @@ def draw_quadmesh(path: str | os.PathLike, mesh, *, title: str = "", y_down: boo
         pc.set_clim(min(0.0, float(sj.min()) if sj.size else 0.0), 1.0)
         ax.add_collection(pc)
         fig.colorbar(pc, ax=ax, label="scaled Jacobian", shrink=0.9)
+    elif color == "size":
+        ratio = size_ratios(mesh)
+        pc = PolyCollection(xy[quads], array=np.log2(ratio), cmap="coolwarm", edgecolors="0.3", linewidths=0.35)
+        pc.set_clim(-1.5, 1.5)
+        ax.add_collection(pc)
+        cb = fig.colorbar(pc, ax=ax, label="edge length / size", shrink=0.9, ticks=np.log2([0.35, 0.5, 1.0, 1.6, 2.8]))
+        cb.ax.set_yticklabels(["0.35", "0.5", "1", "1.6", "2.8"])
     else:
         face = PATCH_PALETTE[np.asarray(mesh.patch) % len(PATCH_PALETTE)]
         face = np.where(bad[:, None], np.array([0.95, 0.3, 0.3]), face)
@@ -383,6 +392,20 @@ def draw_quadmesh(path: str | os.PathLike, mesh, *, title: str = "", y_down: boo
         hax.set_ylabel("quads", fontsize=8)
         hax.tick_params(labelsize=7)
     return save_figure(fig, path, dpi=dpi)
+
+
+def size_ratios(mesh) -> np.ndarray:
+    """``(Q,) float64`` per quad, the mean of its four edge lengths / the size at its centre (the
+    mesh's size field, or its one size): what ``--color size`` draws. Raises
+    :class:`InputError` for a mesh made without a size (``--template``)."""
+    xy = np.asarray(mesh.xy, np.float64)
+    p = xy[np.asarray(mesh.quads, np.int64)]
+    mean_edge = np.linalg.norm(np.roll(p, -1, axis=1) - p, axis=2).mean(axis=1)
+    if mesh.field is not None:
+        return mean_edge / np.asarray(mesh.field(p.mean(axis=1)), np.float64)
+    if not mesh.size:
+        raise InputError("colour by size needs a mesh made to a size (--size, --size-field), not --template", "--color")
+    return mean_edge / float(mesh.size)
 
 
 draw_mesh = draw_quadmesh

@@ -27,11 +27,11 @@ def _shape_corners(shape: Shape) -> np.ndarray:
     return shape.to_user(shape.points[shape.corners]) if shape.n_corners else np.zeros((0, 2))
 
 
-def from_layout(lm, *, size: float | None = None, corners: np.ndarray | None = None) -> QuadMesh:
+def from_layout(lm, *, size: float | None = None, corners: np.ndarray | None = None, field=None) -> QuadMesh:
     """A :class:`~jaxmatch.placement.layout.LayoutMesh` as a :class:`QuadMesh`.
 
     corners: ``(C, 2)`` the region's corners (default: the layout points marked as corners on
-    the outer boundary). Side lengths and counts are kept for the sides on the region's boundary
+    the outer boundary); field: the size field it follows (:attr:`QuadMesh.field`). Side lengths and counts are kept for the sides on the region's boundary
     (the sizes of cuts between patches are the pipeline's own choice, not the user's)."""
     lay = lm.layout
     if corners is None:
@@ -46,7 +46,8 @@ def from_layout(lm, *, size: float | None = None, corners: np.ndarray | None = N
     return QuadMesh(xy=lm.xy, quads=np.asarray(lm.quads, np.int64), patch=np.asarray(lm.patch, np.int64),
                     line_sets=line_sets, region_area=float(lm.region_area), corners=np.asarray(corners, np.float64),
                     size=size, side_lengths={n: float(v) for n, v, o in zip(names, lm.sides.lengths, outer) if o},
-                    side_counts={n: int(c) for n, c, o in zip(names, lm.counts, outer) if o}, templates=tuple(lm.templates))
+                    side_counts={n: int(c) for n, c, o in zip(names, lm.counts, outer) if o}, templates=tuple(lm.templates),
+                    field=field)
 
 
 def from_placement(shape: Shape | None, pl, mesh_id: str = "", *, detail=None) -> QuadMesh:
@@ -60,7 +61,7 @@ def from_placement(shape: Shape | None, pl, mesh_id: str = "", *, detail=None) -
                     templates=(mesh_id,) if mesh_id else (), detail=detail)
 
 
-def from_refined(shape: Shape, rm, *, size: float | None = None) -> QuadMesh:
+def from_refined(shape: Shape, rm, *, size: float | None = None, field=None) -> QuadMesh:
     """A refined template (:class:`~jaxmatch.placement.refine.RefinedMesh`) of ``shape``."""
 
     quads = np.asarray(rm.quads, np.int64)
@@ -73,4 +74,4 @@ def from_refined(shape: Shape, rm, *, size: float | None = None) -> QuadMesh:
     return QuadMesh(xy=np.asarray(rm.xy, np.float64), quads=quads, patch=np.zeros(len(quads), np.int64),
                     line_sets=line_sets, region_area=float(rm.region_area), corners=_shape_corners(shape), size=size,
                     side_lengths=dict(zip(names, map(float, lengths))),
-                    side_counts=dict(zip(names, map(int, rm.counts))), templates=(rm.template.mesh_id,))
+                    side_counts=dict(zip(names, map(int, rm.counts))), templates=(rm.template.mesh_id,), field=field)

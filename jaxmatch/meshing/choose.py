@@ -11,12 +11,15 @@
    user sees it, not the pieces between the patches' cut ends) and no edge longer than
    ``Quality.long_edge * h`` (with a target size). A yes or no: between two meshes that both
    miss it, quality decides and the counts go to the size fit. A stretch finer than ``h`` is not
-   ruled out here: a feature smaller than the size is meshed finer, not cut off;
+   ruled out here: a feature smaller than the size is meshed finer, not cut off. With a size
+   field, ``h`` is the field at each edge's midpoint (a stretch's ``length / h`` its integral of
+   ``1 / size``) and an edge shorter than the field over ``Quality.short_edge`` misses it too
+   (:meth:`QuadMesh.size_conformity`);
 6. quality band: min scaled Jacobian ``>= Quality.high_sj``;
 7. quality: higher min scaled Jacobian, in steps of ``Quality.sj_step``;
 8. size fit: fewer stretches whose edge count is off ``length / h`` by more than
    ``max(1, Quality.size_tol * length / h)`` either way, plus edges longer than
-   ``Quality.long_edge * h``;
+   ``Quality.long_edge * h`` (and, with a size field, the short ones: :meth:`QuadMesh.size_fit`);
 9. irregular vertices: fewer irregular internal vertices beyond Euler's lower bound for the
    boundary valences used (:func:`jaxmatch.meshing.result.irregular_bound`; none below it counts
    as 0: a valence-6 vertex can make up for two);
@@ -71,16 +74,15 @@ def mesh_key(m: QuadMesh, order: int = 0, quality: Quality = QUALITY) -> tuple:
     """The sort key of :data:`RULES` for mesh ``m`` (``order``: its place among the candidates)."""
     sj, mean = m.min_scaled_jacobian, m.mean_scaled_jacobian  # of the (Q,) array the mesh keeps
     area = m.area_ratio
-    long = m.long_edges(quality.long_edge)
     return (
         m.inverted > 0,
         m.missed_corners.shape[0] > 0,
         not (abs(area - 1.0) <= quality.area_tol),
         not (sj >= quality.good_sj),
-        m.coarse_stretches(quality.coarse_side) + long > 0,
+        m.size_conformity(quality),
         not (sj >= quality.high_sj),
         -math.floor(sj / quality.sj_step + 1e-9) if math.isfinite(sj) else math.inf,
-        m.stretches_off_size(quality.size_tol) + long,
+        m.size_fit(quality),
         max(int(m.irregular.size) - m.irregular_bound, 0),
         m.n_patches,
         -round(mean, 2),

@@ -29,15 +29,18 @@ from __future__ import annotations
 import math
 import os
 import time
+from dataclasses import replace
 from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
 from jaxmatch.defaults import DEFAULT_LATTICE, QUALITY, Quality
 from jaxmatch.errors import InputError
+from jaxmatch.field import CallableSize, Field, SizeField, bind, outline_size
 from jaxmatch.meshing.build import from_layout, from_placement, from_refined
 from jaxmatch.meshing.choose import choose
 from jaxmatch.meshing.groups import make_periodic, name_groups, periodic_mismatch
+from jaxmatch.meshing.grading import follow_field
 from jaxmatch.meshing.region import canonical, corner_points, default_size, load_region
 from jaxmatch.meshing.result import Candidate, QuadMesh
 from jaxmatch.meshing.strategies import (RINGS, SINGLE, Bends, Conforming, Larger, Layouts, Request, RingPartition, Smooth,
@@ -61,6 +64,12 @@ def strategy_names() -> tuple[str, ...]:
     """Every candidate strategy, in the order tried: ``"single"``, the decompositions, then the
     ring partition (``"rings"``)."""
     return (SINGLE,) + tuple(STRATEGIES) + (RINGS,)
+
+
+def _is_field(size) -> bool:
+    """Whether ``size`` is a size field (a :class:`~jaxmatch.field.Field`, a bound one, or a
+    callable) rather than a number."""
+    return isinstance(size, (Field, SizeField, CallableSize)) or (callable(size) and not isinstance(size, (int, float)))
 
 
 def _check_size(size) -> float:
@@ -103,7 +112,11 @@ def mesh(region=None, *, regions=None, size: float | None = None, divisions: int
       regions: instead of ``region``: an assembly's regions, each a :class:`~jaxmatch.model.Region`
         or a dict ``{"name": ..., "boundary": ..., "holes": ..., "embedded": ...}`` (the JSON
         file's entries); meshed as one conforming mesh (:mod:`jaxmatch.meshing.assembly`).
-      size: target edge length (user units); default perimeter / :data:`DEFAULT_DIVISIONS`.
+      size: target edge length (user units); default perimeter / :data:`DEFAULT_DIVISIONS`. Or a
+        size field (shapes only): a :class:`jaxmatch.field.Field` (``Field(H, near=[Near(...)])``,
+        the JSON form of ``--size-field``) or a callable mapping ``(n, 2)`` points to ``(n,)``
+        positive sizes; the mesh follows it (side counts from the integral of 1 / size, side
+        vertices spaced by it, size conformity judged against it: ``Quality.field``).
       divisions: instead of ``size``: edge length = the region's perimeter / ``divisions``
         (a whole number >= 1; each region of a batch gets its own size).
       sides: edges per user side (side ``i`` from corner ``i`` to ``i + 1``, file order), met
@@ -143,6 +156,12 @@ def mesh(region=None, *, regions=None, size: float | None = None, divisions: int
                                          budget_s=budget_s, progress=progress)
     if sides is not None and size is not None:
         raise InputError("give either sides or size, not both")
+    if size is not None and _is_field(size):
+        if not isinstance(region, Shape) or template or divisions is not None:
+            raise InputError("a size field is for a shape meshed to a size (not a layout, --template or --divisions)")
+        f = bind(size, region, "size field" if isinstance(size, Field) else "size")
+        quality = replace(quality, field=f)
+        size = outline_size(f, region)
     if divisions is not None:
         if size is not None or sides is not None:
             raise InputError("give divisions or a size or sides, not two of them")
@@ -249,7 +268,8 @@ def _mesh_size(shape, cat, lat, h, strategies, quality, budget_s, progress, corn
     if not any(c.mesh is not None for c in tried):
         raise InputError("no candidate could be meshed: " + "; ".join(f"{c.name}: {c.note}" for c in tried),
                          where=region.source)
-    return _named(choose(tried, quality), region)
+    best = choose(tried, quality)
+    return _named(best if quality.field is None else follow_field(best, quality), region)
 
 
 def _named(m: QuadMesh, region: Shape) -> QuadMesh:

@@ -16,13 +16,14 @@ import numpy as np
 
 from jaxmatch.catalogue.mesh import boundary_loops, edges, valences
 from jaxmatch.defaults import QUALITY, Quality
+from jaxmatch.field import SHARE_BAND
 from jaxmatch.geometry import signed_area
 from jaxmatch.quality import edge_ratios, quad_areas, sj_inverted
 
 __all__ = ["Candidate", "QuadMesh", "boundary_loops", "irregular_bound"]
 
 _KEPT = ("_sj_inverted", "_edges", "_edge_lengths", "_valences", "_loops", "_missed", "_area", "_stretches",
-         "_region_parts")
+         "_region_parts", "_edge_targets")
 """The :class:`QuadMesh` measures computed once per mesh (``cached_property`` names)."""
 
 
@@ -73,6 +74,10 @@ class QuadMesh:
         length of a side on the region's boundary and its number of mesh edges (``"i-j"``).
     point_sets: name -> ``(N,) int64`` node ids (the periodic pairs' ``"periodic k a"`` /
         ``"periodic k b"``, in matching order).
+    field: the size field the mesh was made to follow (``Quality.field``: ``(n, 2)`` points to
+        ``(n,)`` sizes) or None; with one, the size measures (:meth:`stretches_off_size`,
+        :meth:`sides_off_size`, :meth:`long_edges`, :attr:`field_share`) read the local size at
+        each edge's midpoint instead of ``size``.
     chosen: the candidate that won (``"single"``, a decomposition, ``"template"``, ``"layout"``);
     rule: the rule of :mod:`jaxmatch.meshing.choose` that decided (empty with one candidate);
     runner_up: the best other candidate's name or None; tried: every :class:`Candidate`;
@@ -107,6 +112,7 @@ class QuadMesh:
     detail: object = None
     regions: tuple[str, ...] = ()
     point_sets: Mapping[str, np.ndarray] = field(default_factory=dict)
+    field: object = None
 
     def with_choice(self, chosen: str, rule: str, runner_up: str | None, tried) -> "QuadMesh":
         """This mesh, labelled with how it was chosen (the measures kept so far kept with it)."""
@@ -134,6 +140,32 @@ class QuadMesh:
         return np.linalg.norm(self.xy[e[:, 0]] - self.xy[e[:, 1]], axis=1)
 
     @cached_property
+    def _edge_targets(self) -> np.ndarray:
+        """``(E,) float64`` the size each edge of :attr:`_edges` is measured against: the field at
+        its midpoint, or ``size`` everywhere (NaN without either)."""
+        e = self._edges
+        if self.field is None:
+            return np.full(e.shape[0], self.size if self.size else math.nan)
+        return np.asarray(self.field(0.5 * (self.xy[e[:, 0]] + self.xy[e[:, 1]])), np.float64)
+
+    def _wanted(self, edges_: np.ndarray) -> float:
+        """Edges of the field wanted along ``edges_ (k, 2)``: the sum of length / field at the
+        midpoint."""
+        a, b = self.xy[edges_[:, 0]], self.xy[edges_[:, 1]]
+        return float(np.sum(np.linalg.norm(b - a, axis=1) / self.field(0.5 * (a + b))))
+
+    @property
+    def field_share(self) -> float | None:
+        """Share of the edges whose length / the size at its midpoint (the field, or ``size``)
+        lies in :data:`jaxmatch.field.SHARE_BAND` (None without a size)."""
+        if self.field is None and not self.size:
+            return None
+        if not self._edges.size:
+            return math.nan
+        r = self._edge_lengths / self._edge_targets
+        return float(np.mean((r >= SHARE_BAND[0]) & (r <= SHARE_BAND[1])))
+
+    @cached_property
     def _valences(self) -> np.ndarray:
         """``(V,) int32`` vertex valences (:func:`~jaxmatch.catalogue.mesh.valences`, from :attr:`_edges`)."""
         return np.bincount(self._edges.ravel(), minlength=self.xy.shape[0]).astype(np.int32)
@@ -159,7 +191,8 @@ class QuadMesh:
 
     @cached_property
     def _stretches(self) -> np.ndarray:
-        """``(S, 3)`` edges, length (user units) and outer (1: on the outer loop, 0: a hole's) of
+        """``(S, 3)`` edges, length (user units; with a field: the integral of 1 / field, edges
+        wanted) and outer (1: on the outer loop, 0: a hole's) of
         every boundary stretch between consecutive corners of a boundary loop (a loop without a
         corner: the whole loop), from ``xy``, the quads and the region's corners alone (not from
         how the mesh was made)."""
@@ -176,6 +209,8 @@ class QuadMesh:
             if at.size == 0:
                 out.append((len(loop), float(seg.sum()), outer))
                 continue
+            if self.field is not None:  # the field's integral, edge by edge, in place of the length
+                seg = seg / self.field(0.5 * (pts + np.roll(pts, -1, axis=0)))
             csum = np.concatenate([[0.0], np.cumsum(seg)])
             for a, b in zip(at, np.roll(at, -1)):
                 n = int((b - a) % len(loop)) or len(loop)
@@ -187,18 +222,19 @@ class QuadMesh:
         """Boundary stretches between corners (:attr:`_stretches`) whose edge count ``n`` is off
         ``L / h`` by more than ``max(1, tol * L / h)`` (0 without a size): what the user sees of
         the size along the outline, whatever cuts the mesh's patches end on it."""
-        if not self.size or not self._stretches.size:
+        if not (self.size or self.field is not None) or not self._stretches.size:
             return 0
-        n, want = self._stretches[:, 0], self._stretches[:, 1] / self.size
+        n, want = self._stretches[:, 0], self._stretches[:, 1] / (1.0 if self.field is not None else self.size)
         return int(np.sum(np.abs(n - want) > np.maximum(1.0, tol * want) + 1e-9))
 
     def coarse_stretches(self, factor: float) -> int:
         """Boundary stretches between corners (:attr:`_stretches`) of ``n`` edges and length ``L``
         whose mean edge ``L / n`` is longer than ``factor * h`` and whose ``n`` is more than one
-        edge short of ``L / h`` (0 without a size): sides meshed coarser than the size asked."""
-        if not self.size or not self._stretches.size:
+        edge short of ``L / h`` (0 without a size): sides meshed coarser than the size asked. With
+        a size field, ``L / h`` is the stretch's integral of ``1 / size``."""
+        if not (self.size or self.field is not None) or not self._stretches.size:
             return 0
-        n, want = self._stretches[:, 0], self._stretches[:, 1] / self.size
+        n, want = self._stretches[:, 0], self._stretches[:, 1] / (1.0 if self.field is not None else self.size)
         return int(np.sum((want > factor * n + 1e-9) & (want - n > 1.0 + 1e-9)))
 
     # -- sets and data, as meshio names them ---------------------------------------------------
@@ -286,26 +322,58 @@ class QuadMesh:
     @property
     def size_deviation(self) -> float:
         """Largest ``|n / (L / h) - 1|`` over the sides (0 without a size)."""
-        if not self.size or not self.side_counts:
+        if not (self.size or self.field is not None) or not self.side_counts:
             return 0.0
+        if self.field is not None:
+            return max(abs(self.side_counts[s] / max(self._side_wanted(s), 1e-300) - 1.0) for s in self.side_counts)
         return max(abs(self.side_counts[s] / (self.side_lengths[s] / self.size) - 1.0) for s in self.side_counts)
 
     def sides_off_size(self, tol: float) -> list[str]:
         """Sides whose edge count ``n`` is off ``L / h`` by more than ``max(1, tol * L / h)``."""
-        if not self.size:
+        if not (self.size or self.field is not None):
             return []
         out = []
         for s, n in self.side_counts.items():
-            want = self.side_lengths[s] / self.size
+            want = self._side_wanted(s) if self.field is not None else self.side_lengths[s] / self.size
             if abs(n - want) > max(1.0, tol * want) + 1e-9:  # round-off: L / h = 0.99999... is one edge
                 out.append(s)
         return out
 
     def long_edges(self, factor: float) -> int:
-        """Edges longer than ``factor * size`` (0 without a size)."""
+        """Edges longer than ``factor * size`` (the field at the edge's midpoint with a field; 0
+        without a size)."""
+        if self.field is not None:
+            return int(np.sum(self._edge_lengths > factor * self._edge_targets))
         if not self.size:
             return 0
         return int(np.sum(self._edge_lengths > factor * self.size))
+
+    def short_edges(self, factor: float) -> int:
+        """With a size field: edges shorter than the field at their midpoint over ``factor`` (a
+        graded mesh refined where the field does not ask for it); 0 without a field."""
+        if self.field is None:
+            return 0
+        return int(np.sum(self._edge_lengths * factor < self._edge_targets))
+
+    def size_conformity(self, quality: Quality = QUALITY) -> bool:
+        """The choice rule's size conformity, a yes or no (True: the size is missed somewhere):
+        a boundary stretch coarser than the size (:meth:`coarse_stretches`), an edge longer than
+        ``quality.long_edge`` sizes or, with a size field, shorter than the field over
+        ``quality.short_edge`` (:meth:`short_edges`)."""
+        return (self.coarse_stretches(quality.coarse_side) + self.long_edges(quality.long_edge)
+                + self.short_edges(quality.short_edge)) > 0
+
+    def size_fit(self, quality: Quality = QUALITY) -> int:
+        """The choice rule's size fit count: boundary stretches off the size either way
+        (:meth:`stretches_off_size`), edges longer than ``quality.long_edge`` sizes and, with a
+        size field, shorter than the field over ``quality.short_edge``."""
+        return (self.stretches_off_size(quality.size_tol) + self.long_edges(quality.long_edge)
+                + self.short_edges(quality.short_edge))
+
+    def _side_wanted(self, name: str) -> float:
+        """Edges the field wants along side ``name`` (its ``"side NAME"`` edges as meshed)."""
+        e = self.line_sets.get(f"side {name}")
+        return self._wanted(np.asarray(e, np.int64)) if e is not None and len(e) else 0.0
 
     @property
     def mean_edge_length(self) -> float:
@@ -335,7 +403,11 @@ class QuadMesh:
             out.append(f"{self.irregular.size} irregular internal vertices, more than twice Euler's bound {bound}; "
                        "try a smaller --size, or give the corners explicitly")
         long = self.long_edges(quality.long_edge)
-        if long:
+        if long and self.field is not None:
+            r = self._edge_lengths / self._edge_targets
+            out.append(f"{long} edges longer than {quality.long_edge:g} x the size field at their midpoints (longest "
+                       f"{r.max():.2f} x); the region's patches are wider than its templates can fill there")
+        elif long:
             out.append(f"{long} edges longer than {quality.long_edge:g} x the size {self.size:.4g} (longest "
                        f"{self._edge_lengths.max() / self.size:.2f} x); the region's patches are wider than its "
                        "templates can fill at this size")
@@ -351,7 +423,7 @@ class QuadMesh:
             "missed_corners": int(self.missed_corners.shape[0]), "area_ratio": self.area_ratio,
             "irregular": int(self.irregular.size), "irregular_bound": self.irregular_bound,
             "max_edge_ratio": self.max_edge_ratio, "mean_edge_length": self.mean_edge_length,
-            "size": self.size, "size_deviation": self.size_deviation,
+            "size": self.size, "size_deviation": self.size_deviation, "field_share": self.field_share,
             "side_counts": {k: int(v) for k, v in self.side_counts.items()}, "templates": list(self.templates),
             "warnings": self.warnings(quality),
         }

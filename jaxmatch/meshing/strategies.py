@@ -8,7 +8,8 @@ strategy                candidates                                              
 :class:`Layouts`        the layout strategies together (:class:`Single`: the region as    always
                         one template; :class:`Split`: each decomposition), meshed by the
                         one solve most promising first, a layout that cannot win skipped
-:class:`Larger`         the single patch with each larger template size group            below the quality floor
+:class:`Larger`         the single patch with each larger template size group            below the quality floor;
+                                                                                         graded: off the field
 :class:`Conforming`     single templates whose side counts follow the size                no candidate follows it
 :class:`RingPartition`  a layer of patches along every loop and an O-grid core, or a box  an edge of every candidate
                         around every hole and a grid through the rest                     is longer than 2 h, or none
@@ -31,6 +32,7 @@ import numpy as np
 
 from jaxmatch.defaults import QUALITY, Quality
 from jaxmatch.errors import InputError, SolverError, UnmatchableError
+from jaxmatch.field import line_integral
 from jaxmatch.meshing.build import from_layout, from_refined
 from jaxmatch.meshing.choose import best_possible_key, cannot_win, mesh_key
 from jaxmatch.meshing.region import corner_points
@@ -39,7 +41,7 @@ from jaxmatch.placement.bounds import node_sj_bound, single_sj_bound
 from jaxmatch.placement.decompose import _same, decompose, disk_layout, same_cuts, single_patch
 from jaxmatch.placement.layout import check_layout
 from jaxmatch.placement.rings import ring_layout
-from jaxmatch.placement.refine import DEFAULT_LIMIT, InfeasibleRequest, refine_mesh, side_lengths
+from jaxmatch.placement.refine import DEFAULT_LIMIT, InfeasibleRequest, refine_mesh, side_lengths, side_polylines
 from jaxmatch.placement.solve import ALL_SIZES, TEMPLATE_SIZES, mesh_layout
 from jaxmatch.placement.templates import walk
 from jaxmatch.shape import Shape
@@ -142,7 +144,7 @@ def try_layouts(shape: Shape, strategies: Sequence["LayoutStrategy"], cat, lat, 
             except FAILED as e:
                 tried[i] = Candidate(label, None, _why_not(e))
             else:
-                m = from_layout(lm, size=h, corners=corners)
+                m = from_layout(lm, size=h, corners=corners, field=quality.field)
                 tried[i] = Candidate(label, m)
                 key = mesh_key(m, i, quality)
                 if best is None or key < best[0]:
@@ -247,13 +249,18 @@ def _single(tried) -> QuadMesh | None:
 
 
 class Larger:
-    """Below the quality floor: the single patch with each larger template size group
-    (:func:`larger_templates`), after the single candidate."""
+    """Below the quality floor, or a graded mesh (a size field) whose edges do not all conform to
+    it: the single patch with each larger template size group (:func:`larger_templates`), after
+    the single candidate."""
 
     after_single = True
 
     def wanted(self, best: QuadMesh | None, tried, req: Request) -> bool:
-        return _single(tried) is not None and not best.min_scaled_jacobian >= req.quality.good_sj
+        if _single(tried) is None:
+            return False
+        if req.quality.field is not None and best.size_conformity(req.quality) > 0:
+            return True  # graded: a larger template's irregular vertices are transitions of size
+        return not best.min_scaled_jacobian >= req.quality.good_sj
 
     def candidates(self, req: Request, tried) -> list[Candidate]:
         return larger_templates(single_patch(req.region), req.cat, req.lat, req.h, req.corners, _single(tried),
@@ -366,7 +373,7 @@ def larger_templates(lay, cat, lat, h, corners, first: QuadMesh, quality: Qualit
             lm = mesh_layout(lay, cat, lat, size=h, sizes=(group,), quality=quality, periodic=periodic)
         except (InputError, SolverError, IndexError):
             continue
-        m = from_layout(lm, size=h, corners=corners)
+        m = from_layout(lm, size=h, corners=corners, field=quality.field)
         if m.templates not in seen:
             seen.add(m.templates)
             out.append(Candidate(f"{SINGLE} {m.templates[0]}", m))
@@ -385,12 +392,12 @@ def smooth_candidates(shape: Shape, cat, lat, h: float, quality: Quality) -> lis
     tried = []
     try:
         tried.append(Candidate(SINGLE, from_refined(shape, refine_mesh(shape, cat, lat, size=h, quality=quality).mesh,
-                                                     size=h)))
+                                                     size=h, field=quality.field)))
     except (InputError, SolverError) as e:
         tried.append(Candidate(SINGLE, None, str(getattr(e, "problem", e))))
     try:
         lm = mesh_layout(disk_layout(shape), cat, lat, size=h, smooth_cuts=True, quality=quality)
-        tried.append(Candidate(DISK, from_layout(lm, size=h, corners=corners)))
+        tried.append(Candidate(DISK, from_layout(lm, size=h, corners=corners, field=quality.field)))
     except (InputError, SolverError) as e:
         tried.append(Candidate(DISK, None, str(getattr(e, "problem", e))))
     return tried
@@ -433,13 +440,15 @@ def conforming_templates(shape: Shape, cat, lat, h, first: QuadMesh, quality: Qu
     except UnmatchableError:
         return []
     out, seen = [], {first.templates}
-    for counts in _target_counts(side_lengths(shape), h, CONFORMING_TRIES):
+    f = quality.field
+    targets = side_lengths(shape) if f is None else np.array([line_integral(f, p)[-1] for p in side_polylines(shape)])
+    for counts in _target_counts(targets, h if f is None else 1.0, CONFORMING_TRIES):
         try:
             choice = refine_mesh(shape, cat, lat, sides=counts.tolist(), templates=templates, explain=False,
                                  quality=quality)
         except (InfeasibleRequest, SolverError):
             continue
-        m = from_refined(shape, choice.mesh, size=h)
+        m = from_refined(shape, choice.mesh, size=h, field=quality.field)
         if m.templates not in seen and not m.sides_off_size(quality.size_tol):
             seen.add(m.templates)
             out.append(Candidate(f"{SINGLE} {m.templates[0]}", m))

@@ -766,7 +766,7 @@ def fit_sides(layout: Layout, sides: Sides, p: int, refined, counts: np.ndarray,
             continue
         pos = []
         for s, r in zip(parts, revs):
-            q = side_points(layout.points[sides.chains[s]], int(counts[s]))
+            q = side_points(layout.points[sides.chains[s]], int(counts[s]), quality.field)
             pos.append((q[::-1] if r else q)[:-1])
         last = sides.chains[parts[-1]][0 if revs[-1] else -1]  # the end corner of the patch side
         new = np.concatenate(pos + [layout.points[last][None]])

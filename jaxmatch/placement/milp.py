@@ -55,7 +55,8 @@ about the size too) against the primary one (edges per side close to ``length / 
 def solve_counts(sides, matrices: Sequence[np.ndarray], *, counts: Mapping[int, int] | None = None,
                  size: float | None = None, widths: Sequence[np.ndarray] | None = None,
                  source: str = "<layout>", floors: np.ndarray | None = None,
-                 chord_weight: float = CHORD_WEIGHT, equal: Sequence = ()) -> tuple[list[np.ndarray], np.ndarray]:
+                 chord_weight: float = CHORD_WEIGHT, equal: Sequence = (), side_targets: np.ndarray | None = None,
+                 chord_targets: Sequence[np.ndarray] | None = None) -> tuple[list[np.ndarray], np.ndarray]:
     """Chord multiplicities of every patch from ONE integer program (``scipy.optimize.milp``).
 
     matrices: per patch ``(n_p, c_p) int64`` side matrix (edges of chord ``c`` on the patch's
@@ -64,7 +65,9 @@ def solve_counts(sides, matrices: Sequence[np.ndarray], *, counts: Mapping[int, 
     patch ``(c_p,)`` chord widths (user units, :meth:`PatchTemplate.chord_widths`); floors:
     ``(S,)`` the fewest edges of each side not requested (:func:`curve_floors`); equal: pairs
     ``(side ids A, side ids B)`` whose total counts must be equal (periodic sides: a side of
-    the input may be several layout sides where cuts end on it).
+    the input may be several layout sides where cuts end on it); side_targets, chord_targets: a
+    size field's targets instead of ``length_s / size`` (``(S,)``, the integral of 1 / size along
+    each side) and ``width_c / size`` (per patch ``(c_p,)``).
 
     Variables: ``m_p >= 1`` integer per patch and chord, ``n_s >= 1`` integer per side.
     Constraints: ``A_p[i] @ m_p = sum of n_s over the layout sides along patch side i`` for
@@ -95,8 +98,12 @@ def solve_counts(sides, matrices: Sequence[np.ndarray], *, counts: Mapping[int, 
         raise InputError(f"element size must be a positive number, got {size!r}", where=source)
     if float(np.sum(sides.lengths)) / h > 1_000_000:
         raise InputError(f"element size {h:g} gives more than 1000000 side edges", where=source)
-    tau_m = np.concatenate([np.maximum(np.asarray(w, np.float64) / h, 1.0) for w in widths]) if widths is not None \
-        else np.ones(M)
+    if chord_targets is not None:
+        tau_m = np.concatenate([np.maximum(np.asarray(w, np.float64), 1.0) for w in chord_targets]) if M else np.ones(0)
+    elif widths is not None:
+        tau_m = np.concatenate([np.maximum(np.asarray(w, np.float64) / h, 1.0) for w in widths])
+    else:
+        tau_m = np.ones(M)
 
     def program(fixed: Mapping[int, int], targets: Mapping[int, float]):
         """Variables: m (M), n (S), t (T side deviations), u (M chord deviations)."""
@@ -159,7 +166,10 @@ def solve_counts(sides, matrices: Sequence[np.ndarray], *, counts: Mapping[int, 
         x = np.rint(x).astype(np.int64)
         return [x[off[p]:off[p + 1]] for p in range(len(matrices))], x[M:M + S]
 
-    targets = {s: float(sides.lengths[s]) / h for s in range(S) if s not in counts}
+    if side_targets is not None:
+        targets = {s: float(side_targets[s]) for s in range(S) if s not in counts}
+    else:
+        targets = {s: float(sides.lengths[s]) / h for s in range(S) if s not in counts}
     sol = program(counts, targets)
     if sol is not None:
         return sol

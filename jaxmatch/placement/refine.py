@@ -46,6 +46,7 @@ from jaxmatch.cache import key as cache_key
 from jaxmatch.catalogue.mesh import QuadMesh, edges, valences
 from jaxmatch.defaults import QUALITY, Quality
 from jaxmatch.errors import InputError
+from jaxmatch.field import graded_points
 from jaxmatch.placement.milp import LayoutInfeasible, one_patch_sides, solve_counts
 from jaxmatch.placement.embed import DENSE_TUTTE, Placement, smooth_in_frame, smooth_near, tutte
 from jaxmatch.placement.templates import PatchTemplate, walk
@@ -164,14 +165,17 @@ def side_lengths(shape: Shape) -> np.ndarray:
     return np.array([float(np.linalg.norm(np.diff(p, axis=0), axis=1).sum()) for p in side_polylines(shape)])
 
 
-def side_points(polyline: np.ndarray, count: int) -> np.ndarray:
+def side_points(polyline: np.ndarray, count: int, field=None) -> np.ndarray:
     """``(count + 1, 2)`` points evenly spaced by arc length on ``polyline (k, 2)``, from its
-    first point to its last, both ends exact.
+    first point to its last, both ends exact; with a size ``field`` (``Quality.field``) at equal
+    steps of the integral of 1 / size instead (:func:`jaxmatch.field.graded_points`).
 
     Computed from the lexicographically smaller end whatever the direction, so that two
     patches sharing a side with the same count get bit-identical points. On a straight
     two-point side, point ``j`` (counted from the smaller end ``p0``) is
     ``p0 + (j / count) * (p1 - p0)``."""
+    if field is not None:
+        return graded_points(field, polyline, count)
     poly = np.asarray(polyline, dtype=np.float64)
     N = int(count)
     first, last = poly[0], poly[-1]
@@ -605,6 +609,8 @@ def refine_and_place(template: PatchTemplate, mult, *, smooth_iters: int | None 
     m = template.match
     k = cache_key(template.shape, template.mesh_id, int(m.rotation), bool(m.reflected), m.alignment,
                   template.placement.xy, np.asarray(mult, np.int64), smooth_iters, quality.good_sj, ignore=("source",))
+    if quality.field is not None:  # (uniform sizes: the key as it was)
+        k = k + (quality.field,)
     rm = cache.get("refined", k, lambda: _refine_and_place(template, mult, smooth_iters=smooth_iters, quality=quality,
                                                             cache=cache), quads=lambda r: r.quads.shape[0])
     return rm._replace(template=template)
@@ -645,7 +651,7 @@ def _refine_and_place(template: PatchTemplate, mult, *, smooth_iters: int | None
     # boundary
     counts = template.side_matrix() @ m
     polys = side_polylines(template.shape)
-    bpos = [side_points(p, int(c)) for p, c in zip(polys, counts)]
+    bpos = [side_points(p, int(c), quality.field) for p, c in zip(polys, counts)]
     bverts = np.concatenate([sv[:-1] for sv in side_vertices])
     bxy = np.concatenate([bp[:-1] for bp in bpos])
     # ccw loop

@@ -30,6 +30,7 @@ from jaxmatch.cache import Cache
 from jaxmatch.cache import key as cache_key
 from jaxmatch.defaults import QUALITY, Quality
 from jaxmatch.errors import InputError
+from jaxmatch.field import line_integral
 from jaxmatch.placement.embed import sj_inverted, smooth_in_frame, smooth_near
 from jaxmatch.placement.layout import (Layout, LayoutMesh, Sides, _boundary_loops, curve_floors, fit_sides,
                                        layout_sides, merge_patches, parse_counts, patch_shapes, region_area)
@@ -149,7 +150,7 @@ whose template change makes a layout's program feasible: past it the layout is g
 (138 patches) took 219 of them, 7.6 of its 8.6 s, for a mesh that did not win."""
 
 
-def _advance_for_feasibility(sides, cands, choice, want, size, source, equal=()) -> bool:
+def _advance_for_feasibility(sides, cands, choice, want, size, source, equal=(), f=None, side_targets=None) -> bool:
     """Switch one patch to another template so that the program becomes feasible; True when
     one was found (``choice`` is changed in place) within :data:`FEASIBILITY_TRIES` programs."""
     tries = 0
@@ -165,7 +166,9 @@ def _advance_for_feasibility(sides, cands, choice, want, size, source, equal=())
             try:
                 solve_counts(sides, [cands[q][trial[q]].side_matrix() for q in range(len(cands))], counts=want,
                              size=size, widths=[cands[q][trial[q]].chord_widths() for q in range(len(cands))],
-                             source=source, equal=equal)
+                             source=source, equal=equal, side_targets=side_targets,
+                             chord_targets=None if f is None else [cands[q][trial[q]].chord_targets(f)
+                                                                   for q in range(len(cands))])
             except LayoutInfeasible:
                 continue
             choice[p] = j
@@ -192,14 +195,17 @@ def patch_shapes_kept(layout: Layout, catalogue: Catalogue, lkey: tuple | None =
 
 
 def _solve_counts_cached(layout: Layout, sides: Sides, matrices, want, size, widths, floors, cache: Cache,
-                         lkey: tuple, equal: tuple = ()):
+                         lkey: tuple, equal: tuple = (), side_targets=None, chord_targets=None):
     """:func:`solve_counts` of ``layout`` (whose ``sides`` these are, ``lkey`` its
     :func:`layout_key`), from ``cache`` (store ``solves``) when the same program was solved
     before; fresh copies of the arrays either way."""
     k = (lkey,) + cache_key(matrices, {int(a): int(b) for a, b in want.items()}, None if size is None else float(size),
                             widths, floors) + ((equal,) if equal else ())
+    if side_targets is not None:  # a size field's targets (uniform sizes: the key as it was)
+        k = k + cache_key(side_targets, chord_targets)
     mults, n = cache.get("solves", k, lambda: solve_counts(sides, matrices, counts=want, size=size, widths=widths,
-                                                          source=layout.source, floors=floors, equal=equal),
+                                                          source=layout.source, floors=floors, equal=equal,
+                                                          side_targets=side_targets, chord_targets=chord_targets),
                          keep_errors=(InputError, LayoutInfeasible))
     return [np.array(m) for m in mults], np.array(n)
 
@@ -276,7 +282,11 @@ def _mesh_layout(layout: Layout, catalogue: Catalogue, lattice: Lattice, *, size
     want.update(counts or {})
     equal = _equal_sides(layout, sides, periodic)
     shapes = patch_shapes_kept(layout, catalogue, lkey)
-    moved = _translates(layout)
+    f = quality.field
+    moved = _translates(layout) if f is None else [Translate(p, np.zeros(2), 0) for p in range(len(shapes))]
+    # (a size field is not the same on a translate: every patch its own)
+    side_targets = None if f is None or size is None else \
+        np.array([line_integral(f, layout.points[c])[-1] for c in sides.chains])
     cands = []
     for p, shp in enumerate(shapes):
         if moved[p].of != p:  # a translate of an earlier patch: its templates, turned
@@ -304,9 +314,11 @@ def _mesh_layout(layout: Layout, catalogue: Catalogue, lattice: Lattice, *, size
         tmpl = [cands[p][choice[p]] for p in range(len(shapes))]
         try:
             mults, n = _solve_counts_cached(layout, sides, [t.side_matrix() for t in tmpl], want, size,
-                                            [t.chord_widths() for t in tmpl], floors, cache, lkey, equal)
+                                            [t.chord_widths() for t in tmpl], floors, cache, lkey, equal, side_targets,
+                                            None if side_targets is None else [t.chord_targets(f) for t in tmpl])
         except LayoutInfeasible:
-            if not _advance_for_feasibility(sides, cands, choice, want, size, layout.source, equal):
+            if not _advance_for_feasibility(sides, cands, choice, want, size, layout.source, equal,
+                                            None if side_targets is None else f, side_targets):
                 raise
             continue
         refined = []

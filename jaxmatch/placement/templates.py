@@ -99,6 +99,21 @@ class PatchTemplate(NamedTuple):
         cnt = np.bincount(self.edge_chord, minlength=self.n_chords)
         return tot / np.maximum(cnt, 1)
 
+    def chord_targets(self, f) -> np.ndarray:
+        """``(n_chords,) float64`` what :meth:`chord_widths` ``/ size`` is under a size field ``f``
+        (``(n, 2)`` points to ``(n,)`` sizes): the mean over each chord's edges of the integral of
+        ``1 / f`` along the placed edge (composite Simpson's rule on 4 pieces)."""
+        xy = self.placement.xy
+        a, b = xy[self.edge_list[:, 0]], xy[self.edge_list[:, 1]]
+        t = np.linspace(0.0, 1.0, 5)
+        pts = a[:, None, :] + t[None, :, None] * (b - a)[:, None, :]
+        inv = 1.0 / np.asarray(f(pts.reshape(-1, 2)), np.float64).reshape(-1, 5)
+        ln = np.linalg.norm(b - a, axis=1)
+        integral = ln * (inv[:, 0] + 4 * inv[:, 1] + 2 * inv[:, 2] + 4 * inv[:, 3] + inv[:, 4]) / 12.0
+        tot = np.bincount(self.edge_chord, weights=integral, minlength=self.n_chords)
+        cnt = np.bincount(self.edge_chord, minlength=self.n_chords)
+        return tot / np.maximum(cnt, 1)
+
 
 def _components(n: int, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Connected components of the undirected graph on ``n`` nodes with the edges ``a[i]-b[i]``

@@ -1,0 +1,427 @@
+"""Size fields: a target element size that varies over the region (graded meshes).
+
+A :class:`Field` is data only: a largest size ``H`` and entries :class:`Near` (finer near a hole,
+a point, a side of the outline or a curve). Bound to a region (:meth:`Field.bind`, or
+:func:`bind` for anything the meshing accepts as a size) it is a :class:`SizeField`, a callable
+``(n, 2) float64 points -> (n,) float64 sizes`` (user units)::
+
+    size(x) = min(H, min over entries of s + (H - s) * min(1, dist(x, entity) / d))
+
+the same as gmsh's ``Distance`` + ``Threshold`` fields with ``SizeMin s``, ``SizeMax H``,
+``DistMin 0``, ``DistMax d`` (one ``Threshold`` per entry, their ``Min``).
+
+Entities (the JSON form ``{"size": H, "near": [{KIND: ENTITY, "size": s, "distance": d}, ...]}``):
+
+========== ============================= ==================================================
+kind       entity                        the set distances are measured to
+========== ============================= ==================================================
+``hole``   ``k`` (1 = first in the file)  the hole's ring (closed polyline)
+``point``  ``[x, y]``                     the point
+``side``   ``"i-j"``                      the outline's side between consecutive corners
+                                         ``i`` and ``j`` (points of the outline as numbered
+                                         in the file, 0 first; as the mesh file's
+                                         ``side i-j`` groups), either direction
+``curve``  ``[[x, y], ...]``              the polyline (at least two points)
+========== ============================= ==================================================
+
+A user's callable ``size(points (n, 2)) -> (n,)`` is bound as :class:`CallableSize`, which checks
+every answer (shape, finite, positive). :func:`line_integral` (``integral of 1 / size ds`` along a
+polyline: the number of edges a side wants) and :func:`graded_points` (a side's vertices at equal
+steps of that integral) are what the meshing reads.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from dataclasses import dataclass, field
+from functools import cached_property
+from typing import Callable, Sequence
+
+import numpy as np
+import shapely
+
+from jaxmatch.errors import InputError
+
+__all__ = ["KINDS", "CallableSize", "Field", "Near", "SizeField", "bind", "edge_ratios",
+           "field_share", "graded_points", "line_integral", "load_field", "outline_size", "parse_field",
+           "smallest_size"]
+
+KINDS = ("hole", "point", "side", "curve")
+"""The kinds of entity a :class:`Near` entry refines towards."""
+
+SHARE_BAND = (0.5, 1.6)
+"""An edge follows the field when its length / the field at its midpoint lies in this band
+(``field_share``; the issue's criterion)."""
+
+
+def _positive(value, what: str, where: str | None) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        v = math.nan
+    if isinstance(value, bool) or not (v > 0 and math.isfinite(v)):
+        raise InputError(f"{what} must be a positive number, got {value!r:.40}", where)
+    return v
+
+
+def _xy(value, what: str, where: str | None) -> tuple[float, float]:
+    try:
+        x, y = (float(v) for v in value)
+    except (TypeError, ValueError):
+        raise InputError(f"{what} must be a point [x, y], got {value!r:.60}", where) from None
+    if not (math.isfinite(x) and math.isfinite(y)):
+        raise InputError(f"{what} must be finite, got {value!r:.60}", where)
+    return x, y
+
+
+@dataclass(frozen=True)
+class Near:
+    """One refinement: size ``size`` at ``entity`` growing linearly to the field's largest size at
+    ``distance`` from it (user units). kind: one of :data:`KINDS`; entity: a hole number (int,
+    1 first), a point ``(x, y)``, a side ``"i-j"`` or a curve ``((x, y), ...)``."""
+
+    kind: str
+    entity: object
+    size: float
+    distance: float
+
+    def __post_init__(self):
+        if self.kind not in KINDS:
+            raise InputError(f"size field: unknown entity kind {self.kind!r} (expected one of {', '.join(KINDS)})")
+        object.__setattr__(self, "size", _positive(self.size, f"size field: {self.kind} entry's size", None))
+        object.__setattr__(self, "distance", _positive(self.distance, f"size field: {self.kind} entry's distance", None))
+        e = self.entity
+        if self.kind == "hole":
+            if isinstance(e, bool) or not isinstance(e, (int, np.integer)) or e < 1:
+                raise InputError(f"size field: hole must be a hole number >= 1 (1 = first in the file), got {e!r:.40}")
+            object.__setattr__(self, "entity", int(e))
+        elif self.kind == "point":
+            object.__setattr__(self, "entity", _xy(e, "size field: point", None))
+        elif self.kind == "side":
+            parts = str(e).split("-") if isinstance(e, str) else []
+            if len(parts) != 2 or not all(p.strip().isdigit() for p in parts):
+                raise InputError(f"size field: side must be \"i-j\" (the outline's points i and j), got {e!r:.40}")
+            object.__setattr__(self, "entity", f"{int(parts[0])}-{int(parts[1])}")
+        else:
+            try:
+                pts = tuple(_xy(p, "size field: curve point", None) for p in e)
+            except TypeError:
+                raise InputError(f"size field: curve must be a list of points [[x, y], ...], got {e!r:.60}") from None
+            if len(pts) < 2:
+                raise InputError("size field: a curve needs at least two points")
+            object.__setattr__(self, "entity", pts)
+
+
+@dataclass(frozen=True)
+class Field:
+    """A size field as given (data only): the largest size ``size`` (``H``, user units) and the
+    refinements ``near``; source: the file it was read from (named in errors). Raises :class:`InputError` for a size that is not positive or an entry
+    whose size exceeds ``H``."""
+
+    size: float
+    near: tuple[Near, ...] = ()
+    source: str | None = field(default=None, compare=False)
+
+    def __post_init__(self):
+        object.__setattr__(self, "size", _positive(self.size, "size field: size", None))
+        near = tuple(self.near)
+        for e in near:
+            if not isinstance(e, Near):
+                raise InputError(f"size field: near entries must be Near, got {type(e).__name__}")
+            if e.size > self.size:
+                raise InputError(f"size field: a {e.kind} entry's size {e.size:g} is larger than the field's size "
+                                 f"{self.size:g}")
+        object.__setattr__(self, "near", near)
+
+    def bind(self, shape) -> "SizeField":
+        """This field on ``shape`` (a :class:`~jaxmatch.shape.Shape`): holes and sides resolved to
+        polylines. Raises :class:`InputError` for a hole or side the shape does not have."""
+        H = float(self.size)
+        entries = []
+        for e in self.near:
+            entries.append((float(e.size), float(e.distance), _segments(e, shape, self.source or "size field")))
+        return SizeField(H, tuple(entries), smallest=min([H] + [s for s, _, _ in entries]))
+
+
+def _outline_sides(shape) -> dict[tuple[int, int], np.ndarray]:
+    """``{(i, j): (k, 2) polyline}`` of the outline's sides between consecutive corners, ``i``
+    and ``j`` numbered as the points of the file (both directions keyed)."""
+    pts = np.asarray(shape.given_points, np.float64)
+    P = pts.shape[0]
+    corners = [int(c) for c in _input_corners(shape)]
+    out = {}
+    if len(corners) < 2:
+        return out
+    for a, b in zip(corners, corners[1:] + corners[:1]):
+        idx = np.arange(a, (b if b > a else b + P) + 1) % P
+        out[(a, b)] = pts[idx]
+        out[(b, a)] = pts[idx][::-1].copy()
+    return out
+
+
+def _input_corners(shape) -> list[int]:
+    """The shape's corners as indices of the points in the file's order (by coordinates),
+    ascending."""
+    if shape.n_corners == 0:
+        return []
+    pts = np.asarray(shape.given_points, np.float64)
+    user = shape.to_user(shape.points[np.asarray(shape.corners, np.int64)])
+    return sorted(int(np.argmin(np.linalg.norm(pts - u, axis=1))) for u in user)
+
+
+def _segments(e: Near, shape, where: str) -> np.ndarray:
+    """``(m, 2, 2)`` the segments of entry ``e``'s entity on ``shape`` (a point: one segment of
+    length 0)."""
+    if e.kind == "point":
+        p = np.asarray(e.entity, np.float64)
+        return np.stack([p, p])[None]
+    if e.kind == "curve":
+        poly = np.asarray(e.entity, np.float64)
+    elif e.kind == "hole":
+        holes = tuple(getattr(shape, "holes", ()))
+        if not 1 <= e.entity <= len(holes):
+            raise InputError(f"hole {e.entity} does not exist in {getattr(shape, 'source', 'the region')} (it has "
+                             f"{len(holes)} hole{'s' if len(holes) != 1 else ''})", where)
+        ring = np.asarray(holes[e.entity - 1], np.float64)
+        poly = np.concatenate([ring, ring[:1]])
+    else:
+        sides = _outline_sides(shape)
+        i, j = (int(v) for v in e.entity.split("-"))
+        if (i, j) not in sides:
+            names = list(dict.fromkeys(f"{a}-{b}" for a, b in list(sides)[::2]))  # (a, b) as the outline runs
+            raise InputError(f"side {e.entity} is not a side of {getattr(shape, 'source', 'the region')}'s outline "
+                             f"(its sides: {', '.join(names) or 'none: it has no corners'})", where)
+        poly = sides[(i, j)]
+    return np.stack([poly[:-1], poly[1:]], axis=1)
+
+
+@dataclass(frozen=True, eq=False)
+class SizeField:  # (eq=False: hashed by identity, so a Quality holding one is a cache key)
+    """A :class:`Field` bound to a region: ``field(points (n, 2)) -> (n,) float64`` sizes (user
+    units). entries: per refinement ``(s, d, segments (m, 2, 2))``; smallest: the least size it
+    can take (``min(H, every s)``)."""
+
+    size: float
+    entries: tuple = ()
+    smallest: float = math.nan
+
+    def __call__(self, points) -> np.ndarray:
+        pts = np.asarray(points, np.float64).reshape(-1, 2)
+        out = np.full(pts.shape[0], self.size)
+        H = self.size
+        if not self.entries or not pts.shape[0]:
+            return out
+        where = shapely.points(pts)
+        for (s, d, _), geom in zip(self.entries, self._geometries):
+            dist = shapely.distance(where, geom)
+            out = np.minimum(out, s + (H - s) * np.minimum(1.0, dist / d))
+        return out
+
+    @cached_property
+    def _geometries(self) -> tuple:
+        """Per entry its segments as one shapely geometry (a point, or a multi-line string):
+        shapely's vectorised distances, in C."""
+        out = []
+        for _, _, seg in self.entries:
+            if seg.shape[0] == 1 and np.array_equal(seg[0, 0], seg[0, 1]):
+                out.append(shapely.Point(seg[0, 0]))
+            else:
+                out.append(shapely.MultiLineString([s for s in seg]))
+        return tuple(out)
+
+
+@dataclass(frozen=True, eq=False)
+class CallableSize:
+    """A user's ``size(points (n, 2)) -> (n,)`` checked on every call: an answer of another
+    shape, not finite or not positive raises :class:`InputError` naming ``name``. smallest: the
+    least size seen on the region's outline when bound (:func:`bind`)."""
+
+    function: Callable
+    name: str = "size"
+    smallest: float = math.nan
+
+    def __call__(self, points) -> np.ndarray:
+        pts = np.asarray(points, np.float64).reshape(-1, 2)
+        try:
+            raw = self.function(pts.copy())
+        except InputError:
+            raise
+        except Exception as e:  # noqa: BLE001 - the user's code: named, one line
+            raise InputError(f"{self.name}: the size function failed on {pts.shape[0]} points: "
+                             f"{type(e).__name__}: {e}") from None
+        try:
+            out = np.asarray(raw, np.float64)
+        except (TypeError, ValueError):
+            raise InputError(f"{self.name}: the size function must return numbers, got {type(raw).__name__}") from None
+        if out.shape != (pts.shape[0],):
+            raise InputError(f"{self.name}: the size function must map ({pts.shape[0]}, 2) points to "
+                             f"({pts.shape[0]},) sizes, got shape {out.shape}")
+        bad = ~(np.isfinite(out) & (out > 0))
+        if bad.any():
+            i = int(np.flatnonzero(bad)[0])
+            raise InputError(f"{self.name}: the size function must return positive sizes, got {out[i]!r} at "
+                             f"({pts[i, 0]:.6g}, {pts[i, 1]:.6g})")
+        return out
+
+
+def _outline_samples(shape) -> np.ndarray:
+    """Points along the region's loops (their points and 8 per segment) where a callable's
+    smallest size is looked for."""
+    loops = [np.asarray(shape.given_points, np.float64)] + [np.asarray(h, np.float64) for h in getattr(shape, "holes", ())]
+    out = []
+    t = np.linspace(0.0, 1.0, 8, endpoint=False)
+    for ring in loops:
+        nxt = np.roll(ring, -1, axis=0)
+        out.append((ring[:, None, :] + t[None, :, None] * (nxt - ring)[:, None, :]).reshape(-1, 2))
+    return np.concatenate(out)
+
+
+def bind(size, shape, name: str = "size"):
+    """What the meshing takes for ``size``: a number stays a number; a :class:`Field` is bound
+    to ``shape`` (:meth:`Field.bind`); a :class:`SizeField` / :class:`CallableSize` is kept; any
+    other callable becomes a :class:`CallableSize` (checked on the region's outline once here).
+    name: the option or argument named in errors."""
+    if isinstance(size, Field):
+        return size.bind(shape)
+    if isinstance(size, (SizeField, CallableSize)):
+        return size
+    if callable(size):
+        f = CallableSize(size, name)
+        return CallableSize(size, name, smallest=float(f(_outline_samples(shape)).min()))
+    return size
+
+
+def smallest_size(f) -> float:
+    """The least size a bound field takes (:class:`SizeField`: exact; :class:`CallableSize`: on
+    the outline)."""
+    return float(f.smallest)
+
+
+def outline_size(f, shape) -> float:
+    """The one size that stands for a bound field where the meshing needs one number (the
+    corners judged at the size, a ring layer's depth, the record's ``size``): the region's loops'
+    total length over the integral of ``1 / f`` along them, the mean edge length the outline
+    gets."""
+    loops = [np.asarray(shape.given_points, np.float64)] + [np.asarray(h, np.float64) for h in getattr(shape, "holes", ())]
+    length = wanted = 0.0
+    for ring in loops:
+        closed = np.concatenate([ring, ring[:1]])
+        length += float(np.linalg.norm(np.diff(closed, axis=0), axis=1).sum())
+        wanted += float(line_integral(f, closed)[-1])
+    return length / wanted
+
+
+def line_integral(f, polyline: np.ndarray, *, per_size: int = 4) -> np.ndarray:
+    """``(k,) float64`` cumulative ``integral of 1 / f ds`` along ``polyline (k, 2)`` at its
+    points (0 at the first): the number of edges of size ``f`` that fit along it. Each segment is
+    cut into pieces no longer than ``smallest / per_size`` (at most 512 a segment) and integrated
+    by the trapezoidal rule on ``1 / f``."""
+    p = np.asarray(polyline, np.float64)
+    seg = np.linalg.norm(np.diff(p, axis=0), axis=1)
+    small = smallest_size(f)
+    step = small / per_size if small > 0 and math.isfinite(small) else (seg.max() if seg.size else 1.0) / 64
+    k = np.clip(np.ceil(seg / max(step, 1e-300)), 1, 512).astype(np.int64)
+    pieces = np.repeat(np.arange(seg.size), k)
+    j = np.arange(pieces.size) - np.repeat(np.cumsum(k) - k, k)
+    t0, t1 = j / k[pieces], (j + 1) / k[pieces]
+    a, d = p[:-1][pieces], (p[1:] - p[:-1])[pieces]
+    inv = 1.0 / f(np.concatenate([a + t0[:, None] * d, a + t1[:, None] * d]))
+    n = pieces.size
+    part = 0.5 * (inv[:n] + inv[n:]) * seg[pieces] / k[pieces]
+    cum = np.concatenate([[0.0], np.cumsum(np.bincount(pieces, weights=part, minlength=seg.size))])
+    return cum
+
+
+def graded_points(f, polyline: np.ndarray, count: int) -> np.ndarray:
+    """``(count + 1, 2)`` points on ``polyline (k, 2)`` at equal steps of ``integral of 1 / f``
+    (:func:`line_integral`), both ends exact: a side's vertices where the field wants them.
+    Computed from the lexicographically smaller end whatever the direction (as
+    :func:`jaxmatch.placement.refine.side_points`), so that two patches sharing a side get
+    bit-identical points."""
+    poly = np.asarray(polyline, dtype=np.float64)
+    N = int(count)
+    first, last = poly[0], poly[-1]
+    flip = (not np.array_equal(first, last)) and tuple(last) < tuple(first)
+    p = poly[::-1] if flip else poly
+    seg = np.linalg.norm(np.diff(p, axis=0), axis=1)
+    small = smallest_size(f)
+    step = small / 4 if small > 0 and math.isfinite(small) else (seg.max() if seg.size else 1.0) / 64
+    # the polyline cut finely, then the integral's inverse by linear interpolation
+    k = np.clip(np.ceil(seg / max(step, 1e-300)), 1, 512).astype(np.int64)
+    pieces = np.repeat(np.arange(seg.size), k)
+    j = np.arange(pieces.size) - np.repeat(np.cumsum(k) - k, k)
+    fine = np.concatenate([p[:-1][pieces] + (j / k[pieces])[:, None] * (p[1:] - p[:-1])[pieces], p[-1:]])
+    inv = 1.0 / f(fine)  # already fine: the trapezoidal rule on its segments
+    cum = np.concatenate([[0.0], np.cumsum(0.5 * (inv[:-1] + inv[1:]) * np.linalg.norm(np.diff(fine, axis=0), axis=1))])
+    t = np.arange(N + 1, dtype=np.float64) / N * cum[-1]
+    idx = np.clip(np.searchsorted(cum, t, side="right") - 1, 0, fine.shape[0] - 2)
+    dc = cum[idx + 1] - cum[idx]
+    w = np.where(dc > 0, (t - cum[idx]) / np.where(dc > 0, dc, 1.0), 0.0)
+    out = fine[idx] + w[:, None] * (fine[idx + 1] - fine[idx])
+    out[0], out[-1] = p[0], p[-1]
+    return out[::-1].copy() if flip else out
+
+
+def edge_ratios(f, xy: np.ndarray, edges: np.ndarray) -> np.ndarray:
+    """``(E,) float64`` each edge's length / the field at its midpoint (``edges (E, 2)`` vertex
+    ids into ``xy (V, 2)``)."""
+    a, b = xy[edges[:, 0]], xy[edges[:, 1]]
+    return np.linalg.norm(b - a, axis=1) / f(0.5 * (a + b))
+
+
+def field_share(f, xy: np.ndarray, edges: np.ndarray, band: tuple[float, float] = SHARE_BAND) -> float:
+    """Share of ``edges`` whose :func:`edge_ratios` lies in ``band`` (NaN without edges)."""
+    r = edge_ratios(f, xy, edges)
+    return float(np.mean((r >= band[0]) & (r <= band[1]))) if r.size else math.nan
+
+
+def parse_field(obj, where: str | None = None) -> Field:
+    """A :class:`Field` from its JSON form ``{"size": H, "near": [{KIND: ENTITY, "size": s,
+    "distance": d}, ...]}`` (KIND one of :data:`KINDS`); ``where`` names the file in errors."""
+    if not isinstance(obj, dict):
+        raise InputError("a size field must be a JSON object {\"size\": H, \"near\": [...]}", where)
+    unknown = sorted(set(obj) - {"size", "near"})
+    if unknown:
+        raise InputError(f"size field: unknown key {unknown[0]!r} (expected \"size\", \"near\")", where)
+    if "size" not in obj:
+        raise InputError("size field: missing key \"size\" (the largest size H)", where)
+    near = obj.get("near", [])
+    if not isinstance(near, list):
+        raise InputError("size field: \"near\" must be a list of entries", where)
+    entries = []
+    for n, e in enumerate(near, start=1):
+        if not isinstance(e, dict):
+            raise InputError(f"size field: near entry {n} must be an object", where)
+        kinds = [k for k in KINDS if k in e]
+        extra = sorted(set(e) - set(KINDS) - {"size", "distance"})
+        if len(kinds) != 1 or extra:
+            raise InputError(f"size field: near entry {n} needs exactly one of {', '.join(KINDS)} and "
+                             f"\"size\", \"distance\"" + (f" (unknown key {extra[0]!r})" if extra else ""), where)
+        for key in ("size", "distance"):
+            if key not in e:
+                raise InputError(f"size field: near entry {n} misses key {key!r}", where)
+        try:
+            entries.append(Near(kinds[0], e[kinds[0]], e["size"], e["distance"]))
+        except InputError as err:
+            raise InputError(f"near entry {n}: {err.problem}", where) from None
+    try:
+        return Field(obj["size"], tuple(entries), source=where)
+    except InputError as err:
+        raise InputError(err.problem, where) from None
+
+
+def load_field(path: str | os.PathLike) -> Field:
+    """:func:`parse_field` of a JSON file (errors name the file)."""
+    where = os.fspath(path)
+    try:
+        with open(path, encoding="utf-8") as fh:
+            obj = json.load(fh)
+    except FileNotFoundError:
+        raise InputError("size field file not found", where) from None
+    except (OSError, UnicodeDecodeError) as e:
+        raise InputError(f"cannot read the size field: {e}", where) from None
+    except json.JSONDecodeError as e:
+        raise InputError(f"not valid JSON: {e.msg} (line {e.lineno})", where) from None
+    return parse_field(obj, where)
