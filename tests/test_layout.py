@@ -39,6 +39,7 @@ from jaxmatch.placement.layout import (
 )
 from jaxmatch.io.meshfile import write_mesh
 from jaxmatch.meshing.build import from_layout
+from jaxmatch.meshing.pipeline import strategy_names
 from jaxmatch.placement import solve as lay_solve
 from jaxmatch.placement.solve import mesh_layout
 from jaxmatch.scoring.lattice import load_lattice
@@ -605,8 +606,9 @@ def test_cli_shape_is_decomposed(cli, tmp_path):
     code, stdout, err = cli("mesh", ROOT / "examples" / "lshape.json", "--size", 0.5, "--json")
     assert code == 0, err
     d = json.loads(stdout)
-    assert d["chosen"] in ("single", "continuations", "bisectors", "recursive", "radial")
-    assert {c["name"] for c in d["candidates"]} == {"single", "continuations", "bisectors", "recursive", "radial"}
+    tried = set(strategy_names()) - {"rings"}  # (the ring partition: only when no candidate is at the size and of high quality)
+    assert d["chosen"] in tried
+    assert {c["name"] for c in d["candidates"]} == tried
     assert d["inverted"] == 0 and d["area_ratio"] == pytest.approx(1, abs=1e-9)
 
 
