@@ -42,3 +42,19 @@ def test_the_graded_pipeline_ends_relaxed(graded):
     _, f = graded
     m = mesh(SQUARE, size=Field(0.2, (Near("point", (1.0, 1.0), 0.04, 0.6),)))
     assert m.valid and m.field_share >= 0.9 and m.min_scaled_jacobian >= 0.6
+
+
+def test_after_its_first_step_the_relaxation_asks_the_field_at_the_inner_vertices_only(graded):
+    m, f = graded
+    asked = []
+
+    def counting(points):
+        asked.append(len(points))
+        return f(points)
+
+    out = follow_field(replace(m, field=counting), QUALITY)
+    inner = m.xy.shape[0] - len(np.unique(np.concatenate([np.asarray(loop) for loop in m._loops])))
+    n_edges = m._edges.shape[0]  # (the share of edges in the band, before and after, at the end)
+    assert asked[0] == m.xy.shape[0] and asked[-2:] == [n_edges, n_edges]
+    assert len(asked) > 4 and set(asked[1:-2]) == {inner}
+    assert np.array_equal(out.xy, follow_field(m, QUALITY).xy)  # the same relaxation as with the bound field

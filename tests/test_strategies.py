@@ -10,6 +10,7 @@ import pytest
 
 import jaxmatch
 from jaxmatch.defaults import QUALITY, Quality
+from jaxmatch.field import Field
 from jaxmatch.meshing import strategies as S
 from jaxmatch.meshing.result import Candidate
 from jaxmatch.placement import refine, solve
@@ -93,3 +94,20 @@ def test_the_policy_reaches_the_solve_and_the_refinement(cat, monkeypatch):
     jaxmatch.mesh(EX / "tshape.json", divisions=16, catalogue=cat)
     assert seen and all(q == QUALITY for _, q in seen)
     cat.cache.clear()
+
+
+class _OffSize:
+    """A best mesh whose sides are off the size (what :class:`S.Conforming` asks of it)."""
+
+    def sides_off_size(self, tol):
+        return 1
+
+
+@pytest.mark.parametrize("graded", [False, True])
+def test_conforming_templates_are_tried_for_a_uniform_size_only(graded):
+    """With a size field the integer program already aims at the field's integrals: the exact
+    counts of :class:`S.Conforming` are not asked (a uniform size still asks them)."""
+    q = QUALITY if not graded else Quality(field=Field(1.0).bind(jaxmatch.make_shape([[0, 0], [1, 0], [1, 1], [0, 1]])))
+    req = S.Request(None, None, None, 1.0, np.zeros((0, 2)), q, None, 0.0, None)
+    best = _OffSize()
+    assert S.Conforming().wanted(best, [Candidate("single", best)], req) is (not graded)

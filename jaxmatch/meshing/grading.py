@@ -65,11 +65,13 @@ def follow_field(m: QuadMesh, quality: Quality = QUALITY, iters: int = FOLLOW_IT
     sj0, _ = sj_inverted(xy, quads)
     floor = _quad_floor(sj0, quality)
     deg = np.bincount(e.ravel(), minlength=xy.shape[0]).astype(np.float64)
-    for _ in range(int(iters)):
+    fv = np.asarray(m.field(xy), np.float64)  # at the vertices: an edge's rest length is its ends' mean
+    for it in range(int(iters)):
         a, b = xy[e[:, 0]], xy[e[:, 1]]
         d = b - a
         L = np.linalg.norm(d, axis=1)
-        fv = np.asarray(m.field(xy), np.float64)  # at the vertices: an edge's rest length is its ends' mean
+        if it:  # (only the inner vertices move: the field is evaluated again there only)
+            fv[free] = np.asarray(m.field(xy[free]), np.float64)
         t = 0.5 * (fv[e[:, 0]] + fv[e[:, 1]])
         pull = ((L - t) / np.maximum(L, 1e-300))[:, None] * d  # moves a towards b when too long
         force = np.zeros_like(xy)

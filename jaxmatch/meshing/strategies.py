@@ -11,6 +11,7 @@ strategy                candidates                                              
 :class:`Larger`         the single patch with each larger template size group            below the quality floor;
                                                                                          graded: off the field
 :class:`Conforming`     single templates whose side counts follow the size                no candidate follows it
+                                                                                         (no size field)
 :class:`RingPartition`  a layer of patches along every loop and an O-grid core, or a box  an edge of every candidate
                         around every hole and a grid through the rest                     is longer than 2 h, or none
                         (:class:`Rings`, ``"rings"``)                                     reaches the quality band
@@ -269,11 +270,17 @@ class Larger:
 
 class Conforming:
     """No candidate follows the size yet: single templates whose side counts do
-    (:func:`conforming_templates`), after the single candidate."""
+    (:func:`conforming_templates`), after the single candidate. Not with a size field: the
+    integer program already takes the field's integrals as the side targets these templates are
+    asked to meet exactly, and where one template cannot follow them (a side finer than the one
+    facing it) the larger templates (:class:`Larger`) are its transitions; meeting such counts
+    exactly takes a fan of irregular vertices (docs/graded.md: what it cost and never won)."""
 
     after_single = True
 
     def wanted(self, best: QuadMesh | None, tried, req: Request) -> bool:
+        if req.quality.field is not None:
+            return False
         return _single(tried) is not None and bool(best.sides_off_size(req.quality.size_tol))
 
     def candidates(self, req: Request, tried) -> list[Candidate]:
