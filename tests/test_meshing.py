@@ -358,6 +358,18 @@ def test_size_conformity_is_a_yes_or_no():
     assert picked.chosen == "at size" and picked.rule == "size conformity"
 
 
+def test_size_conformity_counts_the_misses_of_a_size_field_only():
+    """For one size, size conformity is a yes or no; with a size field (the same size
+    everywhere here) it counts the misses: long edges, coarse stretches."""
+    import dataclasses
+
+    uniform = dataclasses.replace(grid_mesh(4, 4), size=0.4)  # every edge 2.5 h
+    graded = dataclasses.replace(uniform, field=lambda p: np.full(len(p), 0.4))
+    assert uniform.long_edges(QUALITY.long_edge) == 40 and uniform.size_conformity(QUALITY) == 1
+    assert graded.size_conformity(QUALITY) == graded.long_edges(QUALITY.long_edge) + graded.coarse_stretches(
+        QUALITY.coarse_side) + graded.short_edges(QUALITY.short_edge) == 44
+
+
 @settings(max_examples=40, deadline=None)
 @given(st.integers(1, 4), st.integers(1, 4), st.booleans(), st.integers(1, 4), st.integers(0, 6),
        st.sampled_from([None, 0.5, 1.0, 3.0]))

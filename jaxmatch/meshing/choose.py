@@ -9,11 +9,12 @@
 5. size conformity: no boundary stretch between corners meshed coarser than the size (mean
    edge longer than ``Quality.coarse_side * h``, beyond one edge of rounding; the outline as the
    user sees it, not the pieces between the patches' cut ends) and no edge longer than
-   ``Quality.long_edge * h`` (with a target size). A yes or no: between two meshes that both
-   miss it, quality decides and the counts go to the size fit. A stretch finer than ``h`` is not
-   ruled out here: a feature smaller than the size is meshed finer, not cut off. With a size
-   field, ``h`` is the field at each edge's midpoint (a stretch's ``length / h`` its integral of
-   ``1 / size``) and an edge shorter than the field over ``Quality.short_edge`` misses it too
+   ``Quality.long_edge * h`` (with a target size). For one size, a yes or no: between two meshes
+   that both miss it, quality decides and the counts go to the size fit. A stretch finer than
+   ``h`` is not ruled out here: a feature smaller than the size is meshed finer, not cut off.
+   With a size field, ``h`` is the field at each edge's midpoint (a stretch's ``length / h`` its
+   integral of ``1 / size``), an edge shorter than the field over ``Quality.short_edge`` misses
+   it too, and the misses are counted: following the field is what was asked
    (:meth:`QuadMesh.size_conformity`);
 6. quality band: min scaled Jacobian ``>= Quality.high_sj``;
 7. quality: higher min scaled Jacobian, in steps of ``Quality.sj_step``;

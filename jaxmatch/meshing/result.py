@@ -355,13 +355,16 @@ class QuadMesh:
             return 0
         return int(np.sum(self._edge_lengths * factor < self._edge_targets))
 
-    def size_conformity(self, quality: Quality = QUALITY) -> bool:
-        """The choice rule's size conformity, a yes or no (True: the size is missed somewhere):
-        a boundary stretch coarser than the size (:meth:`coarse_stretches`), an edge longer than
-        ``quality.long_edge`` sizes or, with a size field, shorter than the field over
-        ``quality.short_edge`` (:meth:`short_edges`)."""
-        return (self.coarse_stretches(quality.coarse_side) + self.long_edges(quality.long_edge)
-                + self.short_edges(quality.short_edge)) > 0
+    def size_conformity(self, quality: Quality = QUALITY) -> int:
+        """The choice rule's size conformity (0: the size is met everywhere): the boundary
+        stretches coarser than the size (:meth:`coarse_stretches`), edges longer than
+        ``quality.long_edge`` sizes and, with a size field, shorter than the field over
+        ``quality.short_edge`` (:meth:`short_edges`). For one size ``h`` a yes or no (0 or 1):
+        between two meshes that both miss it somewhere, quality decides. With a size field their
+        count: following the field is what was asked, so the mesh that misses it least wins."""
+        misses = (self.coarse_stretches(quality.coarse_side) + self.long_edges(quality.long_edge)
+                  + self.short_edges(quality.short_edge))
+        return misses if self.field is not None else int(misses > 0)
 
     def size_fit(self, quality: Quality = QUALITY) -> int:
         """The choice rule's size fit count: boundary stretches off the size either way
