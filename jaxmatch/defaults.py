@@ -52,9 +52,10 @@ class Quality:
         to one that does not before irregular vertices are counted.
     area_tol: a mesh keeps the region's area when ``|mesh area / region area - 1| <= area_tol``.
     coarse_side: a boundary stretch of ``n`` edges and length ``L`` is coarser than the size ``h``
-        when its mean edge ``L / n`` is longer than this many ``h`` and ``n`` is more than one edge
-        of rounding short of ``L / h``; with ``long_edge``, what size conformity rules out (a
-        stretch finer than ``h`` is allowed: a small feature is meshed finer, not cut off).
+        when even one edge more would leave its edges longer than this many ``h``,
+        ``L / (n + 1) > coarse_side * h`` (one edge of rounding); with ``long_edge``, what size
+        conformity rules out (a stretch finer than ``h`` is allowed: a small feature is meshed
+        finer, not cut off).
     size_tol: a side fits the size ``h`` when its edge count ``n`` and length ``L`` satisfy
         ``|n - L / h| <= max(1, size_tol * L / h)`` (one edge of rounding, or this fraction): the
         choice rule's size fit, after the quality rule.

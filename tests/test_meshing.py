@@ -314,16 +314,17 @@ def test_the_rule_order():
     (4, 0.7, 0),    # mean edge 1.43 h: within the band
     (4, 0.5, 4),    # 4 edges for 8 h on each side: every side coarse
     (1, 0.55, 0),   # 1 edge for 1.8 h: coarser than 1.5 h, but within one edge of rounding
+    (2, 0.6, 0),    # 2 edges for 3.3 h: 1.67 h each, 1.1 h with one more
+    (2, 0.4, 4),    # 2 edges for 5 h: 2.5 h each, 1.67 h with one more
 ])
 def test_a_side_is_coarse_only_past_the_band_and_one_edge_of_rounding(n, size, coarse):
-    """Size conformity rules out sides meshed coarser than ``coarse_side * h`` (beyond one edge
-    of rounding), not finer ones: a feature smaller than the size is meshed finer."""
+    """Size conformity rules out sides meshed coarser than ``coarse_side * h`` even with one edge
+    more (one edge of rounding), not finer ones: a feature smaller than the size is meshed finer."""
     import dataclasses
 
     m = dataclasses.replace(grid_mesh(n, n), size=size)
     assert m.coarse_stretches(QUALITY.coarse_side) == coarse
-    want = n / size  # independently: each of the 4 sides has n edges of length 1
-    assert coarse == 4 * int(want > QUALITY.coarse_side * n and want - n > 1)
+    assert coarse == 4 * int(n / (n + 1) > QUALITY.coarse_side * size)  # independently: each side is n unit edges
 
 
 def test_quality_comes_before_the_size_fit():

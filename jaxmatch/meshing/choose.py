@@ -6,8 +6,8 @@
 2. corners kept: every corner of the region is a mesh vertex;
 3. area kept: ``|mesh area / region area - 1| <= Quality.area_tol``;
 4. quality floor: min scaled Jacobian ``>= Quality.good_sj``;
-5. size conformity: no boundary stretch between corners meshed coarser than the size (mean
-   edge longer than ``Quality.coarse_side * h``, beyond one edge of rounding; the outline as the
+5. size conformity: no boundary stretch between corners meshed coarser than the size (edges
+   longer than ``Quality.coarse_side * h`` even with one edge more; the outline as the
    user sees it, not the pieces between the patches' cut ends) and no edge longer than
    ``Quality.long_edge * h`` (with a target size). For one size, a yes or no: between two meshes
    that both miss it, quality decides and the counts go to the size fit. A stretch finer than

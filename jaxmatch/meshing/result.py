@@ -229,13 +229,14 @@ class QuadMesh:
 
     def coarse_stretches(self, factor: float) -> int:
         """Boundary stretches between corners (:attr:`_stretches`) of ``n`` edges and length ``L``
-        whose mean edge ``L / n`` is longer than ``factor * h`` and whose ``n`` is more than one
-        edge short of ``L / h`` (0 without a size): sides meshed coarser than the size asked. With
-        a size field, ``L / h`` is the stretch's integral of ``1 / size``."""
+        whose edges would be longer than ``factor * h`` even with one edge more,
+        ``L / (n + 1) > factor * h`` (0 without a size): sides meshed coarser than the size asked,
+        beyond one edge of rounding. With a size field, ``L / h`` is the stretch's integral of
+        ``1 / size``."""
         if not (self.size or self.field is not None) or not self._stretches.size:
             return 0
         n, want = self._stretches[:, 0], self._stretches[:, 1] / (1.0 if self.field is not None else self.size)
-        return int(np.sum((want > factor * n + 1e-9) & (want - n > 1.0 + 1e-9)))
+        return int(np.sum(want > factor * (n + 1) + 1e-9))
 
     # -- sets and data, as meshio names them ---------------------------------------------------
 
