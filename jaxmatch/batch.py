@@ -106,7 +106,7 @@ RECORD_FIELDS: dict[str, str] = {
     "field_share": "share of the edges whose length / the size at their midpoint lies in [0.5, 1.6]: the size "
                    "field's value there with --size-field, else h; null without a size (--template)",
     "side_counts": 'edges per side, keyed "i-j" as the mesh file\'s "side i-j" groups (from the input\'s corner i to the '
-                   'next, j: point numbers, or positions in "corners") and "hole h side i-j" as its hole sides',
+                   'next, j: point numbers, or positions in "corners") and "hole h side i-j" as its hole sides; an assembly\'s as its groups, "NAME side i-j"',
     "templates": "the catalogue mesh id of each patch's template",
     "warnings": "what is poor about the mesh, each with what to try (empty for a good mesh): min scaled Jacobian "
                 "below the quality floor, irregular vertices beyond twice Euler's bound, edges far longer than h",

@@ -329,6 +329,9 @@ def test_region_side_groups_cover_the_input_sides(tmp_path, doc):
             e = m.line_sets[f"{r['name']} side {i}-{j}"]
             assert np.all(shapely.distance(side, shapely.points(m.xy[e.ravel()])) < 1e-9)
             assert abs(_length(m.xy, e) - side.length) < 1e-9 * side.length
+            key = f"{r['name']} side {i}-{j}"  # side_counts (--json, summary.jsonl) keyed as the groups
+            assert m.side_counts[key] == len(e) and abs(m.side_lengths[key] - side.length) < 1e-9 * side.length
+    assert set(m.side_counts) == {k for k in m.line_sets if " side " in k and not k.startswith("hole ")}
 
 
 @pytest.mark.slow

@@ -522,9 +522,12 @@ def mesh_model(model: Model, mesh_one, *, size: float | None = None, divisions: 
     corners = np.concatenate([corner_points(canonical(p.shape, h, corner_angle)) for p in parts]
                              + [np.asarray(model.embedded.points).reshape(-1, 2)])
     detail = {r.name: [c for p, c in zip(parts, chosen) if model.regions[p.region] is r] for r in model.regions}
+    sides = {k: np.asarray(v, np.int64).reshape(-1, 2) for k, v in line_sets.items() if " side " in k and not k.startswith("hole ")}
     out = QuadMesh(xy=xy, quads=quads, patch=region_of_quad, line_sets=line_sets,
-                   region_area=float(lm.region_area), corners=corners, size=h, side_lengths=base.side_lengths,
-                   side_counts=base.side_counts, templates=tuple(lm.templates), detail=detail, regions=model.names,
+                   region_area=float(lm.region_area), corners=corners, size=h,
+                   side_lengths={k: float(np.linalg.norm(xy[e[:, 1]] - xy[e[:, 0]], axis=1).sum()) for k, e in sides.items()},
+                   side_counts={k: int(len(e)) for k, e in sides.items()},  # keyed as the groups, "NAME side i-j"
+                   templates=tuple(lm.templates), detail=detail, regions=model.names,
                    point_sets={f"point {k + 1}": np.array([v], np.int64) for k, v in enumerate(point_ids)})
     rule = "; ".join(f"{name}: {', '.join(c)}" for name, c in detail.items())
     per_region = []
