@@ -400,6 +400,9 @@ def mesh(
                                               'graded mesh, {"size": H, "near": [{"hole": k | "point": [x, y] | "side": '
                                               '"i-j" | "curve": [[x, y], ...], "size": s, "distance": d}, ...]} '
                                               "(docs/graded.md)."),
+    auto_size: bool = typer.Option(False, "--auto-size", help="Also finer where the part asks for it: thin parts (an "
+                                   "element across), curved stretches (30 degrees of arc an edge), small holes (8 edges "
+                                   "around), back to the size within 2 sizes (docs/graded.md)."),
     sides: Optional[str] = typer.Option(None, "--sides", help="Edges per side, e.g. 4,2,4,2: the sides in the file's order, "
                                         "each from a corner to the next (the output's groups 'side i-j': i, j point numbers, "
                                         "or positions in \"corners\"); one total count for a shape without corners. One "
@@ -497,7 +500,7 @@ def mesh(
         size = load_field(size_field)
     if template:
         for opt, given in (("--size", size is not None), ("--divisions", divisions is not None),
-                           ("--sides", sides is not None),
+                           ("--sides", sides is not None), ("--auto-size", auto_size),
                            ("--sides-file", sides_file is not None), ("--strategy", strategy is not None),
                            ("--out-dir", out_dir is not None), ("--png-size/--dpi/--color/--histogram",
                                                                     drawing != PictureOutput())):
@@ -527,6 +530,8 @@ def mesh(
         if divisions is not None and given:
             raise InputError(f"give --divisions or {opt}, not both", "--divisions")
     options = dict(size=size, divisions=divisions, catalogue=cat, lattice=lat, strategies=names, budget_s=budget)
+    if auto_size:
+        options["auto_size"] = True
     if len(regions) > 1 or out_dir is not None:
         for opt, given in (("--out", out_path is not None), ("--png", png is not None), ("--svg", svg is not None),
                            ("--sides", sides is not None), ("--sides-file", sides_file is not None),

@@ -34,6 +34,7 @@ from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
+from jaxmatch.autosize import auto_field
 from jaxmatch.defaults import DEFAULT_LATTICE, QUALITY, Quality
 from jaxmatch.errors import InputError
 from jaxmatch.field import CallableSize, Field, SizeField, bind, outline_size
@@ -102,7 +103,8 @@ def mesh(region=None, *, regions=None, size: float | None = None, divisions: int
          counts: Mapping[int, int] | None = None, template: bool = False,
          catalogue=None, lattice=DEFAULT_LATTICE, strategies: Sequence[str] | None = None,
          quality: Quality = QUALITY, corner_angle: float = DEFAULT_CORNER_ANGLE, budget_s: float | None = None,
-         progress: Callable[[int, int, str], None] | None = None, **template_options) -> QuadMesh:
+         progress: Callable[[int, int, str], None] | None = None, auto_size: bool = False,
+         **template_options) -> QuadMesh:
     """Mesh a region: the one front door.
 
     Args:
@@ -119,6 +121,9 @@ def mesh(region=None, *, regions=None, size: float | None = None, divisions: int
         vertices spaced by it, size conformity judged against it: ``Quality.field``).
       divisions: instead of ``size``: edge length = the region's perimeter / ``divisions``
         (a whole number >= 1; each region of a batch gets its own size).
+      auto_size: add the size field of the part's own features (thin parts, curvature, small
+        holes: :mod:`jaxmatch.autosize`) to the size or :class:`~jaxmatch.field.Field` (shapes
+        meshed to a size only).
       sides: edges per user side (side ``i`` from corner ``i`` to ``i + 1``, file order), met
         exactly by one template; excludes ``size``.
       counts: layouts only: ``{side id: edges}`` (ids of
@@ -148,14 +153,16 @@ def mesh(region=None, *, regions=None, size: float | None = None, divisions: int
     if isinstance(region, (str, os.PathLike)):
         region = load_region(region, corner_angle=corner_angle)
     if isinstance(region, Model):
-        if sides is not None or counts or template or template_options:
-            raise InputError("an assembly is meshed at a size (size= or divisions=); sides, counts and template are "
-                             "for one region")
+        if sides is not None or counts or template or template_options or auto_size:
+            raise InputError("an assembly is meshed at a size (size= or divisions=); sides, counts, template and "
+                             "automatic sizing are for one region")
         return later.assembly.mesh_model(region, mesh, size=size, divisions=divisions, catalogue=catalogue, lattice=lattice,
                                          quality=quality, corner_angle=corner_angle, strategies=strategies,
                                          budget_s=budget_s, progress=progress)
     if sides is not None and size is not None:
         raise InputError("give either sides or size, not both")
+    if auto_size:
+        size, divisions = _auto_size(region, size, divisions, sides, template)
     if size is not None and _is_field(size):
         if not isinstance(region, Shape) or template or divisions is not None:
             raise InputError("a size field is for a shape meshed to a size (not a layout, --template or --divisions)")
@@ -165,9 +172,7 @@ def mesh(region=None, *, regions=None, size: float | None = None, divisions: int
     if divisions is not None:
         if size is not None or sides is not None:
             raise InputError("give divisions or a size or sides, not two of them")
-        if isinstance(divisions, bool) or not isinstance(divisions, (int, np.integer)) or divisions < 1:
-            raise InputError(f"divisions must be a whole number >= 1, got {divisions!r}")
-        size = default_size(region, int(divisions)) if isinstance(region, (Shape, Layout)) else None
+        size = _divisions_size(region, divisions)
     if size is not None:
         size = _check_size(size)
     cat, lat = load_catalogue(catalogue), _lattice(lattice)
@@ -189,6 +194,35 @@ def mesh(region=None, *, regions=None, size: float | None = None, divisions: int
         return _mesh_sides(region, cat, lat, sides, quality)
     h = size if size is not None else default_size(region)
     return _mesh_size(region, cat, lat, h, strategies, quality, budget_s, progress, corner_angle)
+
+
+def _divisions_size(region, divisions) -> float | None:
+    """The size of ``divisions`` edges along ``region``'s perimeter (None for neither a shape
+    nor a layout). Raises :class:`InputError` for divisions that are no whole number >= 1."""
+    if isinstance(divisions, bool) or not isinstance(divisions, (int, np.integer)) or divisions < 1:
+        raise InputError(f"divisions must be a whole number >= 1, got {divisions!r}")
+    return default_size(region, int(divisions)) if isinstance(region, (Shape, Layout)) else None
+
+
+def _auto_size(region, size, divisions, sides, template) -> tuple:
+    """``(size, divisions)`` with automatic sizing (:func:`jaxmatch.autosize.auto_field`) added:
+    the field of the part's features, on top of the user's size or :class:`~jaxmatch.field.Field`
+    (divisions become the size they give); the size unchanged when the part has no feature
+    smaller than it. Raises :class:`InputError` where automatic sizing does not apply."""
+    if not isinstance(region, Shape) or template or sides is not None:
+        raise InputError("automatic sizing (auto_size, --auto-size) is for a shape meshed to a size (not a layout, "
+                         "--template or --sides)")
+    user = size if isinstance(size, Field) else None
+    if size is not None and user is None and _is_field(size):
+        raise InputError("automatic sizing adds to a size or a Field, not to a callable size")
+    if divisions is not None:
+        if size is not None:
+            raise InputError("give divisions or a size or sides, not two of them")
+        H = _divisions_size(region, divisions)
+    else:
+        H = user.size if user is not None else _check_size(size) if size is not None else default_size(region)
+    field = auto_field(region, H, user)
+    return (H if field is None else field), None
 
 
 def warm_up(catalogue=None, lattice=DEFAULT_LATTICE) -> None:
