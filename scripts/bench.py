@@ -48,6 +48,7 @@ repository root: ``.venv/bin/python scripts/bench.py``.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import json
 import os
@@ -1241,8 +1242,9 @@ def profile_bulk(parts: int, div: int = 32, top: int = 15) -> dict:
     (Python code is slowed, compiled code is not: read shares, not seconds). ``strategies``: per
     strategy of :mod:`jaxmatch.meshing.strategies`, the parts it ran for, the profiled seconds of
     its candidates; ``chosen_by``: how many chosen meshes each kind of candidate made (a larger or
-    a conforming single template are both named ``single <id>``); ``top``, ``top_own``: as
-    :func:`profile_mesh`."""
+    a conforming single template are both named ``single <id>``); ``layouts``: from the first
+    pass (:func:`_layout_losers`), what a bound that skips a layout before it is meshed could save
+    at most; ``top``, ``top_own``: as :func:`profile_mesh`."""
     import cProfile
     import pstats
 
@@ -1261,9 +1263,10 @@ def profile_bulk(parts: int, div: int = 32, top: int = 15) -> dict:
     jaxmatch.mesh(shapes[-1], divisions=div, catalogue=cat)  # (a part not measured: the code paths warm)
     shapes = shapes[:-1]
     cat.cache.forget_shapes()
-    t = time.process_time()
-    meshes = [jaxmatch.mesh(s, divisions=div, catalogue=cat) for s in shapes]
-    cpu = time.process_time() - t
+    with _layout_losers() as layouts:
+        t = time.process_time()
+        meshes = [jaxmatch.mesh(s, divisions=div, catalogue=cat) for s in shapes]
+        cpu = time.process_time() - t
     cat.cache.forget_shapes()
     prof = cProfile.Profile(time.process_time)
     prof.enable()
@@ -1290,8 +1293,66 @@ def profile_bulk(parts: int, div: int = 32, top: int = 15) -> dict:
         return [[f"{Path(f).name}:{line}({fn})" if f != "~" else fn, nc, tt, ct] for (f, line, fn), (_, nc, tt, ct, _) in rows]
 
     return {"parts": len(shapes), "div": int(div), "cpu_s": cpu, "cpu_s_per_part": cpu / max(len(shapes), 1),
-            "profiled_s": st.total_tt, "strategies": per, "chosen_by": chosen_by, "top": entries(3), "top_own": entries(2),
-            "load": list(os.getloadavg())}
+            "profiled_s": st.total_tt, "strategies": per, "chosen_by": chosen_by, "layouts": layouts, "top": entries(3),
+            "top_own": entries(2), "load": list(os.getloadavg())}
+
+
+@contextlib.contextmanager
+def _layout_losers():
+    """While in the block, every layout that :func:`jaxmatch.meshing.strategies.try_layouts`
+    meshes is recorded with the CPU time (``time.process_time``) of its
+    :func:`~jaxmatch.placement.solve.mesh_layout` call. Yields a dict filled on exit:
+    ``{"meshed": layouts meshed, "cpu_s": their mesh_layout CPU seconds, "after_better": {rule:
+    {"layouts", "cpu_s"}}}``, where ``after_better`` counts the layouts whose mesh lost, by
+    :func:`jaxmatch.meshing.choose.mesh_key` (order: the order meshed), to a mesh made before it
+    in the same ``try_layouts`` call, under the first rule of ``choose.RULES`` on which they
+    differ: the layouts an exact bound there could have skipped, and the most it could save."""
+    from jaxmatch.meshing import choose, strategies
+
+    calls: list[list] = []
+    last = {}
+    saved = strategies.try_layouts, strategies.mesh_layout, strategies.from_layout
+
+    def try_layouts(*a, **k):
+        calls.append([])
+        last["inside"] = True
+        try:
+            return saved[0](*a, **k)
+        finally:
+            last["inside"] = False
+
+    def mesh_layout(*a, **k):
+        t = time.process_time()
+        try:
+            return saved[1](*a, **k)
+        finally:
+            last["cpu"] = time.process_time() - t
+
+    def from_layout(*a, **k):
+        m = saved[2](*a, **k)
+        cpu = last.pop("cpu", 0.0)
+        if last.get("inside"):  # (not the larger templates' or a disk's meshes: no bound skips those)
+            calls[-1].append((m, cpu))
+        return m
+
+    out = {"meshed": 0, "cpu_s": 0.0, "after_better": {}}
+    strategies.try_layouts, strategies.mesh_layout, strategies.from_layout = try_layouts, mesh_layout, from_layout
+    try:
+        yield out
+    finally:
+        strategies.try_layouts, strategies.mesh_layout, strategies.from_layout = saved
+    for made in calls:
+        best = None
+        for i, (m, cpu) in enumerate(made):
+            key = choose.mesh_key(m, i)
+            out["meshed"] += 1
+            out["cpu_s"] += cpu
+            if best is not None and best < key:
+                rule = choose.RULES[next(j for j, (a, b) in enumerate(zip(best, key)) if a != b)]
+                d = out["after_better"].setdefault(rule, {"layouts": 0, "cpu_s": 0.0})
+                d["layouts"] += 1
+                d["cpu_s"] += cpu
+            best = key if best is None or key < best else best
 
 
 def _report(line: str, result: dict, as_json: bool) -> int:
@@ -1333,6 +1394,11 @@ def main(argv=None) -> int:
         for name, v in r["strategies"].items():
             print(f"  {name:>13}: ran for {v['parts']:3d} parts, {v['profiled_s']:6.2f} s profiled", file=out)
         print("  chosen: " + ", ".join(f"{k} {v}" for k, v in r["chosen_by"].items()), file=out)
+        lay = r["layouts"]
+        print(f"  layouts meshed: {lay['meshed']}, {lay['cpu_s']:.2f} CPU s in mesh_layout; after a better one in the "
+              "same call, by the rule they lose on: " + (", ".join(
+                  f"{k} {v['layouts']} ({v['cpu_s']:.2f} s)" for k, v in
+                  sorted(lay["after_better"].items(), key=lambda kv: -kv[1]["cpu_s"])) or "none"), file=out)
         for title, key in (("cumulative", "top"), ("own", "top_own")):
             print(f"top {len(r[key])} by {title} time:", file=out)
             for fn, nc, tt, ct in r[key]:

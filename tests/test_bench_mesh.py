@@ -10,6 +10,8 @@ from pathlib import Path
 
 import pytest
 
+from jaxmatch.meshing.choose import RULES
+
 ROOT = Path(__file__).resolve().parent.parent
 
 pytest.importorskip("gmsh")
@@ -137,3 +139,26 @@ def test_the_bulk_profile_counts_every_part_and_the_strategies_that_ran(bench):
     assert all(s >= 0 for s in ran) and sum(ran) <= r["profiled_s"] * 1.01
     assert len(r["top"]) == len(r["top_own"]) == 5 and r["top"][0][3] >= r["top"][-1][3]
     assert r["top"][0][1] >= 3  # the outermost entry: at least one call per part
+    lay = r["layouts"]  # every part meshes one layout at least; the losers are some of them, under a rule
+    assert lay["meshed"] >= 3 and 0 < lay["cpu_s"] <= r["cpu_s"]
+    assert set(lay["after_better"]) <= set(RULES)
+    assert sum(v["layouts"] for v in lay["after_better"].values()) < lay["meshed"]
+    assert sum(v["cpu_s"] for v in lay["after_better"].values()) <= lay["cpu_s"] + 1e-9
+
+
+@pytest.mark.parametrize("region", ["examples/lshape.json", "examples/holes/plate-bolt.json"])
+def test_the_layout_losers_are_the_layouts_that_lost_to_an_earlier_one(bench, region):
+    """_layout_losers: every candidate that the layout strategies meshed is counted once (not the
+    larger or conforming templates), and of them at most all but the first are losers, each
+    under a rule of the choice."""
+    import jaxmatch
+
+    shp = jaxmatch.load_shape(ROOT / region)
+    bench.clear_mesh_caches()
+    with bench._layout_losers() as lay:
+        m = jaxmatch.mesh(shp, divisions=16)
+    layouts = [c for c in m.tried if c.mesh is not None and " " not in c.name]
+    assert lay["meshed"] == len(layouts) and lay["cpu_s"] > 0
+    lost = sum(v["layouts"] for v in lay["after_better"].values())
+    assert lost <= len(layouts) - 1  # (the first layout meshed has nothing before it)
+    assert set(lay["after_better"]) <= set(RULES)
