@@ -6,6 +6,9 @@ from __future__ import annotations
 import importlib.util
 import json
 import math
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -131,13 +134,19 @@ def test_the_bulk_profile_counts_every_part_and_the_strategies_that_ran(bench):
     """--mesh-bulk-profile N: the first N random parts meshed as a worker meshes them; every part
     meshed once by the Layouts strategy, each chosen mesh attributed to one kind of candidate,
     the profiled strategies within the profiled total."""
-    r = json.loads(json.dumps(bench.profile_bulk(3, 8, top=5)))
+    # (in a process of its own, as the option runs: after tests that leave a process pool or a
+    # cluster behind, profiling in the test process can wait forever)
+    p = subprocess.run([sys.executable, str(ROOT / "scripts" / "bench.py"), "--mesh", "--mesh-bulk-profile", "3:8",
+                        "--json"], capture_output=True, text=True, cwd=ROOT, timeout=300,
+                       env={**os.environ, "PYTHONPATH": str(ROOT)})
+    assert p.returncode == 0, p.stderr[-2000:]
+    r = json.loads(p.stdout.strip().splitlines()[-1])["bulk_profile"]
     assert (r["parts"], r["div"]) == (3, 8) and r["cpu_s"] > 0
     assert r["cpu_s_per_part"] == pytest.approx(r["cpu_s"] / 3)
     assert r["strategies"]["Layouts"]["parts"] == 3 and sum(r["chosen_by"].values()) == 3
     ran = [v["profiled_s"] for v in r["strategies"].values()]
     assert all(s >= 0 for s in ran) and sum(ran) <= r["profiled_s"] * 1.01
-    assert len(r["top"]) == len(r["top_own"]) == 5 and r["top"][0][3] >= r["top"][-1][3]
+    assert len(r["top"]) == len(r["top_own"]) > 0 and r["top"][0][3] >= r["top"][-1][3]
     assert r["top"][0][1] >= 3  # the outermost entry: at least one call per part
     lay = r["layouts"]  # every part meshes one layout at least; the losers are some of them, under a rule
     assert lay["meshed"] >= 3 and 0 < lay["cpu_s"] <= r["cpu_s"]
