@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import shapely
-from hypothesis import given, settings
+from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 import jaxmatch
@@ -175,6 +175,7 @@ def test_random_polygons_any_start_and_direction(n, seed, start, reverse, tmp_pa
     rng = np.random.default_rng(seed)
     ang = np.sort(rng.uniform(0, 2 * np.pi, n))
     ang = ang[np.diff(np.concatenate([ang, [ang[0] + 2 * np.pi]])) > 0.4] if n > 4 else np.linspace(0, 2 * np.pi, 5)[:4] + 0.3
+    assume(len(ang) >= 3)  # (angles closer than 0.4 dropped: a polygon needs 3 points)
     r = rng.uniform(0.6, 1.0, len(ang))
     pts = np.round(np.column_stack([r * np.cos(ang), r * np.sin(ang)]), 6).tolist()
     pts = pts[start % len(pts):] + pts[:start % len(pts)]
