@@ -16,8 +16,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from jaxmatch.errors import EXIT_BAD_INPUT, InputError
-from jaxmatch.field import (CallableSize, Field, Near, bind, field_share, graded_points, line_integral, load_field,
-                            parse_field)
+import shapely
+
+from jaxmatch.field import (NUMPY_SEGMENTS, CallableSize, Field, Near, bind, field_share, graded_points, line_integral,
+                            load_field, parse_field, segment_distance)
 from jaxmatch.io.readers import load_shape
 from jaxmatch.meshing.pipeline import mesh
 from jaxmatch.shape import make_shape
@@ -98,6 +100,21 @@ def test_property_field_is_the_reference_and_between_its_sizes(H, entries, pts):
     got = f.bind(SQUARE)(x)
     np.testing.assert_allclose(got, reference(f, SQUARE, x), rtol=1e-9, atol=1e-12)
     assert np.all(got <= H) and np.all(got >= min(e.size for e in near) - 1e-15)
+
+
+@settings(max_examples=40, deadline=None)
+@given(line=st.lists(st.tuples(coords, coords), min_size=1, max_size=NUMPY_SEGMENTS + 3),
+       pts=st.lists(st.tuples(coords, coords), min_size=1, max_size=20))
+def test_property_segment_distance_is_shapelys_bit_for_bit(line, pts):
+    # numpy for a few segments, shapely for more: either way the same numbers (meshes do not depend on the cut)
+    p = np.array(line + line[-1:] if len(line) == 1 else line, np.float64)
+    seg = np.stack([p[:-1], p[1:]], axis=1)
+    geom = shapely.Point(p[0]) if len(line) == 1 else shapely.MultiLineString(list(seg))
+    x = np.array(pts, np.float64)
+    np.testing.assert_array_equal(segment_distance(x, seg), shapely.distance(shapely.points(x), geom))
+    f = Field(1.0, (Near("point", line[0], 0.1, 0.5) if len(line) == 1 else Near("curve", tuple(line), 0.1, 0.5),))
+    want = np.minimum(1.0, 0.1 + 0.9 * np.minimum(1.0, shapely.distance(shapely.points(x), geom) / 0.5))
+    np.testing.assert_array_equal(f.bind(SQUARE)(x), want)
 
 
 def test_line_integral_along_a_linear_ramp():
