@@ -9,17 +9,20 @@ import pytest
 
 from jaxmatch.defaults import QUALITY
 from jaxmatch.field import Field, Near
-from jaxmatch.meshing.grading import follow_field
+from jaxmatch.meshing.grading import follow_field, laplacian_solve
 from jaxmatch.meshing.pipeline import mesh
 from jaxmatch.shape import make_shape
 
 SQUARE = make_shape([[0.0, 0.0], [2.0, 0.0], [2.0, 2.0], [0.0, 2.0]])
+QUAD = make_shape([[0.0, 0.0], [2.0, 0.0], [2.3, 2.0], [0.2, 1.8]])
 
 
 @pytest.fixture(scope="module")
 def graded():
-    f = Field(0.2, (Near("point", (1.0, 1.0), 0.04, 0.6),)).bind(SQUARE)
-    m = mesh(SQUARE, size=0.1)  # a uniform mesh, then judged against the field
+    # a uniform mesh, then judged against the field (not a square: a perfect grid's quads must all
+    # keep a scaled Jacobian of 1, which no move of its inner vertices does)
+    f = Field(0.2, (Near("point", (1.1, 1.0), 0.04, 0.6),)).bind(QUAD)
+    m = mesh(QUAD, size=0.1)
     return replace(m, field=f), f
 
 
@@ -29,7 +32,28 @@ def test_relaxing_moves_no_outline_vertex_and_keeps_the_quality(graded):
     on_loops = np.concatenate([np.asarray(loop) for loop in m._loops])
     assert np.array_equal(out.xy[on_loops], m.xy[on_loops]) and np.array_equal(out.quads, m.quads)
     assert out.inverted == 0 and out.min_scaled_jacobian >= min(m.min_scaled_jacobian, QUALITY.high_sj) - 1e-12
-    assert out.field_share > m.field_share  # edges near the point shorten, the others lengthen
+    assert out.field_share > m.field_share + 0.1  # edges near the point shorten, the others lengthen
+
+
+def test_a_perfect_grid_keeps_its_quads_square():
+    f = Field(0.2, (Near("point", (1.0, 1.0), 0.04, 0.6),)).bind(SQUARE)
+    m = replace(mesh(SQUARE, size=0.1), field=f)
+    out = follow_field(m, QUALITY)
+    assert out.min_scaled_jacobian == pytest.approx(1.0) and out.field_share >= m.field_share
+
+
+@pytest.mark.parametrize("n", [1, 7, 60])
+def test_laplacian_solve_is_the_dense_solve(n):
+    rng = np.random.default_rng(n)
+    ea, eb = np.triu_indices(n, 1)
+    keep = rng.random(ea.size) < 0.3
+    ea, eb = ea[keep], eb[keep]
+    degree = np.bincount(np.concatenate([ea, eb]), minlength=n) + rng.integers(1, 3, n)  # + edges to fixed vertices
+    A = np.diag(degree.astype(float))
+    A[ea, eb] = A[eb, ea] = -1.0
+    rhs = rng.normal(size=(n, 2))
+    got = laplacian_solve(degree.astype(float), ea, eb, rhs, np.zeros((n, 2)), tol=1e-12)
+    np.testing.assert_allclose(got, np.linalg.solve(A, rhs), rtol=1e-9, atol=1e-9)
 
 
 def test_without_a_field_the_mesh_is_returned_as_is(graded):
@@ -54,7 +78,8 @@ def test_after_its_first_step_the_relaxation_asks_the_field_at_the_inner_vertice
 
     out = follow_field(replace(m, field=counting), QUALITY)
     inner = m.xy.shape[0] - len(np.unique(np.concatenate([np.asarray(loop) for loop in m._loops])))
-    n_edges = m._edges.shape[0]  # (the share of edges in the band, before and after, at the end)
-    assert asked[0] == m.xy.shape[0] and asked[-2:] == [n_edges, n_edges]
-    assert len(asked) > 4 and set(asked[1:-2]) == {inner}
+    n_edges = m._edges.shape[0]  # (the shares of edges in the band, at the start and after each step)
+    # the vertices, the start's shares, the first step's; then per step the inner vertices and its shares
+    assert asked[:3] == [m.xy.shape[0], n_edges, n_edges] and len(asked) > 4 and len(asked) % 2 == 1
+    assert set(asked[3::2]) == {inner} and set(asked[4::2]) == {n_edges}
     assert np.array_equal(out.xy, follow_field(m, QUALITY).xy)  # the same relaxation as with the bound field
