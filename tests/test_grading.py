@@ -83,3 +83,20 @@ def test_after_its_first_step_the_relaxation_asks_the_field_at_the_inner_vertice
     assert asked[:3] == [m.xy.shape[0], n_edges, n_edges] and len(asked) > 4 and len(asked) % 2 == 1
     assert set(asked[3::2]) == {inner} and set(asked[4::2]) == {n_edges}
     assert np.array_equal(out.xy, follow_field(m, QUALITY).xy)  # the same relaxation as with the bound field
+
+
+@pytest.mark.parametrize("graded_size", [False, True])
+def test_with_a_field_the_solve_smooths_with_fewer_iterations(monkeypatch, graded_size):
+    import jaxmatch.placement.refine as refine
+    import jaxmatch.placement.solve as solve
+    from jaxmatch.inputs import load_catalogue
+
+    seen = []
+    for mod in (refine, solve):
+        real = mod.smooth_in_frame
+        monkeypatch.setattr(mod, "smooth_in_frame", lambda *a, _real=real, **k: (seen.append(k.get("iters")), _real(*a, **k))[1])
+    load_catalogue().cache.forget_shapes()  # (a first call: nothing refined before)
+    L = make_shape([[0.0, 0.0], [2.0, 0.0], [2.0, 1.0], [1.0, 1.0], [1.0, 2.0], [0.0, 2.0]])
+    mesh(L, size=Field(0.2, (Near("point", (1.0, 1.0), 0.05, 0.8),)) if graded_size else 0.1)
+    want = refine.SMOOTH_ITERS_GRADED if graded_size else refine.SMOOTH_ITERS
+    assert seen and set(seen) == {want}  # the patches' and the cuts' smoothing

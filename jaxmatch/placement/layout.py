@@ -46,7 +46,7 @@ from jaxmatch.errors import InputError
 from jaxmatch.files import read_limited
 from jaxmatch.arrays import roll
 from jaxmatch.placement.milp import CHORD_WEIGHT, LayoutInfeasible, solve_counts  # noqa: F401 (public here)
-from jaxmatch.placement.refine import (SMOOTH_LOCAL, bad_quads, harmonic_displacement, side_points,
+from jaxmatch.placement.refine import (SMOOTH_ITERS_GRADED, SMOOTH_LOCAL, bad_quads, harmonic_displacement, side_points,
                                        smooth_near_bad)
 from jaxmatch.placement.embed import polygon_area, smooth_in_frame, tutte
 from jaxmatch.catalogue.mesh import boundary_edges, valences  # noqa: F401 (boundary_edges public here)
@@ -785,7 +785,8 @@ def fit_sides(layout: Layout, sides: Sides, p: int, refined, counts: np.ndarray,
     xy = np.asarray(refined.xy) + disp
     xy[b] = target
     if not large:
-        return smooth_in_frame(xy, quads, b, frame=target, iters=smooth_iters)
+        iters = smooth_iters if quality.field is None else min(smooth_iters, SMOOTH_ITERS_GRADED)
+        return smooth_in_frame(xy, quads, b, frame=target, iters=iters)
     bad = bad_quads(*sj_inverted(xy, quads), quality.good_sj)
     return smooth_near_bad(xy, quads, bad, b, frame=target) if bad.any() else xy
 
