@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -15,6 +16,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from jaxmatch.defaults import QUALITY
 from jaxmatch.errors import EXIT_BAD_INPUT, InputError
 import shapely
 
@@ -198,6 +200,16 @@ def test_a_callable_and_the_equivalent_field_give_the_same_mesh():
     b = mesh(SQUARE, size=lambda p: fb(p))
     assert np.array_equal(a.quads, b.quads) and np.allclose(a.xy, b.xy)
     assert isinstance(bind(lambda p: fb(p), SQUARE), CallableSize)
+
+
+def test_graded_tries_the_ring_partition_before_the_larger_templates():
+    # a square finer at its centre: the ring partition follows the field (no edge off it), so the
+    # larger templates (tried when the best mesh so far misses the field) are not
+    folder = EXAMPLES / "graded"
+    m = mesh(load_shape(folder / "square.json"), size=load_field(folder / "square.field.json"))
+    names = [c.name for c in m.tried if c.mesh is not None]
+    assert m.chosen == "rings" and m.size_conformity(replace(QUALITY, field=m.field)) == 0
+    assert names == ["single", "rings"]
 
 
 def _refined_share(m, f, H, s):

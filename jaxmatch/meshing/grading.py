@@ -94,25 +94,23 @@ def _shares(f, xy: np.ndarray, e: np.ndarray, cut: float | None) -> tuple[float,
     of the edges whose length / the field at the midpoint lies in :data:`SHARE_BAND`
     (:attr:`QuadMesh.field_share`), the same share over the refined zone's edges (the field below
     ``cut``; all edges where none is) and ``cut``: as given, or (None) halfway between the
-    field's smallest and largest size (:func:`refined_cut`)."""
+    field's least and largest value there (:func:`refined_cut`)."""
     a, b = xy[e[:, 0]], xy[e[:, 1]]
     fm = np.asarray(f(0.5 * (a + b)), np.float64)
     r = np.linalg.norm(b - a, axis=1) / fm
     ok = (r >= SHARE_BAND[0]) & (r <= SHARE_BAND[1])
-    cut = refined_cut(f, fm) if cut is None else cut
+    cut = refined_cut(fm) if cut is None else cut
     zone = fm < cut
     return float(ok.mean()), float(ok[zone].mean() if zone.any() else ok.mean()), cut
 
 
-def refined_cut(f, values: np.ndarray) -> float:
-    """The size below which the field's refined zone lies: halfway between its smallest size and
-    its largest (a :class:`~jaxmatch.field.SizeField`'s ``smallest`` and ``size``, as
-    ``scripts/graded_table.py``'s criteria; another callable: the least and largest of
-    ``values``, its values on the mesh)."""
-    lo, hi = float(getattr(f, "smallest", np.nan)), float(getattr(f, "size", np.nan))
-    if not (np.isfinite(lo) and np.isfinite(hi)):
-        lo, hi = float(values.min()), float(values.max())
-    return 0.5 * (lo + hi)
+def refined_cut(values: np.ndarray) -> float:
+    """The size below which the field's refined zone lies: halfway between the least and the
+    largest of ``values`` (the field at the mesh's edge midpoints; for a
+    :class:`~jaxmatch.field.Field` about its smallest size and ``H``, as in
+    ``scripts/graded_table.py``'s criteria), the same for a field and a callable giving the
+    same sizes."""
+    return 0.5 * (float(values.min()) + float(values.max()))
 
 
 def _step(xy: np.ndarray, trial: np.ndarray, quads: np.ndarray, floor: np.ndarray) -> np.ndarray | None:

@@ -294,7 +294,10 @@ def _mesh_size(shape, cat, lat, h, strategies, quality, budget_s, progress, corn
             finer = canonical(shape, h, corner_angle, held_angle=corner_angle)
             return None if np.array_equal(finer.corners, region.corners) else finer
 
-        plan = (layouts, Larger(), Conforming()) + rings + (Bends(layouts, rejudge),)
+        if quality.field is None:
+            plan = (layouts, Larger(), Conforming()) + rings + (Bends(layouts, rejudge),)
+        else:  # graded: the ring partition before the larger templates, tried only if it too misses the field
+            plan = (layouts,) + rings + (Larger(), Bends(layouts, rejudge))
     tried = run(plan, req)
     if region.periodic:  # a candidate whose periodic sides got different counts (no equal-count program) is out
         tried = [c if c.mesh is None or not periodic_mismatch(c.mesh, region) else
