@@ -224,6 +224,12 @@ class SizeField:  # (eq=False: hashed by identity, so a Quality holding one is a
         return out
 
     @cached_property
+    def _memo(self) -> dict:
+        """What :func:`line_integral` and :func:`graded_points` worked out on this field, by
+        polyline (:func:`_remembered`)."""
+        return {}
+
+    @cached_property
     def _geometries(self) -> tuple:
         """Per entry None where its distances are computed with numpy (at most
         :data:`NUMPY_SEGMENTS` segments: a point, a side or a short curve), else its polylines as
@@ -345,6 +351,19 @@ def outline_size(f, shape) -> float:
     return length / wanted
 
 
+def _remembered(f, key: tuple, compute):
+    """``compute()``, kept on a bound :class:`SizeField` under ``key`` (its integrals along the
+    sides the candidates share: each polyline's worked out once per field; a field is bound
+    anew by every meshing call); computed every time for another callable. Not to be written
+    to."""
+    memo = getattr(f, "_memo", None) if isinstance(f, SizeField) else None
+    if memo is None:
+        return compute()
+    if key not in memo:
+        memo[key] = compute()
+    return memo[key]
+
+
 def line_integral(f, polyline: np.ndarray, *, per_size: int = 4) -> np.ndarray:
     """``(k,) float64`` cumulative ``integral of 1 / f ds`` along ``polyline (k, 2)`` at its
     points (0 at the first): the number of edges of size ``f`` that fit along it. Each segment is
@@ -354,16 +373,20 @@ def line_integral(f, polyline: np.ndarray, *, per_size: int = 4) -> np.ndarray:
     seg = np.linalg.norm(np.diff(p, axis=0), axis=1)
     small = smallest_size(f)
     step = small / per_size if small > 0 and math.isfinite(small) else (seg.max() if seg.size else 1.0) / 64
-    k = np.clip(np.ceil(seg / max(step, 1e-300)), 1, 512).astype(np.int64)
-    pieces = np.repeat(np.arange(seg.size), k)
-    j = np.arange(pieces.size) - np.repeat(np.cumsum(k) - k, k)
-    t0, t1 = j / k[pieces], (j + 1) / k[pieces]
-    a, d = p[:-1][pieces], (p[1:] - p[:-1])[pieces]
-    inv = 1.0 / f(np.concatenate([a + t0[:, None] * d, a + t1[:, None] * d]))
-    n = pieces.size
-    part = 0.5 * (inv[:n] + inv[n:]) * seg[pieces] / k[pieces]
-    cum = np.concatenate([[0.0], np.cumsum(np.bincount(pieces, weights=part, minlength=seg.size))])
-    return cum
+
+    def integrate():
+        k = np.clip(np.ceil(seg / max(step, 1e-300)), 1, 512).astype(np.int64)
+        pieces = np.repeat(np.arange(seg.size), k)
+        j = np.arange(pieces.size) - np.repeat(np.cumsum(k) - k, k)
+        t0, t1 = j / k[pieces], (j + 1) / k[pieces]
+        a, d = p[:-1][pieces], (p[1:] - p[:-1])[pieces]
+        inv = 1.0 / f(np.concatenate([a + t0[:, None] * d, a + t1[:, None] * d]))
+        n = pieces.size
+        part = 0.5 * (inv[:n] + inv[n:]) * seg[pieces] / k[pieces]
+        cum = np.concatenate([[0.0], np.cumsum(np.bincount(pieces, weights=part, minlength=seg.size))])
+        return cum
+
+    return _remembered(f, ("integral", per_size, p.tobytes(), p.shape), integrate).copy()
 
 
 def graded_points(f, polyline: np.ndarray, count: int) -> np.ndarray:
@@ -381,12 +404,16 @@ def graded_points(f, polyline: np.ndarray, count: int) -> np.ndarray:
     small = smallest_size(f)
     step = small / 4 if small > 0 and math.isfinite(small) else (seg.max() if seg.size else 1.0) / 64
     # the polyline cut finely, then the integral's inverse by linear interpolation
-    k = np.clip(np.ceil(seg / max(step, 1e-300)), 1, 512).astype(np.int64)
-    pieces = np.repeat(np.arange(seg.size), k)
-    j = np.arange(pieces.size) - np.repeat(np.cumsum(k) - k, k)
-    fine = np.concatenate([p[:-1][pieces] + (j / k[pieces])[:, None] * (p[1:] - p[:-1])[pieces], p[-1:]])
-    inv = 1.0 / f(fine)  # already fine: the trapezoidal rule on its segments
-    cum = np.concatenate([[0.0], np.cumsum(0.5 * (inv[:-1] + inv[1:]) * np.linalg.norm(np.diff(fine, axis=0), axis=1))])
+    def cut():
+        k = np.clip(np.ceil(seg / max(step, 1e-300)), 1, 512).astype(np.int64)
+        pieces = np.repeat(np.arange(seg.size), k)
+        j = np.arange(pieces.size) - np.repeat(np.cumsum(k) - k, k)
+        fine = np.concatenate([p[:-1][pieces] + (j / k[pieces])[:, None] * (p[1:] - p[:-1])[pieces], p[-1:]])
+        inv = 1.0 / f(fine)  # already fine: the trapezoidal rule on its segments
+        return fine, np.concatenate([[0.0], np.cumsum(0.5 * (inv[:-1] + inv[1:]) * np.linalg.norm(np.diff(fine, axis=0),
+                                                                                                 axis=1))])
+
+    fine, cum = _remembered(f, ("graded", p.tobytes(), p.shape), cut)
     t = np.arange(N + 1, dtype=np.float64) / N * cum[-1]
     idx = np.clip(np.searchsorted(cum, t, side="right") - 1, 0, fine.shape[0] - 2)
     dc = cum[idx + 1] - cum[idx]

@@ -20,7 +20,7 @@ from jaxmatch.defaults import QUALITY
 from jaxmatch.errors import EXIT_BAD_INPUT, InputError
 import shapely
 
-from jaxmatch.field import (NUMPY_SEGMENTS, CallableSize, Field, Near, bind, field_share, graded_points, line_integral,
+from jaxmatch.field import (NUMPY_SEGMENTS, CallableSize, Field, Near, SizeField, bind, field_share, graded_points, line_integral,
                             load_field, parse_field, segment_distance)
 from jaxmatch.io.readers import load_shape
 from jaxmatch.meshing.pipeline import mesh
@@ -137,6 +137,25 @@ def test_graded_points_equal_steps_and_same_points_either_way():
     np.testing.assert_array_equal(graded_points(f, poly[::-1], 12)[::-1], p)  # bit-identical both ways
     d = np.linalg.norm(np.diff(p, axis=0), axis=1)
     assert d[0] < d[-1] / 3  # fine at the point, coarse away
+
+
+def test_a_bound_field_integrates_each_polyline_once(monkeypatch):
+    # the candidates share sides: their integrals are kept on the bound field, the same numbers
+    poly = np.array([[0.0, 0.0], [0.7, 0.0], [1.5, 0.3]])
+    f = Field(0.5, (Near("point", (0.0, 0.0), 0.05, 1.0),))
+    kept, fresh = f.bind(SQUARE), f.bind(SQUARE)
+    a, b = graded_points(kept, poly, 12), line_integral(kept, poly)
+
+    def no_more(self, points):
+        raise AssertionError("the field evaluated again")
+
+    monkeypatch.setattr(SizeField, "__call__", no_more)
+    np.testing.assert_array_equal(graded_points(kept, poly[::-1], 12)[::-1], a)
+    np.testing.assert_array_equal(line_integral(kept, poly), b)
+    got = graded_points(kept, poly, 5)
+    monkeypatch.undo()
+    np.testing.assert_array_equal(got, graded_points(fresh, poly, 5))
+    np.testing.assert_array_equal(b, line_integral(fresh, poly))
 
 
 def test_json_form_and_file(tmp_path):
