@@ -13,15 +13,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import shapely
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from jaxmatch.defaults import QUALITY
 from jaxmatch.errors import EXIT_BAD_INPUT, InputError
-import shapely
-
-from jaxmatch.field import (NUMPY_SEGMENTS, CallableSize, Field, Near, SizeField, bind, field_share, graded_points, line_integral,
-                            load_field, parse_field, segment_distance)
+from jaxmatch.field import (NUMPY_SEGMENTS, CallableSize, Field, Near, SizeField, bind, field_share, graded_points,
+                            line_integral, load_field, parse_field, segment_distance)
 from jaxmatch.io.readers import load_shape
 from jaxmatch.meshing.pipeline import mesh
 from jaxmatch.shape import make_shape
