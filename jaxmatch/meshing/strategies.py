@@ -20,6 +20,9 @@ strategy                candidates                                              
                         central block (``"disk"``)
 ======================= ================================================================= ===========================
 
+With a size field the plan is the layouts, the ring partition, the larger templates (so tried
+only when the ring partition too misses the field), the bends (``Conforming`` never applies).
+
 Every strategy has ``wanted(best, tried, request)`` (its condition on the best mesh so far) and
 ``candidates(request, tried)``.
 """
