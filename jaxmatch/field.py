@@ -46,7 +46,7 @@ from jaxmatch.errors import InputError
 
 __all__ = ["KINDS", "CallableSize", "Field", "Near", "SizeField", "bind", "edge_ratios",
            "field_share", "graded_points", "line_integral", "load_field", "outline_size", "parse_field",
-           "segment_distance", "smallest_size"]
+           "segment_distance", "segment_distances", "smallest_size"]
 
 KINDS = ("hole", "point", "side", "curve")
 """The kinds of entity a :class:`Near` entry refines towards."""
@@ -209,19 +209,19 @@ class SizeField:  # (eq=False: hashed by identity, so a Quality holding one is a
 
     def __call__(self, points) -> np.ndarray:
         pts = np.asarray(points, np.float64).reshape(-1, 2)
-        out = np.full(pts.shape[0], self.size)
         H = self.size
         if not self.entries or not pts.shape[0]:
-            return out
-        where = None
-        for (s, d, seg), geom in zip(self.entries, self._geometries):
-            if geom is None:  # a few segments: numpy, the same arithmetic as GEOS's
-                dist = segment_distance(pts, seg)
-            else:
-                where = shapely.points(pts) if where is None else where
-                dist = shapely.distance(where, geom)
-            out = np.minimum(out, s + (H - s) * np.minimum(1.0, dist / d))
-        return out
+            return np.full(pts.shape[0], H)
+        segments, starts, s, d = self._segments
+        if segments.shape[0] == starts.shape[0] and not np.any(segments[:, 0] - segments[:, 1]):  # points only
+            a = segments[:, 0]
+            dist = np.sqrt((pts[:, 0:1] - a[:, 0]) ** 2 + (pts[:, 1:2] - a[:, 1]) ** 2)
+        elif pts.shape[0] * segments.shape[0] <= NUMPY_PAIRS:  # every entry at once, numpy (GEOS's arithmetic)
+            dist = np.minimum.reduceat(segment_distances(pts, segments), starts, axis=1)
+        else:  # many points: shapely's distances per entry, in C
+            where = shapely.points(pts)
+            dist = np.stack([shapely.distance(where, g) for g in self._geometries], axis=1)
+        return np.minimum(H, (s + (H - s) * np.minimum(1.0, dist / d)).min(axis=1))
 
     @cached_property
     def _memo(self) -> dict:
@@ -230,44 +230,56 @@ class SizeField:  # (eq=False: hashed by identity, so a Quality holding one is a
         return {}
 
     @cached_property
+    def _segments(self) -> tuple:
+        """Every entry's segments together ``(M, 2, 2)``, where each entry's start ``(E,)``, and
+        the entries' sizes and distances ``(E,)`` each."""
+        seg = [e[2] for e in self.entries]
+        starts = np.cumsum([0] + [x.shape[0] for x in seg[:-1]])
+        return (np.concatenate(seg), starts, np.array([e[0] for e in self.entries]),
+                np.array([e[1] for e in self.entries]))
+
+    @cached_property
     def _geometries(self) -> tuple:
-        """Per entry None where its distances are computed with numpy (at most
-        :data:`NUMPY_SEGMENTS` segments: a point, a side or a short curve), else its polylines as
-        one shapely geometry (a line string, or a multi-line string where the segments do not
-        join end to end): shapely's vectorised distances, in C."""
+        """Per entry one shapely geometry: a point, its polylines as a line string, or a
+        multi-line string where the segments do not join end to end."""
         out = []
         for _, _, seg in self.entries:
-            if seg.shape[0] <= NUMPY_SEGMENTS:
-                out.append(None)
+            if seg.shape[0] == 1 and np.array_equal(seg[0, 0], seg[0, 1]):
+                out.append(shapely.Point(seg[0, 0]))
             elif np.array_equal(seg[1:, 0], seg[:-1, 1]):
                 out.append(shapely.LineString(np.concatenate([seg[:, 0], seg[-1:, 1]])))
             else:
-                out.append(shapely.MultiLineString([s for s in seg]))
+                out.append(shapely.MultiLineString([x for x in seg]))
         return tuple(out)
 
 
-NUMPY_SEGMENTS = 8
-"""Entities with at most this many segments get their distances from :func:`segment_distance`
-(numpy: no shapely points to make, the cost of a call on few points); longer ones from shapely."""
+NUMPY_PAIRS = 1 << 14
+"""Up to this many (point, segment) pairs a call's distances are numpy's, every entry at once
+(:func:`segment_distances`: no shapely points to make, no loop over the entries: the cost of the
+many calls on few points); beyond, shapely's per entry (faster there). Both give the same
+numbers; a field of points only is numpy's at any size."""
 
 
-def segment_distance(points: np.ndarray, segments: np.ndarray) -> np.ndarray:
-    """``(n,) float64``: each of ``points (n, 2)``'s distance to the nearest of ``segments
-    (m, 2, 2)`` (a segment of length 0 is a point), with GEOS's arithmetic
-    (``Distance::pointToSegment``: the projection's parameter, then the nearer end or the
-    perpendicular distance), so the values are those ``shapely.distance`` gives."""
+def segment_distances(points: np.ndarray, segments: np.ndarray) -> np.ndarray:
+    """``(n, m) float64``: each of ``points (n, 2)``'s distance to each of ``segments (m, 2, 2)``
+    (a segment of length 0 is a point), with GEOS's arithmetic (``Distance::pointToSegment``:
+    the projection's parameter, then the nearer end or the perpendicular distance), so the
+    values are those ``shapely.distance`` gives."""
     px, py = points[:, 0:1], points[:, 1:2]
     ax, ay, bx, by = segments[:, 0, 0], segments[:, 0, 1], segments[:, 1, 0], segments[:, 1, 1]
-    if segments.shape[0] == 1 and ax[0] == bx[0] and ay[0] == by[0]:  # a point
-        return np.sqrt((px[:, 0] - ax[0]) ** 2 + (py[:, 0] - ay[0]) ** 2)
     dx, dy = bx - ax, by - ay
     len2 = dx * dx + dy * dy
     safe = np.where(len2 > 0, len2, 1.0)
     r = ((px - ax) * dx + (py - ay) * dy) / safe
     s = ((ay - py) * dx - (ax - px) * dy) / safe
-    d = np.where((r <= 0) | (len2 == 0), np.sqrt((px - ax) ** 2 + (py - ay) ** 2),
-                 np.where(r >= 1, np.sqrt((px - bx) ** 2 + (py - by) ** 2), np.abs(s) * np.sqrt(len2)))
-    return d.min(axis=1)
+    return np.where((r <= 0) | (len2 == 0), np.sqrt((px - ax) ** 2 + (py - ay) ** 2),
+                    np.where(r >= 1, np.sqrt((px - bx) ** 2 + (py - by) ** 2), np.abs(s) * np.sqrt(len2)))
+
+
+def segment_distance(points: np.ndarray, segments: np.ndarray) -> np.ndarray:
+    """``(n,) float64``: each of ``points (n, 2)``'s distance to the nearest of ``segments
+    (m, 2, 2)`` (:func:`segment_distances`' least)."""
+    return segment_distances(points, segments).min(axis=1)
 
 
 @dataclass(frozen=True, eq=False)

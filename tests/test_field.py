@@ -10,6 +10,7 @@ import json
 import math
 from dataclasses import replace
 from pathlib import Path
+from unittest.mock import patch
 
 import numpy as np
 import pytest
@@ -19,7 +20,7 @@ from hypothesis import strategies as st
 
 from jaxmatch.defaults import QUALITY
 from jaxmatch.errors import EXIT_BAD_INPUT, InputError
-from jaxmatch.field import (NUMPY_SEGMENTS, CallableSize, Field, Near, SizeField, bind, field_share, graded_points,
+from jaxmatch.field import (NUMPY_PAIRS, CallableSize, Field, Near, SizeField, bind, field_share, graded_points,
                             line_integral, load_field, parse_field, segment_distance)
 from jaxmatch.io.readers import load_shape
 from jaxmatch.meshing.pipeline import mesh
@@ -104,18 +105,23 @@ def test_property_field_is_the_reference_and_between_its_sizes(H, entries, pts):
 
 
 @settings(max_examples=40, deadline=None)
-@given(line=st.lists(st.tuples(coords, coords), min_size=1, max_size=NUMPY_SEGMENTS + 3),
-       pts=st.lists(st.tuples(coords, coords), min_size=1, max_size=20))
-def test_property_segment_distance_is_shapelys_bit_for_bit(line, pts):
-    # numpy for a few segments, shapely for more: either way the same numbers (meshes do not depend on the cut)
-    p = np.array(line + line[-1:] if len(line) == 1 else line, np.float64)
-    seg = np.stack([p[:-1], p[1:]], axis=1)
-    geom = shapely.Point(p[0]) if len(line) == 1 else shapely.MultiLineString(list(seg))
+@given(lines=st.lists(st.lists(st.tuples(coords, coords), min_size=1, max_size=6), min_size=1, max_size=4),
+       pts=st.lists(st.tuples(coords, coords), min_size=1, max_size=20), shapely_path=st.booleans())
+def test_property_the_field_gives_shapelys_distances_bit_for_bit(lines, pts, shapely_path):
+    # numpy for few (point, segment) pairs, shapely for many: either way the same numbers
     x = np.array(pts, np.float64)
-    np.testing.assert_array_equal(segment_distance(x, seg), shapely.distance(shapely.points(x), geom))
-    f = Field(1.0, (Near("point", line[0], 0.1, 0.5) if len(line) == 1 else Near("curve", tuple(line), 0.1, 0.5),))
-    want = np.minimum(1.0, 0.1 + 0.9 * np.minimum(1.0, shapely.distance(shapely.points(x), geom) / 0.5))
-    np.testing.assert_array_equal(f.bind(SQUARE)(x), want)
+    near, want = [], np.full(len(pts), 1.0)
+    for k, line in enumerate(lines):
+        p = np.array(line + line[-1:] if len(line) == 1 else line, np.float64)
+        seg = np.stack([p[:-1], p[1:]], axis=1)
+        geom = shapely.Point(p[0]) if len(line) == 1 else shapely.MultiLineString(list(seg))
+        np.testing.assert_array_equal(segment_distance(x, seg), shapely.distance(shapely.points(x), geom))
+        s, d = 0.1 + 0.05 * k, 0.5 + 0.3 * k
+        near.append(Near("point", line[0], s, d) if len(line) == 1 else Near("curve", tuple(line), s, d))
+        want = np.minimum(want, s + (1.0 - s) * np.minimum(1.0, shapely.distance(shapely.points(x), geom) / d))
+    f = Field(1.0, tuple(near)).bind(SQUARE)
+    with patch("jaxmatch.field.NUMPY_PAIRS", 0 if shapely_path else NUMPY_PAIRS):
+        np.testing.assert_array_equal(f(x), want)
 
 
 def test_line_integral_along_a_linear_ramp():
