@@ -86,17 +86,20 @@ def test_after_its_first_step_the_relaxation_asks_the_field_at_the_inner_vertice
 
 
 @pytest.mark.parametrize("graded_size", [False, True])
-def test_with_a_field_the_solve_smooths_with_fewer_iterations(monkeypatch, graded_size):
+def test_with_a_field_the_patches_are_smoothed_with_fewer_iterations(monkeypatch, graded_size):
+    import jaxmatch.placement.layout as layout
     import jaxmatch.placement.refine as refine
     import jaxmatch.placement.solve as solve
     from jaxmatch.inputs import load_catalogue
 
-    seen = []
-    for mod in (refine, solve):
+    seen = {"patches": [], "cuts": []}
+    for mod, what in ((refine, "patches"), (layout, "patches"), (solve, "cuts")):
         real = mod.smooth_in_frame
-        monkeypatch.setattr(mod, "smooth_in_frame", lambda *a, _real=real, **k: (seen.append(k.get("iters")), _real(*a, **k))[1])
+        monkeypatch.setattr(mod, "smooth_in_frame", lambda *a, _real=real, _w=what, **k: (
+            seen[_w].append(k.get("iters", refine.SMOOTH_ITERS)), _real(*a, **k))[1])
     load_catalogue().cache.forget_shapes()  # (a first call: nothing refined before)
     L = make_shape([[0.0, 0.0], [2.0, 0.0], [2.0, 1.0], [1.0, 1.0], [1.0, 2.0], [0.0, 2.0]])
     mesh(L, size=Field(0.2, (Near("point", (1.0, 1.0), 0.05, 0.8),)) if graded_size else 0.1)
     want = refine.SMOOTH_ITERS_GRADED if graded_size else refine.SMOOTH_ITERS
-    assert seen and set(seen) == {want}  # the patches' and the cuts' smoothing
+    assert seen["patches"] and set(seen["patches"]) == {want}
+    assert seen["cuts"] and set(seen["cuts"]) == {refine.SMOOTH_ITERS}  # the merged mesh's cuts: as for one size

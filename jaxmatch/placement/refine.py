@@ -106,10 +106,11 @@ SMOOTH_ITERS = 200
 """L-BFGS iterations per round of :func:`jaxmatch.placement.embed.smooth` for refined meshes."""
 
 SMOOTH_ITERS_GRADED = 50
-"""L-BFGS iterations per round for refined meshes (and the layout's fitted patches and cuts) with
-a size field (``Quality.field``): the smoother is blind to size, and the relaxation towards the
-field (:func:`jaxmatch.meshing.grading.follow_field`) moves the inner vertices afterwards; on
-docs/graded.md's cases it costs a third of :data:`SMOOTH_ITERS`' time, the meshes no worse."""
+"""L-BFGS iterations per round for refined meshes (and the layout's fitted patches) with a size
+field (``Quality.field``): the smoother is blind to size, the merged mesh's cuts are smoothed
+with :data:`SMOOTH_ITERS` after them and the relaxation towards the field
+(:func:`jaxmatch.meshing.grading.follow_field`) moves the inner vertices last; on
+docs/graded.md's cases the meshes are no worse."""
 
 SMOOTH_ITERS_LARGE = 50
 """Iterations per round for larger meshes, which are smoothed only when the interpolated

@@ -35,8 +35,7 @@ from jaxmatch.placement.embed import sj_inverted, smooth_in_frame, smooth_near
 from jaxmatch.placement.layout import (Layout, LayoutMesh, Sides, _boundary_loops, curve_floors, fit_sides,
                                        layout_sides, merge_patches, parse_counts, patch_shapes, region_area)
 from jaxmatch.placement.milp import LayoutInfeasible, solve_counts
-from jaxmatch.placement.refine import (SMOOTH_ALWAYS, SMOOTH_ITERS, SMOOTH_ITERS_GRADED, SMOOTH_ITERS_LARGE, refine_and_place,
-                                       side_points, side_polylines)
+from jaxmatch.placement.refine import SMOOTH_ALWAYS, SMOOTH_ITERS_LARGE, refine_and_place, side_points, side_polylines
 from jaxmatch.placement.templates import first_group_templates
 from jaxmatch.shape import Shape
 
@@ -218,17 +217,15 @@ cuts): the patches come smoothed already, and smoothing every vertex was ~80% of
 25,000-quad L-shape."""
 
 
-def _smooth_cuts(xy: np.ndarray, quads: np.ndarray, fixed: np.ndarray, sides: Sides, side_ids,
-                 iters: int = SMOOTH_ITERS) -> np.ndarray:
+def _smooth_cuts(xy: np.ndarray, quads: np.ndarray, fixed: np.ndarray, sides: Sides, side_ids) -> np.ndarray:
     """The merged mesh smoothed with the outer loops ``fixed``
     (:func:`jaxmatch.placement.embed.smooth_in_frame`): every other vertex up to
-    :data:`~jaxmatch.placement.refine.SMOOTH_ALWAYS` quads (``iters`` L-BFGS iterations per round:
-    :data:`~jaxmatch.placement.refine.SMOOTH_ITERS_GRADED` with a size field); above, with
+    :data:`~jaxmatch.placement.refine.SMOOTH_ALWAYS` quads; above, with
     :data:`~jaxmatch.placement.refine.SMOOTH_ITERS_LARGE` iterations, only the vertices within
     :data:`CUT_RINGS` rings of the inner sides (the quads around them smoothed as a submesh
     whose other vertices stay)."""
     if quads.shape[0] <= SMOOTH_ALWAYS:
-        return smooth_in_frame(xy, quads, fixed, iters=iters)
+        return smooth_in_frame(xy, quads, fixed)
     inner = [np.asarray(side_ids[s], np.int64) for s in range(len(side_ids)) if sides.users[s, 1] >= 0]
     if not inner:
         return xy
@@ -350,8 +347,7 @@ def _mesh_layout(layout: Layout, catalogue: Catalogue, lattice: Lattice, *, size
     loops = _boundary_loops(layout, sides, side_ids, xy)
     outer, holes = loops[0], tuple(loops[1:])
     if smooth_cuts:
-        xy = _smooth_cuts(xy, quads, np.concatenate(loops), sides, side_ids,
-                          SMOOTH_ITERS if quality.field is None else SMOOTH_ITERS_GRADED)
+        xy = _smooth_cuts(xy, quads, np.concatenate(loops), sides, side_ids)
     return LayoutMesh(layout=layout, sides=sides, xy=xy, quads=quads, patch=patch, side_vertices=side_ids,
                       counts=n, outer=outer, holes=holes, templates=tuple(t.mesh_id for t in tmpl),
                       multiplicities=tuple(mults), shared_gap=gap, region_area=float(region))
