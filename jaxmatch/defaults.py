@@ -67,6 +67,12 @@ class Quality:
     short_edge: with a size field, an edge shorter than the field at its midpoint over this
         breaks size conformity too (a graded mesh refined where the field does not ask for it;
         more lenient than ``long_edge``: too fine costs quads, too coarse misses the refinement).
+    size_band: ``(lo, hi)``: an edge is "at the size" when its length is within ``[lo h, hi h]``
+        (the field at its midpoint with a field).
+    band_share: a mesh "meets the size band" when at least this share of its edges is at the size
+        (``size_band``): the choice rule's size band, after the quality rule, and the ring partition
+        is tried for a best mesh that misses it. A yes or no: between meshes that both miss it
+        (a region with features smaller than ``h`` is meshed finer there), it does not decide.
     field: the size field the mesh follows (a bound :class:`jaxmatch.field.SizeField` or
         :class:`~jaxmatch.field.CallableSize`: ``(n, 2)`` points to ``(n,)`` sizes), or None: one size
         ``h`` everywhere. With a field, side counts are its integrals, side vertices are spaced by it
@@ -84,6 +90,8 @@ class Quality:
     long_edge: float = 2.0
     sj_step: float = 0.1
     short_edge: float = 3.0
+    size_band: tuple = (0.5, 1.5)
+    band_share: float = 0.8
     field: object = None
 
 

@@ -165,6 +165,21 @@ class QuadMesh:
         r = self._edge_lengths / self._edge_targets
         return float(np.mean((r >= SHARE_BAND[0]) & (r <= SHARE_BAND[1])))
 
+    def band_share(self, band: tuple[float, float]) -> float:
+        """Share of the edges whose length / the size at its midpoint (the field, or ``size``)
+        lies in ``band = (lo, hi)`` (NaN without a size or without edges)."""
+        if not self._edges.size:
+            return math.nan
+        r = self._edge_lengths / self._edge_targets
+        return float(np.mean((r >= band[0]) & (r <= band[1])))
+
+    def misses_size_band(self, quality) -> bool:
+        """Whether fewer than ``quality.band_share`` of the edges are within ``quality.size_band``
+        sizes (the choice rule's size band; False without a size: nothing to miss)."""
+        if self.field is None and not self.size:
+            return False
+        return not (self.band_share(quality.size_band) >= quality.band_share)
+
     @cached_property
     def _valences(self) -> np.ndarray:
         """``(V,) int32`` vertex valences (:func:`~jaxmatch.catalogue.mesh.valences`, from :attr:`_edges`)."""

@@ -13,8 +13,9 @@ strategy                candidates                                              
 :class:`Conforming`     single templates whose side counts follow the size                no candidate follows it
                                                                                          (no size field)
 :class:`RingPartition`  a layer of patches along every loop and an O-grid core, or a box  an edge of every candidate
-                        around every hole and a grid through the rest                     is longer than 2 h, or none
-                        (:class:`Rings`, ``"rings"``)                                     reaches the quality band
+                        around every hole and a grid through the rest                     is longer than 2 h, none
+                        (:class:`Rings`, ``"rings"``)                                     reaches the quality band,
+                                                                                         or the best misses the size band
 :class:`Bends`          the layouts again with a curved outline's bends as corners        every candidate folds
 :class:`Smooth`         a region with fewer than two corners: a refined template and the  (its own plan)
                         central block (``"disk"``)
@@ -325,7 +326,8 @@ def layout_strategies(names: Sequence[str]) -> tuple[LayoutStrategy, ...]:
 
 class RingPartition:
     """Every candidate has an edge longer than ``Quality.long_edge`` sizes, or none reaches the
-    quality band (``Quality.high_sj``): the ring partition (:class:`Rings`), meshed by the same solve, at the end; also
+    quality band (``Quality.high_sj``), or the best misses the size band
+    (:meth:`QuadMesh.misses_size_band`): the ring partition (:class:`Rings`), meshed by the same solve, at the end; also
     when nothing else meshed (``when_none_meshed``). Sides off the size alone are
     :class:`Conforming`'s (docs/meshing.md, "The ring partition": what trying the rings for them
     too cost)."""
@@ -334,7 +336,8 @@ class RingPartition:
 
     def wanted(self, best: QuadMesh | None, tried, req: Request) -> bool:
         q = req.quality
-        return best is None or best.long_edges(q.long_edge) > 0 or not best.min_scaled_jacobian >= q.high_sj
+        return best is None or best.long_edges(q.long_edge) > 0 or not best.min_scaled_jacobian >= q.high_sj or \
+            best.misses_size_band(q)
 
     def candidates(self, req: Request, tried) -> list[Candidate]:
         return try_layouts(req.region, (Rings(),), req.cat, req.lat, req.h, req.corners, req.budget_s, req.t0,
