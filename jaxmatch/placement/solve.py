@@ -12,7 +12,11 @@ fitted to them (:func:`~jaxmatch.placement.layout.fit_sides`), and the patches a
 (:func:`~jaxmatch.placement.layout.merge_patches`). A patch whose refinement folds (or has a
 scaled Jacobian below ``quality.good_sj``) is given its next template and the program is solved
 again; the best round is kept (fewest inverted quads, then the highest minimum scaled Jacobian of
-the worst patch). A patch that is a translate of an earlier one takes that patch's templates and
+the worst patch). The side counts' floors keep the area
+(:func:`~jaxmatch.placement.layout.curve_floors`): lean ones first (the area budget shared by
+the curved sides), and when that merged mesh folds or misses the quality band
+(``quality.high_sj``), the finer curves of the budget shared by the whole boundary too, the
+merged mesh with fewer inverted quads, then the higher min scaled Jacobian, kept. A patch that is a translate of an earlier one takes that patch's templates and
 refinement, moved.
 
 Everything made is kept in the catalogue's cache (:mod:`jaxmatch.cache`).
@@ -303,12 +307,56 @@ def _mesh_layout(layout: Layout, catalogue: Catalogue, lattice: Lattice, *, size
         if progress:
             progress(p + 1, len(shapes))
     region = region_area(layout)
-    floors = curve_floors(layout, sides, quality.area_tol, region) if size is not None else None
-    choice = [0] * len(shapes) if first_templates is None else [int(j) for j in first_templates]
-    for p, j in enumerate(choice):
+    choice0 = [0] * len(shapes) if first_templates is None else [int(j) for j in first_templates]
+    for p, j in enumerate(choice0):
         if not (j >= 0 and _has(cands[p], j)):
             raise IndexError(f"patch {p} has {len(cands[p])} candidate templates, not {j + 1}")
     made: dict = {}
+    passes = [None]
+    if size is not None:  # lean floors, then, when they miss the quality band, finer curves (the better kept)
+        lean = curve_floors(layout, sides, quality.area_tol, region)
+        fine = curve_floors(layout, sides, quality.area_tol, region, lean=False)
+        passes = [lean] if np.array_equal(fine, lean) else [lean, fine]
+    out = None
+    for k, floors in enumerate(passes):
+        try:
+            best = _rounds(layout, sides, shapes, cands, moved, list(choice0), want, size, floors, equal, side_targets,
+                           f, made, quality, lkey, cache)
+        except LayoutInfeasible:
+            if k == len(passes) - 1 and out is None:
+                raise
+            continue
+        lm = _merged(layout, sides, best, smooth_cuts, region)
+        sj, inv = sj_inverted(lm.xy, lm.quads)
+        key = (int(inv.sum()), -float(sj.min()) if sj.size else 0.0)
+        if out is None or key < out[0]:
+            out = (key, lm)
+        if out[0][0] == 0 and -out[0][1] >= quality.high_sj:  # no fold, in the quality band: no finer curves
+            break
+    return out[1]
+
+
+def _merged(layout: Layout, sides: Sides, best: tuple, smooth_cuts: bool, region: float) -> LayoutMesh:
+    """The :class:`LayoutMesh` of a best round of :func:`_rounds`: its patches merged, the cuts
+    smoothed when ``smooth_cuts``."""
+    _, tmpl, mults, n, refined = best
+    xy, quads, patch, side_ids, gap = merge_patches(layout, sides, refined, n)
+    loops = _boundary_loops(layout, sides, side_ids, xy)
+    outer, holes = loops[0], tuple(loops[1:])
+    if smooth_cuts:
+        xy = _smooth_cuts(xy, quads, np.concatenate(loops), sides, side_ids)
+    return LayoutMesh(layout=layout, sides=sides, xy=xy, quads=quads, patch=patch, side_vertices=side_ids,
+                      counts=n, outer=outer, holes=holes, templates=tuple(t.mesh_id for t in tmpl),
+                      multiplicities=tuple(mults), shared_gap=gap, region_area=float(region))
+
+
+def _rounds(layout: Layout, sides: Sides, shapes, cands, moved, choice: list, want, size, floors, equal, side_targets, f,
+            made: dict, quality: Quality, lkey: tuple, cache: Cache):
+    """The rounds of :func:`_mesh_layout` with these side ``floors``: solve, refine, give each
+    patch that folds (or is below ``quality.good_sj``) its next template, at most :data:`ROUNDS`
+    times. Returns the best round ``(key, templates, multiplicities, counts, refined patches)``;
+    ``made``: refinements kept across calls. Raises :class:`LayoutInfeasible` when no round is
+    feasible."""
     best = None
     for _ in range(ROUNDS):
         tmpl = [cands[p][choice[p]] for p in range(len(shapes))]
@@ -342,15 +390,9 @@ def _mesh_layout(layout: Layout, catalogue: Catalogue, lattice: Lattice, *, size
             break
         for p in bad:
             choice[p] += 1
-    _, tmpl, mults, n, refined = best
-    xy, quads, patch, side_ids, gap = merge_patches(layout, sides, refined, n)
-    loops = _boundary_loops(layout, sides, side_ids, xy)
-    outer, holes = loops[0], tuple(loops[1:])
-    if smooth_cuts:
-        xy = _smooth_cuts(xy, quads, np.concatenate(loops), sides, side_ids)
-    return LayoutMesh(layout=layout, sides=sides, xy=xy, quads=quads, patch=patch, side_vertices=side_ids,
-                      counts=n, outer=outer, holes=holes, templates=tuple(t.mesh_id for t in tmpl),
-                      multiplicities=tuple(mults), shared_gap=gap, region_area=float(region))
+    if best is None:  # pragma: no cover - the loop solved at least once or raised
+        raise LayoutInfeasible("no round of the layout's solve was feasible", where=layout.source)
+    return best
 
 
 TRANSLATE_TOL = 1e-12
