@@ -73,6 +73,10 @@ class Quality:
         (``size_band``): the choice rule's size band, after the quality rule, and the ring partition
         is tried for a best mesh that misses it. A yes or no: between meshes that both miss it
         (a region with features smaller than ``h`` is meshed finer there), it does not decide.
+    lean_cost: a mesh whose curves take the curved sides' share of the area budget alone (tried
+        when the best mesh misses the size band: :class:`jaxmatch.meshing.strategies.LeanCurves`)
+        is kept only when it meets the size band and its min scaled Jacobian is at most this
+        below the best mesh's: coarser curves for the band, not for a worse mesh.
     field: the size field the mesh follows (a bound :class:`jaxmatch.field.SizeField` or
         :class:`~jaxmatch.field.CallableSize`: ``(n, 2)`` points to ``(n,)`` sizes), or None: one size
         ``h`` everywhere. With a field, side counts are its integrals, side vertices are spaced by it
@@ -92,6 +96,7 @@ class Quality:
     short_edge: float = 3.0
     size_band: tuple = (0.5, 1.5)
     band_share: float = 0.8
+    lean_cost: float = 0.02
     field: object = None
 
 

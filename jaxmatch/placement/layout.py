@@ -641,15 +641,16 @@ def _region_shares(layout: Layout, sides: Sides) -> np.ndarray:
 
 
 def curve_floors(layout: Layout, sides: Sides, area_tol: float, region: float | None = None, *,
-                 lean: bool = True) -> np.ndarray:
+                 lean: bool = False) -> np.ndarray:
     """``(S,) int64`` the fewest edges each side may have so that its chords keep the region's
     area: a boundary side whose points do not lie on one line gets at least the edges that keep
-    the area between it and its chords within its share (``lean``: its length over the curved
-    boundary sides' total, a straight side needing none; else over the whole boundary's, finer
-    curves) of :data:`CURVE_SHARE` ``* area_tol`` of the region's area; every other side 1. ``region``:
+    the area between it and its chords within its share of :data:`CURVE_SHARE` ``* area_tol`` of
+    the region's area: its length over the whole boundary's, or with ``lean`` over the curved
+    boundary sides' total (a straight side loses no area and takes none: coarser curves, nearer
+    the size, where the outline also has straight sides); every other side 1. ``region``:
     :func:`region_area` of ``layout`` when the caller has it. An assembly's layout
     (``layout.regions``): a side between two regions is kept like a boundary side of each, its
-    budget the smaller of the two regions' shares."""
+    budget the smaller of the two regions' shares (``lean`` does not apply)."""
     floors = np.ones(len(sides.chains), np.int64)
     own = _region_shares(layout, sides) if layout.regions is not None else None
     bound = np.flatnonzero(sides.outer if own is None else ~np.isinf(own))
