@@ -364,7 +364,8 @@ def test_the_size_band_decides_after_quality_and_only_as_a_yes_or_no():
     """The same 4 x 4 grid of unit quads at the size 1 (every edge h) and at the size 2.5 (every
     edge 0.4 h: finer, which size conformity allows): equal quality, so the size band decides for
     the one with >= 80 % of its edges within [0.5 h, 1.5 h]. Two meshes that both miss it are not
-    told apart by it; and the ring partition is wanted for a best mesh that misses it."""
+    told apart by it; and the ring partition is wanted for a best mesh that nearly meets it (at
+    least ``Quality.band_near`` of its edges at the size), not for one far off it."""
     import dataclasses
     from types import SimpleNamespace
 
@@ -378,13 +379,23 @@ def test_the_size_band_decides_after_quality_and_only_as_a_yes_or_no():
     picked = choose([Candidate("finer", finer), Candidate("fine", fine)])
     assert picked.rule != "size band"
     assert not fine.misses_size_band(dataclasses.replace(QUALITY, band_share=0.0))
+    near = dataclasses.replace(grid_mesh(4, 4), size=1.5)  # 0.67 h: at the size but for the band's share
+    half = dataclasses.replace(grid_mesh(4, 4), size=1.0)
+    xy = half.xy.copy()
+    xy[:, 0] = np.where(half.xy[:, 0] > 2, 2 + 0.3 * (half.xy[:, 0] - 2), half.xy[:, 0])  # the right half at 0.3 h
+    half = dataclasses.replace(half, xy=xy, corners=xy[[0, 4, 24, 20]])
+    assert half.misses_size_band(QUALITY) and 0.5 <= half.band_share(QUALITY.size_band) < 0.8
+    assert near.band_share(QUALITY.size_band) == 1.0 and not near.near_size_band(QUALITY)
     req = SimpleNamespace(quality=QUALITY)
-    assert strat.RingPartition().wanted(fine, [], req) and not strat.RingPartition().wanted(at_size, [], req)
+    assert half.near_size_band(QUALITY) and not fine.near_size_band(QUALITY)
+    assert strat.RingPartition().wanted(half, [], req)
+    assert not strat.RingPartition().wanted(fine, [], req) and not strat.RingPartition().wanted(at_size, [], req)
 
 
 def test_lean_curves_are_tried_off_the_size_band_and_kept_only_at_it(monkeypatch):
-    """:class:`LeanCurves` is wanted when the best mesh misses the size band and the region has
-    curved sides (not for a polygon whose vertices are all corners, not with a size field); of
+    """:class:`LeanCurves` is wanted when the best mesh nearly meets the size band and the region
+    has curved sides (not for a polygon whose vertices are all corners, not far off the band,
+    not with a size field); of
     its meshes it keeps those that meet the band with a min scaled Jacobian at most
     ``Quality.lean_cost`` below the best's (the layouts themselves come from ``try_layouts``,
     replaced here by ready meshes); only the best mesh's own layout is meshed again, none when it
@@ -394,7 +405,11 @@ def test_lean_curves_are_tried_off_the_size_band_and_kept_only_at_it(monkeypatch
 
     from jaxmatch.shape import make_shape
 
-    fine = dataclasses.replace(grid_mesh(4, 4), size=2.5)  # the best so far: misses the band, min SJ 1
+    fine = dataclasses.replace(grid_mesh(4, 4), size=2.5)  # far off the band (every edge 0.4 h), min SJ 1
+    half = dataclasses.replace(grid_mesh(4, 4), size=1.0)
+    xy = half.xy.copy()
+    xy[:, 0] = np.where(half.xy[:, 0] > 2, 2 + 0.3 * (half.xy[:, 0] - 2), half.xy[:, 0])  # the right half at 0.3 h
+    half = dataclasses.replace(half, xy=xy, corners=xy[[0, 4, 24, 20]])  # the best so far: a near miss
     at_size = dataclasses.replace(grid_mesh(4, 4), size=1.0)
     two = grid_mesh(4, 4)
     xy = two.xy + np.c_[0.3 * two.xy[:, 1], np.zeros(len(two.xy))]  # sheared: at the size, min SJ 0.96
@@ -404,11 +419,12 @@ def test_lean_curves_are_tried_off_the_size_band_and_kept_only_at_it(monkeypatch
     disk = make_shape([[2 + 2 * np.cos(t), 2 + 2 * np.sin(t)] for t in np.linspace(0, 2 * np.pi, 40, endpoint=False)])
     assert not strat.has_curves(square) and strat.has_curves(disk)
     lean = strat.LeanCurves((strat.Rings(),))
-    tried = [Candidate("rings", fine)]
-    assert lean.wanted(fine, tried, SimpleNamespace(quality=QUALITY, region=disk))
-    assert not lean.wanted(fine, tried, SimpleNamespace(quality=QUALITY, region=square))
+    tried = [Candidate("rings", half)]
+    assert lean.wanted(half, tried, SimpleNamespace(quality=QUALITY, region=disk))
+    assert not lean.wanted(half, tried, SimpleNamespace(quality=QUALITY, region=square))
     assert not lean.wanted(at_size, tried, SimpleNamespace(quality=QUALITY, region=disk))
-    assert not lean.wanted(fine, tried, SimpleNamespace(quality=dataclasses.replace(QUALITY, field=lambda p: p[:, 0]),
+    assert not lean.wanted(fine, tried, SimpleNamespace(quality=QUALITY, region=disk))
+    assert not lean.wanted(half, tried, SimpleNamespace(quality=dataclasses.replace(QUALITY, field=lambda p: p[:, 0]),
                                                         region=disk))
     made = [Candidate("a" + strat.LEAN, at_size), Candidate("b" + strat.LEAN, sheared),
             Candidate("c" + strat.LEAN, fine), Candidate("d" + strat.LEAN, None, "cannot beat")]

@@ -180,6 +180,13 @@ class QuadMesh:
             return False
         return not (self.band_share(quality.size_band) >= quality.band_share)
 
+    def near_size_band(self, quality) -> bool:
+        """Whether the mesh misses the size band (:meth:`misses_size_band`) by a near miss: at
+        least ``quality.band_near`` of its edges within ``quality.size_band`` sizes (further
+        off, features of the region smaller than the size make the short edges, which no other
+        partition of it avoids)."""
+        return self.misses_size_band(quality) and self.band_share(quality.size_band) >= quality.band_near
+
     @cached_property
     def _valences(self) -> np.ndarray:
         """``(V,) int32`` vertex valences (:func:`~jaxmatch.catalogue.mesh.valences`, from :attr:`_edges`)."""

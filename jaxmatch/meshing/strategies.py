@@ -15,9 +15,10 @@ strategy                candidates                                              
 :class:`RingPartition`  a layer of patches along every loop and an O-grid core, or a box  an edge of every candidate
                         around every hole and a grid through the rest                     is longer than 2 h, none
                         (:class:`Rings`, ``"rings"``)                                     reaches the quality band,
-                                                                                         or the best misses the size band
-:class:`LeanCurves`     the best mesh's layout again, the curves' area budget shared by   the best misses the size
-                        the curved sides alone (``" +lean curves"``), kept at the band    band (curved sides)
+                                                                                         or the best nearly meets the
+                                                                                         size band
+:class:`LeanCurves`     the best mesh's layout again, the curves' area budget shared by   the best nearly meets the
+                        the curved sides alone (``" +lean curves"``), kept at the band    size band (curved sides)
 :class:`Bends`          the layouts again with a curved outline's bends as corners        every candidate folds
 :class:`Smooth`         a region with fewer than two corners: a refined template and the  (its own plan)
                         central block (``"disk"``)
@@ -341,8 +342,8 @@ def layout_strategies(names: Sequence[str]) -> tuple[LayoutStrategy, ...]:
 
 class RingPartition:
     """Every candidate has an edge longer than ``Quality.long_edge`` sizes, or none reaches the
-    quality band (``Quality.high_sj``), or the best misses the size band
-    (:meth:`QuadMesh.misses_size_band`): the ring partition (:class:`Rings`), meshed by the same solve, at the end; also
+    quality band (``Quality.high_sj``), or the best nearly meets the size band
+    (:meth:`QuadMesh.near_size_band`): the ring partition (:class:`Rings`), meshed by the same solve, at the end; also
     when nothing else meshed (``when_none_meshed``). Sides off the size alone are
     :class:`Conforming`'s (docs/meshing.md, "The ring partition": what trying the rings for them
     too cost)."""
@@ -352,7 +353,7 @@ class RingPartition:
     def wanted(self, best: QuadMesh | None, tried, req: Request) -> bool:
         q = req.quality
         return best is None or best.long_edges(q.long_edge) > 0 or not best.min_scaled_jacobian >= q.high_sj or \
-            best.misses_size_band(q)
+            best.near_size_band(q)
 
     def candidates(self, req: Request, tried) -> list[Candidate]:
         return try_layouts(req.region, (Rings(),), req.cat, req.lat, req.h, req.corners, req.budget_s, req.t0,
@@ -372,8 +373,8 @@ def has_curves(shape: Shape) -> bool:
 
 
 class LeanCurves:
-    """The best mesh so far misses the size band (:meth:`QuadMesh.misses_size_band`; one size, no
-    field) and the region has curved sides: the best mesh's layout meshed again (``" +lean
+    """The best mesh so far nearly meets the size band (:meth:`QuadMesh.near_size_band`; one
+    size, no field) and the region has curved sides: the best mesh's layout meshed again (``" +lean
     curves"``; one solve, none when the best mesh is not one of ``strategies``') with the area
     budget of the curves' chords shared by the curved sides alone (``lean_curves`` of
     :func:`~jaxmatch.placement.solve.mesh_layout`: where the whole boundary shares it, small
@@ -387,7 +388,7 @@ class LeanCurves:
         self.strategies = tuple(strategies)
 
     def wanted(self, best: QuadMesh | None, tried, req: Request) -> bool:
-        return req.quality.field is None and best.misses_size_band(req.quality) and has_curves(req.region)
+        return req.quality.field is None and best.near_size_band(req.quality) and has_curves(req.region)
 
     def candidates(self, req: Request, tried) -> list[Candidate]:
         q = req.quality
