@@ -360,57 +360,58 @@ def test_size_conformity_is_a_yes_or_no():
     assert picked.chosen == "at size" and picked.rule == "size conformity"
 
 
-def test_the_size_band_decides_after_quality_and_only_as_a_yes_or_no():
-    """The same 4 x 4 grid of unit quads at the size 1 (every edge h) and at the size 2.5 (every
-    edge 0.4 h: finer, which size conformity allows): equal quality, so the size band decides for
-    the one with >= 80 % of its edges within [0.5 h, 1.5 h]. Two meshes that both miss it are not
-    told apart by it; and the ring partition is wanted for a best mesh that nearly meets it (at
-    least ``Quality.band_near`` of its edges at the size), not for one far off it."""
+def _strip(height: float) -> QuadMesh:
+    """A 4 x 1 row of quads ``height`` tall at the size 1: the long sides at the size, the short
+    sides one edge of ``height`` (``height / h`` within one edge of rounding: the size fit holds)."""
+    import dataclasses
+
+    m = grid_mesh(4, 1)
+    xy = m.xy * [1.0, height]
+    return dataclasses.replace(m, xy=xy, corners=xy[[0, 4, 9, 5]], region_area=4.0 * height, size=1.0)
+
+
+def test_the_size_band_decides_after_the_size_fit_and_only_as_a_yes_or_no():
+    """Rectangles of the same quality whose sides all fit the size: a row of unit quads (every
+    edge h) beats the same row 1.8 tall (its 5 edges across at 1.8 h: 8 of 13 edges within
+    [0.5 h, 1.5 h], below 80 %) on the size band; two meshes that both miss it are not told apart
+    by it. The ring partition is wanted for a best mesh that nearly meets it (at least
+    ``Quality.band_near`` of its edges at the size), not for one far off it (a 4 x 4 grid of unit
+    quads at the size 2.5: every edge 0.4 h)."""
     import dataclasses
     from types import SimpleNamespace
 
-    at_size = dataclasses.replace(grid_mesh(4, 4), size=1.0)
-    fine = dataclasses.replace(grid_mesh(4, 4), size=2.5)
-    finer = dataclasses.replace(grid_mesh(4, 4), size=3.0)
-    assert at_size.band_share(QUALITY.size_band) == 1.0 and fine.band_share(QUALITY.size_band) == 0.0
-    assert not at_size.size_conformity(QUALITY) and not fine.size_conformity(QUALITY)
-    picked = choose([Candidate("fine", fine), Candidate("at size", at_size)])
+    at_size, tall, taller = _strip(1.0), _strip(1.8), _strip(1.9)
+    for m in (at_size, tall, taller):
+        assert not m.size_conformity(QUALITY) and m.size_fit(QUALITY) == 0 and m.min_scaled_jacobian == 1.0
+    assert at_size.band_share(QUALITY.size_band) == 1.0 and tall.band_share(QUALITY.size_band) == pytest.approx(8 / 13)
+    picked = choose([Candidate("tall", tall), Candidate("at size", at_size)])
     assert picked.chosen == "at size" and picked.rule == "size band"
-    picked = choose([Candidate("finer", finer), Candidate("fine", fine)])
+    picked = choose([Candidate("taller", taller), Candidate("tall", tall)])
     assert picked.rule != "size band"
-    assert not fine.misses_size_band(dataclasses.replace(QUALITY, band_share=0.0))
-    near = dataclasses.replace(grid_mesh(4, 4), size=1.5)  # 0.67 h: at the size but for the band's share
-    half = dataclasses.replace(grid_mesh(4, 4), size=1.0)
-    xy = half.xy.copy()
-    xy[:, 0] = np.where(half.xy[:, 0] > 2, 2 + 0.3 * (half.xy[:, 0] - 2), half.xy[:, 0])  # the right half at 0.3 h
-    half = dataclasses.replace(half, xy=xy, corners=xy[[0, 4, 24, 20]])
-    assert half.misses_size_band(QUALITY) and 0.5 <= half.band_share(QUALITY.size_band) < 0.8
-    assert near.band_share(QUALITY.size_band) == 1.0 and not near.near_size_band(QUALITY)
+    assert not tall.misses_size_band(dataclasses.replace(QUALITY, band_share=0.6))
+    far = dataclasses.replace(grid_mesh(4, 4), size=2.5)
+    assert far.band_share(QUALITY.size_band) == 0.0 and far.misses_size_band(QUALITY)
+    assert tall.near_size_band(QUALITY) and not far.near_size_band(QUALITY) and not at_size.near_size_band(QUALITY)
     req = SimpleNamespace(quality=QUALITY)
-    assert half.near_size_band(QUALITY) and not fine.near_size_band(QUALITY)
-    assert strat.RingPartition().wanted(half, [], req)
-    assert not strat.RingPartition().wanted(fine, [], req) and not strat.RingPartition().wanted(at_size, [], req)
+    assert strat.RingPartition().wanted(tall, [], req)
+    assert not strat.RingPartition().wanted(far, [], req) and not strat.RingPartition().wanted(at_size, [], req)
 
 
 def test_lean_curves_are_tried_off_the_size_band_and_kept_only_at_it(monkeypatch):
     """:class:`LeanCurves` is wanted when the best mesh nearly meets the size band and the region
     has curved sides (not for a polygon whose vertices are all corners, not far off the band,
-    not with a size field); of
-    its meshes it keeps those that meet the band with a min scaled Jacobian at most
-    ``Quality.lean_cost`` below the best's (the layouts themselves come from ``try_layouts``,
-    replaced here by ready meshes); only the best mesh's own layout is meshed again, none when it
-    is not one of the strategy's."""
+    not with a size field); of its meshes it keeps those that meet the band with a min scaled
+    Jacobian at most ``Quality.lean_cost`` below the best's (the layouts themselves come from
+    ``try_layouts``, replaced here by ready meshes); only the best mesh's own layout is meshed
+    again, none when it is not one of the strategy's."""
     import dataclasses
     from types import SimpleNamespace
 
     from jaxmatch.shape import make_shape
 
     fine = dataclasses.replace(grid_mesh(4, 4), size=2.5)  # far off the band (every edge 0.4 h), min SJ 1
-    half = dataclasses.replace(grid_mesh(4, 4), size=1.0)
-    xy = half.xy.copy()
-    xy[:, 0] = np.where(half.xy[:, 0] > 2, 2 + 0.3 * (half.xy[:, 0] - 2), half.xy[:, 0])  # the right half at 0.3 h
-    half = dataclasses.replace(half, xy=xy, corners=xy[[0, 4, 24, 20]])  # the best so far: a near miss
-    at_size = dataclasses.replace(grid_mesh(4, 4), size=1.0)
+    half = _strip(1.8)  # the best so far: a near miss, min SJ 1
+    at_size = _strip(1.0)
     two = grid_mesh(4, 4)
     xy = two.xy + np.c_[0.3 * two.xy[:, 1], np.zeros(len(two.xy))]  # sheared: at the size, min SJ 0.96
     sheared = dataclasses.replace(two, xy=xy, corners=xy[[0, 4, 24, 20]], size=1.0)
