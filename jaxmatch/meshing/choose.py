@@ -98,7 +98,8 @@ def mesh_key(m: QuadMesh, order: int = 0, quality: Quality = QUALITY) -> tuple:
 def best_possible_key(n_patches: int, order: int, max_sj: float = 1.0, quality: Quality = QUALITY) -> tuple:
     """The smallest :func:`mesh_key` any mesh of ``n_patches`` patches tried at ``order`` whose
     min scaled Jacobian is at most ``max_sj`` can have: no fold, every corner, the area, every
-    side at the size, min scaled Jacobian ``max_sj``, the size band met, no irregular vertex beyond the bound, mean 1."""
+    side at the size, min scaled Jacobian ``max_sj``, the size band met, no irregular vertex
+    beyond the bound, mean 1."""
     return (False, False, False, not (max_sj >= quality.good_sj), 0, not (max_sj >= quality.high_sj),
             -math.floor(max_sj / quality.sj_step + 1e-9), 0, False, 0, int(n_patches), -1.0, int(order))
 

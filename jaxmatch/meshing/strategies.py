@@ -377,9 +377,9 @@ class LeanCurves:
     size, no field) and the region has curved sides: the best mesh's layout meshed again (``" +lean
     curves"``; one solve, none when the best mesh is not one of ``strategies``') with the area
     budget of the curves' chords shared by the curved sides alone (``lean_curves`` of
-    :func:`~jaxmatch.placement.solve.mesh_layout`: where the whole boundary shares it, small
-    holes among long straight sides are meshed at 0.3-0.5 h and their rings carry those short
-    edges inside), only where that makes a side coarser that the whole boundary's share put below
+    :func:`~jaxmatch.placement.solve.mesh_layout`: where the whole boundary shares it, round
+    holes among long straight sides are meshed finer than the size and their rings carry those
+    short edges inside), only where that makes a side coarser that the whole boundary's share put below
     the size band (:func:`~jaxmatch.placement.solve.lean_floors_help`). The mesh is kept when it
     meets the size band and its min scaled Jacobian is at most ``Quality.lean_cost`` below the
     best's: coarser curves to reach the band, not for a worse mesh."""

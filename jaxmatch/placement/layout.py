@@ -659,7 +659,7 @@ def curve_floors(layout: Layout, sides: Sides, area_tol: float, region: float | 
     err1 = {int(s): chord_area_error(layout.points[sides.chains[s]], 1) for s in bound}
     if region is None and own is None:
         region = region_area(layout)
-    curved = [s for s in bound if err1[int(s)] > CURVE_ZERO * (region if own is None else 1.0)] if lean else bound
+    curved = [s for s in bound if err1[int(s)] > CURVE_ZERO * region] if lean and own is None else bound
     total = float(np.sum(sides.lengths[curved])) if len(curved) else 1.0  # (lean: straight sides need no share)
     for s in bound:
         poly = layout.points[sides.chains[s]]
