@@ -67,6 +67,20 @@ class Quality:
     short_edge: with a size field, an edge shorter than the field at its midpoint over this
         breaks size conformity too (a graded mesh refined where the field does not ask for it;
         more lenient than ``long_edge``: too fine costs quads, too coarse misses the refinement).
+    size_band: ``(lo, hi)``: an edge is "at the size" when its length is within ``[lo h, hi h]``
+        (the field at its midpoint with a field).
+    band_share: a mesh "meets the size band" when at least this share of its edges is at the size
+        (``size_band``): the choice rule's size band, after the size fit; the ring partition and
+        the lean curves are tried for a best mesh that nearly meets it (``band_near``). A yes or
+        no: between meshes that both miss it (a region with features smaller than ``h`` is meshed
+        finer there), it does not decide.
+    band_near: the ring partition and the lean curves are tried for a best mesh that misses the
+        size band only when at least this share of its edges is at the size (a near miss; further
+        off, the region's features smaller than ``h`` make the short edges).
+    lean_cost: a mesh whose curves take the curved sides' share of the area budget alone (tried
+        when the best mesh nearly meets the size band: :class:`jaxmatch.meshing.strategies.LeanCurves`)
+        is kept only when it meets the size band and its min scaled Jacobian is at most this
+        below the best mesh's: coarser curves for the band, not for a worse mesh.
     field: the size field the mesh follows (a bound :class:`jaxmatch.field.SizeField` or
         :class:`~jaxmatch.field.CallableSize`: ``(n, 2)`` points to ``(n,)`` sizes), or None: one size
         ``h`` everywhere. With a field, side counts are its integrals, side vertices are spaced by it
@@ -84,6 +98,10 @@ class Quality:
     long_edge: float = 2.0
     sj_step: float = 0.1
     short_edge: float = 3.0
+    size_band: tuple = (0.5, 1.5)
+    band_share: float = 0.8
+    band_near: float = 0.5
+    lean_cost: float = 0.02
     field: object = None
 
 

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import itertools
 import json
+import math
 import sys
 from collections import Counter
 from pathlib import Path
@@ -29,19 +30,22 @@ from hypothesis import strategies as st
 
 from jaxmatch.errors import EXIT_BAD_INPUT, InputError
 from jaxmatch.placement.layout import (
+    CURVE_SHARE,
     LayoutInfeasible,
+    curve_floors,
     layout_sides,
     load_layout,
     make_layout,
     merge_patches,
     parse_layout,
+    region_area,
     solve_counts,
 )
 from jaxmatch.io.meshfile import write_mesh
 from jaxmatch.meshing.build import from_layout
 from jaxmatch.meshing.pipeline import strategy_names
 from jaxmatch.placement import solve as lay_solve
-from jaxmatch.placement.solve import mesh_layout
+from jaxmatch.placement.solve import lean_floors_help, mesh_layout
 from jaxmatch.scoring.lattice import load_lattice
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -878,3 +882,72 @@ def test_translates_need_the_same_corners_and_offsets():
     assert of(make_layout(bent, [[0, 1, 4, 5], [1, 2, 3, 4]])) == [0, 1]
     near = [[0, 0], [1, 0], [2, 0], [2, 1 + 1e-9], [1, 1], [0, 1]]
     assert of(make_layout(near, [[0, 1, 4, 5], [1, 2, 3, 4]])) == [0, 1]
+
+
+def _even_points(poly: np.ndarray, n: int) -> np.ndarray:
+    """``n + 1`` points evenly spaced by arc length along ``poly`` (numpy only)."""
+    cum = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(poly, axis=0), axis=1))])
+    t = np.linspace(0.0, cum[-1], n + 1)
+    return np.stack([np.interp(t, cum, poly[:, 0]), np.interp(t, cum, poly[:, 1])], axis=1)
+
+
+def _shoelace(p: np.ndarray) -> float:
+    return 0.5 * abs(float(np.sum(p[:, 0] * np.roll(p[:, 1], -1) - np.roll(p[:, 0], -1) * p[:, 1])))
+
+
+def _bulge(width: float):
+    """A rectangle ``width`` x 10 whose top is a flat circular arc (58 points), its four corners
+    the layout's: ``(points, layout)``."""
+    t = np.linspace(0.0, math.pi, 61)[1:-1]
+    r = width / 2
+    arc = np.stack([r + r * np.cos(t), 10.0 + 0.6 * r * np.sin(t)], axis=1)  # from the right to the left
+    pts = np.vstack([[[0.0, 0.0], [width, 0.0], [width, 10.0]], arc, [[0.0, 10.0]]])
+    n = len(pts)
+    return pts, make_layout(pts, [list(range(n))], corners=[0, 1, 2, n - 1])
+
+
+@pytest.mark.parametrize("width", [10.0, 40.0])
+def test_lean_curve_floors_share_the_area_budget_among_the_curved_sides(width):
+    """The straight sides get no floor; with ``lean`` they take no share of the budget either, so
+    the arc's lean floor is below the one of the budget shared by the whole boundary, and its
+    chords (evenly spaced, as the mesh places them) lose at most ``CURVE_SHARE * area_tol`` of the
+    region's area, measured by the shoelace formula; one edge fewer loses more."""
+    pts, lay = _bulge(width)
+    sd = layout_sides(lay)
+    region = region_area(lay)
+    assert region == pytest.approx(_shoelace(pts))
+    lean = curve_floors(lay, sd, 0.01, lean=True)
+    fine = curve_floors(lay, sd, 0.01)
+    curved = [s for s in range(len(sd.chains)) if len(sd.chains[s]) > 2]
+    assert len(curved) == 1 and all(lean[s] == fine[s] == 1 for s in range(len(sd.chains)) if s not in curved)
+    s = curved[0]
+    assert 1 < lean[s] < fine[s]
+    chain = lay.points[sd.chains[s]]
+    for floor, share in ((lean[s], 1.0), (fine[s], float(sd.lengths[s] / sd.lengths.sum()))):
+        budget = CURVE_SHARE * 0.01 * region * share
+        lost = _shoelace(pts) - _shoelace(np.vstack([[[0.0, 0.0], [width, 0.0]], _even_points(chain, int(floor))]))
+        assert 0 < lost <= budget * (1 + 1e-9)
+        fewer = _shoelace(pts) - _shoelace(np.vstack([[[0.0, 0.0], [width, 0.0]], _even_points(chain, int(floor) - 1)]))
+        assert fewer > budget  # the fewest edges that keep it
+
+
+def test_lean_floors_help_only_where_a_curve_floor_is_below_the_size_band(cat):
+    """The bulge 40 wide: its arc of length ``L`` has the floor ``fine`` from the whole
+    boundary's share and the smaller ``lean`` from the curves' own. The lean solve can help at a
+    size ``h`` where ``L / fine < 0.5 h <= L / lean`` (the floor puts the arc's edges below the
+    size band and the lean floor lets them into it); not at a finer size (no floor below the
+    band), nor at a coarser one (the lean floor is below it too), nor for a polygon without curves."""
+    _, lay = _bulge(40.0)
+    sd = layout_sides(lay)
+    s = next(s for s in range(len(sd.chains)) if len(sd.chains[s]) > 2)
+    fine = int(curve_floors(lay, sd, 0.01)[s])
+    lean = int(curve_floors(lay, sd, 0.01, lean=True)[s])
+    L = float(sd.lengths[s])
+    assert lean < fine
+    assert lean_floors_help(lay, cat, 2 * L / lean)
+    assert lean_floors_help(lay, cat, L / lean + L / fine)
+    assert not lean_floors_help(lay, cat, 2 * L / fine)
+    assert not lean_floors_help(lay, cat, 2 * L / lean * 1.01)
+    square = make_layout([[0.0, 0.0], [40.0, 0.0], [40.0, 10.0], [20.0, 10.0], [0.0, 10.0]], [[0, 1, 2, 3, 4]],
+                         corners=[0, 1, 2, 4])
+    assert not lean_floors_help(square, cat, 2 * L / lean)

@@ -32,6 +32,7 @@ from jaxmatch.errors import EXIT_BAD_INPUT, InputError, SolverError
 from jaxmatch.meshing.choose import RULES, best_possible_key, cannot_win, choose, mesh_key
 from jaxmatch.meshing.pipeline import strategy_names
 from jaxmatch.meshing.result import Candidate, QuadMesh, irregular_bound
+from jaxmatch.meshing import strategies as strat
 from jaxmatch.placement.decompose import STRATEGIES
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -357,6 +358,92 @@ def test_size_conformity_is_a_yes_or_no():
     at_size = dataclasses.replace(coarse_poor, size=1.0)
     picked = choose([Candidate("long", coarse_good), Candidate("at size", at_size)])
     assert picked.chosen == "at size" and picked.rule == "size conformity"
+
+
+def _strip(height: float) -> QuadMesh:
+    """A 4 x 1 row of quads ``height`` tall at the size 1: the long sides at the size, the short
+    sides one edge of ``height`` (``height / h`` within one edge of rounding: the size fit holds)."""
+    import dataclasses
+
+    m = grid_mesh(4, 1)
+    xy = m.xy * [1.0, height]
+    return dataclasses.replace(m, xy=xy, corners=xy[[0, 4, 9, 5]], region_area=4.0 * height, size=1.0)
+
+
+def test_the_size_band_decides_after_the_size_fit_and_only_as_a_yes_or_no():
+    """Rectangles of the same quality whose sides all fit the size: a row of unit quads (every
+    edge h) beats the same row 1.8 tall (its 5 edges across at 1.8 h: 8 of 13 edges within
+    [0.5 h, 1.5 h], below 80 %) on the size band; two meshes that both miss it are not told apart
+    by it. The ring partition is wanted for a best mesh that nearly meets it (at least
+    ``Quality.band_near`` of its edges at the size), not for one far off it (a 4 x 4 grid of unit
+    quads at the size 2.5: every edge 0.4 h)."""
+    import dataclasses
+    from types import SimpleNamespace
+
+    at_size, tall, taller = _strip(1.0), _strip(1.8), _strip(1.9)
+    for m in (at_size, tall, taller):
+        assert not m.size_conformity(QUALITY) and m.size_fit(QUALITY) == 0 and m.min_scaled_jacobian == 1.0
+    assert at_size.band_share(QUALITY.size_band) == 1.0 and tall.band_share(QUALITY.size_band) == pytest.approx(8 / 13)
+    picked = choose([Candidate("tall", tall), Candidate("at size", at_size)])
+    assert picked.chosen == "at size" and picked.rule == "size band"
+    picked = choose([Candidate("taller", taller), Candidate("tall", tall)])
+    assert picked.rule != "size band"
+    assert not tall.misses_size_band(dataclasses.replace(QUALITY, band_share=0.6))
+    far = dataclasses.replace(grid_mesh(4, 4), size=2.5)
+    assert far.band_share(QUALITY.size_band) == 0.0 and far.misses_size_band(QUALITY)
+    assert tall.near_size_band(QUALITY) and not far.near_size_band(QUALITY) and not at_size.near_size_band(QUALITY)
+    req = SimpleNamespace(quality=QUALITY)
+    assert strat.RingPartition().wanted(tall, [], req)
+    assert not strat.RingPartition().wanted(far, [], req) and not strat.RingPartition().wanted(at_size, [], req)
+
+
+def test_lean_curves_are_tried_off_the_size_band_and_kept_only_at_it(monkeypatch):
+    """:class:`LeanCurves` is wanted when the best mesh nearly meets the size band and the region
+    has curved sides (not for a polygon whose vertices are all corners, not far off the band,
+    not with a size field); of its meshes it keeps those that meet the band with a min scaled
+    Jacobian at most ``Quality.lean_cost`` below the best's (the layouts themselves come from
+    ``try_layouts``, replaced here by ready meshes); only the best mesh's own layout is meshed
+    again, none when it is not one of the strategy's."""
+    import dataclasses
+    from types import SimpleNamespace
+
+    from jaxmatch.shape import make_shape
+
+    fine = dataclasses.replace(grid_mesh(4, 4), size=2.5)  # far off the band (every edge 0.4 h), min SJ 1
+    half = _strip(1.8)  # the best so far: a near miss, min SJ 1
+    at_size = _strip(1.0)
+    two = grid_mesh(4, 4)
+    xy = two.xy + np.c_[0.3 * two.xy[:, 1], np.zeros(len(two.xy))]  # sheared: at the size, min SJ 0.96
+    sheared = dataclasses.replace(two, xy=xy, corners=xy[[0, 4, 24, 20]], size=1.0)
+    assert not sheared.misses_size_band(QUALITY) and sheared.min_scaled_jacobian < 1 - QUALITY.lean_cost
+    square = make_shape([[0, 0], [4, 0], [4, 4], [0, 4]])
+    disk = make_shape([[2 + 2 * np.cos(t), 2 + 2 * np.sin(t)] for t in np.linspace(0, 2 * np.pi, 40, endpoint=False)])
+    assert not strat.has_curves(square) and strat.has_curves(disk)
+    lean = strat.LeanCurves((strat.Rings(),))
+    tried = [Candidate("rings", half)]
+    assert lean.wanted(half, tried, SimpleNamespace(quality=QUALITY, region=disk))
+    assert not lean.wanted(half, tried, SimpleNamespace(quality=QUALITY, region=square))
+    assert not lean.wanted(at_size, tried, SimpleNamespace(quality=QUALITY, region=disk))
+    assert not lean.wanted(fine, tried, SimpleNamespace(quality=QUALITY, region=disk))
+    assert not lean.wanted(half, tried, SimpleNamespace(quality=dataclasses.replace(QUALITY, field=lambda p: p[:, 0]),
+                                                        region=disk))
+    made = [Candidate("a" + strat.LEAN, at_size), Candidate("b" + strat.LEAN, sheared),
+            Candidate("c" + strat.LEAN, fine), Candidate("d" + strat.LEAN, None, "cannot beat")]
+    seen = {}
+
+    def fake(region, strategies, *args, **kw):
+        seen.update(kw, strategies=strategies)
+        return made
+
+    monkeypatch.setattr(strat, "try_layouts", fake)
+    req = SimpleNamespace(quality=QUALITY, region=disk, cat=None, lat=None, h=1.0, corners=np.zeros((0, 2)),
+                          budget_s=None, t0=0.0, progress=None)
+    kept = lean.candidates(req, tried)
+    assert [c.name for c in kept] == ["a" + strat.LEAN]
+    assert seen["lean_curves"] and seen["best"][1] == "rings" and [s.name for s in seen["strategies"]] == ["rings"]
+    assert strat.LeanCurves((strat.Split("continuations"),)).candidates(req, tried) == []
+    req.quality = dataclasses.replace(QUALITY, lean_cost=0.1)  # a larger cost allowed: the sheared one too
+    assert [c.name for c in lean.candidates(req, tried)] == ["a" + strat.LEAN, "b" + strat.LEAN]
 
 
 def test_size_conformity_counts_the_misses_of_a_size_field_only():

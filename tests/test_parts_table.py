@@ -182,6 +182,7 @@ def test_criteria_count_cases():
     assert crit["mean of min "][2] is False  # (0.8 + 0.5) / 2 < 0.8
     assert crit["no edge long"] == (1, 3, False)
     assert crit["where gmsh h"] == (1, 3, False)
+    assert pt.band_misses(rows) == ["b P/40 (60%, gmsh 90%)", "c P/40 (0%, gmsh 90%)"]
 
 
 def test_one_small_part_through_both_meshers(tmp_path):

@@ -21,12 +21,15 @@
 8. size fit: fewer stretches whose edge count is off ``length / h`` by more than
    ``max(1, Quality.size_tol * length / h)`` either way, plus edges longer than
    ``Quality.long_edge * h`` (and, with a size field, the short ones: :meth:`QuadMesh.size_fit`);
-9. irregular vertices: fewer irregular internal vertices beyond Euler's lower bound for the
+9. size band: at least ``Quality.band_share`` of the edges within ``Quality.size_band`` sizes
+   (:meth:`QuadMesh.misses_size_band`: the interior too; a yes or no: where every candidate
+   misses it, a feature smaller than the size meshed finer, it does not decide);
+10. irregular vertices: fewer irregular internal vertices beyond Euler's lower bound for the
    boundary valences used (:func:`jaxmatch.meshing.result.irregular_bound`; none below it counts
    as 0: a valence-6 vertex can make up for two);
-10. fewer patches;
-11. higher mean scaled Jacobian (2 decimals);
-12. the order tried (single template first).
+11. fewer patches;
+12. higher mean scaled Jacobian (2 decimals);
+13. the order tried (single template first).
 
 :func:`choose` names the first rule on which the winner beats the runner-up;
 :func:`cannot_win` tells, before a candidate is meshed, that it cannot beat a given key (from its
@@ -68,7 +71,7 @@ from jaxmatch.meshing.result import Candidate, QuadMesh
 __all__ = ["RULES", "best_possible_key", "cannot_win", "choose", "mesh_key"]
 
 RULES = ("no fold", "corners kept", "area kept", "quality floor", "size conformity", "quality band", "min scaled Jacobian",
-         "size fit", "irregular vertices", "fewer patches", "mean scaled Jacobian", "order tried")
+         "size fit", "size band", "irregular vertices", "fewer patches", "mean scaled Jacobian", "order tried")
 """The rules of :func:`mesh_key`, in order (the last one: the earlier candidate)."""
 
 def mesh_key(m: QuadMesh, order: int = 0, quality: Quality = QUALITY) -> tuple:
@@ -84,6 +87,7 @@ def mesh_key(m: QuadMesh, order: int = 0, quality: Quality = QUALITY) -> tuple:
         not (sj >= quality.high_sj),
         -math.floor(sj / quality.sj_step + 1e-9) if math.isfinite(sj) else math.inf,
         m.size_fit(quality),
+        m.misses_size_band(quality),
         max(int(m.irregular.size) - m.irregular_bound, 0),
         m.n_patches,
         -round(mean, 2),
@@ -94,9 +98,10 @@ def mesh_key(m: QuadMesh, order: int = 0, quality: Quality = QUALITY) -> tuple:
 def best_possible_key(n_patches: int, order: int, max_sj: float = 1.0, quality: Quality = QUALITY) -> tuple:
     """The smallest :func:`mesh_key` any mesh of ``n_patches`` patches tried at ``order`` whose
     min scaled Jacobian is at most ``max_sj`` can have: no fold, every corner, the area, every
-    side at the size, min scaled Jacobian ``max_sj``, no irregular vertex beyond the bound, mean 1."""
+    side at the size, min scaled Jacobian ``max_sj``, the size band met, no irregular vertex
+    beyond the bound, mean 1."""
     return (False, False, False, not (max_sj >= quality.good_sj), 0, not (max_sj >= quality.high_sj),
-            -math.floor(max_sj / quality.sj_step + 1e-9), 0, 0, int(n_patches), -1.0, int(order))
+            -math.floor(max_sj / quality.sj_step + 1e-9), 0, False, 0, int(n_patches), -1.0, int(order))
 
 
 def cannot_win(best_key: tuple, n_patches: int, order: int, max_sj: float = 1.0, quality: Quality = QUALITY) -> bool:

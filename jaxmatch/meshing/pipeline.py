@@ -14,7 +14,8 @@ canonical loops, corners at the size), the candidates (:mod:`.strategies`), the 
   :data:`~jaxmatch.placement.decompose.STRATEGIES`; every candidate is meshed by the same solve
   (:func:`~jaxmatch.placement.solve.mesh_layout`: templates per patch, one integer program for
   every side count, refinement, placement, merging, smoothing); then, when the best so far needs
-  them, larger templates, templates that follow the size and the bends as corners: one plan of
+  them, larger templates, templates that follow the size, the curves meshed coarser (nearer the
+  size) and the bends as corners: one plan of
   strategy objects (:mod:`.strategies`), run once, and the best kept by the one rule of
   :mod:`jaxmatch.meshing.choose`, applied once;
 * a shape with ``sides`` (edges per side) is meshed as one template meeting them exactly;
@@ -44,8 +45,8 @@ from jaxmatch.meshing.groups import make_periodic, name_groups, periodic_mismatc
 from jaxmatch.meshing.grading import follow_field
 from jaxmatch.meshing.region import canonical, corner_points, default_size, load_region
 from jaxmatch.meshing.result import Candidate, QuadMesh
-from jaxmatch.meshing.strategies import (RINGS, SINGLE, Bends, Conforming, Larger, Layouts, Request, RingPartition, Smooth,
-                                         layout_strategies, run)
+from jaxmatch.meshing.strategies import (RINGS, SINGLE, Bends, Conforming, Larger, Layouts, LeanCurves, Request, RingPartition,
+                                         Rings, Smooth, layout_strategies, run)
 from jaxmatch.inputs import _lattice, check_sizes, load_catalogue
 from jaxmatch.lazy import Later
 from jaxmatch.model import Model, Region, make_model
@@ -295,7 +296,8 @@ def _mesh_size(shape, cat, lat, h, strategies, quality, budget_s, progress, corn
             return None if np.array_equal(finer.corners, region.corners) else finer
 
         if quality.field is None:
-            plan = (layouts, Larger(), Conforming()) + rings + (Bends(layouts, rejudge),)
+            lean = LeanCurves(layouts.strategies + ((Rings(),) if rings else ()))
+            plan = (layouts, Larger(), Conforming()) + rings + (lean, Bends(layouts, rejudge))
         else:  # graded: the ring partition before the larger templates, tried only if it too misses the field
             plan = (layouts,) + rings + (Larger(), Bends(layouts, rejudge))
     tried = run(plan, req)

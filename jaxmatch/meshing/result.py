@@ -165,6 +165,28 @@ class QuadMesh:
         r = self._edge_lengths / self._edge_targets
         return float(np.mean((r >= SHARE_BAND[0]) & (r <= SHARE_BAND[1])))
 
+    def band_share(self, band: tuple[float, float]) -> float:
+        """Share of the edges whose length / the size at its midpoint (the field, or ``size``)
+        lies in ``band = (lo, hi)`` (NaN without a size or without edges)."""
+        if not self._edges.size:
+            return math.nan
+        r = self._edge_lengths / self._edge_targets
+        return float(np.mean((r >= band[0]) & (r <= band[1])))
+
+    def misses_size_band(self, quality) -> bool:
+        """Whether fewer than ``quality.band_share`` of the edges are within ``quality.size_band``
+        sizes (the choice rule's size band; False without a size: nothing to miss)."""
+        if self.field is None and not self.size:
+            return False
+        return not (self.band_share(quality.size_band) >= quality.band_share)
+
+    def near_size_band(self, quality) -> bool:
+        """Whether the mesh misses the size band (:meth:`misses_size_band`) by a near miss: at
+        least ``quality.band_near`` of its edges within ``quality.size_band`` sizes (further
+        off, features of the region smaller than the size make the short edges, which no other
+        partition of it avoids)."""
+        return self.misses_size_band(quality) and self.band_share(quality.size_band) >= quality.band_near
+
     @cached_property
     def _valences(self) -> np.ndarray:
         """``(V,) int32`` vertex valences (:func:`~jaxmatch.catalogue.mesh.valences`, from :attr:`_edges`)."""

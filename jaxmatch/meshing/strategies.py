@@ -13,8 +13,12 @@ strategy                candidates                                              
 :class:`Conforming`     single templates whose side counts follow the size                no candidate follows it
                                                                                          (no size field)
 :class:`RingPartition`  a layer of patches along every loop and an O-grid core, or a box  an edge of every candidate
-                        around every hole and a grid through the rest                     is longer than 2 h, or none
-                        (:class:`Rings`, ``"rings"``)                                     reaches the quality band
+                        around every hole and a grid through the rest                     is longer than 2 h, none
+                        (:class:`Rings`, ``"rings"``)                                     reaches the quality band,
+                                                                                         or the best nearly meets the
+                                                                                         size band
+:class:`LeanCurves`     the best mesh's layout again, the curves' area budget shared by   the best nearly meets the
+                        the curved sides alone (``" +lean curves"``), kept at the band    size band (curved sides)
 :class:`Bends`          the layouts again with a curved outline's bends as corners        every candidate folds
 :class:`Smooth`         a region with fewer than two corners: a refined template and the  (its own plan)
                         central block (``"disk"``)
@@ -46,12 +50,13 @@ from jaxmatch.placement.decompose import _same, decompose, disk_layout, same_cut
 from jaxmatch.placement.layout import check_layout
 from jaxmatch.placement.rings import ring_layout
 from jaxmatch.placement.refine import DEFAULT_LIMIT, InfeasibleRequest, refine_mesh, side_lengths, side_polylines
-from jaxmatch.placement.solve import ALL_SIZES, TEMPLATE_SIZES, mesh_layout
+from jaxmatch.placement.solve import ALL_SIZES, TEMPLATE_SIZES, lean_floors_help, mesh_layout
 from jaxmatch.placement.templates import walk
 from jaxmatch.shape import Shape
 from jaxmatch.sides import periodic_lines
 
-__all__ = ["CONFORMING_TRIES", "DISK", "FINER", "RINGS", "SINGLE", "Bends", "Conforming", "Larger", "LayoutStrategy", "Layouts",
+__all__ = ["CONFORMING_TRIES", "DISK", "FINER", "LEAN", "RINGS", "SINGLE", "Bends", "Conforming", "Larger", "LayoutStrategy",
+           "Layouts", "LeanCurves", "has_curves",
            "Request", "RingPartition", "Rings", "Single", "Smooth", "Split", "conforming_templates", "larger_templates", "layout_strategies", "run",
            "smooth_candidates", "try_layouts"]
 
@@ -83,7 +88,8 @@ def _why_not(e: Exception) -> str:
 
 
 def try_layouts(shape: Shape, strategies: Sequence["LayoutStrategy"], cat, lat, h: float, corners: np.ndarray, budget_s,
-                t0: float, progress, suffix: str = "", quality: Quality = QUALITY) -> list[Candidate]:
+                t0: float, progress, suffix: str = "", quality: Quality = QUALITY, lean_curves: bool = False,
+                best: tuple | None = None) -> list[Candidate]:
     """Each layout strategy of ``strategies`` (one :class:`Candidate` each, in their order, with its
     mesh or the reason it has none): every strategy's layout is cut first, then meshed by the same
     solve (:func:`~jaxmatch.placement.solve.mesh_layout`), the most promising first: by the best
@@ -94,7 +100,10 @@ def try_layouts(shape: Shape, strategies: Sequence["LayoutStrategy"], cat, lat, 
     scaled Jacobian: :func:`~jaxmatch.placement.bounds.node_sj_bound` from the angles its nodes
     split, and for the single patch :func:`~jaxmatch.placement.bounds.single_sj_bound` from its
     template sizes) is not meshed, so the choice is the one meshing all of them would give. A
-    strategy whose cuts or solve fail for any reason is skipped with that reason."""
+    strategy whose cuts or solve fail for any reason is skipped with that reason. ``lean_curves``:
+    the solve's curve floors from the curved sides' share alone
+    (:func:`~jaxmatch.placement.solve.mesh_layout`); ``best``: ``(key, name, valid)`` of the best
+    mesh already made elsewhere (what a layout must beat to be meshed)."""
     names = [st.name for st in strategies]
     tried: list[Candidate | None] = [None] * len(names)
     layouts: list[tuple[int, object]] = []
@@ -111,8 +120,16 @@ def try_layouts(shape: Shape, strategies: Sequence["LayoutStrategy"], cat, lat, 
         if any(_same(lay, other) for _, other in layouts):
             tried[i] = Candidate(name + suffix, None, "same patches as an earlier candidate")
             continue
+        if lean_curves:
+            try:
+                helps = lean_floors_help(lay, cat, h, quality)
+            except FAILED as e:
+                tried[i] = Candidate(name + suffix, None, _why_not(e))
+                continue
+            if not helps:
+                tried[i] = Candidate(name + suffix, None, "no side's curve floor below the size band to make coarser")
+                continue
         layouts.append((i, lay))
-    best: tuple | None = None
     concave = bool(np.any(~np.asarray(shape.convex, bool)))
     late = {i for i, _ in layouts if strategies[i].single and concave}  # after the cuts: a grid they make may rule it out
     caps = {}
@@ -144,7 +161,7 @@ def try_layouts(shape: Shape, strategies: Sequence["LayoutStrategy"], cat, lat, 
             try:
                 check_layout(lay)  # (the cuts' layouts are checked only when meshed)
                 lm = mesh_layout(lay, cat, lat, size=h, smooth_cuts=lay.n_patches > 1, sizes=sizes, quality=quality,
-                                 periodic=periodic_lines(shape))
+                                 periodic=periodic_lines(shape), lean_curves=lean_curves)
             except FAILED as e:
                 tried[i] = Candidate(label, None, _why_not(e))
             else:
@@ -328,7 +345,8 @@ def layout_strategies(names: Sequence[str]) -> tuple[LayoutStrategy, ...]:
 
 class RingPartition:
     """Every candidate has an edge longer than ``Quality.long_edge`` sizes, or none reaches the
-    quality band (``Quality.high_sj``): the ring partition (:class:`Rings`), meshed by the same solve, at the end; also
+    quality band (``Quality.high_sj``), or the best nearly meets the size band
+    (:meth:`QuadMesh.near_size_band`): the ring partition (:class:`Rings`), meshed by the same solve, at the end; also
     when nothing else meshed (``when_none_meshed``). Sides off the size alone are
     :class:`Conforming`'s (docs/meshing.md, "The ring partition": what trying the rings for them
     too cost)."""
@@ -337,11 +355,56 @@ class RingPartition:
 
     def wanted(self, best: QuadMesh | None, tried, req: Request) -> bool:
         q = req.quality
-        return best is None or best.long_edges(q.long_edge) > 0 or not best.min_scaled_jacobian >= q.high_sj
+        return best is None or best.long_edges(q.long_edge) > 0 or not best.min_scaled_jacobian >= q.high_sj or \
+            best.near_size_band(q)
 
     def candidates(self, req: Request, tried) -> list[Candidate]:
         return try_layouts(req.region, (Rings(),), req.cat, req.lat, req.h, req.corners, req.budget_s, req.t0,
                            req.progress, quality=req.quality)
+
+
+LEAN = " +lean curves"
+"""Suffix of the candidates meshed again with the curves' floors from the curved sides' share of
+the area budget alone (:class:`LeanCurves`)."""
+
+
+def has_curves(shape: Shape) -> bool:
+    """Whether a loop of ``shape`` has a point that is not a corner (a curved or subdivided
+    side: the only sides whose floors :class:`LeanCurves` changes)."""
+    return shape.points.shape[0] > len(shape.corners) or \
+        any(len(hole) > len(c) for hole, c in zip(shape.holes, shape.hole_corners))
+
+
+class LeanCurves:
+    """The best mesh so far nearly meets the size band (:meth:`QuadMesh.near_size_band`; one
+    size, no field) and the region has curved sides: the best mesh's layout meshed again (``" +lean
+    curves"``; one solve, none when the best mesh is not one of ``strategies``') with the area
+    budget of the curves' chords shared by the curved sides alone (``lean_curves`` of
+    :func:`~jaxmatch.placement.solve.mesh_layout`: where the whole boundary shares it, round
+    holes among long straight sides are meshed finer than the size and their rings carry those
+    short edges inside), only where that makes a side coarser that the whole boundary's share put below
+    the size band (:func:`~jaxmatch.placement.solve.lean_floors_help`). The mesh is kept when it
+    meets the size band and its min scaled Jacobian is at most ``Quality.lean_cost`` below the
+    best's: coarser curves to reach the band, not for a worse mesh."""
+
+    def __init__(self, strategies: Sequence[LayoutStrategy]):
+        self.strategies = tuple(strategies)
+
+    def wanted(self, best: QuadMesh | None, tried, req: Request) -> bool:
+        return req.quality.field is None and best.near_size_band(req.quality) and has_curves(req.region)
+
+    def candidates(self, req: Request, tried) -> list[Candidate]:
+        q = req.quality
+        key, i = min((mesh_key(c.mesh, i, q), i) for i, c in enumerate(tried) if c.mesh is not None)
+        best = tried[i].mesh
+        own = [st for st in self.strategies if st.name == tried[i].name]  # the best mesh's own layout
+        if not own:
+            return []
+        more = try_layouts(req.region, own, req.cat, req.lat, req.h, req.corners, req.budget_s, req.t0,
+                           req.progress, suffix=LEAN, quality=q, lean_curves=True, best=(key, tried[i].name, best.valid))
+        floor = best.min_scaled_jacobian - q.lean_cost
+        return [c for c in more if c.mesh is not None and not c.mesh.misses_size_band(q)
+                and c.mesh.min_scaled_jacobian >= floor]
 
 
 def _best(tried, quality: Quality) -> QuadMesh | None:

@@ -604,7 +604,11 @@ def chord_area_error(polyline: np.ndarray, n: int) -> float:
 
 CURVE_SHARE = 0.8
 """The part of the area tolerance (``Quality.area_tol``) that the chords of curved sides may
-use, shared among the boundary sides by length (:func:`curve_floors`)."""
+use, shared among the curved boundary sides by length (:func:`curve_floors`)."""
+
+CURVE_ZERO = 1e-9
+"""A boundary side whose single chord leaves less than this fraction of the region's area is
+straight (:func:`curve_floors`: no share of the area budget)."""
 
 
 def region_area(layout: Layout) -> float:
@@ -636,20 +640,27 @@ def _region_shares(layout: Layout, sides: Sides) -> np.ndarray:
     return share
 
 
-def curve_floors(layout: Layout, sides: Sides, area_tol: float, region: float | None = None) -> np.ndarray:
+def curve_floors(layout: Layout, sides: Sides, area_tol: float, region: float | None = None, *,
+                 lean: bool = False) -> np.ndarray:
     """``(S,) int64`` the fewest edges each side may have so that its chords keep the region's
     area: a boundary side whose points do not lie on one line gets at least the edges that keep
-    the area between it and its chords within its share (its length over the boundary's) of
-    :data:`CURVE_SHARE` ``* area_tol`` of the region's area; every other side 1. ``region``:
+    the area between it and its chords within its share of :data:`CURVE_SHARE` ``* area_tol`` of
+    the region's area: its length over the whole boundary's, or with ``lean`` over the curved
+    boundary sides' total (a straight side loses no area and takes none: coarser curves, nearer
+    the size, where the outline also has straight sides); every other side 1. ``region``:
     :func:`region_area` of ``layout`` when the caller has it. An assembly's layout
     (``layout.regions``): a side between two regions is kept like a boundary side of each, its
-    budget the smaller of the two regions' shares."""
+    budget the smaller of the two regions' shares (``lean`` does not apply)."""
     floors = np.ones(len(sides.chains), np.int64)
     own = _region_shares(layout, sides) if layout.regions is not None else None
     bound = np.flatnonzero(sides.outer if own is None else ~np.isinf(own))
     if not bound.size:
         return floors
-    total = float(np.sum(sides.lengths[bound]))
+    err1 = {int(s): chord_area_error(layout.points[sides.chains[s]], 1) for s in bound}
+    if region is None and own is None:
+        region = region_area(layout)
+    curved = [s for s in bound if err1[int(s)] > CURVE_ZERO * region] if lean and own is None else bound
+    total = float(np.sum(sides.lengths[curved])) if len(curved) else 1.0  # (lean: straight sides need no share)
     for s in bound:
         poly = layout.points[sides.chains[s]]
         if poly.shape[0] <= 2:
@@ -657,10 +668,8 @@ def curve_floors(layout: Layout, sides: Sides, area_tol: float, region: float | 
         if own is not None:
             budget = CURVE_SHARE * area_tol * float(own[s]) * float(sides.lengths[s])
         else:
-            if region is None:
-                region = region_area(layout)
             budget = CURVE_SHARE * area_tol * region * float(sides.lengths[s]) / total
-        if chord_area_error(poly, 1) <= budget:
+        if err1[int(s)] <= budget:
             continue
         lo, hi = 1, 2
         while chord_area_error(poly, hi) > budget and hi < poly.shape[0] * 4:

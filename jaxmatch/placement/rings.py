@@ -31,7 +31,7 @@ from jaxmatch.placement.decompose import DISK_BLOCK, _faces, _hits, _layout, _ri
 from jaxmatch.placement.layout import Layout, check_layout
 from jaxmatch.shape import Shape, make_shape
 
-__all__ = ["BOX_ROOM", "CUT_REACH", "MIN_CUTS", "OPENING", "RING_DEPTH", "hole_ring_layout", "ring_layout"]
+__all__ = ["BOX_ROOM", "BOX_SHARE", "BOX_SNAP", "CUT_REACH", "MIN_CUTS", "OPENING", "RING_DEPTH", "hole_ring_layout", "ring_layout"]
 
 _later = Later(shapely="shapely")
 
@@ -49,8 +49,15 @@ MIN_CUTS = 4
 """Fewest cuts from the outline to the core (a disk has no corner: four)."""
 
 BOX_ROOM = 0.45
-"""The box around a hole leaves it at most this fraction of the way to the nearest other loop
-(half-way to another hole counts as the whole way: the other's box takes the rest)."""
+"""The box around a hole leaves it at most this fraction of the way to the outer loop."""
+
+BOX_SHARE = 0.225
+"""The box around a hole leaves it at most this fraction of the way to the nearest other hole
+(whose box takes as much from the other side)."""
+
+BOX_SNAP = 0.75
+"""Sides of two boxes closer than this many ``h`` along an axis are moved to one line (no thin
+strip of quads between them, no extra cut through the boxes' ring patches)."""
 
 QUAD_SEGMENTS = 4
 """Segments per quarter circle of the core's rounded parts (shapely's ``quad_segs``)."""
@@ -186,9 +193,10 @@ def hole_ring_layout(shape: Shape, h: float, depth: float = RING_DEPTH) -> Layou
     frame2 = np.stack([u, v], axis=1)
     ext = []  # per hole: (lo, hi) of its box and (lo, hi) of the hole, along u and v
     for k, hole in enumerate(holes):
-        others = [boundary.distance(shapely.Polygon(hole))] + [shapely.Polygon(hole).distance(shapely.Polygon(o)) / 2
-                                                               for j, o in enumerate(holes) if j != k]
-        gap = min(d, BOX_ROOM * min(others))
+        to_outer = boundary.distance(shapely.Polygon(hole))
+        to_holes = min((shapely.Polygon(hole).distance(shapely.Polygon(o)) for j, o in enumerate(holes) if j != k),
+                       default=math.inf)
+        gap = min(d, BOX_ROOM * to_outer, BOX_SHARE * to_holes)
         if gap <= 0:
             raise InputError(f"hole {k + 1}: no room for a box around it", where=shape.source)
         w = hole @ frame2
@@ -234,7 +242,7 @@ def _boxed_layout(shape: Shape, region, outer: np.ndarray, holes: list, boxes_xy
 
 def _aligned_boxes(ext, snap: float, outer, frame2, shapely):
     """The boxes' corners ``(4, 2)`` each (user coordinates) from their extents along the frame's
-    axes ``ext`` (:func:`hole_ring_layout`), sides closer than ``0.75 * snap`` along an axis moved
+    axes ``ext`` (:func:`hole_ring_layout`), sides closer than :data:`BOX_SNAP` ``* snap`` along an axis moved
     to one value, their mean as near as every box keeps a fifth of its gap to its hole (no thin
     strip of quads between two boxes' nearly aligned sides), or None when a box then leaves the
     region or meets another."""
@@ -246,7 +254,7 @@ def _aligned_boxes(ext, snap: float, outer, frame2, shapely):
             order = np.argsort(vals)
             groups, cur = [], [order[0]]
             for i in order[1:]:
-                if vals[i] - vals[cur[-1]] < 0.75 * snap:
+                if vals[i] - vals[cur[-1]] < BOX_SNAP * snap:
                     cur.append(i)
                 else:
                     groups.append(cur)

@@ -12,7 +12,10 @@ fitted to them (:func:`~jaxmatch.placement.layout.fit_sides`), and the patches a
 (:func:`~jaxmatch.placement.layout.merge_patches`). A patch whose refinement folds (or has a
 scaled Jacobian below ``quality.good_sj``) is given its next template and the program is solved
 again; the best round is kept (fewest inverted quads, then the highest minimum scaled Jacobian of
-the worst patch). A patch that is a translate of an earlier one takes that patch's templates and
+the worst patch). The side counts' floors keep the area
+(:func:`~jaxmatch.placement.layout.curve_floors`; ``lean_curves``: the area budget shared by the
+curved sides alone, tried by :class:`jaxmatch.meshing.strategies.LeanCurves`). A patch that
+is a translate of an earlier one takes that patch's templates and
 refinement, moved.
 
 Everything made is kept in the catalogue's cache (:mod:`jaxmatch.cache`).
@@ -44,7 +47,7 @@ if TYPE_CHECKING:  # pragma: no cover
     from jaxmatch.scoring.lattice import Lattice
 
 __all__ = ["ALL_SIZES", "ROUNDS", "TEMPLATES_PER_PATCH", "TEMPLATE_SIZES", "layout_key", "layout_sides_kept",
-           "mesh_layout", "patch_shapes_kept"]
+           "lean_floors_help", "mesh_layout", "patch_shapes_kept"]
 
 TEMPLATE_SIZES = ((0, 1), (2, 3))
 """Groups of internal-vertex counts tried for a patch's templates, in this order: the first
@@ -88,7 +91,7 @@ def mesh_layout(layout: Layout, catalogue: Catalogue, lattice: Lattice, *, size:
                 counts: Mapping[int, int] | None = None, templates_per_patch: int = TEMPLATES_PER_PATCH,
                 sizes=TEMPLATE_SIZES, smooth_cuts: bool = False, progress=None,
                 first_templates: Sequence[int] | None = None, quality: Quality = QUALITY,
-                periodic: Sequence = ()) -> LayoutMesh:
+                periodic: Sequence = (), lean_curves: bool = False) -> LayoutMesh:
     """Mesh every patch of ``layout`` and merge them into one conforming :class:`LayoutMesh`.
 
     size: target edge length (user units) for sides without a requested count; counts:
@@ -105,6 +108,9 @@ def mesh_layout(layout: Layout, catalogue: Catalogue, lattice: Lattice, *, size:
     smooth_cuts: after merging, untangle/smooth all vertices except the outer boundary
     (:func:`jaxmatch.placement.embed.smooth`; for decompositions, whose inner sides are not
     the user's): it never lowers the minimum scaled Jacobian.
+    lean_curves: the area budget of the curved sides' chords shared by the curved boundary sides
+    alone, not by the whole boundary (:func:`~jaxmatch.placement.layout.curve_floors`): curves
+    nearer the size where the outline also has straight sides.
 
     What is made is kept in the catalogue's cache (:mod:`jaxmatch.cache`: the meshed layout, its
     sides, patch shapes, integer programs, templates and refined patches): the same layout meshed
@@ -116,7 +122,7 @@ def mesh_layout(layout: Layout, catalogue: Catalogue, lattice: Lattice, *, size:
     return _mesh_layout_cached(layout, catalogue, lattice, size=size, counts=counts,
                                templates_per_patch=templates_per_patch, sizes=sizes, smooth_cuts=smooth_cuts,
                                progress=progress, first_templates=first_templates, quality=quality,
-                               periodic=tuple(periodic))
+                               periodic=tuple(periodic), lean_curves=bool(lean_curves))
 
 
 def _equal_sides(layout: Layout, sides: Sides, periodic) -> tuple:
@@ -188,6 +194,22 @@ def layout_sides_kept(layout: Layout, catalogue: Catalogue, lkey: tuple | None =
                                keep_errors=(InputError, LayoutInfeasible))
 
 
+def lean_floors_help(layout: Layout, catalogue: Catalogue, size: float, quality: Quality = QUALITY) -> bool:
+    """Whether meshing ``layout`` with ``lean_curves`` (:func:`mesh_layout`) can bring a side
+    nearer the size: some boundary side's floor from the whole boundary's share of the area
+    budget (:func:`~jaxmatch.placement.layout.curve_floors`) makes its edges shorter than
+    ``quality.size_band[0] * size`` and the curved sides' share alone lets them be that long.
+    (Where it cannot, the lean solve gives a mesh no nearer the size band.)"""
+    sides = layout_sides_kept(layout, catalogue)
+    region = region_area(layout)
+    fine = curve_floors(layout, sides, quality.area_tol, region)
+    short = sides.lengths / fine < quality.size_band[0] * float(size)
+    if not np.any(short & (fine > 1)):
+        return False
+    lean = curve_floors(layout, sides, quality.area_tol, region, lean=True)
+    return bool(np.any(short & (sides.lengths / lean >= quality.size_band[0] * float(size))))
+
+
 def patch_shapes_kept(layout: Layout, catalogue: Catalogue, lkey: tuple | None = None) -> list[Shape]:
     """:func:`~jaxmatch.placement.layout.patch_shapes`, kept in the catalogue's cache (store ``shapes``)."""
     return catalogue.cache.get("shapes", layout_key(layout) if lkey is None else lkey, lambda: patch_shapes(layout),
@@ -234,14 +256,15 @@ def _smooth_cuts(xy: np.ndarray, quads: np.ndarray, fixed: np.ndarray, sides: Si
 
 
 def _mesh_layout_cached(layout: Layout, catalogue, lattice, *, size, counts, templates_per_patch, sizes, smooth_cuts,
-                        progress, first_templates, quality, periodic=()) -> LayoutMesh:
+                        progress, first_templates, quality, periodic=(), lean_curves=False) -> LayoutMesh:
     """:func:`_mesh_layout` from the catalogue's cache (store ``layouts``) when the same layout was
     meshed with the same options (the answer names the given layout; its arrays are copies)."""
     lkey = layout_key(layout)
     k = (lkey,) + cache_key(lattice, None if size is None else float(size),
                             None if counts is None else {int(a): int(b) for a, b in dict(counts).items()},
                             int(templates_per_patch), sizes, bool(smooth_cuts), first_templates, quality) \
-        + ((cache_key(*[np.asarray(x, np.float64) for pair in periodic for x in pair]),) if periodic else ())
+        + ((cache_key(*[np.asarray(x, np.float64) for pair in periodic for x in pair]),) if periodic else ()) \
+        + (("lean",) if lean_curves else ())
     cache = catalogue.cache
     done = cache.lookup("layouts", k)  # (an error kept for these options is raised again)
     if done is not None:
@@ -253,7 +276,7 @@ def _mesh_layout_cached(layout: Layout, catalogue, lattice, *, size, counts, tem
                                                       templates_per_patch=templates_per_patch, sizes=sizes,
                                                       smooth_cuts=smooth_cuts, progress=progress,
                                                       first_templates=first_templates, quality=quality, lkey=lkey,
-                                                      periodic=periodic),
+                                                      periodic=periodic, lean_curves=lean_curves),
                    quads=lambda m: m.quads.shape[0], keep_errors=(LayoutInfeasible, InputError))
     return _copied(lm, layout)
 
@@ -274,7 +297,8 @@ def _copied(lm: LayoutMesh, layout: Layout) -> LayoutMesh:
 
 
 def _mesh_layout(layout: Layout, catalogue: Catalogue, lattice: Lattice, *, size, counts, templates_per_patch, sizes,
-                 smooth_cuts, progress, first_templates, quality: Quality, lkey: tuple, periodic=()) -> LayoutMesh:
+                 smooth_cuts, progress, first_templates, quality: Quality, lkey: tuple, periodic=(),
+                 lean_curves: bool = False) -> LayoutMesh:
     """The work of :func:`mesh_layout` (see there; ``lkey``: :func:`layout_key` of ``layout``)."""
     cache = catalogue.cache
     sides = layout_sides_kept(layout, catalogue, lkey)
@@ -303,12 +327,38 @@ def _mesh_layout(layout: Layout, catalogue: Catalogue, lattice: Lattice, *, size
         if progress:
             progress(p + 1, len(shapes))
     region = region_area(layout)
-    floors = curve_floors(layout, sides, quality.area_tol, region) if size is not None else None
-    choice = [0] * len(shapes) if first_templates is None else [int(j) for j in first_templates]
-    for p, j in enumerate(choice):
+    choice0 = [0] * len(shapes) if first_templates is None else [int(j) for j in first_templates]
+    for p, j in enumerate(choice0):
         if not (j >= 0 and _has(cands[p], j)):
             raise IndexError(f"patch {p} has {len(cands[p])} candidate templates, not {j + 1}")
     made: dict = {}
+    floors = curve_floors(layout, sides, quality.area_tol, region, lean=lean_curves) if size is not None else None
+    best = _rounds(layout, sides, shapes, cands, moved, list(choice0), want, size, floors, equal, side_targets, f, made,
+                   quality, lkey, cache)
+    return _merged(layout, sides, best, smooth_cuts, region)
+
+
+def _merged(layout: Layout, sides: Sides, best: tuple, smooth_cuts: bool, region: float) -> LayoutMesh:
+    """The :class:`LayoutMesh` of a best round of :func:`_rounds`: its patches merged, the cuts
+    smoothed when ``smooth_cuts``."""
+    _, tmpl, mults, n, refined = best
+    xy, quads, patch, side_ids, gap = merge_patches(layout, sides, refined, n)
+    loops = _boundary_loops(layout, sides, side_ids, xy)
+    outer, holes = loops[0], tuple(loops[1:])
+    if smooth_cuts:
+        xy = _smooth_cuts(xy, quads, np.concatenate(loops), sides, side_ids)
+    return LayoutMesh(layout=layout, sides=sides, xy=xy, quads=quads, patch=patch, side_vertices=side_ids,
+                      counts=n, outer=outer, holes=holes, templates=tuple(t.mesh_id for t in tmpl),
+                      multiplicities=tuple(mults), shared_gap=gap, region_area=float(region))
+
+
+def _rounds(layout: Layout, sides: Sides, shapes, cands, moved, choice: list, want, size, floors, equal, side_targets, f,
+            made: dict, quality: Quality, lkey: tuple, cache: Cache):
+    """The rounds of :func:`_mesh_layout` with these side ``floors``: solve, refine, give each
+    patch that folds (or is below ``quality.good_sj``) its next template, at most :data:`ROUNDS`
+    times. Returns the best round ``(key, templates, multiplicities, counts, refined patches)``;
+    ``made``: refinements kept across calls. Raises :class:`LayoutInfeasible` when no round is
+    feasible."""
     best = None
     for _ in range(ROUNDS):
         tmpl = [cands[p][choice[p]] for p in range(len(shapes))]
@@ -342,15 +392,9 @@ def _mesh_layout(layout: Layout, catalogue: Catalogue, lattice: Lattice, *, size
             break
         for p in bad:
             choice[p] += 1
-    _, tmpl, mults, n, refined = best
-    xy, quads, patch, side_ids, gap = merge_patches(layout, sides, refined, n)
-    loops = _boundary_loops(layout, sides, side_ids, xy)
-    outer, holes = loops[0], tuple(loops[1:])
-    if smooth_cuts:
-        xy = _smooth_cuts(xy, quads, np.concatenate(loops), sides, side_ids)
-    return LayoutMesh(layout=layout, sides=sides, xy=xy, quads=quads, patch=patch, side_vertices=side_ids,
-                      counts=n, outer=outer, holes=holes, templates=tuple(t.mesh_id for t in tmpl),
-                      multiplicities=tuple(mults), shared_gap=gap, region_area=float(region))
+    if best is None:  # pragma: no cover - the loop solved at least once or raised
+        raise LayoutInfeasible("no round of the layout's solve was feasible", where=layout.source)
+    return best
 
 
 TRANSLATE_TOL = 1e-12
