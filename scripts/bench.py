@@ -1241,7 +1241,10 @@ def profile_bulk(parts: int, div: int = 32, top: int = 15) -> dict:
     (``time.process_time``); ``profiled_s``: the second's, under cProfile with that CPU clock
     (Python code is slowed, compiled code is not: read shares, not seconds). ``strategies``: per
     strategy of :mod:`jaxmatch.meshing.strategies`, the parts it ran for, the profiled seconds of
-    its candidates; ``chosen_by``: how many chosen meshes each kind of candidate made (a larger or
+    its candidates, and from the first pass (:func:`_strategy_outcomes`) its CPU seconds
+    (``cpu_s``), the parts where one of its candidates was chosen (``chosen``) and the CPU seconds
+    of the parts where none was (``unchosen_cpu_s``: what a bound that skips the strategy could save
+    at most); ``chosen_by``: how many chosen meshes each kind of candidate made (a larger or
     a conforming single template are both named ``single <id>``); ``layouts``: from the first
     pass (:func:`_layout_losers`), what a bound that skips a layout before it is meshed could save
     at most; ``top``, ``top_own``: as :func:`profile_mesh`."""
@@ -1263,9 +1266,12 @@ def profile_bulk(parts: int, div: int = 32, top: int = 15) -> dict:
     jaxmatch.mesh(shapes[-1], divisions=div, catalogue=cat)  # (a part not measured: the code paths warm)
     shapes = shapes[:-1]
     cat.cache.forget_shapes()
-    with _layout_losers() as layouts:
+    meshes = []
+    with _layout_losers() as layouts, _strategy_outcomes() as outcomes:
         t = time.process_time()
-        meshes = [jaxmatch.mesh(s, divisions=div, catalogue=cat) for s in shapes]
+        for s in shapes:
+            meshes.append(jaxmatch.mesh(s, divisions=div, catalogue=cat))
+            outcomes.part(meshes[-1])
         cpu = time.process_time() - t
     cat.cache.forget_shapes()
     prof = cProfile.Profile(time.process_time)
@@ -1279,7 +1285,7 @@ def profile_bulk(parts: int, div: int = 32, top: int = 15) -> dict:
                 strategies.Bends, strategies.Smooth):
         code = cls.candidates.__code__
         _, nc, _, ct, _ = st.stats.get((code.co_filename, code.co_firstlineno, code.co_name), (0, 0, 0.0, 0.0, {}))
-        per[cls.__name__] = {"parts": nc, "profiled_s": ct}
+        per[cls.__name__] = {"parts": nc, "profiled_s": ct, **outcomes.of(cls.__name__)}
     chosen_by: dict = {}
     for m in meshes:  # the kind of the chosen candidate, by its name
         c = m.chosen
@@ -1295,6 +1301,61 @@ def profile_bulk(parts: int, div: int = 32, top: int = 15) -> dict:
     return {"parts": len(shapes), "div": int(div), "cpu_s": cpu, "cpu_s_per_part": cpu / max(len(shapes), 1),
             "profiled_s": st.total_tt, "strategies": per, "chosen_by": chosen_by, "layouts": layouts, "top": entries(3),
             "top_own": entries(2), "load": list(os.getloadavg())}
+
+
+class _Outcomes:
+    """What :func:`_strategy_outcomes` records: per strategy class name, every
+    ``candidates(request, tried)`` call of the current part (CPU seconds, names of the candidates
+    meshed) until :meth:`part` is told the part's chosen mesh."""
+
+    def __init__(self):
+        self.pending: list[tuple[str, float, set]] = []
+        self.totals: dict[str, dict] = {}
+
+    def part(self, mesh) -> None:
+        """The part whose calls are pending was meshed as ``mesh``: each call counts as chosen when
+        ``mesh.chosen`` is one of its candidates."""
+        for name, cpu, names in self.pending:
+            d = self.totals.setdefault(name, {"cpu_s": 0.0, "chosen": 0, "unchosen_cpu_s": 0.0})
+            d["cpu_s"] += cpu
+            if mesh.chosen in names:
+                d["chosen"] += 1
+            else:
+                d["unchosen_cpu_s"] += cpu
+        self.pending.clear()
+
+    def of(self, name: str) -> dict:
+        return dict(self.totals.get(name, {"cpu_s": 0.0, "chosen": 0, "unchosen_cpu_s": 0.0}))
+
+
+@contextlib.contextmanager
+def _strategy_outcomes():
+    """While in the block, every strategy's ``candidates`` call (the classes of
+    :mod:`jaxmatch.meshing.strategies` that :func:`profile_bulk` reports) is timed with
+    ``time.process_time`` and its meshed candidates named; yields an :class:`_Outcomes`, told
+    each part's chosen mesh (``part(mesh)``) after its ``jaxmatch.mesh`` call."""
+    from jaxmatch.meshing import strategies
+
+    out = _Outcomes()
+    classes = (strategies.Layouts, strategies.Larger, strategies.Conforming, strategies.RingPartition,
+               strategies.Bends, strategies.Smooth)
+    saved = {cls: cls.candidates for cls in classes}
+
+    def timed(cls):
+        def candidates(self, req, tried):
+            t = time.process_time()
+            made = saved[cls](self, req, tried)
+            out.pending.append((cls.__name__, time.process_time() - t, {c.name for c in made if c.mesh is not None}))
+            return made
+        return candidates
+
+    for cls in classes:
+        cls.candidates = timed(cls)
+    try:
+        yield out
+    finally:
+        for cls, f in saved.items():
+            cls.candidates = f
 
 
 @contextlib.contextmanager
@@ -1392,7 +1453,8 @@ def main(argv=None) -> int:
               f"({r['cpu_s_per_part']:.3f} s a part); under cProfile (CPU clock) {r['profiled_s']:.2f} s; load "
               f"{r['load'][0]:.2f}", file=out)
         for name, v in r["strategies"].items():
-            print(f"  {name:>13}: ran for {v['parts']:3d} parts, {v['profiled_s']:6.2f} s profiled", file=out)
+            print(f"  {name:>13}: ran for {v['parts']:3d} parts, {v['profiled_s']:6.2f} s profiled; {v['cpu_s']:6.2f} CPU s, "
+                  f"chosen in {v['chosen']:3d} parts, {v['unchosen_cpu_s']:6.2f} CPU s in the others", file=out)
         print("  chosen: " + ", ".join(f"{k} {v}" for k, v in r["chosen_by"].items()), file=out)
         lay = r["layouts"]
         print(f"  layouts meshed: {lay['meshed']}, {lay['cpu_s']:.2f} CPU s in mesh_layout; after a better one in the "
