@@ -1242,9 +1242,10 @@ def profile_bulk(parts: int, div: int = 32, top: int = 15) -> dict:
     (Python code is slowed, compiled code is not: read shares, not seconds). ``strategies``: per
     strategy of :mod:`jaxmatch.meshing.strategies`, the parts it ran for, the profiled seconds of
     its candidates, and from the first pass (:func:`_strategy_outcomes`) its CPU seconds
-    (``cpu_s``), the parts where one of its candidates was chosen (``chosen``) and the CPU seconds
+    (``cpu_s``), the parts where one of its candidates was chosen (``chosen``), the CPU seconds
     of the parts where none was (``unchosen_cpu_s``: what a bound that skips the strategy could save
-    at most); ``chosen_by``: how many chosen meshes each kind of candidate made (a larger or
+    at most) and the parts where the layout bound would have skipped it (``bounded``,
+    :func:`_bounded`); ``chosen_by``: how many chosen meshes each kind of candidate made (a larger or
     a conforming single template are both named ``single <id>``); ``layouts``: from the first
     pass (:func:`_layout_losers`), what a bound that skips a layout before it is meshed could save
     at most; ``top``, ``top_own``: as :func:`profile_mesh`."""
@@ -1308,16 +1309,19 @@ class _Outcomes:
     ``candidates(request, tried)`` call of the current part (CPU seconds, names of the candidates
     meshed) until :meth:`part` is told the part's chosen mesh."""
 
+    EMPTY = {"cpu_s": 0.0, "chosen": 0, "unchosen_cpu_s": 0.0, "bounded": 0}
+
     def __init__(self):
-        self.pending: list[tuple[str, float, set]] = []
+        self.pending: list[tuple[str, float, set, bool]] = []
         self.totals: dict[str, dict] = {}
 
     def part(self, mesh) -> None:
         """The part whose calls are pending was meshed as ``mesh``: each call counts as chosen when
         ``mesh.chosen`` is one of its candidates."""
-        for name, cpu, names in self.pending:
-            d = self.totals.setdefault(name, {"cpu_s": 0.0, "chosen": 0, "unchosen_cpu_s": 0.0})
+        for name, cpu, names, bounded in self.pending:
+            d = self.totals.setdefault(name, dict(self.EMPTY))
             d["cpu_s"] += cpu
+            d["bounded"] += bounded
             if mesh.chosen in names:
                 d["chosen"] += 1
             else:
@@ -1325,7 +1329,30 @@ class _Outcomes:
         self.pending.clear()
 
     def of(self, name: str) -> dict:
-        return dict(self.totals.get(name, {"cpu_s": 0.0, "chosen": 0, "unchosen_cpu_s": 0.0}))
+        return dict(self.totals.get(name, self.EMPTY))
+
+
+def _bounded(cls, req, tried) -> bool:
+    """Whether the pipeline's bound rules out every candidate of strategy ``cls`` before it runs:
+    the best mesh so far beats (before the order tried) :func:`jaxmatch.meshing.choose.best_possible_key`
+    of its layout (the single patch for :class:`~jaxmatch.meshing.strategies.Larger` and
+    :class:`~jaxmatch.meshing.strategies.Conforming`, the ring layout for
+    :class:`~jaxmatch.meshing.strategies.RingPartition`) with
+    :func:`~jaxmatch.placement.bounds.node_sj_bound`'s cap; False for the others."""
+    from jaxmatch.meshing import choose, strategies
+    from jaxmatch.placement.bounds import node_sj_bound
+    from jaxmatch.placement.decompose import single_patch
+    from jaxmatch.placement.rings import ring_layout
+
+    keys = [choose.mesh_key(c.mesh, i, req.quality) for i, c in enumerate(tried) if c.mesh is not None]
+    if not keys or cls not in (strategies.Larger, strategies.Conforming, strategies.RingPartition):
+        return False
+    try:
+        lay = ring_layout(req.region, req.h) if cls is strategies.RingPartition else single_patch(req.region)
+        cap = node_sj_bound(lay)
+    except Exception:  # noqa: BLE001 - (a layout that cannot be made: no claim)
+        return False
+    return min(keys)[:-1] < choose.best_possible_key(lay.n_patches, 0, cap, req.quality)[:-1]
 
 
 @contextlib.contextmanager
@@ -1343,9 +1370,11 @@ def _strategy_outcomes():
 
     def timed(cls):
         def candidates(self, req, tried):
+            bounded = _bounded(cls, req, tried)  # (outside the time)
             t = time.process_time()
             made = saved[cls](self, req, tried)
-            out.pending.append((cls.__name__, time.process_time() - t, {c.name for c in made if c.mesh is not None}))
+            out.pending.append((cls.__name__, time.process_time() - t, {c.name for c in made if c.mesh is not None},
+                                bounded))
             return made
         return candidates
 
@@ -1454,7 +1483,8 @@ def main(argv=None) -> int:
               f"{r['load'][0]:.2f}", file=out)
         for name, v in r["strategies"].items():
             print(f"  {name:>13}: ran for {v['parts']:3d} parts, {v['profiled_s']:6.2f} s profiled; {v['cpu_s']:6.2f} CPU s, "
-                  f"chosen in {v['chosen']:3d} parts, {v['unchosen_cpu_s']:6.2f} CPU s in the others", file=out)
+                  f"chosen in {v['chosen']:3d} parts, {v['unchosen_cpu_s']:6.2f} CPU s in the others; the layout bound "
+                  f"rules it out in {v['bounded']}", file=out)
         print("  chosen: " + ", ".join(f"{k} {v}" for k, v in r["chosen_by"].items()), file=out)
         lay = r["layouts"]
         print(f"  layouts meshed: {lay['meshed']}, {lay['cpu_s']:.2f} CPU s in mesh_layout; after a better one in the "
