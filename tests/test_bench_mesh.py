@@ -176,3 +176,29 @@ def test_the_layout_losers_are_the_layouts_that_lost_to_an_earlier_one(bench, re
     lost = sum(v["layouts"] for v in lay["after_better"].values())
     assert lost <= len(layouts) - 1  # (the first layout meshed has nothing before it)
     assert set(lay["after_better"]) <= set(RULES)
+
+
+def test_the_profile_bound_rules_out_the_rings_only_after_a_mesh_they_cannot_beat(bench):
+    """_bounded: nothing meshed, no claim; after the square's single grid (min scaled Jacobian
+    1, at the size), the ring layout (more patches, at best as good) cannot win, and the
+    decompositions, which have no bound there, are never ruled out."""
+    import time
+
+    import jaxmatch
+    from jaxmatch.meshing import strategies
+    from jaxmatch.meshing.region import canonical, corner_points
+    from jaxmatch.defaults import DEFAULT_LATTICE, QUALITY
+    from jaxmatch.inputs import _lattice
+
+    shp = jaxmatch.load_shape(ROOT / "examples" / "square.json")
+    cat = jaxmatch.load_catalogue()
+    m = jaxmatch.mesh(shp, divisions=32, catalogue=cat)  # (at P/16 no ring fits the unit square)
+    assert m.chosen == "single" and m.min_scaled_jacobian == pytest.approx(1.0)
+    h = m.size
+    region = canonical(shp, h, jaxmatch.shape.DEFAULT_CORNER_ANGLE)
+    req = strategies.Request(region, cat, _lattice(DEFAULT_LATTICE), h, corner_points(region), QUALITY, None,
+                             time.perf_counter(), None)
+    single = [c for c in m.tried if c.name == "single"]
+    assert not bench._bounded(strategies.RingPartition, req, [])
+    assert bench._bounded(strategies.RingPartition, req, single)
+    assert not bench._bounded(strategies.Layouts, req, single)
