@@ -1256,7 +1256,11 @@ def profile_bulk(parts: int, div: int = 32, top: int = 15) -> dict:
     (``time.process_time``); ``profiled_s``: the second's, under cProfile with that CPU clock
     (Python code is slowed, compiled code is not: read shares, not seconds). ``strategies``: per
     strategy of :mod:`jaxmatch.meshing.strategies`, the parts it ran for, the profiled seconds of
-    its candidates; ``chosen_by``: how many chosen meshes each kind of candidate made (a larger or
+    its candidates, and from the first pass (:func:`_strategy_outcomes`) its CPU seconds
+    (``cpu_s``), the parts where one of its candidates was chosen (``chosen``), the CPU seconds
+    of the parts where none was (``unchosen_cpu_s``: what a bound that skips the strategy could save
+    at most) and the parts where the layout bound would have skipped it (``bounded``,
+    :func:`_bounded`); ``chosen_by``: how many chosen meshes each kind of candidate made (a larger or
     a conforming single template are both named ``single <id>``); ``layouts``: from the first
     pass (:func:`_layout_losers`), what a bound that skips a layout before it is meshed could save
     at most; ``top``, ``top_own``: as :func:`profile_mesh`."""
@@ -1278,10 +1282,13 @@ def profile_bulk(parts: int, div: int = 32, top: int = 15) -> dict:
     jaxmatch.mesh(shapes[-1], divisions=div, catalogue=cat)  # (a part not measured: the code paths warm)
     shapes = shapes[:-1]
     cat.cache.forget_shapes()
-    with _layout_losers() as layouts:
+    meshes = []
+    with _layout_losers() as layouts, _strategy_outcomes() as outcomes:
         t = time.process_time()
-        meshes = [jaxmatch.mesh(s, divisions=div, catalogue=cat) for s in shapes]
-        cpu = time.process_time() - t
+        for s in shapes:
+            meshes.append(jaxmatch.mesh(s, divisions=div, catalogue=cat))
+            outcomes.part(meshes[-1])
+        cpu = time.process_time() - t - outcomes.bound_cpu_s
     cat.cache.forget_shapes()
     prof = cProfile.Profile(time.process_time)
     prof.enable()
@@ -1294,7 +1301,7 @@ def profile_bulk(parts: int, div: int = 32, top: int = 15) -> dict:
                 strategies.Bends, strategies.Smooth):
         code = cls.candidates.__code__
         _, nc, _, ct, _ = st.stats.get((code.co_filename, code.co_firstlineno, code.co_name), (0, 0, 0.0, 0.0, {}))
-        per[cls.__name__] = {"parts": nc, "profiled_s": ct}
+        per[cls.__name__] = {"parts": nc, "profiled_s": ct, **outcomes.of(cls.__name__)}
     chosen_by: dict = {}
     for m in meshes:  # the kind of the chosen candidate, by its name
         c = m.chosen
@@ -1310,6 +1317,92 @@ def profile_bulk(parts: int, div: int = 32, top: int = 15) -> dict:
     return {"parts": len(shapes), "div": int(div), "cpu_s": cpu, "cpu_s_per_part": cpu / max(len(shapes), 1),
             "profiled_s": st.total_tt, "strategies": per, "chosen_by": chosen_by, "layouts": layouts, "top": entries(3),
             "top_own": entries(2), "load": list(os.getloadavg())}
+
+
+class _Outcomes:
+    """What :func:`_strategy_outcomes` records: per strategy class name, every
+    ``candidates(request, tried)`` call of the current part (CPU seconds, names of the candidates
+    meshed) until :meth:`part` is told the part's chosen mesh."""
+
+    EMPTY = {"cpu_s": 0.0, "chosen": 0, "unchosen_cpu_s": 0.0, "bounded": 0}
+
+    def __init__(self):
+        self.pending: list[tuple[str, float, set, bool]] = []
+        self.totals: dict[str, dict] = {}
+        self.bound_cpu_s = 0.0  # spent judging the bound (not meshing: the caller leaves it out)
+
+    def part(self, mesh) -> None:
+        """The part whose calls are pending was meshed as ``mesh``: each call counts as chosen when
+        ``mesh.chosen`` is one of its candidates."""
+        for name, cpu, names, bounded in self.pending:
+            d = self.totals.setdefault(name, dict(self.EMPTY))
+            d["cpu_s"] += cpu
+            d["bounded"] += bounded
+            if mesh.chosen in names:
+                d["chosen"] += 1
+            else:
+                d["unchosen_cpu_s"] += cpu
+        self.pending.clear()
+
+    def of(self, name: str) -> dict:
+        return dict(self.totals.get(name, self.EMPTY))
+
+
+def _bounded(cls, req, tried) -> bool:
+    """Whether the pipeline's bound rules out every candidate of strategy ``cls`` before it runs:
+    the best mesh so far beats (before the order tried) :func:`jaxmatch.meshing.choose.best_possible_key`
+    of its layout (the single patch for :class:`~jaxmatch.meshing.strategies.Larger` and
+    :class:`~jaxmatch.meshing.strategies.Conforming`, the ring layout for
+    :class:`~jaxmatch.meshing.strategies.RingPartition`) with
+    :func:`~jaxmatch.placement.bounds.node_sj_bound`'s cap; False for the others."""
+    from jaxmatch.meshing import choose, strategies
+    from jaxmatch.placement.bounds import node_sj_bound
+    from jaxmatch.placement.decompose import single_patch
+    from jaxmatch.placement.rings import ring_layout
+
+    keys = [choose.mesh_key(c.mesh, i, req.quality) for i, c in enumerate(tried) if c.mesh is not None]
+    if not keys or cls not in (strategies.Larger, strategies.Conforming, strategies.RingPartition):
+        return False
+    try:
+        lay = ring_layout(req.region, req.h) if cls is strategies.RingPartition else single_patch(req.region)
+        cap = node_sj_bound(lay)
+    except Exception:  # noqa: BLE001 - (a layout that cannot be made: no claim)
+        return False
+    return min(keys)[:-1] < choose.best_possible_key(lay.n_patches, 0, cap, req.quality)[:-1]
+
+
+@contextlib.contextmanager
+def _strategy_outcomes():
+    """While in the block, every strategy's ``candidates`` call (the classes of
+    :mod:`jaxmatch.meshing.strategies` that :func:`profile_bulk` reports) is timed with
+    ``time.process_time`` and its meshed candidates named; yields an :class:`_Outcomes`, told
+    each part's chosen mesh (``part(mesh)``) after its ``jaxmatch.mesh`` call."""
+    from jaxmatch.meshing import strategies
+
+    out = _Outcomes()
+    classes = (strategies.Layouts, strategies.Larger, strategies.Conforming, strategies.RingPartition,
+               strategies.Bends, strategies.Smooth)
+    saved = {cls: cls.candidates for cls in classes}
+
+    def timed(cls):
+        def candidates(self, req, tried):
+            t = time.process_time()
+            bounded = _bounded(cls, req, tried)
+            out.bound_cpu_s += time.process_time() - t
+            t = time.process_time()
+            made = saved[cls](self, req, tried)
+            out.pending.append((cls.__name__, time.process_time() - t, {c.name for c in made if c.mesh is not None},
+                                bounded))
+            return made
+        return candidates
+
+    for cls in classes:
+        cls.candidates = timed(cls)
+    try:
+        yield out
+    finally:
+        for cls, f in saved.items():
+            cls.candidates = f
 
 
 @contextlib.contextmanager
@@ -1407,7 +1500,9 @@ def main(argv=None) -> int:
               f"({r['cpu_s_per_part']:.3f} s a part); under cProfile (CPU clock) {r['profiled_s']:.2f} s; load "
               f"{r['load'][0]:.2f}", file=out)
         for name, v in r["strategies"].items():
-            print(f"  {name:>13}: ran for {v['parts']:3d} parts, {v['profiled_s']:6.2f} s profiled", file=out)
+            print(f"  {name:>13}: ran for {v['parts']:3d} parts, {v['profiled_s']:6.2f} s profiled; {v['cpu_s']:6.2f} CPU s, "
+                  f"chosen in {v['chosen']:3d} parts, {v['unchosen_cpu_s']:6.2f} CPU s in the others; the layout bound "
+                  f"rules it out in {v['bounded']}", file=out)
         print("  chosen: " + ", ".join(f"{k} {v}" for k, v in r["chosen_by"].items()), file=out)
         lay = r["layouts"]
         print(f"  layouts meshed: {lay['meshed']}, {lay['cpu_s']:.2f} CPU s in mesh_layout; after a better one in the "

@@ -146,6 +146,11 @@ def test_the_bulk_profile_counts_every_part_and_the_strategies_that_ran(bench):
     assert r["strategies"]["Layouts"]["parts"] == 3 and sum(r["chosen_by"].values()) == 3
     ran = [v["profiled_s"] for v in r["strategies"].values()]
     assert all(s >= 0 for s in ran) and sum(ran) <= r["profiled_s"] * 1.01
+    st = r["strategies"].values()  # each chosen mesh made by a strategy that ran; unchosen time is some of its time
+    assert sum(v["chosen"] for v in st) >= 3 and all(v["chosen"] <= v["parts"] for v in st)
+    assert all(0 <= v["unchosen_cpu_s"] <= v["cpu_s"] for v in st) and sum(v["cpu_s"] for v in st) <= r["cpu_s"] + 1e-9
+    assert all(v["cpu_s"] == 0 for v in st if v["parts"] == 0)
+    assert all(0 <= v["bounded"] <= v["parts"] - v["chosen"] for v in st)  # a bound never rules out a winner
     assert len(r["top"]) == len(r["top_own"]) > 0 and r["top"][0][3] >= r["top"][-1][3]
     assert r["top"][0][1] >= 3  # the outermost entry: at least one call per part
     lay = r["layouts"]  # every part meshes one layout at least; the losers are some of them, under a rule
@@ -171,3 +176,29 @@ def test_the_layout_losers_are_the_layouts_that_lost_to_an_earlier_one(bench, re
     lost = sum(v["layouts"] for v in lay["after_better"].values())
     assert lost <= len(layouts) - 1  # (the first layout meshed has nothing before it)
     assert set(lay["after_better"]) <= set(RULES)
+
+
+def test_the_profile_bound_rules_out_the_rings_only_after_a_mesh_they_cannot_beat(bench):
+    """_bounded: nothing meshed, no claim; after the square's single grid (min scaled Jacobian
+    1, at the size), the ring layout (more patches, at best as good) cannot win, and the
+    decompositions, which have no bound there, are never ruled out."""
+    import time
+
+    import jaxmatch
+    from jaxmatch.meshing import strategies
+    from jaxmatch.meshing.region import canonical, corner_points
+    from jaxmatch.defaults import DEFAULT_LATTICE, QUALITY
+    from jaxmatch.inputs import _lattice
+
+    shp = jaxmatch.load_shape(ROOT / "examples" / "square.json")
+    cat = jaxmatch.load_catalogue()
+    m = jaxmatch.mesh(shp, divisions=32, catalogue=cat)  # (at P/16 no ring fits the unit square)
+    assert m.chosen == "single" and m.min_scaled_jacobian == pytest.approx(1.0)
+    h = m.size
+    region = canonical(shp, h, jaxmatch.shape.DEFAULT_CORNER_ANGLE)
+    req = strategies.Request(region, cat, _lattice(DEFAULT_LATTICE), h, corner_points(region), QUALITY, None,
+                             time.perf_counter(), None)
+    single = [c for c in m.tried if c.name == "single"]
+    assert not bench._bounded(strategies.RingPartition, req, [])
+    assert bench._bounded(strategies.RingPartition, req, single)
+    assert not bench._bounded(strategies.Layouts, req, single)
