@@ -235,3 +235,73 @@ def test_lazy_rankings_equal_eager_ones(cat, internal):
     with pytest.raises(IndexError):
         lazy[len(lazy)]
     cat.cache.clear("rankings")
+
+
+def _dense_program(sides, matrices, equal, targets, tau_m):
+    """The integer program's rows built one dense row at a time (the plain path): ``(A, lo)``."""
+    from jaxmatch.placement.milp import _chord_row
+
+    nc = [int(np.asarray(A).shape[1]) for A in matrices]
+    off = np.concatenate([[0], np.cumsum(nc)]).astype(int)
+    M, S, T = int(off[-1]), len(sides.chains), len(targets)
+    nv = M + S + T + M
+    rows, lo = [], []
+
+    def row(bound):
+        r = np.zeros(nv)
+        rows.append(r)
+        lo.append(bound)
+        return r
+
+    for p, A in enumerate(matrices):
+        for i, parts in enumerate(sides.patch_sides[p]):
+            r = row(0.0)
+            r[off[p]:off[p + 1]] = np.asarray(A, np.float64)[i]
+            r[M + parts] = -1.0
+    for ids_a, ids_b in equal:
+        r = row(0.0)
+        r[M + np.asarray(ids_a, np.int64)] += 1.0
+        r[M + np.asarray(ids_b, np.int64)] -= 1.0
+    items = [(M + s, M + S + j, tau) for j, (s, tau) in enumerate(targets.items())]
+    items += [(c, M + S + T + c, float(tau_m[c])) for c in range(M)]
+    for x, d, tau in items:
+        for sign in (1.0, -1.0):
+            r = row(-sign * tau)
+            r[x], r[d] = -sign, 1.0
+        chord = _chord_row(tau)
+        if chord is not None:
+            r = row(chord[1])
+            r[x], r[d] = -chord[0], 1.0
+    return np.array(rows), np.array(lo)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_the_sparse_integer_program_is_the_dense_one(seed, monkeypatch):
+    """solve_counts builds its rows as SparseRows: the same matrix and bounds as the rows built
+    one at a time, and HiGHS reads the same columns from it as from the dense matrix (zeros,
+    -0.0 included, left out; a side listed twice, sides on both sides of an equal pair)."""
+    from jaxmatch.placement import milp
+
+    rng = np.random.default_rng(seed)
+    n = 4 + 2 * int(rng.integers(0, 3))
+    lengths = rng.choice([0.5, 1.0, 1.25, 2.0, 2.5, 3.7], size=n) * rng.integers(1, 4)  # whole, half (slope 0), other
+    sides = milp.one_patch_sides(lengths)
+    c = int(rng.integers(2, 5))
+    A = rng.integers(0, 3, size=(n, c)).astype(np.int64)  # zeros in it
+    sides = sides._replace(patch_sides=(tuple(np.array([i, i]) if i == 0 else np.array([i]) for i in range(n)),))
+    equal = [([0, 1], [1, 2])] if seed % 2 else []
+    widths = [rng.choice([0.5, 1.0, 1.5, 2.25], size=c)]
+    seen = []
+    monkeypatch.setattr(milp, "run_milp", lambda *a, **k: seen.append(a))  # no solve: the program only
+    with pytest.raises(milp.LayoutInfeasible):  # (None from run_milp reads as infeasible)
+        milp.solve_counts(sides, [A], size=1.0, widths=widths, equal=equal, counts={1: 2})
+    cost, sparse, lo, hi, integ, lb, ub = seen[0]
+    targets = {s: float(lengths[s]) for s in range(n) if s != 1}
+    dense, dlo = _dense_program(sides, [A], equal, targets, np.maximum(widths[0], 1.0))
+    np.testing.assert_array_equal(np.asarray(sparse), dense)
+    np.testing.assert_array_equal(lo, dlo)
+    assert np.array_equal(np.signbit(lo), np.signbit(dlo))
+    assert len(set(zip(sparse.row.tolist(), sparse.col.tolist()))) == sparse.row.size  # each entry once
+    for a, b in zip(milp._columns(sparse), milp._columns(dense)):
+        assert a.dtype == b.dtype
+        np.testing.assert_array_equal(a, b)
