@@ -105,19 +105,30 @@ def solve_counts(sides, matrices: Sequence[np.ndarray], *, counts: Mapping[int, 
     else:
         tau_m = np.ones(M)
 
-    patch_rows = []  # per patch side: (chord columns, their entries, side columns), built once
+    rr, cc, vv = [], [], []  # the rows of the patch sides, then of the pairs of `equal`: built once
+    k = 0
     for p, A in enumerate(matrices):
         A = np.asarray(A, dtype=np.float64)
         for i, parts in enumerate(sides.patch_sides[p]):
             nz = np.flatnonzero(A[i])
-            patch_rows.append((off[p] + nz, A[i][nz], M + np.unique(np.asarray(parts, np.int64))))
-    equal_rows = []
+            cols = M + np.unique(np.asarray(parts, np.int64))
+            rr.append([k] * (nz.size + cols.size))
+            cc += [off[p] + nz, cols]
+            vv += [A[i][nz], [-1.0] * cols.size]
+            k += 1
     for ids_a, ids_b in equal:  # periodic sides: one count
         a = np.unique(np.asarray(ids_a, np.int64))
         b = np.unique(np.asarray(ids_b, np.int64))
         cols = np.union1d(a, b)
         vals = np.isin(cols, a).astype(np.float64) - np.isin(cols, b)
-        equal_rows.append((M + cols[vals != 0], vals[vals != 0]))
+        rr.append([k] * int(np.count_nonzero(vals)))
+        cc.append(M + cols[vals != 0])
+        vv.append(vals[vals != 0])
+        k += 1
+    n0 = k
+    row0 = np.fromiter((r for part in rr for r in part), np.int64) if rr else np.zeros(0, np.int64)
+    col0 = np.concatenate(cc).astype(np.int64) if cc else np.zeros(0, np.int64)
+    val0 = np.concatenate(vv).astype(np.float64) if vv else np.zeros(0)
 
     def program(fixed: Mapping[int, int], targets: Mapping[int, float]):
         """Variables: m (M), n (S), t (T side deviations), u (M chord deviations). The rows, in
@@ -127,30 +138,13 @@ def solve_counts(sides, matrices: Sequence[np.ndarray], *, counts: Mapping[int, 
         variables, each with two or three entries)."""
         T = len(targets)
         nv = M + S + T + M
-        rr, cc, vv, lo, hi = [], [], [], [], []
-        for k, (cols, vals, sides_) in enumerate(patch_rows):
-            rr.append(np.full(cols.size + sides_.size, k))
-            cc += [cols, sides_]
-            vv += [vals, np.full(sides_.size, -1.0)]
-        for k, (cols, vals) in enumerate(equal_rows, len(patch_rows)):
-            rr.append(np.full(cols.size, k))
-            cc.append(cols)
-            vv.append(vals)
-        n0 = len(patch_rows) + len(equal_rows)
-        lo.append(np.zeros(n0))
-        hi.append(np.zeros(n0))
         tau = np.concatenate([np.fromiter(targets.values(), np.float64, T), tau_m])
         x = np.concatenate([M + np.fromiter(targets.keys(), np.int64, T), np.arange(M)])
         d = M + S + np.arange(T + M)
         r, c, v, dlo = _deviation_rows(x, d, tau, n0)
-        rr.append(r)
-        cc.append(c)
-        vv.append(v)
-        lo.append(dlo)
-        hi.append(np.full(dlo.size, np.inf))
-        A = SparseRows((n0 + dlo.size, nv), np.concatenate(rr).astype(np.int64), np.concatenate(cc).astype(np.int64),
-                       np.concatenate(vv))
-        lo, hi = np.concatenate(lo), np.concatenate(hi)
+        A = SparseRows((n0 + dlo.size, nv), np.concatenate([row0, r]), np.concatenate([col0, c]), np.concatenate([val0, v]))
+        lo = np.concatenate([np.zeros(n0), dlo])
+        hi = np.concatenate([np.zeros(n0), np.full(dlo.size, np.inf)])
         cost = np.concatenate([np.zeros(M + S), np.ones(T), np.full(M, chord_weight)])
         lb = np.concatenate([np.ones(M), np.ones(S) if floors is None else np.maximum(floors, 1), np.zeros(T + M)])
         ub = np.full(nv, np.inf)
