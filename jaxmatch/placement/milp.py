@@ -109,25 +109,28 @@ def solve_counts(sides, matrices: Sequence[np.ndarray], *, counts: Mapping[int, 
     rr, cc, vv = [], [], []  # the rows of the patch sides, then of the pairs of `equal`: built once
     k = 0
     for p, A in enumerate(matrices):
-        A = np.asarray(A, dtype=np.float64)
-        for i, parts in enumerate(sides.patch_sides[p]):
-            nz = np.flatnonzero(A[i])
-            cols = M + np.unique(np.asarray(parts, np.int64))
-            rr.append([k] * (nz.size + cols.size))
-            cc += [off[p] + nz, cols]
-            vv += [A[i][nz], [-1.0] * cols.size]
-            k += 1
+        ps = sides.patch_sides[p]
+        A = np.asarray(A, dtype=np.float64)[:len(ps)]
+        i, j = np.nonzero(A)  # a chord's edges on the side
+        parts = [np.asarray(x, np.int64).ravel() for x in ps]
+        rows = k + np.repeat(np.arange(len(ps)), [x.size for x in parts])
+        cols = M + np.concatenate(parts) if parts else np.zeros(0, np.int64)
+        _, first = np.unique(rows * (M + S) + cols, return_index=True)  # a side listed twice: one entry
+        rr += [k + i, rows[first]]
+        cc += [off[p] + j, cols[first]]
+        vv += [A[i, j], np.full(first.size, -1.0)]
+        k += len(ps)
     for ids_a, ids_b in equal:  # periodic sides: one count
         a = np.unique(np.asarray(ids_a, np.int64))
         b = np.unique(np.asarray(ids_b, np.int64))
         cols = np.union1d(a, b)
         vals = np.isin(cols, a).astype(np.float64) - np.isin(cols, b)
-        rr.append([k] * int(np.count_nonzero(vals)))
+        rr.append(np.full(int(np.count_nonzero(vals)), k))
         cc.append(M + cols[vals != 0])
         vv.append(vals[vals != 0])
         k += 1
     n0 = k
-    row0 = np.fromiter((r for part in rr for r in part), np.int64) if rr else np.zeros(0, np.int64)
+    row0 = np.concatenate(rr).astype(np.int64) if rr else np.zeros(0, np.int64)
     col0 = np.concatenate(cc).astype(np.int64) if cc else np.zeros(0, np.int64)
     val0 = np.concatenate(vv).astype(np.float64) if vv else np.zeros(0)
 
