@@ -85,7 +85,28 @@ def key(*parts, ignore: tuple[str, ...] = ()) -> tuple:
     return tuple(_part(p, ignore) for p in parts)
 
 
+_PLAIN = frozenset({type(None), str, bool, int, float})
+"""Types a key part keeps as they are (exact types: the common case, tested first)."""
+
+_DATACLASS_FIELDS: dict = {}
+"""Per dataclass type: ``(frozen and eq, its field names)`` (what :func:`_part` reads of a type
+every time; types only, never values)."""
+
+
 def _part(p, ignore):
+    t = type(p)
+    if t in _PLAIN:
+        return p
+    if t is np.ndarray:
+        a = np.ascontiguousarray(p)
+        return a.dtype.str, a.shape, a.tobytes()
+    if t is tuple or t is list:
+        return tuple([_part(x, ignore) for x in p])
+    return _other(p, ignore)
+
+
+def _other(p, ignore):
+    """:func:`_part` of what is not of a plain type, an array, a tuple or a list by exact type."""
     if p is None or isinstance(p, (str, bool, int, float)):
         return p
     if isinstance(p, np.ndarray):
@@ -94,19 +115,23 @@ def _part(p, ignore):
     if isinstance(p, np.generic):
         return p.item()
     if isinstance(p, (tuple, list)):
-        return tuple(_part(x, ignore) for x in p)
+        return tuple([_part(x, ignore) for x in p])
     if isinstance(p, dict):
         return tuple(sorted((k, _part(v, ignore)) for k, v in p.items()))
-    if dataclasses.is_dataclass(p) and not isinstance(p, type):
-        params, fields = type(p).__dataclass_params__, type(p).__dataclass_fields__
-        if params.frozen and params.eq and not any(n in fields for n in ignore):
+    t = type(p)
+    info = _DATACLASS_FIELDS.get(t)
+    if info is None and dataclasses.is_dataclass(p) and not isinstance(p, type):
+        params = t.__dataclass_params__
+        info = _DATACLASS_FIELDS[t] = (params.frozen and params.eq, tuple(f.name for f in dataclasses.fields(p)))
+    if info is not None:
+        by_value, names = info
+        if by_value and not any(n in names for n in ignore):
             try:
                 hash(p)  # hashable by value (a lattice: tuples inside)
                 return p
             except TypeError:  # arrays inside: field by field
                 pass
-        return (type(p).__name__,) + tuple(_part(getattr(p, f.name), ignore) for f in dataclasses.fields(p)
-                                           if f.name not in ignore)
+        return (t.__name__,) + tuple([_part(getattr(p, n), ignore) for n in names if n not in ignore])
     return p
 
 

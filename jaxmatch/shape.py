@@ -699,7 +699,7 @@ def annotate(shape: Shape, m: int) -> Annotation:
         k = np.arange(m) - first[side]  # 0 for the corner, i for the i-th s point
         t = tc[side] + lengths[side] * k / (counts[side] + 1)
         codes = np.where(k == 0, np.where(shape.convex[side], X, V), S).astype(np.int32)
-    positions = point_at(shape.points, t + start)
+    positions = point_at(shape.points, t + start, cum)
     if c:  # corners exactly on their polyline vertices
         positions[codes != S] = shape.points[shape.corners]
     return Annotation(

@@ -235,3 +235,197 @@ def test_lazy_rankings_equal_eager_ones(cat, internal):
     with pytest.raises(IndexError):
         lazy[len(lazy)]
     cat.cache.clear("rankings")
+
+
+def _dense_program(sides, matrices, equal, targets, tau_m):
+    """The integer program's rows built one dense row at a time (the plain path): ``(A, lo)``."""
+    from jaxmatch.placement.milp import _chord_row
+
+    nc = [int(np.asarray(A).shape[1]) for A in matrices]
+    off = np.concatenate([[0], np.cumsum(nc)]).astype(int)
+    M, S, T = int(off[-1]), len(sides.chains), len(targets)
+    nv = M + S + T + M
+    rows, lo = [], []
+
+    def row(bound):
+        r = np.zeros(nv)
+        rows.append(r)
+        lo.append(bound)
+        return r
+
+    for p, A in enumerate(matrices):
+        for i, parts in enumerate(sides.patch_sides[p]):
+            r = row(0.0)
+            r[off[p]:off[p + 1]] = np.asarray(A, np.float64)[i]
+            r[M + parts] = -1.0
+    for ids_a, ids_b in equal:
+        r = row(0.0)
+        r[M + np.asarray(ids_a, np.int64)] += 1.0
+        r[M + np.asarray(ids_b, np.int64)] -= 1.0
+    items = [(M + s, M + S + j, tau) for j, (s, tau) in enumerate(targets.items())]
+    items += [(c, M + S + T + c, float(tau_m[c])) for c in range(M)]
+    for x, d, tau in items:
+        for sign in (1.0, -1.0):
+            r = row(-sign * tau)
+            r[x], r[d] = -sign, 1.0
+        chord = _chord_row(tau)
+        if chord is not None:
+            r = row(chord[1])
+            r[x], r[d] = -chord[0], 1.0
+    return np.array(rows), np.array(lo)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_the_sparse_integer_program_is_the_dense_one(seed, monkeypatch):
+    """solve_counts builds its rows as SparseRows: the same matrix and bounds as the rows built
+    one at a time, and HiGHS reads the same columns from it as from the dense matrix (zeros,
+    -0.0 included, left out; a side listed twice, sides on both sides of an equal pair)."""
+    from jaxmatch.placement import milp
+
+    rng = np.random.default_rng(seed)
+    n = 4 + 2 * int(rng.integers(0, 3))
+    lengths = rng.choice([0.5, 1.0, 1.25, 2.0, 2.5, 3.7], size=n) * rng.integers(1, 4)  # whole, half (slope 0), other
+    sides = milp.one_patch_sides(lengths)
+    c = int(rng.integers(2, 5))
+    A = rng.integers(0, 3, size=(n, c)).astype(np.int64)  # zeros in it
+    sides = sides._replace(patch_sides=(tuple(np.array([i, i]) if i == 0 else np.array([i]) for i in range(n)),))
+    equal = [([0, 1], [1, 2])] if seed % 2 else []
+    widths = [rng.choice([0.5, 1.0, 1.5, 2.25], size=c)]
+    seen = []
+    monkeypatch.setattr(milp, "run_milp", lambda *a, **k: seen.append(a))  # no solve: the program only
+    with pytest.raises(milp.LayoutInfeasible):  # (None from run_milp reads as infeasible)
+        milp.solve_counts(sides, [A], size=1.0, widths=widths, equal=equal, counts={1: 2})
+    cost, sparse, lo, hi, integ, lb, ub = seen[0]
+    targets = {s: float(lengths[s]) for s in range(n) if s != 1}
+    dense, dlo = _dense_program(sides, [A], equal, targets, np.maximum(widths[0], 1.0))
+    np.testing.assert_array_equal(np.asarray(sparse), dense)
+    np.testing.assert_array_equal(lo, dlo)
+    assert np.array_equal(np.signbit(lo), np.signbit(dlo))
+    assert len(set(zip(sparse.row.tolist(), sparse.col.tolist()))) == sparse.row.size  # each entry once
+    for a, b in zip(milp._columns(sparse), milp._columns(dense)):
+        assert a.dtype == b.dtype
+        np.testing.assert_array_equal(a, b)
+
+
+def _plain_part(p, ignore):
+    """cache.key's part, one isinstance test after the other (the plain path)."""
+    import dataclasses as dc
+
+    if p is None or isinstance(p, (str, bool, int, float)):
+        return p
+    if isinstance(p, np.ndarray):
+        a = np.ascontiguousarray(p)
+        return a.dtype.str, a.shape, a.tobytes()
+    if isinstance(p, np.generic):
+        return p.item()
+    if isinstance(p, (tuple, list)):
+        return tuple(_plain_part(x, ignore) for x in p)
+    if isinstance(p, dict):
+        return tuple(sorted((k, _plain_part(v, ignore)) for k, v in p.items()))
+    if dc.is_dataclass(p) and not isinstance(p, type):
+        params, fields = type(p).__dataclass_params__, type(p).__dataclass_fields__
+        if params.frozen and params.eq and not any(n in fields for n in ignore):
+            try:
+                hash(p)
+                return p
+            except TypeError:
+                pass
+        return (type(p).__name__,) + tuple(_plain_part(getattr(p, f.name), ignore) for f in dc.fields(p)
+                                           if f.name not in ignore)
+    return p
+
+
+def test_the_key_builder_gives_the_plain_paths_keys(cat):
+    """cache.key dispatches the common types by exact type first: the same keys as testing each
+    kind in turn, for shapes, layouts, a lattice, templates, numpy scalars, dicts and views."""
+    from jaxmatch.cache import key
+    from jaxmatch.placement.decompose import decompose
+
+    lat = load_lattice("fine")
+    shp = load_shape(ROOT / "examples" / "tshape.json")
+    lay = decompose(shp, "continuations")
+    tmpl = T.patch_templates(load_shape(ROOT / "examples" / "lshape.json"), cat, lat, limit=1, internal=[0, 1])[0]
+    parts = [("walk", True, shp, lat, 3, (0, 1)), (lay,), (lat,), (tmpl.match, tmpl.placement.xy, tmpl.side_chords),
+             (np.float64(0.5), np.int64(3), np.bool_(True), {"b": np.arange(3)[::2], "a": [1.5, None]}),
+             (np.arange(12.0).reshape(3, 4).T, [shp.numbering, shp.holes], dataclasses.replace(shp, source="x"))]
+    for ps in parts:
+        for ignore in ((), ("source",)):
+            got, want = key(*ps, ignore=ignore), tuple(_plain_part(p, ignore) for p in ps)
+            assert got == want
+            assert [type(x) for x in got] == [type(x) for x in want]
+
+
+def test_a_side_walk_of_a_refined_topology_is_the_edge_by_edge_one(cat):
+    """The refined vertices of each template side, found for all its template edges at once, are
+    those of the walk edge by edge (template vertex, then the edge's inner points)."""
+    from jaxmatch.placement import refine as R
+
+    lat = load_lattice("fine")
+    shp = load_shape(ROOT / "examples" / "tshape.json")
+    for t in T.patch_templates(shp, cat, lat, limit=2, internal=[0, 1, 2, 3]):
+        tq = np.asarray(t.placement.mesh.quads, np.int64)
+        for m in (np.ones(t.n_chords, np.int64), np.arange(1, t.n_chords + 1) % 4 + 1):
+            nv, quads, along, W, VV = R._refine_topology(tq, t.edge_list, t.edge_chord, t.quad_chords, m)
+            V0 = int(tq.max()) + 1
+            ekey = t.edge_list[:, 0] * V0 + t.edge_list[:, 1]
+            got = R._make_refined_topology(tq, t, m)[4]
+            for path, sv in zip(t.side_path, got):
+                ids = []
+                for a, b in zip(path[:-1].tolist(), path[1:].tolist()):
+                    me = int(m[t.edge_chord[int(np.searchsorted(ekey, min(a, b) * V0 + max(a, b)))]])
+                    ids += along(np.int64(a), np.int64(b), np.arange(me), me).tolist()
+                np.testing.assert_array_equal(sv, ids + [int(path[-1])])
+                assert sv.dtype == np.int64
+
+
+def test_a_reused_highs_object_solves_as_a_fresh_one(cat, monkeypatch):
+    """Every integer program of a few meshes, solved by the thread's one HiGHS object (its model
+    cleared each time), in order and in reverse, gives the status and solution of a new object."""
+    import threading
+
+    import jaxmatch
+    from jaxmatch.placement import milp
+
+    progs = []
+    real = milp._highs
+
+    def keep(*a, **k):
+        progs.append((a, k))
+        return real(*a, **k)
+
+    monkeypatch.setattr(milp, "_highs", keep)
+    cat.cache.clear()
+    for name in ("lshape.json", "tshape.json", "holes/letter-A.json"):
+        jaxmatch.mesh(load_shape(ROOT / "examples" / name), catalogue=cat, divisions=24)
+    monkeypatch.setattr(milp, "_highs", real)
+    assert len(progs) >= 5
+    reused = [real(*a, **k) for a, k in progs] + [real(*a, **k) for a, k in reversed(progs)][::-1]
+    fresh = []
+    for a, k in progs:
+        monkeypatch.setattr(milp, "_SOLVER", threading.local())  # a new object for this program
+        fresh.append(real(*a, **k))
+    for i, (st, x, _) in enumerate(reused):
+        f = fresh[i % len(progs)]
+        assert st == f[0] and (x is None) == (f[1] is None)
+        if x is not None:
+            np.testing.assert_array_equal(x, f[1])
+
+
+def test_the_choice_rules_counts_kept_on_a_mesh_equal_fresh_ones(cat):
+    """A mesh's size conformity, size fit, irregular vertices and Euler bound, asked again (kept
+    on the mesh) or for another quality, equal those of a fresh copy of it."""
+    import jaxmatch
+    from jaxmatch.defaults import QUALITY
+    from jaxmatch.meshing.choose import mesh_key
+
+    m = jaxmatch.mesh(load_shape(ROOT / "examples" / "tshape.json"), catalogue=cat, size=0.3)
+    strict = dataclasses.replace(QUALITY, long_edge=1.01, coarse_side=1.01, size_tol=0.01)
+    keys = [mesh_key(m, 0, q) for q in (QUALITY, strict, QUALITY)]
+    fresh = dataclasses.replace(m)  # the same mesh, nothing computed yet
+    assert keys[0] == keys[2] == mesh_key(fresh, 0, QUALITY)
+    assert keys[1] == mesh_key(dataclasses.replace(m), 0, strict)
+    assert (m.size_conformity(strict), m.size_fit(strict)) == (fresh.size_conformity(strict), fresh.size_fit(strict))
+    np.testing.assert_array_equal(m.irregular, fresh.irregular)
+    assert m.irregular_bound == fresh.irregular_bound
+    m.irregular[:] = -1  # a copy: the kept array stays
+    np.testing.assert_array_equal(m.irregular, fresh.irregular)

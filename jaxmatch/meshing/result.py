@@ -23,7 +23,7 @@ from jaxmatch.quality import edge_ratios, quad_areas, sj_inverted
 __all__ = ["Candidate", "QuadMesh", "boundary_loops", "irregular_bound"]
 
 _KEPT = ("_sj_inverted", "_edges", "_edge_lengths", "_valences", "_loops", "_missed", "_area", "_stretches",
-         "_region_parts", "_edge_targets")
+         "_region_parts", "_edge_targets", "_irregular", "irregular_bound", "_memo")
 """The :class:`QuadMesh` measures computed once per mesh (``cached_property`` names)."""
 
 
@@ -313,20 +313,32 @@ class QuadMesh:
     @property
     def irregular(self) -> np.ndarray:
         """``(I,) int64`` internal vertices (on no boundary loop) whose valence is not 4 (an
-        assembly: on no region's boundary, interfaces included)."""
+        assembly: on no region's boundary, interfaces included); a copy."""
+        return self._irregular.copy()
+
+    @cached_property
+    def _irregular(self) -> np.ndarray:
+        """:attr:`irregular`, computed once."""
         val = self._valences
         internal = np.ones(self.xy.shape[0], bool)
         for loop in self._loops + [lp for _, _, loops in self._region_parts for lp in loops]:
             internal[loop] = False
         return np.flatnonzero(internal & (val != 4) & (val > 0))
 
-    @property
+    @cached_property
     def irregular_bound(self) -> int:
         """Euler's lower bound on irregular internal vertices for these boundary valences (an
         assembly: the sum of its regions' bounds, each region's cells on their own)."""
         if self.regions:
             return sum(_irregular_bound(val, loops) for _, val, loops in self._region_parts)
         return _irregular_bound(self._valences, self._loops)
+
+    @cached_property
+    def _memo(self) -> dict:
+        """The choice rule's counts for a quality's thresholds (:meth:`size_conformity`,
+        :meth:`size_fit`), each computed once: the rule reads them for every candidate, several
+        times a call."""
+        return {}
 
     @cached_property
     def _region_parts(self) -> list[tuple[int, np.ndarray, list[np.ndarray]]]:
@@ -385,16 +397,24 @@ class QuadMesh:
         ``quality.short_edge`` (:meth:`short_edges`). For one size ``h`` a yes or no (0 or 1):
         between two meshes that both miss it somewhere, quality decides. With a size field their
         count: following the field is what was asked, so the mesh that misses it least wins."""
-        misses = (self.coarse_stretches(quality.coarse_side) + self.long_edges(quality.long_edge)
-                  + self.short_edges(quality.short_edge))
-        return misses if self.field is not None else int(misses > 0)
+        k = ("size_conformity", quality.coarse_side, quality.long_edge, quality.short_edge)
+        memo = self._memo
+        if k not in memo:
+            misses = (self.coarse_stretches(quality.coarse_side) + self.long_edges(quality.long_edge)
+                      + self.short_edges(quality.short_edge))
+            memo[k] = misses if self.field is not None else int(misses > 0)
+        return memo[k]
 
     def size_fit(self, quality: Quality = QUALITY) -> int:
         """The choice rule's size fit count: boundary stretches off the size either way
         (:meth:`stretches_off_size`), edges longer than ``quality.long_edge`` sizes and, with a
         size field, shorter than the field over ``quality.short_edge``."""
-        return (self.stretches_off_size(quality.size_tol) + self.long_edges(quality.long_edge)
-                + self.short_edges(quality.short_edge))
+        k = ("size_fit", quality.size_tol, quality.long_edge, quality.short_edge)
+        memo = self._memo
+        if k not in memo:
+            memo[k] = (self.stretches_off_size(quality.size_tol) + self.long_edges(quality.long_edge)
+                       + self.short_edges(quality.short_edge))
+        return memo[k]
 
     def _side_wanted(self, name: str) -> float:
         """Edges the field wants along side ``name`` (its ``"side NAME"`` edges as meshed)."""

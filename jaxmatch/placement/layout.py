@@ -529,6 +529,8 @@ def parse_counts(counts, sides: Sides, source: str) -> dict[int, int]:
     ``{side id: count}``. Raises :class:`InputError` for unknown sides or counts < 1."""
     if not isinstance(counts, dict):
         raise InputError('"sides" must be an object {"i-j": count, ...}', where=source)
+    if not counts:
+        return {}
     lookup: dict[tuple[int, ...], int] = {}
     for s, (c, name) in enumerate(zip(sides.chains, sides.names)):
         for key in (tuple(int(v) for v in name.split("-")), tuple(int(v) for v in c)):

@@ -6,13 +6,14 @@ requests in one place."""
 from __future__ import annotations
 
 import math
+import threading
 from typing import Mapping, NamedTuple, Sequence
 
 import numpy as np
 
 from jaxmatch.errors import InputError, SolverError
 
-__all__ = ["CHORD_WEIGHT", "FEASIBILITY_JUMP", "LayoutInfeasible", "MILP_TIME_LIMIT", "OneSides", "one_patch_sides", "run_milp", "solve_counts"]
+__all__ = ["CHORD_WEIGHT", "FEASIBILITY_JUMP", "LayoutInfeasible", "MILP_TIME_LIMIT", "OneSides", "SparseRows", "one_patch_sides", "run_milp", "solve_counts"]
 
 
 class LayoutInfeasible(InputError):
@@ -105,62 +106,56 @@ def solve_counts(sides, matrices: Sequence[np.ndarray], *, counts: Mapping[int, 
     else:
         tau_m = np.ones(M)
 
+    rr, cc, vv = [], [], []  # the rows of the patch sides, then of the pairs of `equal`: built once
+    k = 0
+    for p, A in enumerate(matrices):
+        ps = sides.patch_sides[p]
+        A = np.asarray(A, dtype=np.float64)[:len(ps)]
+        i, j = np.nonzero(A)  # a chord's edges on the side
+        parts = [np.asarray(x, np.int64).ravel() for x in ps]
+        rows = k + np.repeat(np.arange(len(ps)), [x.size for x in parts])
+        cols = M + np.concatenate(parts) if parts else np.zeros(0, np.int64)
+        _, first = np.unique(rows * (M + S) + cols, return_index=True)  # a side listed twice: one entry
+        rr += [k + i, rows[first]]
+        cc += [off[p] + j, cols[first]]
+        vv += [A[i, j], np.full(first.size, -1.0)]
+        k += len(ps)
+    for ids_a, ids_b in equal:  # periodic sides: one count
+        a = np.unique(np.asarray(ids_a, np.int64))
+        b = np.unique(np.asarray(ids_b, np.int64))
+        cols = np.union1d(a, b)
+        vals = np.isin(cols, a).astype(np.float64) - np.isin(cols, b)
+        rr.append(np.full(int(np.count_nonzero(vals)), k))
+        cc.append(M + cols[vals != 0])
+        vv.append(vals[vals != 0])
+        k += 1
+    n0 = k
+    row0 = np.concatenate(rr).astype(np.int64) if rr else np.zeros(0, np.int64)
+    col0 = np.concatenate(cc).astype(np.int64) if cc else np.zeros(0, np.int64)
+    val0 = np.concatenate(vv).astype(np.float64) if vv else np.zeros(0)
+
     def program(fixed: Mapping[int, int], targets: Mapping[int, float]):
-        """Variables: m (M), n (S), t (T side deviations), u (M chord deviations)."""
+        """Variables: m (M), n (S), t (T side deviations), u (M chord deviations). The rows, in
+        order: one per patch side (``A_p[i] @ m_p - sum n = 0``), one per pair of ``equal``, and
+        per side target then per chord the rows of :func:`_deviation_rows`; built as a
+        :class:`SparseRows` (the gear's programs have thousands of rows of thousands of
+        variables, each with two or three entries)."""
         T = len(targets)
         nv = M + S + T + M
-        rows, lo, hi = [], [], []
-
-        def row():
-            r = np.zeros(nv)
-            rows.append(r)
-            return r
-
-        for p, A in enumerate(matrices):
-            A = np.asarray(A, dtype=np.float64)
-            for i, parts in enumerate(sides.patch_sides[p]):
-                r = row()
-                r[off[p]:off[p + 1]] = A[i]
-                r[M + parts] = -1.0
-                lo.append(0.0)
-                hi.append(0.0)
-        for ids_a, ids_b in equal:  # periodic sides: one count
-            r = row()
-            r[M + np.asarray(ids_a, np.int64)] += 1.0
-            r[M + np.asarray(ids_b, np.int64)] -= 1.0
-            lo.append(0.0)
-            hi.append(0.0)
-
-        def deviation(x: int, d: int, tau: float) -> None:
-            """Rows making variable ``d`` at least ``|x - tau|`` for integer ``x``: the two
-            lines of the absolute value, and the chord through its values at the integers on
-            either side of ``tau`` (:func:`_chord_row`)."""
-            for sign in (1.0, -1.0):  # d >= sign * (x - tau)
-                r = row()
-                r[x] = -sign
-                r[d] = 1.0
-                lo.append(-sign * tau)
-                hi.append(np.inf)
-            chord = _chord_row(tau)
-            if chord is not None:  # d - slope * x >= bound
-                slope, bound = chord
-                r = row()
-                r[x] = -slope
-                r[d] = 1.0
-                lo.append(bound)
-                hi.append(np.inf)
-
-        for j, (s, tau) in enumerate(targets.items()):
-            deviation(M + s, M + S + j, tau)
-        for c in range(M):
-            deviation(c, M + S + T + c, float(tau_m[c]))
+        tau = np.concatenate([np.fromiter(targets.values(), np.float64, T), tau_m])
+        x = np.concatenate([M + np.fromiter(targets.keys(), np.int64, T), np.arange(M)])
+        d = M + S + np.arange(T + M)
+        r, c, v, dlo = _deviation_rows(x, d, tau, n0)
+        A = SparseRows((n0 + dlo.size, nv), np.concatenate([row0, r]), np.concatenate([col0, c]), np.concatenate([val0, v]))
+        lo = np.concatenate([np.zeros(n0), dlo])
+        hi = np.concatenate([np.zeros(n0), np.full(dlo.size, np.inf)])
         cost = np.concatenate([np.zeros(M + S), np.ones(T), np.full(M, chord_weight)])
         lb = np.concatenate([np.ones(M), np.ones(S) if floors is None else np.maximum(floors, 1), np.zeros(T + M)])
         ub = np.full(nv, np.inf)
         for s, v in fixed.items():
             lb[M + s] = ub[M + s] = float(v)
         integrality = np.concatenate([np.ones(M + S), np.zeros(T + M)])
-        x = run_milp(cost, np.array(rows), lo, hi, integrality, lb, ub)
+        x = run_milp(cost, A, lo, hi, integrality, lb, ub)
         if x is None:
             return None
         x = np.rint(x).astype(np.int64)
@@ -183,6 +178,52 @@ def solve_counts(sides, matrices: Sequence[np.ndarray], *, counts: Mapping[int, 
     raise LayoutInfeasible(f"the requested edge counts cannot be met together ({detail}; every patch needs an even "
                            "number of boundary edges, and both ends of a strip of quads get the same count)",
                            where=source, nearest=nearest)
+
+
+class SparseRows(NamedTuple):
+    """A constraint matrix by its nonzero entries (what :func:`run_milp` takes instead of a dense
+    ``(m, n)`` array): entry ``k`` is ``val[k]`` at row ``row[k]``, column ``col[k]``, each
+    ``(row, col)`` at most once, no zero values. ``np.asarray`` of it is the dense matrix."""
+
+    shape: tuple
+    row: np.ndarray
+    col: np.ndarray
+    val: np.ndarray
+
+    def __array__(self, dtype=None, copy=None):
+        a = np.zeros(self.shape, np.float64)
+        a[self.row, self.col] = self.val
+        return a if dtype is None else a.astype(dtype)
+
+
+def _deviation_rows(x: np.ndarray, d: np.ndarray, tau: np.ndarray, first: int):
+    """The rows making each variable ``d[i]`` at least ``|x_i - tau[i]|`` for the integer
+    variable ``x[i]``, item after item from row ``first``: ``d - x >= -tau`` and ``d + x >= tau``
+    (the two lines of the absolute value), then, unless ``tau[i]`` is whole, the chord through
+    its values at the integers on either side of ``tau`` (:func:`_chord_row`: ``d - slope * x >=
+    bound``, its ``x`` entry left out where the slope is 0).
+
+    x, d: ``(K,) int64`` columns; tau: ``(K,) float64``. Returns ``(row, col, val, lower)``: the
+    entries (``row``, ``col``, ``val``, as :class:`SparseRows`) and each row's lower bound (its
+    upper one is infinite)."""
+    K = tau.size
+    fl = np.floor(tau)
+    f = tau - fl
+    slope = 1.0 - 2.0 * f
+    bound = f - slope * fl
+    chord = f > 1e-12
+    n_rows = 2 + chord.astype(np.int64)
+    start = first + np.concatenate([[0], np.cumsum(n_rows)[:-1]]).astype(np.int64)
+    ci = np.flatnonzero(chord)
+    lower = np.empty(int(n_rows.sum()))
+    lower[start - first] = -tau
+    lower[start - first + 1] = tau
+    lower[start[ci] - first + 2] = bound[ci]
+    cx = ci[slope[ci] != 0]  # -0.0 is no entry
+    row = np.concatenate([start, start, start + 1, start + 1, start[ci] + 2, start[cx] + 2])
+    col = np.concatenate([x, d, x, d, d[ci], x[cx]])
+    val = np.concatenate([np.full(K, -1.0), np.ones(K), np.ones(K), np.ones(K), np.ones(ci.size), -slope[cx]])
+    return row, col, val, lower
 
 
 def _chord_row(tau: float) -> tuple[float, float] | None:
@@ -216,14 +257,14 @@ def run_milp(cost, A, lo, hi, integrality, lb, ub, *, time_limit: float = MILP_T
     """Solve one integer program with HiGHS: minimise ``cost @ x`` subject to ``lo <= A @ x <= hi``,
     ``lb <= x <= ub``, ``x[j]`` integer where ``integrality[j]`` is 1.
 
-    cost, integrality, lb, ub: ``(n,)``; A: ``(m, n)`` dense; lo, hi: ``(m,)`` (``+-inf`` allowed).
+    cost, integrality, lb, ub: ``(n,)``; A: ``(m, n)`` dense or a :class:`SparseRows`; lo, hi: ``(m,)`` (``+-inf`` allowed).
     Returns ``x (n,) float64`` (the best solution found: optimal, or the incumbent at the time
     limit), or None when the program is infeasible. A solver failure (status 3 or 4, or a time
     limit without a solution) is retried once without presolve, then raised as
     :class:`jaxmatch.errors.SolverError`, never reported as infeasible. The solver:
     :func:`_highs` (status numbers as :func:`scipy.optimize.milp`'s)."""
 
-    args = [np.asarray(a, np.float64) for a in (cost, A, lo, hi, integrality, lb, ub)]
+    args = [a if isinstance(a, SparseRows) else np.asarray(a, np.float64) for a in (cost, A, lo, hi, integrality, lb, ub)]
     status, x, message = 4, None, ""
     for presolve in (True, False):
         status, x, message = _highs(*args, presolve=presolve, time_limit=float(time_limit))
@@ -232,6 +273,13 @@ def run_milp(cost, A, lo, hi, integrality, lb, ub, *, time_limit: float = MILP_T
         if status == 2:
             return None
     raise SolverError(f"the integer program failed (HiGHS status {status}: {message})", status)
+
+
+_SOLVER = threading.local()
+"""Each thread's HiGHS solver object (:func:`_highs`): made once, its model cleared before the
+next program, which HiGHS then solves as a new object would (the same solutions: every program
+of the example regions at P/16 and P/32, tests/test_speed.py); making one cost ~0.08 ms of a
+small program's ~0.9 ms."""
 
 
 def _highs(cost, A, lo, hi, integrality, lb, ub, *, presolve: bool, time_limit: float):
@@ -250,22 +298,26 @@ def _highs(cost, A, lo, hi, integrality, lb, ub, *, presolve: bool, time_limit: 
     except ImportError:
         from scipy.optimize import Bounds, LinearConstraint, milp
 
-        res = milp(cost, constraints=LinearConstraint(A, lo, hi), integrality=integrality, bounds=Bounds(lb, ub),
+        res = milp(cost, constraints=LinearConstraint(np.asarray(A, np.float64), lo, hi), integrality=integrality, bounds=Bounds(lb, ub),
                    options={"time_limit": time_limit, "presolve": presolve})
         return res.status, res.x, res.message
     m, n = A.shape
-    nz = A.T != 0  # column-wise (CSC), rows ascending in each column
+    start, index, value = _columns(A)
     lp = highspy.HighsLp()
     lp.num_col_, lp.num_row_ = n, m
     lp.a_matrix_.num_col_, lp.a_matrix_.num_row_ = n, m
     lp.a_matrix_.format_ = highspy.MatrixFormat.kColwise
-    lp.a_matrix_.start_ = np.concatenate([[0], np.cumsum(nz.sum(axis=1))]).astype(np.int32)
-    lp.a_matrix_.index_ = np.nonzero(nz)[1].astype(np.int32)
-    lp.a_matrix_.value_ = A.T[nz]
+    lp.a_matrix_.start_, lp.a_matrix_.index_, lp.a_matrix_.value_ = start, index, value
     lp.col_cost_, lp.col_lower_, lp.col_upper_ = cost, lb, ub
     lp.row_lower_, lp.row_upper_ = lo, hi
-    lp.integrality_ = [highspy.HighsVarType(int(i)) for i in integrality]
-    h = highspy.Highs()
+    ints = np.asarray(integrality).astype(int).tolist()
+    kinds = {i: highspy.HighsVarType(i) for i in set(ints)}
+    lp.integrality_ = [kinds[i] for i in ints]
+    h = getattr(_SOLVER, "highs", None)
+    if h is None:  # one solver object per thread, its model cleared for each program
+        h = _SOLVER.highs = highspy.Highs()
+    else:
+        h.clearModel()
     h.setOptionValue("log_to_console", False)  # as scipy sets it
     h.setOptionValue("time_limit", float(time_limit))
     h.setOptionValue("presolve", "on" if presolve else "off")
@@ -282,3 +334,20 @@ def _highs(cost, A, lo, hi, integrality, lb, ub, *, presolve: bool, time_limit: 
         return status, None, h.modelStatusToString(st)
     return status, np.array(h.getSolution().col_value), h.modelStatusToString(st)
 
+
+
+def _columns(A) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(start (n + 1,) int32, index (nnz,) int32, value (nnz,) float64)``: the nonzero entries of
+    ``A`` (dense ``(m, n)`` or :class:`SparseRows`) column by column, rows ascending in each
+    column (compressed sparse columns, as HiGHS reads them); the same arrays for a
+    :class:`SparseRows` as for its dense matrix."""
+    if isinstance(A, SparseRows):
+        keep = A.val != 0
+        row, col, val = A.row[keep], A.col[keep], A.val[keep]
+        order = np.lexsort((row, col))
+        counts = np.bincount(col, minlength=A.shape[1])
+        return (np.concatenate([[0], np.cumsum(counts)]).astype(np.int32), row[order].astype(np.int32),
+                val[order].astype(np.float64))
+    nz = A.T != 0  # column-wise (CSC), rows ascending in each column
+    return (np.concatenate([[0], np.cumsum(nz.sum(axis=1))]).astype(np.int32), np.nonzero(nz)[1].astype(np.int32),
+            A.T[nz])

@@ -578,14 +578,14 @@ def _make_refined_topology(tq: np.ndarray, template: PatchTemplate, m: np.ndarra
         V0 = int(tq.max()) + 1
         ekey = template.edge_list[:, 0] * V0 + template.edge_list[:, 1]
         side_vertices = []
-        for path in template.side_path:  # template edge by template edge
-            ids = []
-            for a, b in zip(path[:-1].tolist(), path[1:].tolist()):
-                eid = int(np.searchsorted(ekey, min(a, b) * V0 + max(a, b)))
-                me = int(m[template.edge_chord[eid]])
-                ids.extend(along(np.int64(a), np.int64(b), np.arange(me), me).tolist())
-            ids.append(int(path[-1]))
-            side_vertices.append(np.asarray(ids, np.int64))
+        for path in template.side_path:  # all its template edges at once: steps 0 .. me - 1 of each, then its end
+            path = np.asarray(path, np.int64)
+            a, b = path[:-1], path[1:]
+            me = np.asarray(m, np.int64)[template.edge_chord[np.searchsorted(ekey, np.minimum(a, b) * V0 + np.maximum(a, b))]]
+            first = np.repeat(np.cumsum(me) - me, me)  # where each edge's steps start
+            k = np.arange(int(me.sum()), dtype=np.int64) - first
+            ids = along(np.repeat(a, me), np.repeat(b, me), k, np.repeat(me, me))
+            side_vertices.append(np.concatenate([ids, path[-1:]]).astype(np.int64))
         return nv, quads, W, VV, tuple(side_vertices)
 
 
