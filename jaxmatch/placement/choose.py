@@ -365,12 +365,17 @@ def place_match(shape: Shape, annotation: Annotation, catalogue: Catalogue, matc
             cands = [(match.rotation, match.reflected,
                       spread_alignment(annotation.t, annotation.perimeter, annotation.codes, given))]
         # one candidate per distinct boundary (orientations that differ by a symmetry of the mesh
-        # give the same placement), in a geometric order, at most MAX_CANDIDATES
+        # give the same placement), in a geometric order, at most MAX_CANDIDATES (a single one
+        # needs no signature: it is the one placed)
         unique = {}
         val = mesh_valences(mesh)
         boundaries: dict[bytes, Boundary] = {}  # corner_boundary depends on the corner points only
         loops: dict[tuple[int, bool], np.ndarray] = {}
         seen = set()
+        if len(cands) == 1:
+            rot, refl, al = cands[0]
+            unique[()] = (rot, refl, al, corner_boundary(shape, annotation, al))
+            cands = []
         for (rot, refl, al), key in zip(cands, _pin_keys(annotation, [c[2] for c in cands])):
             if (rot, refl, key) in seen:  # same boundary, same valences: same signature
                 continue
@@ -381,13 +386,16 @@ def place_match(shape: Shape, annotation: Annotation, catalogue: Catalogue, matc
                 loops[rot, refl] = val[oriented_boundary(mesh, rot, refl)[1]]
             sig = _boundary_signature(boundaries[key], loops[rot, refl])
             unique.setdefault(sig, (rot, refl, al, boundaries[key]))
-        best = None
+        best = None  # (key or None while no other placement needs comparing, placement, u)
         for sig in sorted(unique)[:MAX_CANDIDATES if min_utility is None else MAX_REORIENTED]:
             rot, refl, al, b = unique[sig]
             for pl, u in _place_candidate(shape, annotation, mesh, rot, refl, al, smooth_iters, b):
+                if best is None:
+                    best = (None, pl, u)
+                    continue
                 key = placement_key(pl)
-                if best is None or key < best[0]:
-                    best = (key, pl, u)
+                kept = placement_key(best[1]) if best[0] is None else best[0]
+                best = (key, pl, u) if key < kept else (kept, best[1], best[2])
         _, pl, u = best  # boundary paths only for the one kept
         pl = dataclasses.replace(pl, boundary_paths=exact_paths(shape.points, u, pl.xy[pl.mesh.boundary], shape.arc_length))
         user = to_user_placement(shape, pl)
