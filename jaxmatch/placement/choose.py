@@ -37,7 +37,7 @@ from jaxmatch.kernels import placement as kernels
 from jaxmatch.placement.embed import Placement, exact_paths, oriented_boundary, place
 from jaxmatch.placement.spread import (MAX_TIED_ALIGNMENTS, orientation_utilities, spread_alignment,
                                        spread_optimal_alignment, spread_setup)
-from jaxmatch.quality import edge_ratios, inverted_mask, quad_areas, quality
+from jaxmatch.quality import edge_ratios, quad_areas, quality_inverted
 from jaxmatch.shape import S as S_CODE
 from jaxmatch.shape import point_at as shape_point_at
 from jaxmatch.scoring.rank import TIE_CAP, Match, Ranking, TieBreaker
@@ -486,7 +486,7 @@ def to_user_placement(shape: Shape, pl: Placement) -> Placement:
     """A unit-box placement mapped to user coordinates (``shape.to_user``), quality recomputed."""
     xy = shape.to_user(pl.xy)
     quads = pl.mesh.quads
-    sj, amin, amax = quality(xy, quads)
+    sj, amin, amax, folded = quality_inverted(xy, quads)
     s2 = float(shape.scale) ** 2
     return dataclasses.replace(
         pl,
@@ -496,7 +496,7 @@ def to_user_placement(shape: Shape, pl: Placement) -> Placement:
         scaled_jacobian=sj,
         min_angle=amin,
         max_angle=amax,
-        inverted=int(inverted_mask(xy, quads).sum()),
+        inverted=int(folded.sum()),
         boundary_paths=tuple(shape.to_user(p) for p in pl.boundary_paths),
         region_area=pl.region_area * s2,
         mesh_area=pl.mesh_area * s2,
