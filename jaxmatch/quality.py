@@ -16,7 +16,8 @@ import numpy as np
 from jaxmatch.catalogue.mesh import QUAD_NEXT as _NEXT
 from jaxmatch.lazy import Later
 
-__all__ = ["corner_vectors", "edge_ratios", "inverted_mask", "quad_areas", "quality", "sj_inverted"]
+__all__ = ["corner_vectors", "edge_ratios", "inverted_mask", "quad_areas", "quality", "quality_inverted",
+           "sj_inverted"]
 
 _later = Later(kernels="jaxmatch.kernels.placement")
 """The compiled kernels, on the first :func:`sj_inverted`: where the C library is absent they
@@ -57,14 +58,21 @@ def quality(xy: np.ndarray, quads: np.ndarray) -> tuple[np.ndarray, np.ndarray, 
       so a reflex (non-convex) corner reads above 180 and an inverted quad has angles
       above 180; a corner with a zero-length edge reads 0.
     """
+    return quality_inverted(xy, quads)[:3]
+
+
+def quality_inverted(xy: np.ndarray, quads: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``(scaled_jacobian, min_angle, max_angle, inverted)``: :func:`quality`'s three ``(F,)
+    float64`` arrays and :func:`inverted_mask`'s ``(F,) bool``, the same values from one set of
+    corner vectors (a placement needs all four). xy: (V, 2) positions; quads: (F, 4) vertex ids, ccw."""
     q = np.asarray(quads)
     if q.size == 0:
         z = np.zeros(0)
-        return z, z.copy(), z.copy()
+        return z, z.copy(), z.copy(), np.zeros(0, bool)
     e1, e2, cross = corner_vectors(xy, q)
     dot = np.sum(e1 * e2, axis=-1)
     ang = np.degrees(np.mod(np.arctan2(cross, dot), 2 * np.pi))
-    return _scaled_jacobian(e1, e2, cross), ang.min(axis=1), ang.max(axis=1)
+    return _scaled_jacobian(e1, e2, cross), ang.min(axis=1), ang.max(axis=1), (cross <= 0).any(axis=1)
 
 
 def _scaled_jacobian(e1: np.ndarray, e2: np.ndarray, cross: np.ndarray) -> np.ndarray:

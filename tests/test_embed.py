@@ -22,7 +22,7 @@ from jaxmatch.placement.embed import (
     to_user,
     tutte,
 )
-from jaxmatch.quality import edge_ratios, inverted_mask, quad_areas, quality, sj_inverted
+from jaxmatch.quality import edge_ratios, inverted_mask, quad_areas, quality, quality_inverted, sj_inverted
 from jaxmatch.catalogue.mesh import boundary_valences, from_quads, validate, valences
 
 # ---------------------------------------------------------------------------------------------
@@ -521,6 +521,29 @@ def test_sj_inverted_is_quality_and_inverted_mask(seed):
     np.testing.assert_array_equal(sj, quality(xy, quads)[0])
     np.testing.assert_array_equal(inv, inverted_mask(xy, quads))
     assert sj_inverted(xy, np.zeros((0, 4), np.int64))[0].shape == (0,)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_quality_inverted_is_the_corner_by_corner_measures(seed):
+    """The placement's four measures from one set of corner vectors: the one-pass scaled
+    Jacobian, the plain inverted mask, and angles computed corner by corner in Python (random,
+    partly folded quads)."""
+    rng = np.random.default_rng(seed)
+    xy = rng.normal(size=(40, 2))
+    quads = rng.integers(0, 40, size=(60, 4))
+    quads = np.array([rng.choice(40, 4, replace=False) for _ in range(60)])  # four distinct vertices each
+    sj, lo, hi, inv = quality_inverted(xy, quads)
+    np.testing.assert_array_equal(sj, sj_inverted(xy, quads)[0])
+    np.testing.assert_array_equal(inv, inverted_mask(xy, quads))
+    for f, q in enumerate(quads.tolist()):
+        angles = []
+        for c in range(4):
+            (x0, y0), (x1, y1), (x3, y3) = xy[q[c]], xy[q[(c + 1) % 4]], xy[q[(c + 3) % 4]]
+            ux, uy, vx, vy = x1 - x0, y1 - y0, x3 - x0, y3 - y0  # to the next and the previous vertex
+            a = math.degrees(math.atan2(ux * vy - uy * vx, ux * vx + uy * vy)) % 360.0  # ccw from one to the other
+            angles.append(a)
+        assert lo[f] == pytest.approx(min(angles), abs=1e-9) and hi[f] == pytest.approx(max(angles), abs=1e-9)
+    assert [a.shape for a in quality_inverted(xy, np.zeros((0, 4), np.int64))] == [(0,)] * 4
 
 
 # ---------------------------------------------------------------------------------------------

@@ -737,3 +737,68 @@ def test_a_size_whose_matches_a_scan_went_through_is_not_ranked_again(cat, lat, 
     cat.cache.clear()
     assert list(T._iter_by_size(patch, cat, lat, limit=3, internal=[0, 1])) == []
     assert [k for _, (k,) in asked] == [1]
+
+
+def _plain_fit(shape, annotation, match, cat):
+    """:func:`T.fit_template`'s sides and chords the plain way: each corner's loop position
+    from a dict, each side's path walked from one corner to the next (reversed when the user
+    runs it backwards), chords numbered by a loop over the side edges then every edge."""
+    from jaxmatch.placement.embed import oriented_boundary
+
+    om, loop = oriented_boundary(cat.mesh(match.mesh_id), match.rotation, match.reflected)
+    loop = [int(v) for v in loop]
+    nb = len(loop)
+    if shape.n_corners == 0:
+        paths = [loop + loop[:1]]
+    else:
+        where = {int(a): j for j, a in enumerate(np.asarray(match.alignment).tolist())}
+        side = np.asarray(annotation.side).tolist()
+        corner_point = [side.index(j) for j in range(shape.n_corners)]
+        if any(p not in where or int(annotation.codes[p]) == 0 for p in corner_point):
+            return None
+        pos = [where[p] for p in corner_point]
+        paths = []
+        for j, rev in shape.side_frame:
+            a, b = pos[j], pos[(j + 1) % shape.n_corners]
+            path = [loop[i % nb] for i in range(a, (b if b > a else b + nb) + 1)]
+            paths.append(path[::-1] if rev else path)
+    e = np.asarray(edges(np.asarray(om.quads)), np.int64)
+    key = {tuple(x): i for i, x in enumerate(e.tolist())}
+    label = T._chord_topology(np.asarray(om.quads)).label
+    rename: dict = {}
+    order = [key[tuple(sorted((p[k], p[k + 1])))] for p in paths for k in range(len(p) - 1)] + list(range(len(e)))
+    for i in order:
+        rename.setdefault(int(label[i]), len(rename))
+    chord = [rename[int(c)] for c in label]
+    side_chords = [[chord[key[tuple(sorted((p[k], p[k + 1])))]] for k in range(len(p) - 1)] for p in paths]
+    return paths, side_chords, chord
+
+
+@pytest.mark.parametrize("path", [EXAMPLES / "lshape.json", EXAMPLES / "triangle.json", EXAMPLES / "circle.json",
+                                  LABELLED / "trapezoid.json", LABELLED / "stairs.json"], ids=lambda p: p.stem)
+@pytest.mark.parametrize("clockwise", [False, True])
+def test_fitted_template_is_the_plain_fit(cat, lat, path, clockwise):
+    """:func:`T.fit_template` (loop positions, side paths and chord numbers in whole arrays)
+    gives each ranked match of every size the sides, paths and chords of the plain walk above,
+    for the file's outline and the same outline listed clockwise (the sides run backwards)."""
+    from jaxmatch.scoring.rank import rank
+
+    shp = load_shape(path)
+    if clockwise:
+        shp = make_shape(np.asarray(shp.points)[::-1])
+    fitted = 0
+    for k in sorted(cat.internal)[:4]:
+        ranking = rank(shp, cat, lat, internal=[k], top=12, per_size=True, prune=True)
+        for r, m in enumerate(ranking.results, 1):
+            t = T.fit_template(shp, ranking.annotation, m, cat, r)
+            plain = _plain_fit(shp, ranking.annotation, m, cat)
+            assert (t is None) == (plain is None), (k, m.mesh_id)
+            if t is None:
+                continue
+            fitted += 1
+            paths, side_chords, chord = plain
+            assert [p.tolist() for p in t.side_path] == paths
+            assert all(p.dtype == np.int64 for p in t.side_path + t.side_chords)
+            assert [c.tolist() for c in t.side_chords] == side_chords
+            assert t.edge_chord.tolist() == chord and t.n_chords == max(chord) + 1
+    assert fitted > 10

@@ -37,7 +37,7 @@ from jaxmatch.kernels import placement as kernels
 from jaxmatch.placement.embed import Placement, exact_paths, oriented_boundary, place
 from jaxmatch.placement.spread import (MAX_TIED_ALIGNMENTS, orientation_utilities, spread_alignment,
                                        spread_optimal_alignment, spread_setup)
-from jaxmatch.quality import edge_ratios, inverted_mask, quad_areas, quality
+from jaxmatch.quality import edge_ratios, quad_areas, quality_inverted
 from jaxmatch.shape import S as S_CODE
 from jaxmatch.shape import point_at as shape_point_at
 from jaxmatch.scoring.rank import TIE_CAP, Match, Ranking, TieBreaker
@@ -365,12 +365,17 @@ def place_match(shape: Shape, annotation: Annotation, catalogue: Catalogue, matc
             cands = [(match.rotation, match.reflected,
                       spread_alignment(annotation.t, annotation.perimeter, annotation.codes, given))]
         # one candidate per distinct boundary (orientations that differ by a symmetry of the mesh
-        # give the same placement), in a geometric order, at most MAX_CANDIDATES
+        # give the same placement), in a geometric order, at most MAX_CANDIDATES (a single one
+        # needs no signature: it is the one placed)
         unique = {}
         val = mesh_valences(mesh)
         boundaries: dict[bytes, Boundary] = {}  # corner_boundary depends on the corner points only
         loops: dict[tuple[int, bool], np.ndarray] = {}
         seen = set()
+        if len(cands) == 1:
+            rot, refl, al = cands[0]
+            unique[()] = (rot, refl, al, corner_boundary(shape, annotation, al))
+            cands = []
         for (rot, refl, al), key in zip(cands, _pin_keys(annotation, [c[2] for c in cands])):
             if (rot, refl, key) in seen:  # same boundary, same valences: same signature
                 continue
@@ -381,13 +386,16 @@ def place_match(shape: Shape, annotation: Annotation, catalogue: Catalogue, matc
                 loops[rot, refl] = val[oriented_boundary(mesh, rot, refl)[1]]
             sig = _boundary_signature(boundaries[key], loops[rot, refl])
             unique.setdefault(sig, (rot, refl, al, boundaries[key]))
-        best = None
+        best = None  # (key or None while no other placement needs comparing, placement, u)
         for sig in sorted(unique)[:MAX_CANDIDATES if min_utility is None else MAX_REORIENTED]:
             rot, refl, al, b = unique[sig]
             for pl, u in _place_candidate(shape, annotation, mesh, rot, refl, al, smooth_iters, b):
+                if best is None:
+                    best = (None, pl, u)
+                    continue
                 key = placement_key(pl)
-                if best is None or key < best[0]:
-                    best = (key, pl, u)
+                kept = placement_key(best[1]) if best[0] is None else best[0]
+                best = (key, pl, u) if key < kept else (kept, best[1], best[2])
         _, pl, u = best  # boundary paths only for the one kept
         pl = dataclasses.replace(pl, boundary_paths=exact_paths(shape.points, u, pl.xy[pl.mesh.boundary], shape.arc_length))
         user = to_user_placement(shape, pl)
@@ -478,7 +486,7 @@ def to_user_placement(shape: Shape, pl: Placement) -> Placement:
     """A unit-box placement mapped to user coordinates (``shape.to_user``), quality recomputed."""
     xy = shape.to_user(pl.xy)
     quads = pl.mesh.quads
-    sj, amin, amax = quality(xy, quads)
+    sj, amin, amax, folded = quality_inverted(xy, quads)
     s2 = float(shape.scale) ** 2
     return dataclasses.replace(
         pl,
@@ -488,7 +496,7 @@ def to_user_placement(shape: Shape, pl: Placement) -> Placement:
         scaled_jacobian=sj,
         min_angle=amin,
         max_angle=amax,
-        inverted=int(inverted_mask(xy, quads).sum()),
+        inverted=int(folded.sum()),
         boundary_paths=tuple(shape.to_user(p) for p in pl.boundary_paths),
         region_area=pl.region_area * s2,
         mesh_area=pl.mesh_area * s2,

@@ -51,7 +51,7 @@ import numpy as np
 from jaxmatch.catalogue.mesh import QuadMesh, edges, mesh_valences
 from jaxmatch.arrays import roll
 from jaxmatch.geometry import VERTEX_SNAP, cumulative_length, point_at, signed_area, sub_polyline
-from jaxmatch.quality import corner_vectors, edge_ratios, inverted_mask, quad_areas, quality, sj_inverted
+from jaxmatch.quality import corner_vectors, edge_ratios, quad_areas, quality_inverted, sj_inverted
 
 __all__ = [
     "Placement",
@@ -674,7 +674,7 @@ def place(
         bxy[js] = bxy[ja] + u[:, None] * (bxy[jb] - bxy[ja])
     xy[loop] = bxy  # exact boundary positions (no round-off from normalisation)
 
-    sj, amin, amax = quality(xy, quads)
+    sj, amin, amax, folded = quality_inverted(xy, quads)
     val = mesh_valences(mesh)  # the oriented mesh has the same vertices
     internal = np.ones(V, bool)
     internal[loop] = False
@@ -692,7 +692,7 @@ def place(
         scaled_jacobian=sj,
         min_angle=amin,
         max_angle=amax,
-        inverted=int(inverted_mask(xy, quads).sum()),
+        inverted=int(folded.sum()),
         irregular=irregular,
         alignment=al,
         boundary_paths=paths,

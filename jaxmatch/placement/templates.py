@@ -196,16 +196,14 @@ def _chords(quads: np.ndarray, boundary: np.ndarray, first_edges: Sequence[tuple
     (F, 2), n_chords)``."""
     t = _chord_topology(quads) if topology is None else topology
     E = t.edges.shape[0]
-    # renumber: by first boundary edge along the sides, then the rest by smallest edge
-    rename = np.full(t.n, -1, np.int64)
-    nxt = 0
+    # renumber: by first boundary edge along the sides, then the rest by smallest edge (every
+    # chord has an edge, so each label occurs in `order`; its number is the rank of its first
+    # occurrence)
     fe = np.asarray(first_edges, np.int64).reshape(-1, 2)
     order = np.concatenate([_edge_id(t.key, t.V, fe[:, 0], fe[:, 1]), np.arange(E)])
-    for eid in order.tolist():
-        c = t.label[eid]
-        if rename[c] < 0:
-            rename[c] = nxt
-            nxt += 1
+    labels, first = np.unique(t.label[order], return_index=True)
+    rename = np.empty(t.n, np.int64)
+    rename[labels[np.argsort(first)]] = np.arange(labels.shape[0])
     chord = rename[t.label]
     return t.edges, chord, np.stack([chord[t.quad_edges[:, 0]], chord[t.quad_edges[:, 1]]], axis=1), int(t.n)
 
@@ -220,11 +218,12 @@ def _corner_positions(shape: Shape, annotation, alignment: np.ndarray) -> np.nda
     first = np.searchsorted(side, np.arange(n))  # annotation index of corner j
     if n and np.any(codes[first] == 0):
         return None
-    where = {int(a): j for j, a in enumerate(al.tolist())}
-    pos = [where.get(int(i)) for i in first]
-    if any(p is None for p in pos):
+    where = np.full(max(int(codes.shape[0]), int(al.max(initial=-1)) + 1), -1, np.int64)
+    where[al] = np.arange(al.shape[0])  # point -> its position in the loop (the last, were one twice)
+    pos = where[first]
+    if np.any(pos < 0):
         return None
-    return np.asarray(pos, np.int64)
+    return pos
 
 
 def fit_template(shape: Shape, annotation, match: "Match", catalogue: "Catalogue", rank: int) -> PatchTemplate | None:
@@ -236,24 +235,38 @@ def fit_template(shape: Shape, annotation, match: "Match", catalogue: "Catalogue
     loop = np.asarray(loop32, np.int64)
     nb = loop.shape[0]
     if shape.n_corners == 0:
-        paths = [np.concatenate([loop, loop[:1]])]
+        a = np.zeros(1, np.int64)
+        stop = np.full(1, nb, np.int64)
+        rev = np.zeros(1, bool)
     else:
         pos = _corner_positions(shape, annotation, match.alignment)
         if pos is None:
             return None
         n = shape.n_corners
-        paths = []
-        for j, rev in shape.side_frame:
-            a, b = int(pos[j]), int(pos[(j + 1) % n])
-            stop = b if b > a else b + nb
-            path = loop[np.arange(a, stop + 1) % nb]
-            paths.append(path[::-1].copy() if rev else path)
-    first = [(int(p[k]), int(p[k + 1])) for p in paths for k in range(p.shape[0] - 1)]
+        frame = np.asarray(shape.side_frame, np.int64).reshape(-1, 2)
+        a, b = pos[frame[:, 0]], pos[(frame[:, 0] + 1) % n]
+        stop = np.where(b > a, b, b + nb)
+        rev = frame[:, 1].astype(bool)
+    # side i's path: loop positions a_i .. stop_i (mod nb), backwards when the user runs it so;
+    # all sides' vertices in one array, side i's at [starts[i], starts[i] + lens[i])
+    lens = stop - a + 1
+    ends = np.cumsum(lens)
+    starts = ends - lens
+    side = np.repeat(np.arange(lens.shape[0]), lens)
+    k = np.arange(int(ends[-1])) - starts[side]
+    verts = loop[np.where(rev[side], stop[side] - k, a[side] + k) % nb]
+    inner = np.ones(verts.shape[0], bool)
+    inner[ends - 1] = False  # an edge from each vertex but a side's last
+    first = np.stack([verts[:-1][inner[:-1]], verts[1:][inner[:-1]]], axis=1)  # (sum e_i, 2) side edges in order
     topo = _kept_topology(catalogue, match.mesh_id, match.reflected)
     e, chord, qc, nc = _chords(om.quads, loop, first, topo)
-    side_chords = [chord[_edge_id(topo.key, topo.V, p[:-1], p[1:])].astype(np.int64) for p in paths]
-    return PatchTemplate(shape, match.mesh_id, tuple(side_chords), nc, match, rank, None, qc, e, chord,
-                         tuple(p.astype(np.int64) for p in paths))
+    along = chord[_edge_id(topo.key, topo.V, first[:, 0], first[:, 1])]
+    edge_ends = (ends - np.arange(1, lens.shape[0] + 1)).tolist()  # side i's edges end here in `along`
+    edge_starts = [0] + edge_ends[:-1]
+    side_chords = tuple(along[i:j] for i, j in zip(edge_starts, edge_ends))
+    bounds = zip(starts.tolist(), ends.tolist())
+    return PatchTemplate(shape, match.mesh_id, side_chords, nc, match, rank, None, qc, e, chord,
+                         tuple(verts[i:j].copy() for i, j in bounds))
 
 
 def _candidates(shape: Shape, catalogue: "Catalogue", lattice: "Lattice", *, limit: int,
