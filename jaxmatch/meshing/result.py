@@ -160,10 +160,7 @@ class QuadMesh:
         lies in :data:`jaxmatch.field.SHARE_BAND` (None without a size)."""
         if self.field is None and not self.size:
             return None
-        if not self._edges.size:
-            return math.nan
-        r = self._edge_lengths / self._edge_targets
-        return float(np.mean((r >= SHARE_BAND[0]) & (r <= SHARE_BAND[1])))
+        return self.band_share(SHARE_BAND)
 
     def band_share(self, band: tuple[float, float]) -> float:
         """Share of the edges whose length / the size at its midpoint (the field, or ``size``)

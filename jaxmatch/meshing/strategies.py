@@ -395,7 +395,7 @@ class LeanCurves:
 
     def candidates(self, req: Request, tried) -> list[Candidate]:
         q = req.quality
-        key, i = min((mesh_key(c.mesh, i, q), i) for i, c in enumerate(tried) if c.mesh is not None)
+        key, i = _best_keyed(tried, q)
         best = tried[i].mesh
         own = [st for st in self.strategies if st.name == tried[i].name]  # the best mesh's own layout
         if not own:
@@ -407,10 +407,17 @@ class LeanCurves:
                 and c.mesh.min_scaled_jacobian >= floor]
 
 
+def _best_keyed(tried, quality: Quality) -> tuple[tuple, int] | None:
+    """``(key, index)`` of the candidate of ``tried`` with the smallest
+    :func:`~jaxmatch.meshing.choose.mesh_key` (None when none has a mesh)."""
+    keyed = [(mesh_key(c.mesh, i, quality), i) for i, c in enumerate(tried) if c.mesh is not None]
+    return min(keyed) if keyed else None
+
+
 def _best(tried, quality: Quality) -> QuadMesh | None:
     """The mesh of ``tried`` with the smallest :func:`~jaxmatch.meshing.choose.mesh_key`."""
-    keyed = [(mesh_key(c.mesh, i, quality), i) for i, c in enumerate(tried) if c.mesh is not None]
-    return tried[min(keyed)[1]].mesh if keyed else None
+    kept = _best_keyed(tried, quality)
+    return tried[kept[1]].mesh if kept else None
 
 
 def run(plan: Sequence, req: Request) -> list[Candidate]:
