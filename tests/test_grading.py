@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -103,3 +104,34 @@ def test_with_a_field_the_patches_are_smoothed_with_fewer_iterations(monkeypatch
     want = refine.SMOOTH_ITERS_GRADED if graded_size else refine.SMOOTH_ITERS
     assert seen["patches"] and set(seen["patches"]) == {want}
     assert seen["cuts"] and set(seen["cuts"]) == {refine.SMOOTH_ITERS}  # the merged mesh's cuts: as for one size
+
+
+def test_a_mesh_with_every_edge_in_the_band_is_returned_as_is():
+    m = mesh(SQUARE, size=0.1)  # a grid of 0.1 edges against a field of 0.1 everywhere
+    m = replace(m, field=Field(0.1).bind(SQUARE))
+    assert m.field_share == 1.0 and follow_field(m, QUALITY) is m
+
+
+@pytest.mark.parametrize("case, drop", [("rectangle", True), ("plate-hole", False), ("square", False)])
+def test_the_relaxation_stops_at_a_step_that_follows_the_field_less(monkeypatch, case, drop):
+    """The keys (share + refined share) of the start and of each step: a step below the one
+    before it is the last; on the rectangle of ``examples/graded`` the third step drops."""
+    import jaxmatch
+    import jaxmatch.meshing.grading as G
+    from jaxmatch.field import load_field
+
+    folder = Path(__file__).resolve().parent.parent / "examples" / "graded"
+    shp, f = jaxmatch.load_shape(folder / f"{case}.json"), load_field(folder / f"{case}.field.json")
+    keys, shares, real = [], [], G._shares
+
+    def recorded(*a):
+        r = real(*a)
+        keys.append(r[0] + r[1])
+        shares.append(r[0])
+        return r
+
+    monkeypatch.setattr(G, "_shares", recorded)
+    out = mesh(shp, size=f)
+    drops = [i for i in range(2, len(keys)) if keys[i] < keys[i - 1]]
+    assert drops == ([len(keys) - 1] if drop else []) and 2 <= len(keys) <= G.FOLLOW_ITERS + 1
+    assert out.field_share == pytest.approx(shares[int(np.argmax(np.array(keys) + 1e-12 * np.arange(len(keys))))])

@@ -111,3 +111,22 @@ def test_conforming_templates_are_tried_for_a_uniform_size_only(graded):
     req = S.Request(None, None, None, 1.0, np.zeros((0, 2)), q, None, 0.0, None)
     best = _OffSize()
     assert S.Conforming().wanted(best, [Candidate("single", best)], req) is (not graded)
+
+
+@pytest.mark.parametrize("single_best", [True, False])
+def test_graded_larger_templates_are_tried_while_the_single_patch_is_the_best_mesh(single_best):
+    """With a size field the larger templates are the single patch's transitions: tried when the
+    single candidate is the best mesh so far and misses the field, not where a partition already
+    beats it; below the quality floor they are tried as for one size."""
+    f = Field(0.2, (jaxmatch.Near("point", (1.0, 1.0), 0.04, 0.6),))
+    sq = jaxmatch.make_shape([[0, 0], [2, 0], [2, 2], [0, 2]])
+    single = jaxmatch.mesh(sq, size=f, strategies=["single"])
+    rings = jaxmatch.mesh(sq, size=f, strategies=["rings"])
+    q = Quality(field=single.field)
+    assert single.size_conformity(q) > 0 and rings.size_conformity(q) < single.size_conformity(q)
+    req = S.Request(None, None, None, 1.0, np.zeros((0, 2)), q, None, 0.0, None)
+    tried = [Candidate("single", single), Candidate("rings", rings)]
+    best = single if single_best else rings
+    assert S.Larger().wanted(best, tried, req) is single_best
+    floor = Quality(field=single.field, good_sj=1.01)  # every mesh below the floor: tried either way
+    assert S.Larger().wanted(best, tried, S.Request(None, None, None, 1.0, np.zeros((0, 2)), floor, None, 0.0, None))

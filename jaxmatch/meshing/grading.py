@@ -26,7 +26,7 @@ from jaxmatch.field import SHARE_BAND
 from jaxmatch.meshing.result import QuadMesh
 from jaxmatch.quality import sj_inverted
 
-__all__ = ["CG_TOL", "FOLLOW_ITERS", "FOLLOW_STEP", "HALVINGS", "REVERTS", "SETTLED", "follow_field", "laplacian_solve", "refined_cut"]
+__all__ = ["CG_TOL", "FOLLOW_ITERS", "FOLLOW_STEP", "HALVINGS", "PERFECT", "REVERTS", "SETTLED", "follow_field", "laplacian_solve", "refined_cut"]
 
 FOLLOW_ITERS = 5
 """Relaxation steps of :func:`follow_field` (each one linear solve)."""
@@ -43,6 +43,10 @@ FOLLOW_STEP = 0.3
 HALVINGS = 3
 """A step whose every vertex is put back (its quads below their floors) is halved, up to this
 many times."""
+
+PERFECT = 2.0
+"""The largest key of :func:`follow_field` (share 1 and refined share 1): a mesh there is kept
+as it is, and the relaxation stops at the first step that reaches it."""
 
 CG_TOL = 1e-6
 """Conjugate gradients stop at this residual relative to the right-hand side's norm."""
@@ -132,7 +136,9 @@ def follow_field(m: QuadMesh, quality: Quality = QUALITY, iters: int = FOLLOW_IT
     solves, for the inner vertices ``x``, ``sum over i's edges of (x_i - x_j) = sum over i's edges
     of t_ij (old x_i - old x_j) / old length`` (stress majorization of ``sum (length - t)^2``;
     :func:`laplacian_solve`) and moves every inner vertex ``step`` of the way to it, until none
-    moves by more than :data:`SETTLED` of the field there; a vertex whose move would fold a quad
+    moves by more than :data:`SETTLED` of the field there, a step follows the field less than the
+    step before it (the key below, lower: past the relaxation's best) or every edge is in the
+    band (:data:`PERFECT`; ``m`` itself when it starts there); a vertex whose move would fold a quad
     around it or take one below its floor (:func:`_quad_floor`: the quality band is kept where
     it was reached) stays, and a step where none moves is halved (:data:`HALVINGS` times at
     most). The outline's vertices do not move, so corners, sides and area along
@@ -165,7 +171,9 @@ def follow_field(m: QuadMesh, quality: Quality = QUALITY, iters: int = FOLLOW_IT
                            + np.bincount(e[:, 1], weights=np.where(boundary[e[:, 0]], xy[e[:, 0], k], 0.0), minlength=V))
     fv = np.asarray(m.field(xy), np.float64)  # at the vertices: an edge's rest length is its ends' mean
     share, zone_share, cut = _shares(m.field, xy, e, None)
-    start = best_key = share + zone_share
+    start = best_key = last = share + zone_share
+    if start >= PERFECT:  # every edge in the band already: no step can do better
+        return m
     best = xy
     for it in range(int(iters)):
         if it:  # (only the inner vertices move: the field is evaluated again there only)
@@ -189,6 +197,10 @@ def follow_field(m: QuadMesh, quality: Quality = QUALITY, iters: int = FOLLOW_IT
             break
         xy = trial
         share, zone_share, _ = _shares(m.field, xy, e, cut)
-        if share + zone_share >= best_key:
-            best, best_key = xy, share + zone_share
+        key = share + zone_share
+        if key >= best_key:
+            best, best_key = xy, key
+        if key >= PERFECT or key < last:  # nothing left to gain, or past the relaxation's best
+            break
+        last = key
     return m if best_key < start or best is m.xy else replace(m, xy=best)

@@ -9,7 +9,8 @@ strategy                candidates                                              
                         one template; :class:`Split`: each decomposition), meshed by the
                         one solve most promising first, a layout that cannot win skipped
 :class:`Larger`         the single patch with each larger template size group            below the quality floor;
-                                                                                         graded: off the field
+                                                                                         graded: the single is the
+                                                                                         best, off the field
 :class:`Conforming`     single templates whose side counts follow the size                no candidate follows it
                                                                                          (no size field)
 :class:`RingPartition`  a layer of patches along every loop and an O-grid core, or a box  an edge of every candidate
@@ -25,7 +26,8 @@ strategy                candidates                                              
 ======================= ================================================================= ===========================
 
 With a size field the plan is the layouts, the ring partition, the larger templates (so tried
-only when the ring partition too misses the field), the bends (``Conforming`` never applies).
+only when the single candidate is still the best mesh and misses the field), the bends
+(``Conforming`` never applies).
 
 Every strategy has ``wanted(best, tried, request)`` (its condition on the best mesh so far) and
 ``candidates(request, tried)``.
@@ -270,18 +272,21 @@ def _single(tried) -> QuadMesh | None:
 
 
 class Larger:
-    """Below the quality floor, or a graded mesh (a size field) whose edges do not all conform to
-    it: the single patch with each larger template size group (:func:`larger_templates`), after
-    the single candidate."""
+    """Below the quality floor, or, with a size field, the single candidate is the best mesh so
+    far and its edges do not all conform to the field: the single patch with each larger
+    template size group (:func:`larger_templates`), after the single candidate. (Graded, a
+    larger template's irregular vertices are the single patch's transitions of size; where a
+    partition already follows the field better than the single patch, they are not tried.)"""
 
     after_single = True
 
     def wanted(self, best: QuadMesh | None, tried, req: Request) -> bool:
-        if _single(tried) is None:
+        single = _single(tried)
+        if single is None:
             return False
-        if req.quality.field is not None and best.size_conformity(req.quality) > 0:
-            return True  # graded: a larger template's irregular vertices are transitions of size
-        return not best.min_scaled_jacobian >= req.quality.good_sj
+        if not best.min_scaled_jacobian >= req.quality.good_sj:
+            return True
+        return req.quality.field is not None and best is single and best.size_conformity(req.quality) > 0
 
     def candidates(self, req: Request, tried) -> list[Candidate]:
         return larger_templates(single_patch(req.region), req.cat, req.lat, req.h, req.corners, _single(tried),
