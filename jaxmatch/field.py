@@ -392,9 +392,15 @@ def line_integral(f, polyline: np.ndarray, *, per_size: int = 4) -> np.ndarray:
         j = np.arange(pieces.size) - np.repeat(np.cumsum(k) - k, k)
         t0, t1 = j / k[pieces], (j + 1) / k[pieces]
         a, d = p[:-1][pieces], (p[1:] - p[:-1])[pieces]
-        inv = 1.0 / f(np.concatenate([a + t0[:, None] * d, a + t1[:, None] * d]))
+        # a piece ends where the next one of its segment starts (the same a + t d): the field is
+        # asked at every start and at each segment's last end only
+        last = np.cumsum(k) - 1
+        inv = 1.0 / f(np.concatenate([a + t0[:, None] * d, a[last] + t1[last][:, None] * d[last]]))
         n = pieces.size
-        part = 0.5 * (inv[:n] + inv[n:]) * seg[pieces] / k[pieces]
+        end = np.empty(n)
+        end[:-1] = inv[1:n]
+        end[last] = inv[n:]
+        part = 0.5 * (inv[:n] + end) * seg[pieces] / k[pieces]
         cum = np.concatenate([[0.0], np.cumsum(np.bincount(pieces, weights=part, minlength=seg.size))])
         return cum
 

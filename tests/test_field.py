@@ -284,3 +284,24 @@ def test_cli_bad_size_field_exit_2_one_line_nothing_written(cli, tmp_path, spec,
     code, _, err = cli("mesh", PLATE, "--size-field", field, "--out", out, *extra)
     lines = err.strip().splitlines()
     assert code == EXIT_BAD_INPUT and len(lines) == 1 and words in lines[0] and not out.exists()
+
+
+@pytest.mark.parametrize("poly", [[[0.0, 0.0], [1.0, 0.0], [2.0, 0.3]], [[0.2, 0.9], [0.25, 0.1], [0.9, 0.6], [0.2, 0.9]]])
+def test_line_integral_asks_the_field_once_a_point_and_sums_each_pieces_ends(poly):
+    """Each piece's trapezoid from the field at its two ends (computed here at both ends of every
+    piece, as written), while the field is asked at each piece's start and each segment's end
+    only: the same numbers, bit for bit."""
+    f = Field(0.5, (Near("point", (0.3, 0.2), 0.04, 0.6), Near("curve", ((0.0, 1.0), (1.0, 0.7)), 0.1, 0.4))).bind(SQUARE)
+    p = np.array(poly)
+    asked = []
+    got = line_integral(CallableSize(lambda x: (asked.append(len(x)), f(x))[1], smallest=f.smallest), p)
+    seg = np.linalg.norm(np.diff(p, axis=0), axis=1)
+    k = np.clip(np.ceil(seg / (f.smallest / 4)), 1, 512).astype(int)
+    assert asked == [int(k.sum()) + len(seg)]
+    want = [0.0]
+    for i in range(len(seg)):
+        t = np.arange(k[i] + 1)
+        a, d = p[i], p[i + 1] - p[i]
+        ends = 1.0 / f(np.concatenate([a + (t[:-1] / k[i])[:, None] * d, a + (t[1:] / k[i])[:, None] * d]))
+        want.append(want[-1] + np.sum(0.5 * (ends[:k[i]] + ends[k[i]:]) * seg[i] / k[i]))
+    np.testing.assert_allclose(got, want, rtol=1e-12)
