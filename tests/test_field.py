@@ -236,6 +236,16 @@ def test_graded_tries_the_ring_partition_before_the_larger_templates():
     assert names == ["single", "rings"]
 
 
+@pytest.mark.parametrize("case, meshed, chosen", [
+    ("rectangle", ["single", "rings"], "rings"),  # the ring partition beats the single patch: no larger template
+    ("strip", ["single", "single k2-abbdea1b1e36", "single k4-22d2f29ecc34", "rings"], "single k4-22d2f29ecc34"),
+])
+def test_graded_tries_the_larger_templates_while_the_single_patch_is_the_best_mesh(case, meshed, chosen):
+    folder = EXAMPLES / "graded"
+    m = mesh(load_shape(folder / f"{case}.json"), size=load_field(folder / f"{case}.field.json"))
+    assert [c.name for c in m.tried if c.mesh is not None] == meshed and m.chosen == chosen
+
+
 def _refined_share(m, f, H, s):
     e = m._edges
     mid = 0.5 * (m.xy[e[:, 0]] + m.xy[e[:, 1]])
