@@ -136,9 +136,8 @@ def follow_field(m: QuadMesh, quality: Quality = QUALITY, iters: int = FOLLOW_IT
     solves, for the inner vertices ``x``, ``sum over i's edges of (x_i - x_j) = sum over i's edges
     of t_ij (old x_i - old x_j) / old length`` (stress majorization of ``sum (length - t)^2``;
     :func:`laplacian_solve`) and moves every inner vertex ``step`` of the way to it, until none
-    moves by more than :data:`SETTLED` of the field there, a step follows the field less than the
-    step before it (the key below, lower: past the relaxation's best) or every edge is in the
-    band (:data:`PERFECT`; ``m`` itself when it starts there); a vertex whose move would fold a quad
+    moves by more than :data:`SETTLED` of the field there or every edge is in the band
+    (:data:`PERFECT`; ``m`` itself when it starts there); a vertex whose move would fold a quad
     around it or take one below its floor (:func:`_quad_floor`: the quality band is kept where
     it was reached) stays, and a step where none moves is halved (:data:`HALVINGS` times at
     most). The outline's vertices do not move, so corners, sides and area along
@@ -171,7 +170,7 @@ def follow_field(m: QuadMesh, quality: Quality = QUALITY, iters: int = FOLLOW_IT
                            + np.bincount(e[:, 1], weights=np.where(boundary[e[:, 0]], xy[e[:, 0], k], 0.0), minlength=V))
     fv = np.asarray(m.field(xy), np.float64)  # at the vertices: an edge's rest length is its ends' mean
     share, zone_share, cut = _shares(m.field, xy, e, None)
-    start = best_key = last = share + zone_share
+    start = best_key = share + zone_share
     if start >= PERFECT:  # every edge in the band already: no step can do better
         return m
     best = xy
@@ -200,7 +199,6 @@ def follow_field(m: QuadMesh, quality: Quality = QUALITY, iters: int = FOLLOW_IT
         key = share + zone_share
         if key >= best_key:
             best, best_key = xy, key
-        if key >= PERFECT or key < last:  # nothing left to gain, or past the relaxation's best
+        if key >= PERFECT:  # every edge in the band: no later step can do better
             break
-        last = key
     return m if best_key < start or best is m.xy else replace(m, xy=best)
