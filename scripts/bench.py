@@ -1259,7 +1259,8 @@ def profile_bulk(parts: int, div: int = 32, top: int = 15) -> dict:
     its candidates, and from the first pass (:func:`_strategy_outcomes`) its CPU seconds
     (``cpu_s``), the parts where one of its candidates was chosen (``chosen``), the CPU seconds
     of the parts where none was (``unchosen_cpu_s``: what a bound that skips the strategy could save
-    at most) and the parts where the layout bound would have skipped it (``bounded``,
+    at most), the parts where it meshed no candidate at all (``empty``; their CPU seconds
+    ``empty_cpu_s``) and the parts where the layout bound would have skipped it (``bounded``,
     :func:`_bounded`); ``chosen_by``: how many chosen meshes each kind of candidate made (a larger or
     a conforming single template are both named ``single <id>``); ``layouts``: from the first
     pass (:func:`_layout_losers`), what a bound that skips a layout before it is meshed could save
@@ -1324,7 +1325,7 @@ class _Outcomes:
     ``candidates(request, tried)`` call of the current part (CPU seconds, names of the candidates
     meshed) until :meth:`part` is told the part's chosen mesh."""
 
-    EMPTY = {"cpu_s": 0.0, "chosen": 0, "unchosen_cpu_s": 0.0, "bounded": 0}
+    EMPTY = {"cpu_s": 0.0, "chosen": 0, "unchosen_cpu_s": 0.0, "bounded": 0, "empty": 0, "empty_cpu_s": 0.0}
 
     def __init__(self):
         self.pending: list[tuple[str, float, set, bool]] = []
@@ -1342,6 +1343,9 @@ class _Outcomes:
                 d["chosen"] += 1
             else:
                 d["unchosen_cpu_s"] += cpu
+            if not names:  # no candidate meshed (e.g. no template meets a conforming count vector)
+                d["empty"] += 1
+                d["empty_cpu_s"] += cpu
         self.pending.clear()
 
     def of(self, name: str) -> dict:
@@ -1501,8 +1505,8 @@ def main(argv=None) -> int:
               f"{r['load'][0]:.2f}", file=out)
         for name, v in r["strategies"].items():
             print(f"  {name:>13}: ran for {v['parts']:3d} parts, {v['profiled_s']:6.2f} s profiled; {v['cpu_s']:6.2f} CPU s, "
-                  f"chosen in {v['chosen']:3d} parts, {v['unchosen_cpu_s']:6.2f} CPU s in the others; the layout bound "
-                  f"rules it out in {v['bounded']}", file=out)
+                  f"chosen in {v['chosen']:3d} parts, {v['unchosen_cpu_s']:6.2f} CPU s in the others, no candidate in "
+                  f"{v['empty']} ({v['empty_cpu_s']:.2f} CPU s); the layout bound rules it out in {v['bounded']}", file=out)
         print("  chosen: " + ", ".join(f"{k} {v}" for k, v in r["chosen_by"].items()), file=out)
         lay = r["layouts"]
         print(f"  layouts meshed: {lay['meshed']}, {lay['cpu_s']:.2f} CPU s in mesh_layout; after a better one in the "

@@ -151,6 +151,10 @@ def test_the_bulk_profile_counts_every_part_and_the_strategies_that_ran(bench):
     assert all(0 <= v["unchosen_cpu_s"] <= v["cpu_s"] for v in st) and sum(v["cpu_s"] for v in st) <= r["cpu_s"] + 1e-9
     assert all(v["cpu_s"] == 0 for v in st if v["parts"] == 0)
     assert all(0 <= v["bounded"] <= v["parts"] - v["chosen"] for v in st)  # a bound never rules out a winner
+    # a call that meshed no candidate is one of the losing calls; Layouts meshes one in every part
+    assert all(0 <= v["empty"] <= v["parts"] - v["chosen"] and 0 <= v["empty_cpu_s"] <= v["unchosen_cpu_s"] + 1e-12
+               for v in st)
+    assert r["strategies"]["Layouts"]["empty"] == 0
     assert len(r["top"]) == len(r["top_own"]) > 0 and r["top"][0][3] >= r["top"][-1][3]
     assert r["top"][0][1] >= 3  # the outermost entry: at least one call per part
     lay = r["layouts"]  # every part meshes one layout at least; the losers are some of them, under a rule
