@@ -12,6 +12,7 @@ import shapely
 from jaxmatch.defaults import QUALITY
 from jaxmatch.inputs import load_catalogue, load_lattice
 from jaxmatch.placement.decompose import single_patch
+from jaxmatch.placement.layout import make_layout
 from jaxmatch.placement.milp import count_cost, one_patch_sides, solve_choice, solve_counts
 from jaxmatch.placement.solve import mesh_layout, off_size_patches
 from jaxmatch.shape import make_shape
@@ -121,3 +122,32 @@ def test_a_start_and_a_node_limit_never_return_worse_than_the_start():
     mults, n = solve_counts(sides, [GRID], size=1.0)
     ch = solve_choice(sides, [[GRID, THREE_TO_ONE]], penalties=[[0.0, 0.5]], size=1.0, start=(mults, n), max_nodes=1)
     assert ch.size_cost <= count_cost(sides, mults, n, size=1.0) + 1e-9
+
+
+def test_translated_patches_take_their_transitions_and_the_mesh_conforms():
+    """Two trapezoids (8 at the bottom, 2 at the top) that are translates of each other, a
+    triangle between them: both take a transition (the second as the first's templates, moved),
+    and the merged mesh is conforming (every inner edge in two quads, the outline's edges in one),
+    covers the region and keeps its corners."""
+    cat, lat = load_catalogue(), load_lattice("fine")
+    pts = np.array([[0.0, 0.0], [8.0, 0.0], [16.0, 0.0], [13.0, 2.0], [11.0, 2.0], [5.0, 2.0], [3.0, 2.0]])
+    lay = make_layout(pts, [[0, 1, 5, 6], [1, 4, 5], [1, 2, 3, 4]])
+    plain = mesh_layout(lay, cat, lat, size=1.0, smooth_cuts=True)
+    trans = mesh_layout(lay, cat, lat, size=1.0, smooth_cuts=True, transitions=True)
+    assert trans.templates[0] == trans.templates[2] != plain.templates[0]
+    for p in (0, 2):  # each trapezoid's bottom and top at the size
+        bottom, top = (int(sum(trans.counts[s] for s in trans.sides.patch_sides[p][i])) for i in (0, 2))
+        assert (bottom, top) == (8, 2)
+    q = trans.quads
+    e = np.sort(np.concatenate([q[:, [0, 1]], q[:, [1, 2]], q[:, [2, 3]], q[:, [3, 0]]]), axis=1)
+    uniq, uses = np.unique(e, axis=0, return_counts=True)
+    assert set(uses.tolist()) <= {1, 2}
+    outline = shapely.Polygon(pts[[0, 1, 2, 3, 4, 5, 6]]).exterior
+    mids = 0.5 * (trans.xy[uniq[:, 0]] + trans.xy[uniq[:, 1]])
+    on = shapely.distance(shapely.points(mids), outline) < 1e-9
+    assert np.array_equal(uses == 1, on)
+    areas = shapely.area(shapely.polygons(trans.xy[q]))
+    assert np.all(areas > 0) and areas.sum() == pytest.approx(shapely.Polygon(pts).area, rel=1e-9)
+    for c in pts[[0, 2, 3, 6]]:
+        assert np.min(np.linalg.norm(trans.xy - c, axis=1)) < 1e-12
+    assert _scaled_jacobians(trans.xy, q).min() >= QUALITY.good_sj

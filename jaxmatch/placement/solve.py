@@ -591,8 +591,7 @@ def _transition_rounds(layout: Layout, sides: Sides, shapes, cands, moved, best:
         q = moved[p].of
         if q not in offered:
             alts.append([tmpl[p]])
-            origs.append([cands[q][next(j for j in range(len(cands[q])) if _same_template(cands[q][j], tmpl[p]))]]
-                         if q != p else [tmpl[p]])
+            origs.append([next(t for t in _each(cands[q]) if _same_template(t, tmpl[p]))] if q != p else [tmpl[p]])
             continue
         origs.append(offered[q])
         alts.append(offered[q] if q == p else list(_Turned(offered[q], moved[p].turn, shapes[p])))
