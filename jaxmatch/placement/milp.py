@@ -223,16 +223,16 @@ def solve_choice(sides, alternatives: Sequence[Sequence[np.ndarray]], *, penalti
     widths / chord_targets: per patch, per alternative, as :func:`solve_counts` takes them for
     one template; bound: the largest multiplicity (default: three times the largest side target
     or floor, plus 4); most: ``(S,)`` the most edges each side may take (None: no limit), which
-    also bounds each chord by the sides it has edges on (a tighter program: HiGHS branches on
-    the binaries far less); time_limit: seconds for HiGHS (:func:`run_milp`; default :data:`MILP_TIME_LIMIT`);
-    start: ``(multiplicities per patch, counts (S,))`` of every patch's first alternative, a
-    feasible answer HiGHS starts from (past the time limit the answer is no worse); max_nodes:
-    the most branch-and-bound nodes (:func:`run_milp`); screen: first solve the linear
-    relaxation and keep, besides each patch's first alternative, only those it gives a share
-    above :data:`SCREEN_TOL` (fewer binaries: a heuristic, the optimum of the smaller program). A patch with one
-    alternative is :func:`solve_counts`' patch. Returns a
-    :class:`Choice`; raises :class:`LayoutInfeasible` when no choice meets the requested
-    counts, :class:`InputError` for a bad size."""
+    also bounds each chord by the sides it has edges on (a tighter relaxation); time_limit:
+    seconds for HiGHS (:func:`run_milp`; default :data:`MILP_TIME_LIMIT`); start: ``(multiplicities per patch, counts (S,))`` of every
+    patch's first alternative, a feasible answer HiGHS starts from (a limit of time or nodes
+    then answers no worse); max_nodes: the most branch-and-bound nodes (:func:`run_milp`);
+    screen: first solve the linear relaxation and keep, besides each patch's first alternative,
+    only those it gives a share above :data:`SCREEN_TOL` (fewer binaries: a heuristic, the
+    optimum of the smaller program). A patch with one alternative is :func:`solve_counts`'
+    patch. HiGHS runs with :data:`CHOICE_OPTIONS`. Returns a :class:`Choice`; raises
+    :class:`LayoutInfeasible` when no choice meets the requested counts, :class:`InputError`
+    for a bad size."""
     counts = dict(counts or {})
     h = float(size)
     if not (h > 0 and math.isfinite(h)):

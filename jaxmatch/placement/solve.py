@@ -16,7 +16,10 @@ the worst patch). The side counts' floors keep the area
 (:func:`~jaxmatch.placement.layout.curve_floors`; ``lean_curves``: the area budget shared by the
 curved sides alone, tried by :class:`jaxmatch.meshing.strategies.LeanCurves`). A patch that
 is a translate of an earlier one takes that patch's templates and
-refinement, moved.
+refinement, moved. With ``transitions`` (:class:`jaxmatch.meshing.strategies.Transitions`), the
+patches off the size band are offered larger templates too (transition patterns: opposite sides
+with different counts) and one integer program with a binary per patch and template
+(:func:`~jaxmatch.placement.milp.solve_choice`) chooses them with the multiplicities.
 
 Everything made is kept in the catalogue's cache (:mod:`jaxmatch.cache`).
 """
@@ -48,8 +51,8 @@ if TYPE_CHECKING:  # pragma: no cover
     from jaxmatch.scoring.lattice import Lattice
 
 __all__ = ["ALL_SIZES", "ROUNDS", "TEMPLATES_PER_PATCH", "TEMPLATE_SIZES", "TRANSITION_CHORDS", "TRANSITION_OFFERS",
-           "TRANSITION_TEMPLATES", "layout_key",
-           "layout_sides_kept", "lean_floors_help", "mesh_layout", "off_size_patches", "patch_shapes_kept"]
+           "TRANSITION_PATCHES", "TRANSITION_TEMPLATES", "layout_key", "layout_sides_kept", "lean_floors_help",
+           "mesh_layout", "off_size_patches", "patch_shapes_kept"]
 
 TEMPLATE_SIZES = ((0, 1), (2, 3))
 """Groups of internal-vertex counts tried for a patch's templates, in this order: the first
@@ -349,7 +352,7 @@ def _mesh_layout(layout: Layout, catalogue: Catalogue, lattice: Lattice, *, size
                    quality, lkey, cache)
     if transitions and size is not None:
         best = _transition_rounds(layout, sides, shapes, cands, moved, best, want, size, floors, equal, side_targets,
-                                  f, quality, lkey, catalogue, lattice)
+                                  f, quality, catalogue, lattice)
     return _merged(layout, sides, best, smooth_cuts, region)
 
 
@@ -442,6 +445,26 @@ TRANSITION_CHORDS = 2
 """Most templates a patch off the size is offered besides those (:func:`_offered`) that reach no
 new side counts but have more chords than its own: rows inside it at a size field's sizes (the
 graded rectangle's ring partition takes two such in its core)."""
+
+
+TRANSITION_NODES = 500
+"""Most branch-and-bound nodes HiGHS may spend on one program of :func:`_transition_rounds` (a
+limit of work, so the answer does not depend on the machine's load; past it, the best solution
+found: the program starts from every patch's own template and multiplicities, so it is never
+worse than the round it would replace)."""
+
+TRANSITION_CHORD_WEIGHT = 1.0
+"""Weight of the chords' deviations ``|m_c - width_c / size|`` in the program of
+:func:`_transition_rounds` (against 1 for the sides'): a template's inner chords make edges
+as its sides do, and a transition that brings its sides to the size by squeezing its chords
+is no nearer the size band."""
+
+TRANSITION_ROUNDS = 3
+"""Largest number of programs :func:`_transition_rounds` solves (each after banning the
+templates whose refinement folded or fell below the floor)."""
+
+TRANSITION_TIE = 1e-3
+"""Penalty of taking another template than a patch's own at no size gain (ties stay)."""
 
 
 def off_size_patches(sides: Sides, templates, mults, n: np.ndarray, size: float, quality: Quality = QUALITY, *,
@@ -557,7 +580,7 @@ def _new_counts(base: np.ndarray, A: np.ndarray) -> bool:
 
 
 def _transition_rounds(layout: Layout, sides: Sides, shapes, cands, moved, best: tuple, want, size, floors, equal,
-                       side_targets, f, quality: Quality, lkey: tuple, catalogue, lattice) -> tuple:
+                       side_targets, f, quality: Quality, catalogue, lattice) -> tuple:
     """The best round of :func:`_rounds` with templates chosen for size: the patches off the size
     (:func:`off_size_patches`; a translate's with its original) are offered their other
     candidates and larger templates (:func:`_offered`), and ONE integer program
@@ -565,7 +588,7 @@ def _transition_rounds(layout: Layout, sides: Sides, shapes, cands, moved, best:
     multiplicities, a larger template costing ``quality.transition_gain`` per internal vertex
     more than the patch's template now. The refined patches that fold or fall below
     ``quality.good_sj`` lose that template and the program is solved again (at most
-    :data:`ROUNDS` times). Returns the new round ``(key, templates, multiplicities, counts, refined
+    :data:`TRANSITION_ROUNDS` times). Returns the new round ``(key, templates, multiplicities, counts, refined
     patches)`` when its size objective is lower than ``best``'s and no patch folds or falls
     below ``quality.good_sj``; else ``best``."""
     cache = catalogue.cache
@@ -614,7 +637,8 @@ def _transition_rounds(layout: Layout, sides: Sides, shapes, cands, moved, best:
                               equal=equal, side_targets=side_targets,
                               chord_targets=None if f is None else [[t.chord_targets(f) for t in a] for a in pick],
                               chord_weight=TRANSITION_CHORD_WEIGHT, bound=bound, most=most,
-                              start=(mults, n), max_nodes=TRANSITION_NODES, screen=TRANSITION_SCREEN, source=layout.source)
+                              start=(mults, n), max_nodes=TRANSITION_NODES, screen=TRANSITION_SCREEN,
+                              source=layout.source)
         except LayoutInfeasible:
             return best
         chosen = [keep[p][j] for p, j in enumerate(ch.choice)]
@@ -633,9 +657,6 @@ def _transition_rounds(layout: Layout, sides: Sides, shapes, cands, moved, best:
             new_tmpl.append(t)
         keys = [_round_key(r) for r in refined]
         bad = [p for p, k in enumerate(keys) if k[0] > 0 or -k[1] < quality.good_sj]
-
-
-
         if not bad:
             total = (0, max(k[1] for k in keys))
             return (total, new_tmpl, ch.multiplicities, ch.counts, refined)
@@ -644,26 +665,6 @@ def _transition_rounds(layout: Layout, sides: Sides, shapes, cands, moved, best:
         for p in bad:
             banned[p].add(chosen[p])
     return best
-
-
-TRANSITION_NODES = 500
-"""Most branch-and-bound nodes HiGHS may spend on one program of :func:`_transition_rounds` (a
-limit of work, so the answer does not depend on the machine's load; past it, the best solution
-found: the program starts from every patch's own template and multiplicities, so it is never
-worse than the round it would replace)."""
-
-TRANSITION_CHORD_WEIGHT = 1.0
-"""Weight of the chords' deviations ``|m_c - width_c / size|`` in the program of
-:func:`_transition_rounds` (against 1 for the sides'): a template's inner chords make edges
-as its sides do, and a transition that brings its sides to the size by squeezing its chords
-is no nearer the size band."""
-
-TRANSITION_ROUNDS = 3
-"""Largest number of programs :func:`_transition_rounds` solves (each after banning the
-templates whose refinement folded or fell below the floor)."""
-
-TRANSITION_TIE = 1e-3
-"""Penalty of taking another template than a patch's own at no size gain (ties stay)."""
 
 
 TRANSLATE_TOL = 1e-12
