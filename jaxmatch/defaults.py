@@ -81,6 +81,13 @@ class Quality:
         when the best mesh nearly meets the size band: :class:`jaxmatch.meshing.strategies.LeanCurves`)
         is kept only when it meets the size band and its min scaled Jacobian is at most this
         below the best mesh's: coarser curves for the band, not for a worse mesh.
+    transition_gain: a patch off the size band may take a larger template (a transition: opposite
+        sides with different counts) where the integer program's size objective drops by at
+        least this many edges per internal vertex the template has more
+        (:func:`jaxmatch.placement.solve.mesh_layout`, ``transitions``).
+    transition_cost: a mesh of transition templates (:class:`jaxmatch.meshing.strategies.Transitions`,
+        tried when the best mesh misses the size band or the field) is kept only when its min
+        scaled Jacobian is at most this below the best mesh's.
     field: the size field the mesh follows (a bound :class:`jaxmatch.field.SizeField` or
         :class:`~jaxmatch.field.CallableSize`: ``(n, 2)`` points to ``(n,)`` sizes), or None: one size
         ``h`` everywhere. With a field, side counts are its integrals, side vertices are spaced by it
@@ -102,6 +109,8 @@ class Quality:
     band_share: float = 0.8
     band_near: float = 0.5
     lean_cost: float = 0.02
+    transition_gain: float = 0.5
+    transition_cost: float = 0.02
     field: object = None
 
 

@@ -22,8 +22,10 @@ from hypothesis import strategies as st
 
 import jaxmatch
 from jaxmatch.errors import EXIT_BAD_INPUT, InputError
-from jaxmatch.meshing.region import load_region
+from jaxmatch.meshing.assembly import _layout_of
+from jaxmatch.meshing.region import canonical, load_region
 from jaxmatch.model import Embedded, Model
+from jaxmatch.placement.rings import ring_layout
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 
@@ -354,3 +356,14 @@ def test_abaqus_file_has_region_element_sets_and_point_node_sets(cli, tmp_path):
     (v,) = m.point_sets["point_1"]
     assert np.linalg.norm(m.points[v, :2] - p) < 1e-9
     assert sum(len(c) for c in m.cell_sets["region"]) == len(m.cells[0].data)
+
+
+@pytest.mark.parametrize("suffix", ["", " +lean curves", " +transitions", " +lean curves +transitions"])
+def test_a_region_meshed_with_the_solves_options_gives_its_layout_again(suffix):
+    """A region whose chosen mesh carries a solve option in its name (lean curves, transitions)
+    is the same layout for the assembly's one solve (the options are that solve's)."""
+    shape = load_region(EXAMPLES / "holes" / "plate-bolt.json")
+    lay, single = _layout_of(shape, "rings" + suffix, 0.2, 30.0)
+    want = ring_layout(canonical(shape, 0.2, 30.0), 0.2)
+    assert not single and np.array_equal(lay.points, want.points)
+    assert all(np.array_equal(a, b) for a, b in zip(lay.patches, want.patches))

@@ -44,7 +44,7 @@ from jaxmatch.inputs import _lattice, load_catalogue
 from jaxmatch.meshing.build import from_layout
 from jaxmatch.meshing.region import canonical, corner_points, default_size
 from jaxmatch.meshing.result import Candidate, QuadMesh
-from jaxmatch.meshing.strategies import DISK, FINER, SINGLE, layout_strategies
+from jaxmatch.meshing.strategies import DISK, FINER, LEAN, SINGLE, TRANSITIONS, layout_strategies
 from jaxmatch.model import TOUCH_TOL, Model, region_polygon
 from jaxmatch.placement.decompose import disk_layout, single_patch
 from jaxmatch.placement.embed import smooth_in_frame
@@ -230,7 +230,11 @@ def _connected(model: Model) -> None:
 
 def _layout_of(shape: Shape, chosen: str, h: float, corner_angle: float) -> tuple[Layout, bool]:
     """The layout of the candidate ``chosen`` of ``shape`` at size ``h`` (made again as the
-    pipeline made it), and whether it is a single patch (every template size group)."""
+    pipeline made it), and whether it is a single patch (every template size group). The
+    solve's options a name carries (`` +lean curves``, `` +transitions``) are the assembly
+    solve's to choose, not the layout's."""
+    for option in (TRANSITIONS, LEAN):
+        chosen = chosen[: -len(option)] if chosen.endswith(option) else chosen
     bends = chosen.endswith(FINER)
     base = chosen[: -len(FINER)] if bends else chosen
     region = canonical(shape, h, corner_angle, held_angle=corner_angle if bends else None)

@@ -46,7 +46,7 @@ from jaxmatch.meshing.grading import follow_field
 from jaxmatch.meshing.region import canonical, corner_points, default_size, load_region
 from jaxmatch.meshing.result import Candidate, QuadMesh
 from jaxmatch.meshing.strategies import (RINGS, SINGLE, Bends, Conforming, Larger, Layouts, LeanCurves, Request, RingPartition,
-                                         Rings, Smooth, layout_strategies, run)
+                                         Rings, Smooth, Transitions, layout_strategies, run)
 from jaxmatch.inputs import _lattice, check_sizes, load_catalogue
 from jaxmatch.lazy import Later
 from jaxmatch.model import Model, Region, make_model
@@ -297,9 +297,11 @@ def _mesh_size(shape, cat, lat, h, strategies, quality, budget_s, progress, corn
 
         if quality.field is None:
             lean = LeanCurves(layouts.strategies + ((Rings(),) if rings else ()))
-            plan = (layouts, Larger(), Conforming()) + rings + (lean, Bends(layouts, rejudge))
+            plan = (layouts, Larger(), Conforming()) + rings + (lean, Transitions(lean.strategies),
+                                                                 Bends(layouts, rejudge))
         else:  # graded: the ring partition before the larger templates, tried only if it too misses the field
-            plan = (layouts,) + rings + (Larger(), Bends(layouts, rejudge))
+            trans = Transitions(layouts.strategies + ((Rings(),) if rings else ()))
+            plan = (layouts,) + rings + (trans, Larger(), Bends(layouts, rejudge))
     tried = run(plan, req)
     if region.periodic:  # a candidate whose periodic sides got different counts (no equal-count program) is out
         tried = [c if c.mesh is None or not periodic_mismatch(c.mesh, region) else

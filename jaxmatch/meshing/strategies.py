@@ -20,14 +20,16 @@ strategy                candidates                                              
                                                                                          size band
 :class:`LeanCurves`     the best mesh's layout again, the curves' area budget shared by   the best nearly meets the
                         the curved sides alone (``" +lean curves"``), kept at the band    size band (curved sides)
+:class:`Transitions`    the best mesh's layout again, templates chosen for size in the    the best misses the size
+                        one integer program (``" +transitions"``), kept nearer the band   band (near miss) or the field
 :class:`Bends`          the layouts again with a curved outline's bends as corners        every candidate folds
 :class:`Smooth`         a region with fewer than two corners: a refined template and the  (its own plan)
                         central block (``"disk"``)
 ======================= ================================================================= ===========================
 
 With a size field the plan is the layouts, the ring partition, the larger templates (so tried
-only when the single candidate is still the best mesh and misses the field), the bends
-(``Conforming`` never applies).
+only when the single candidate is still the best mesh and misses the field), the transitions,
+the bends (``Conforming`` never applies).
 
 Every strategy has ``wanted(best, tried, request)`` (its condition on the best mesh so far) and
 ``candidates(request, tried)``.
@@ -58,7 +60,7 @@ from jaxmatch.shape import Shape
 from jaxmatch.sides import periodic_lines
 
 __all__ = ["CONFORMING_TRIES", "DISK", "FINER", "LEAN", "RINGS", "SINGLE", "Bends", "Conforming", "Larger", "LayoutStrategy",
-           "Layouts", "LeanCurves", "has_curves",
+           "Layouts", "LeanCurves", "TRANSITIONS", "Transitions", "has_curves",
            "Request", "RingPartition", "Rings", "Single", "Smooth", "Split", "conforming_templates", "larger_templates", "layout_strategies", "run",
            "smooth_candidates", "try_layouts"]
 
@@ -91,7 +93,7 @@ def _why_not(e: Exception) -> str:
 
 def try_layouts(shape: Shape, strategies: Sequence["LayoutStrategy"], cat, lat, h: float, corners: np.ndarray, budget_s,
                 t0: float, progress, suffix: str = "", quality: Quality = QUALITY, lean_curves: bool = False,
-                best: tuple | None = None) -> list[Candidate]:
+                best: tuple | None = None, transitions: bool = False) -> list[Candidate]:
     """Each layout strategy of ``strategies`` (one :class:`Candidate` each, in their order, with its
     mesh or the reason it has none): every strategy's layout is cut first, then meshed by the same
     solve (:func:`~jaxmatch.placement.solve.mesh_layout`), the most promising first: by the best
@@ -104,7 +106,8 @@ def try_layouts(shape: Shape, strategies: Sequence["LayoutStrategy"], cat, lat, 
     template sizes) is not meshed, so the choice is the one meshing all of them would give. A
     strategy whose cuts or solve fail for any reason is skipped with that reason. ``lean_curves``:
     the solve's curve floors from the curved sides' share alone
-    (:func:`~jaxmatch.placement.solve.mesh_layout`); ``best``: ``(key, name, valid)`` of the best
+    (:func:`~jaxmatch.placement.solve.mesh_layout`); ``transitions``: templates chosen for size
+    in the solve (the same); ``best``: ``(key, name, valid)`` of the best
     mesh already made elsewhere (what a layout must beat to be meshed)."""
     names = [st.name for st in strategies]
     tried: list[Candidate | None] = [None] * len(names)
@@ -163,7 +166,7 @@ def try_layouts(shape: Shape, strategies: Sequence["LayoutStrategy"], cat, lat, 
             try:
                 check_layout(lay)  # (the cuts' layouts are checked only when meshed)
                 lm = mesh_layout(lay, cat, lat, size=h, smooth_cuts=lay.n_patches > 1, sizes=sizes, quality=quality,
-                                 periodic=periodic_lines(shape), lean_curves=lean_curves)
+                                 periodic=periodic_lines(shape), lean_curves=lean_curves, transitions=transitions)
             except FAILED as e:
                 tried[i] = Candidate(label, None, _why_not(e))
             else:
@@ -410,6 +413,50 @@ class LeanCurves:
         floor = best.min_scaled_jacobian - q.lean_cost
         return [c for c in more if c.mesh is not None and not c.mesh.misses_size_band(q)
                 and c.mesh.min_scaled_jacobian >= floor]
+
+
+TRANSITIONS = " +transitions"
+"""Suffix of the candidates whose patches' templates were chosen for size (:class:`Transitions`)."""
+
+
+class Transitions:
+    """The best mesh so far misses the size band by a near miss (:meth:`QuadMesh.near_size_band`;
+    one size), or misses the size field (its size conformity or its size band): the best mesh's
+    layout meshed again (``" +transitions"``; one solve, none when the best mesh is not one of
+    ``strategies``', with lean curves when it had them) with templates chosen for size
+    (``transitions`` of :func:`~jaxmatch.placement.solve.mesh_layout`: a patch whose sides or
+    chords are off the size band may take a larger template, a transition pattern whose opposite
+    sides get different counts, where the one integer program's size objective drops). The mesh
+    is kept when its templates changed, more of its edges are within ``Quality.size_band`` than
+    the best's and its min scaled Jacobian is at most ``Quality.transition_cost`` below the best's;
+    then the one choice rule decides."""
+
+    def __init__(self, strategies: Sequence[LayoutStrategy]):
+        self.strategies = tuple(strategies)
+
+    def wanted(self, best: QuadMesh | None, tried, req: Request) -> bool:
+        q = req.quality
+        if q.field is not None:
+            return best.size_conformity(q) > 0 or best.misses_size_band(q)
+        return best.near_size_band(q)
+
+    def candidates(self, req: Request, tried) -> list[Candidate]:
+        q = req.quality
+        key, i = _best_keyed(tried, q)
+        best = tried[i].mesh
+        name = tried[i].name
+        lean = name.endswith(LEAN)
+        base = name[:-len(LEAN)] if lean else name
+        own = [st for st in self.strategies if st.name == base]  # the best mesh's own layout
+        if not own:
+            return []
+        more = try_layouts(req.region, own, req.cat, req.lat, req.h, req.corners, req.budget_s, req.t0, req.progress,
+                           suffix=(LEAN if lean else "") + TRANSITIONS, quality=q, lean_curves=lean,
+                           best=(key, name, best.valid), transitions=True)
+        floor = best.min_scaled_jacobian - q.transition_cost
+        share = best.band_share(q.size_band)
+        return [c for c in more if c.mesh is not None and c.mesh.templates != best.templates
+                and c.mesh.band_share(q.size_band) > share and c.mesh.min_scaled_jacobian >= floor]
 
 
 def _best_keyed(tried, quality: Quality) -> tuple[tuple, int] | None:

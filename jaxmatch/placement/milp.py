@@ -13,7 +13,8 @@ import numpy as np
 
 from jaxmatch.errors import InputError, SolverError
 
-__all__ = ["CHORD_WEIGHT", "FEASIBILITY_JUMP", "LayoutInfeasible", "MILP_TIME_LIMIT", "OneSides", "SparseRows", "one_patch_sides", "run_milp", "solve_counts"]
+__all__ = ["CHORD_WEIGHT", "Choice", "FEASIBILITY_JUMP", "LayoutInfeasible", "MILP_TIME_LIMIT", "OneSides", "SparseRows",
+           "one_patch_sides", "count_cost", "run_milp", "solve_choice", "solve_counts"]
 
 
 class LayoutInfeasible(InputError):
@@ -180,6 +181,245 @@ def solve_counts(sides, matrices: Sequence[np.ndarray], *, counts: Mapping[int, 
                            where=source, nearest=nearest)
 
 
+class Choice(NamedTuple):
+    """The answer of :func:`solve_choice`: ``choice`` per patch the index of its chosen
+    alternative; ``multiplicities`` per patch ``(c_p,) int64`` the chosen template's;
+    ``counts`` ``(S,) int64`` edges per side; ``size_cost`` the size part of the objective,
+    ``sum_s |n_s - target_s| + chord_weight * sum_c |m_c - tau_c|`` (penalties left out)."""
+
+    choice: tuple
+    multiplicities: list
+    counts: np.ndarray
+    size_cost: float
+
+
+CHOICE_OPTIONS = {"mip_pool_soft_limit": 10}
+"""HiGHS options of :func:`solve_choice`'s programs: a smaller cut pool (default 10000). Its
+root node's cut rounds were most of its time: the three programs of the slotted link's ring
+partition at P/40 took 9.1 s with the default and 3.8 s with this, the same optima."""
+
+
+SCREEN_TOL = 1e-6
+"""An alternative the linear relaxation gives no more than this share is left out of
+:func:`solve_choice`'s program when it screens."""
+
+
+def solve_choice(sides, alternatives: Sequence[Sequence[np.ndarray]], *, penalties: Sequence[Sequence[float]],
+                 size: float, widths: Sequence[Sequence[np.ndarray]] | None = None, floors: np.ndarray | None = None,
+                 counts: Mapping[int, int] | None = None, equal: Sequence = (), side_targets: np.ndarray | None = None,
+                 chord_targets: Sequence[Sequence[np.ndarray]] | None = None, chord_weight: float = CHORD_WEIGHT,
+                 bound: int | None = None, most: np.ndarray | None = None, time_limit: float | None = None,
+                 start: tuple | None = None, max_nodes: int | None = None, screen: bool = False,
+                 source: str = "<layout>") -> Choice:
+    """The program of :func:`solve_counts` with a choice of template per patch: patch ``p`` takes
+    one of its ``alternatives[p]`` (``(n_p, c_pj) int64`` side matrices), a binary variable
+    ``z_pj`` per alternative (``sum_j z_pj = 1``), its multiplicities ``z_pj <= m_pjc <=
+    bound * z_pj`` (so the side rows ``sum_j A_pj[i] @ m_pj = sum n_s`` read the chosen
+    template's alone) and its chord deviations ``|m_pjc - tau_pjc z_pj|``. Objective: the size
+    objective of :func:`solve_counts` plus ``penalties[p][j] * z_pj`` (what taking alternative
+    ``j`` costs: e.g. its irregular vertices), so an alternative is taken only where it brings
+    the sides nearer their targets by more than its penalty.
+
+    widths / chord_targets: per patch, per alternative, as :func:`solve_counts` takes them for
+    one template; bound: the largest multiplicity (default: three times the largest side target
+    or floor, plus 4); most: ``(S,)`` the most edges each side may take (None: no limit), which
+    also bounds each chord by the sides it has edges on (a tighter relaxation); time_limit:
+    seconds for HiGHS (:func:`run_milp`; default :data:`MILP_TIME_LIMIT`); start: ``(multiplicities per patch, counts (S,))`` of every
+    patch's first alternative, a feasible answer HiGHS starts from (a limit of time or nodes
+    then answers no worse); max_nodes: the most branch-and-bound nodes (:func:`run_milp`);
+    screen: first solve the linear relaxation and keep, besides each patch's first alternative,
+    only those it gives a share above :data:`SCREEN_TOL` (fewer binaries: a heuristic, the
+    optimum of the smaller program). A patch with one alternative is :func:`solve_counts`'
+    patch. HiGHS runs with :data:`CHOICE_OPTIONS`. Returns a :class:`Choice`; raises
+    :class:`LayoutInfeasible` when no choice meets the requested counts, :class:`InputError`
+    for a bad size."""
+    counts = dict(counts or {})
+    h = float(size)
+    if not (h > 0 and math.isfinite(h)):
+        raise InputError(f"element size must be a positive number, got {size!r}", where=source)
+    S = len(sides.chains)
+    if side_targets is not None:
+        targets = {s: float(side_targets[s]) for s in range(S) if s not in counts}
+    else:
+        targets = {s: float(sides.lengths[s]) / h for s in range(S) if s not in counts}
+    blocks = [(p, j) for p in range(len(alternatives)) for j in range(len(alternatives[p]))]
+    nc = [int(np.asarray(alternatives[p][j]).shape[1]) for p, j in blocks]
+    off = np.concatenate([[0], np.cumsum(nc)]).astype(int)
+    M, Z = int(off[-1]), len(blocks)
+    tau_parts = []
+    for b, (p, j) in enumerate(blocks):
+        if chord_targets is not None:
+            tau_parts.append(np.maximum(np.asarray(chord_targets[p][j], np.float64), 1.0))
+        elif widths is not None:
+            tau_parts.append(np.maximum(np.asarray(widths[p][j], np.float64) / h, 1.0))
+        else:
+            tau_parts.append(np.ones(nc[b]))
+    tau_m = np.concatenate(tau_parts) if tau_parts else np.zeros(0)
+    top = max([1.0] + list(targets.values()) + ([float(np.max(floors))] if floors is not None and len(floors) else [])
+              + [float(v) for v in counts.values()])
+    U = float(bound if bound is not None else 3 * math.ceil(top) + 4)
+    T = len(targets)
+    zc, nc0, tc, uc = M, M + Z, M + Z + S, M + Z + S + T  # first column of z, n, t, u
+    ubm = np.full(M, U)  # each chord's largest multiplicity: U, or the fewest edges a side it lies on may take
+    if most is not None:
+        most = np.asarray(most, np.float64)
+        for b, (p, j) in enumerate(blocks):
+            A = np.asarray(alternatives[p][j], np.float64)
+            for i, ids in enumerate(sides.patch_sides[p][:A.shape[0]]):
+                cap = float(np.sum(most[np.unique(np.asarray(ids, np.int64).ravel())]))
+                hit = np.flatnonzero(A[i])
+                if hit.size:
+                    seg = ubm[off[b]:off[b + 1]]
+                    seg[hit] = np.minimum(seg[hit], np.floor(cap / A[i, hit]))
+    nv = uc + M
+    rr, cc, vv, lo, hi = [], [], [], [], []
+    k = 0
+
+    def row(cols, vals, low, high):
+        nonlocal k
+        rr.append(np.full(len(cols), k, np.int64))
+        cc.append(np.asarray(cols, np.int64))
+        vv.append(np.asarray(vals, np.float64))
+        lo.append(low)
+        hi.append(high)
+        k += 1
+
+    first = {}
+    for b, (p, j) in enumerate(blocks):
+        first.setdefault(p, b)
+    for p, alts in enumerate(alternatives):
+        ps = sides.patch_sides[p]
+        b0 = first[p]
+        for i in range(len(ps)):
+            cols, vals = [], []
+            for j in range(len(alts)):
+                A = np.asarray(alts[j], np.float64)
+                nzc = np.flatnonzero(A[i])
+                cols += (off[b0 + j] + nzc).tolist()
+                vals += A[i, nzc].tolist()
+            for s in np.unique(np.asarray(ps[i], np.int64).ravel()):
+                cols.append(nc0 + int(s))
+                vals.append(-1.0)
+            row(cols, vals, 0.0, 0.0)
+        row([zc + b0 + j for j in range(len(alts))], [1.0] * len(alts), 1.0, 1.0)
+    for b in range(Z):  # z <= m <= U z
+        for c in range(off[b], off[b + 1]):
+            row([c, zc + b], [1.0, -1.0], 0.0, np.inf)
+            row([c, zc + b], [1.0, -float(ubm[c])], -np.inf, 0.0)
+    for ids_a, ids_b in equal:
+        a = np.unique(np.asarray(ids_a, np.int64))
+        b_ = np.unique(np.asarray(ids_b, np.int64))
+        cols = np.union1d(a, b_)
+        vals = np.isin(cols, a).astype(np.float64) - np.isin(cols, b_)
+        row((nc0 + cols[vals != 0]).tolist(), vals[vals != 0].tolist(), 0.0, 0.0)
+    # side deviations: the rows of solve_counts
+    ts = np.fromiter(targets.keys(), np.int64, T)
+    tv = np.fromiter(targets.values(), np.float64, T)
+    r, c, v, dlo = _deviation_rows(nc0 + ts, tc + np.arange(T), tv, k)
+    rr.append(r)
+    cc.append(c)
+    vv.append(v)
+    lo += dlo.tolist()
+    hi += [np.inf] * dlo.size
+    k += dlo.size
+    # chord deviations, scaled by their patch's z: u >= |m - tau z| (and the chord of |x - tau| times z)
+    zb = np.repeat(np.arange(Z), nc)
+    for m in range(M):
+        t_, u, z = float(tau_m[m]), uc + m, zc + int(zb[m])
+        row([u, m, z], [1.0, -1.0, t_], 0.0, np.inf)
+        row([u, m, z], [1.0, 1.0, -t_], 0.0, np.inf)
+        ch = _chord_row(t_)
+        if ch is not None:
+            slope, bnd = ch
+            row([u, m, z], [1.0, -slope, -bnd], 0.0, np.inf)
+    A = SparseRows((k, nv), *_merged_entries(np.concatenate(rr), np.concatenate(cc), np.concatenate(vv)))
+    pen = np.concatenate([[float(x) for x in penalties[p]] for p in range(len(alternatives))])
+    cost = np.concatenate([np.zeros(M), pen, np.zeros(S), np.ones(T), np.full(M, chord_weight)])
+    lb = np.concatenate([np.zeros(M + Z), np.ones(S) if floors is None else np.maximum(floors, 1), np.zeros(T + M)])
+    ub = np.concatenate([ubm, np.ones(Z), np.full(S, np.inf) if most is None else most, np.full(T + M, np.inf)])
+    for s, val in counts.items():
+        lb[nc0 + s] = ub[nc0 + s] = float(val)
+    integrality = np.concatenate([np.ones(M + Z + S), np.zeros(T + M)])
+    x0 = None
+    if start is not None:
+        x0 = np.zeros(nv)
+        for p, m in enumerate(start[0]):
+            b = first[p]
+            x0[off[b]:off[b + 1]] = m
+            x0[zc + b] = 1.0
+        x0[nc0:nc0 + S] = start[1]
+        x0[tc:tc + T] = np.abs(np.asarray(start[1], np.float64)[ts] - tv)
+        x0[uc:uc + M] = np.abs(x0[:M] - tau_m * x0[zc + zb])
+    lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
+    if screen and Z > len(alternatives):
+        relaxed = run_milp(cost, A, lo, hi, np.zeros_like(integrality), lb, ub)
+        if relaxed is None:
+            raise LayoutInfeasible("no choice of templates and multiplicities meets the requested counts", where=source)
+        z = relaxed[zc:zc + Z]
+        kept = [[j for j in range(len(alts)) if j == 0 or z[first[p] + j] > SCREEN_TOL]
+                for p, alts in enumerate(alternatives)]
+        if any(len(k) < len(a) for k, a in zip(kept, alternatives)):
+            sub = solve_choice(sides, [[alternatives[p][j] for j in k] for p, k in enumerate(kept)],
+                               penalties=[[penalties[p][j] for j in k] for p, k in enumerate(kept)], size=size,
+                               widths=None if widths is None else [[widths[p][j] for j in k] for p, k in enumerate(kept)],
+                               floors=floors, counts=counts, equal=equal, side_targets=side_targets,
+                               chord_targets=None if chord_targets is None else
+                               [[chord_targets[p][j] for j in k] for p, k in enumerate(kept)],
+                               chord_weight=chord_weight, bound=bound, most=most, time_limit=time_limit, start=start,
+                               max_nodes=max_nodes, source=source)
+            return sub._replace(choice=tuple(kept[p][j] for p, j in enumerate(sub.choice)))
+    x = run_milp(cost, A, lo, hi, integrality, lb, ub,
+                 time_limit=MILP_TIME_LIMIT if time_limit is None else time_limit, start=x0, max_nodes=max_nodes,
+                 options=CHOICE_OPTIONS)
+    if x is None:
+        raise LayoutInfeasible("no choice of templates and multiplicities meets the requested counts", where=source)
+    xi = np.rint(x[:M + Z + S]).astype(np.int64)
+    choice, mults = [], []
+    for p, alts in enumerate(alternatives):
+        j = next(j for j in range(len(alts)) if xi[zc + first[p] + j] == 1)
+        choice.append(j)
+        mults.append(xi[off[first[p] + j]:off[first[p] + j + 1]].copy())
+    n = xi[nc0:nc0 + S].copy()
+    chosen = np.concatenate([np.arange(off[first[p] + j], off[first[p] + j + 1]) for p, j in enumerate(choice)]) \
+        if M else np.zeros(0, np.int64)
+    size_cost = float(np.sum(np.abs(n[ts] - tv)) + chord_weight * np.sum(np.abs(xi[chosen] - tau_m[chosen])))
+    return Choice(tuple(choice), mults, n, size_cost)
+
+
+def count_cost(sides, mults: Sequence[np.ndarray], n: np.ndarray, *, size: float, widths=None, counts=None,
+               side_targets=None, chord_targets=None, chord_weight: float = CHORD_WEIGHT) -> float:
+    """The size objective of :func:`solve_counts` at its answer ``(mults, n)``: ``sum_s |n_s -
+    target_s|`` over the sides not in ``counts`` plus ``chord_weight * sum_c |m_c - tau_c|``
+    (targets and ``tau`` as :func:`solve_counts` makes them; widths, chord_targets per patch)."""
+    counts = dict(counts or {})
+    h = float(size)
+    S = len(sides.chains)
+    free = np.array([s for s in range(S) if s not in counts], np.int64)
+    tgt = (np.asarray(side_targets, np.float64) if side_targets is not None else np.asarray(sides.lengths) / h)
+    cost = float(np.sum(np.abs(np.asarray(n)[free] - tgt[free]))) if free.size else 0.0
+    for p, m in enumerate(mults):
+        if chord_targets is not None:
+            tau = np.maximum(np.asarray(chord_targets[p], np.float64), 1.0)
+        elif widths is not None:
+            tau = np.maximum(np.asarray(widths[p], np.float64) / h, 1.0)
+        else:
+            tau = np.ones(len(m))
+        cost += chord_weight * float(np.sum(np.abs(np.asarray(m) - tau)))
+    return cost
+
+
+def _merged_entries(row: np.ndarray, col: np.ndarray, val: np.ndarray):
+    """The entries ``(row, col, val)`` with repeated ``(row, col)`` pairs summed and zeros
+    dropped (what :class:`SparseRows` requires)."""
+    key = row * (int(col.max(initial=0)) + 1) + col
+    uk, inv = np.unique(key, return_inverse=True)
+    v = np.bincount(inv, weights=val, minlength=uk.size)
+    width = int(col.max(initial=0)) + 1
+    r, c = uk // width, uk % width
+    keep = v != 0
+    return r[keep].astype(np.int64), c[keep].astype(np.int64), v[keep]
+
+
 class SparseRows(NamedTuple):
     """A constraint matrix by its nonzero entries (what :func:`run_milp` takes instead of a dense
     ``(m, n)`` array): entry ``k`` is ``val[k]`` at row ``row[k]``, column ``col[k]``, each
@@ -253,13 +493,18 @@ holes and dense tables took 3.18 s with it and 2.23 s without, faster without in
 band (``scripts/milp_options.py``; docs/perf.md, "Integer programs")."""
 
 
-def run_milp(cost, A, lo, hi, integrality, lb, ub, *, time_limit: float = MILP_TIME_LIMIT):
+def run_milp(cost, A, lo, hi, integrality, lb, ub, *, time_limit: float = MILP_TIME_LIMIT, start=None,
+             max_nodes: int | None = None, options: Mapping | None = None):
     """Solve one integer program with HiGHS: minimise ``cost @ x`` subject to ``lo <= A @ x <= hi``,
     ``lb <= x <= ub``, ``x[j]`` integer where ``integrality[j]`` is 1.
 
     cost, integrality, lb, ub: ``(n,)``; A: ``(m, n)`` dense or a :class:`SparseRows`; lo, hi: ``(m,)`` (``+-inf`` allowed).
     Returns ``x (n,) float64`` (the best solution found: optimal, or the incumbent at the time
-    limit), or None when the program is infeasible. A solver failure (status 3 or 4, or a time
+    limit), or None when the program is infeasible. start: ``(n,)`` a feasible solution HiGHS
+    starts from (through ``highspy`` only), so that a time limit returns one at least as good;
+    max_nodes: the most branch-and-bound nodes (a limit of work, not of time: the same answer on
+    a loaded machine), past which the best solution found is used; options: further HiGHS
+    options for this program (``highspy`` only; each program starts from the defaults). A solver failure (status 3 or 4, or a time
     limit without a solution) is retried once without presolve, then raised as
     :class:`jaxmatch.errors.SolverError`, never reported as infeasible. The solver:
     :func:`_highs` (status numbers as :func:`scipy.optimize.milp`'s)."""
@@ -267,7 +512,8 @@ def run_milp(cost, A, lo, hi, integrality, lb, ub, *, time_limit: float = MILP_T
     args = [a if isinstance(a, SparseRows) else np.asarray(a, np.float64) for a in (cost, A, lo, hi, integrality, lb, ub)]
     status, x, message = 4, None, ""
     for presolve in (True, False):
-        status, x, message = _highs(*args, presolve=presolve, time_limit=float(time_limit))
+        more = {k: v for k, v in (("x0", start), ("max_nodes", max_nodes), ("options", options)) if v is not None}
+        status, x, message = _highs(*args, presolve=presolve, time_limit=float(time_limit), **more)
         if status in (0, 1) and x is not None:
             return x
         if status == 2:
@@ -282,7 +528,8 @@ of the example regions at P/16 and P/32, tests/test_speed.py); making one cost ~
 small program's ~0.9 ms."""
 
 
-def _highs(cost, A, lo, hi, integrality, lb, ub, *, presolve: bool, time_limit: float):
+def _highs(cost, A, lo, hi, integrality, lb, ub, *, presolve: bool, time_limit: float, x0=None,
+           max_nodes: int | None = None, options: Mapping | None = None):
     """``(status, x or None, message)`` of one HiGHS run, status as :func:`scipy.optimize.milp`'s (0
     optimal, 1 time or iteration limit, 2 infeasible, 3 unbounded, 4 other).
 
@@ -298,8 +545,11 @@ def _highs(cost, A, lo, hi, integrality, lb, ub, *, presolve: bool, time_limit: 
     except ImportError:
         from scipy.optimize import Bounds, LinearConstraint, milp
 
+        opts = {"time_limit": time_limit, "presolve": presolve}
+        if max_nodes is not None:
+            opts["node_limit"] = int(max_nodes)
         res = milp(cost, constraints=LinearConstraint(np.asarray(A, np.float64), lo, hi), integrality=integrality, bounds=Bounds(lb, ub),
-                   options={"time_limit": time_limit, "presolve": presolve})
+                   options=opts)
         return res.status, res.x, res.message
     m, n = A.shape
     start, index, value = _columns(A)
@@ -318,17 +568,26 @@ def _highs(cost, A, lo, hi, integrality, lb, ub, *, presolve: bool, time_limit: 
         h = _SOLVER.highs = highspy.Highs()
     else:
         h.clearModel()
+        h.resetOptions()  # (a program's own options go with it)
     h.setOptionValue("log_to_console", False)  # as scipy sets it
+    for name, value in (options or {}).items():
+        h.setOptionValue(name, value)
     h.setOptionValue("time_limit", float(time_limit))
     h.setOptionValue("presolve", "on" if presolve else "off")
     h.setOptionValue("mip_heuristic_run_feasibility_jump", bool(FEASIBILITY_JUMP))
+    h.setOptionValue("mip_max_nodes", int(max_nodes) if max_nodes is not None else highspy.kHighsIInf)
     S = highspy.HighsModelStatus
     if h.passModel(lp) == highspy.HighsStatus.kError:
         return 2, None, "the model could not be loaded"  # as scipy: kModelError
+    if x0 is not None:  # a feasible start: the answer past the time limit is no worse
+        sol = highspy.HighsSolution()
+        sol.col_value = np.asarray(x0, np.float64).tolist()
+        sol.value_valid = True
+        h.setSolution(sol)
     h.run()
     st = h.getModelStatus()
-    status = {S.kOptimal: 0, S.kTimeLimit: 1, S.kIterationLimit: 1, S.kInfeasible: 2, S.kModelError: 2,
-              S.kUnbounded: 3}.get(st, 4)
+    status = {S.kOptimal: 0, S.kTimeLimit: 1, S.kIterationLimit: 1, S.kSolutionLimit: 1, S.kInfeasible: 2,
+              S.kModelError: 2, S.kUnbounded: 3}.get(st, 4)
     limit = st in (S.kTimeLimit, S.kIterationLimit, S.kSolutionLimit)
     if st != S.kOptimal and not (limit and h.getInfo().objective_function_value != highspy.kHighsInf):
         return status, None, h.modelStatusToString(st)

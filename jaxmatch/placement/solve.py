@@ -16,7 +16,10 @@ the worst patch). The side counts' floors keep the area
 (:func:`~jaxmatch.placement.layout.curve_floors`; ``lean_curves``: the area budget shared by the
 curved sides alone, tried by :class:`jaxmatch.meshing.strategies.LeanCurves`). A patch that
 is a translate of an earlier one takes that patch's templates and
-refinement, moved.
+refinement, moved. With ``transitions`` (:class:`jaxmatch.meshing.strategies.Transitions`), the
+patches off the size band are offered larger templates too (transition patterns: opposite sides
+with different counts) and one integer program with a binary per patch and template
+(:func:`~jaxmatch.placement.milp.solve_choice`) chooses them with the multiplicities.
 
 Everything made is kept in the catalogue's cache (:mod:`jaxmatch.cache`).
 """
@@ -24,6 +27,7 @@ Everything made is kept in the catalogue's cache (:mod:`jaxmatch.cache`).
 from __future__ import annotations
 
 import dataclasses
+import math
 from typing import TYPE_CHECKING, Mapping, NamedTuple, Sequence
 
 import numpy as np
@@ -32,22 +36,23 @@ from jaxmatch.arrays import roll
 from jaxmatch.cache import Cache
 from jaxmatch.cache import key as cache_key
 from jaxmatch.defaults import QUALITY, Quality
-from jaxmatch.errors import InputError
+from jaxmatch.errors import InputError, UnmatchableError
 from jaxmatch.field import line_integral
 from jaxmatch.placement.embed import sj_inverted, smooth_in_frame, smooth_near
 from jaxmatch.placement.layout import (Layout, LayoutMesh, Sides, _boundary_loops, curve_floors, fit_sides,
                                        layout_sides, merge_patches, parse_counts, patch_shapes, region_area)
-from jaxmatch.placement.milp import LayoutInfeasible, solve_counts
+from jaxmatch.placement.milp import LayoutInfeasible, count_cost, solve_choice, solve_counts
 from jaxmatch.placement.refine import SMOOTH_ALWAYS, SMOOTH_ITERS_LARGE, refine_and_place, side_points, side_polylines
-from jaxmatch.placement.templates import first_group_templates
+from jaxmatch.placement.templates import first_group_templates, lazy_patch_templates
 from jaxmatch.shape import Shape
 
 if TYPE_CHECKING:  # pragma: no cover
     from jaxmatch.catalogue.store import Catalogue
     from jaxmatch.scoring.lattice import Lattice
 
-__all__ = ["ALL_SIZES", "ROUNDS", "TEMPLATES_PER_PATCH", "TEMPLATE_SIZES", "layout_key", "layout_sides_kept",
-           "lean_floors_help", "mesh_layout", "patch_shapes_kept"]
+__all__ = ["ALL_SIZES", "ROUNDS", "TEMPLATES_PER_PATCH", "TEMPLATE_SIZES", "TRANSITION_CHORDS", "TRANSITION_OFFERS",
+           "TRANSITION_PATCHES", "TRANSITION_TEMPLATES", "layout_key", "layout_sides_kept", "lean_floors_help",
+           "mesh_layout", "off_size_patches", "patch_shapes_kept"]
 
 TEMPLATE_SIZES = ((0, 1), (2, 3))
 """Groups of internal-vertex counts tried for a patch's templates, in this order: the first
@@ -91,7 +96,7 @@ def mesh_layout(layout: Layout, catalogue: Catalogue, lattice: Lattice, *, size:
                 counts: Mapping[int, int] | None = None, templates_per_patch: int = TEMPLATES_PER_PATCH,
                 sizes=TEMPLATE_SIZES, smooth_cuts: bool = False, progress=None,
                 first_templates: Sequence[int] | None = None, quality: Quality = QUALITY,
-                periodic: Sequence = (), lean_curves: bool = False) -> LayoutMesh:
+                periodic: Sequence = (), lean_curves: bool = False, transitions: bool = False) -> LayoutMesh:
     """Mesh every patch of ``layout`` and merge them into one conforming :class:`LayoutMesh`.
 
     size: target edge length (user units) for sides without a requested count; counts:
@@ -111,6 +116,13 @@ def mesh_layout(layout: Layout, catalogue: Catalogue, lattice: Lattice, *, size:
     lean_curves: the area budget of the curved sides' chords shared by the curved boundary sides
     alone, not by the whole boundary (:func:`~jaxmatch.placement.layout.curve_floors`): curves
     nearer the size where the outline also has straight sides.
+    transitions: after the rounds, the patches whose sides or chords are off the size band
+    (:func:`off_size_patches`) are offered larger templates too (transition patterns: opposite
+    sides may then get different counts) and ONE integer program chooses each patch's template
+    with the multiplicities (:func:`~jaxmatch.placement.milp.solve_choice`, a larger template at
+    ``quality.transition_gain`` edges of the size objective per internal vertex more); kept when
+    its refinement neither folds nor falls below ``quality.good_sj``
+    (:func:`_transition_rounds`).
 
     What is made is kept in the catalogue's cache (:mod:`jaxmatch.cache`: the meshed layout, its
     sides, patch shapes, integer programs, templates and refined patches): the same layout meshed
@@ -122,7 +134,8 @@ def mesh_layout(layout: Layout, catalogue: Catalogue, lattice: Lattice, *, size:
     return _mesh_layout_cached(layout, catalogue, lattice, size=size, counts=counts,
                                templates_per_patch=templates_per_patch, sizes=sizes, smooth_cuts=smooth_cuts,
                                progress=progress, first_templates=first_templates, quality=quality,
-                               periodic=tuple(periodic), lean_curves=bool(lean_curves))
+                               periodic=tuple(periodic), lean_curves=bool(lean_curves),
+                               transitions=bool(transitions))
 
 
 def _equal_sides(layout: Layout, sides: Sides, periodic) -> tuple:
@@ -256,7 +269,8 @@ def _smooth_cuts(xy: np.ndarray, quads: np.ndarray, fixed: np.ndarray, sides: Si
 
 
 def _mesh_layout_cached(layout: Layout, catalogue, lattice, *, size, counts, templates_per_patch, sizes, smooth_cuts,
-                        progress, first_templates, quality, periodic=(), lean_curves=False) -> LayoutMesh:
+                        progress, first_templates, quality, periodic=(), lean_curves=False,
+                        transitions=False) -> LayoutMesh:
     """:func:`_mesh_layout` from the catalogue's cache (store ``layouts``) when the same layout was
     meshed with the same options (the answer names the given layout; its arrays are copies)."""
     lkey = layout_key(layout)
@@ -264,7 +278,7 @@ def _mesh_layout_cached(layout: Layout, catalogue, lattice, *, size, counts, tem
                             None if counts is None else {int(a): int(b) for a, b in dict(counts).items()},
                             int(templates_per_patch), sizes, bool(smooth_cuts), first_templates, quality) \
         + ((cache_key(*[np.asarray(x, np.float64) for pair in periodic for x in pair]),) if periodic else ()) \
-        + (("lean",) if lean_curves else ())
+        + (("lean",) if lean_curves else ()) + (("transitions",) if transitions else ())
     cache = catalogue.cache
     done = cache.lookup("layouts", k)  # (an error kept for these options is raised again)
     if done is not None:
@@ -276,7 +290,8 @@ def _mesh_layout_cached(layout: Layout, catalogue, lattice, *, size, counts, tem
                                                       templates_per_patch=templates_per_patch, sizes=sizes,
                                                       smooth_cuts=smooth_cuts, progress=progress,
                                                       first_templates=first_templates, quality=quality, lkey=lkey,
-                                                      periodic=periodic, lean_curves=lean_curves),
+                                                      periodic=periodic, lean_curves=lean_curves,
+                                                      transitions=transitions),
                    quads=lambda m: m.quads.shape[0], keep_errors=(LayoutInfeasible, InputError))
     return _copied(lm, layout)
 
@@ -298,7 +313,7 @@ def _copied(lm: LayoutMesh, layout: Layout) -> LayoutMesh:
 
 def _mesh_layout(layout: Layout, catalogue: Catalogue, lattice: Lattice, *, size, counts, templates_per_patch, sizes,
                  smooth_cuts, progress, first_templates, quality: Quality, lkey: tuple, periodic=(),
-                 lean_curves: bool = False) -> LayoutMesh:
+                 lean_curves: bool = False, transitions: bool = False) -> LayoutMesh:
     """The work of :func:`mesh_layout` (see there; ``lkey``: :func:`layout_key` of ``layout``)."""
     cache = catalogue.cache
     sides = layout_sides_kept(layout, catalogue, lkey)
@@ -335,6 +350,9 @@ def _mesh_layout(layout: Layout, catalogue: Catalogue, lattice: Lattice, *, size
     floors = curve_floors(layout, sides, quality.area_tol, region, lean=lean_curves) if size is not None else None
     best = _rounds(layout, sides, shapes, cands, moved, list(choice0), want, size, floors, equal, side_targets, f, made,
                    quality, lkey, cache)
+    if transitions and size is not None:
+        best = _transition_rounds(layout, sides, shapes, cands, moved, best, want, size, floors, equal, side_targets,
+                                  f, quality, catalogue, lattice)
     return _merged(layout, sides, best, smooth_cuts, region)
 
 
@@ -394,6 +412,258 @@ def _rounds(layout: Layout, sides: Sides, shapes, cands, moved, choice: list, wa
             choice[p] += 1
     if best is None:  # pragma: no cover - the loop solved at least once or raised
         raise LayoutInfeasible("no round of the layout's solve was feasible", where=layout.source)
+    return best
+
+
+TRANSITION_TEMPLATES = 6
+"""How many templates of each size of the next size group (:data:`ALL_SIZES`) a patch off the
+size is offered by :func:`_transition_rounds`, besides its own candidates (ranked by the
+lattice, not by their chords: with 3, the trapezoid of tests/test_solve.py was offered no
+template whose parallel sides take different counts, with 6 it is)."""
+
+
+TRANSITION_OFFERS = 6
+"""Most templates a patch off the size is offered that reach side counts its own cannot, its own
+included (:func:`_offered`): each binary choice widens the program. The 8-pointed star's ring
+partition at P/40 (13 patches): with 3 or 4 the template that brings its points to the size is
+not among them, with 6 it is."""
+
+TRANSITION_PATCHES = 16
+"""Most patches (a translate's with its original) :func:`_transition_rounds` offers other
+templates: those whose sides are furthest off their targets (the program's binaries, and its
+time, grow with them; the 8-pointed star's ring partition needs its 13 patches)."""
+
+TRANSITION_SCREEN = True
+"""Whether :func:`_transition_rounds`' programs are screened by their linear relaxation first
+(:func:`~jaxmatch.placement.milp.solve_choice`, ``screen``): ``jaxmatch.mesh`` in a fresh
+process took 9.0 s with all alternatives and 3.3 s screened on the letter B (holes) at P/80,
+4.7 s and 1.9 s on the slotted link at P/40 (neither keeps a transition either way); the
+8-pointed star at P/40 and the graded rectangle take their transitions either way (the star's:
+53 quads, 94 % of edges at the size unscreened, 52 quads and 94 % screened)."""
+
+TRANSITION_CHORDS = 2
+"""Most templates a patch off the size is offered besides those (:func:`_offered`) that reach no
+new side counts but have more chords than its own: rows inside it at a size field's sizes (the
+graded rectangle's ring partition takes two such in its core)."""
+
+
+TRANSITION_NODES = 500
+"""Most branch-and-bound nodes HiGHS may spend on one program of :func:`_transition_rounds` (a
+limit of work, so the answer does not depend on the machine's load; past it, the best solution
+found: the program starts from every patch's own template and multiplicities, so it is never
+worse than the round it would replace)."""
+
+TRANSITION_CHORD_WEIGHT = 1.0
+"""Weight of the chords' deviations ``|m_c - width_c / size|`` in the program of
+:func:`_transition_rounds` (against 1 for the sides'): a template's inner chords make edges
+as its sides do, and a transition that brings its sides to the size by squeezing its chords
+is no nearer the size band."""
+
+TRANSITION_ROUNDS = 3
+"""Largest number of programs :func:`_transition_rounds` solves (each after banning the
+templates whose refinement folded or fell below the floor)."""
+
+TRANSITION_TIE = 1e-3
+"""Penalty of taking another template than a patch's own at no size gain (ties stay)."""
+
+
+def off_size_patches(sides: Sides, templates, mults, n: np.ndarray, size: float, quality: Quality = QUALITY, *,
+                     side_targets: np.ndarray | None = None, chord_targets=None, floors: np.ndarray | None = None,
+                     want: Mapping[int, int] | None = None) -> list[int]:
+    """The patches of a solved layout that a template with other chords could bring nearer the
+    size: one of its layout sides (not requested, not held at its floor) whose edges, ``target_s
+    / n_s`` sizes long (``target_s = length_s / size``, or a size field's integral), lie outside
+    ``quality.size_band``; or one of its chords whose edges across, ``tau_c / m_c`` sizes
+    (``tau_c = width_c / size`` of :meth:`PatchTemplate.chord_widths`, or the field's
+    ``chord_targets``), do (shorter only where ``m_c > 1``).
+
+    templates: per patch the template used; mults: its ``(c_p,)`` multiplicities; n: ``(S,)``
+    edges per side. Returns the patch indices, ascending."""
+    lo, hi = quality.size_band
+    want = dict(want or {})
+    tgt = np.asarray(side_targets, np.float64) if side_targets is not None else np.asarray(sides.lengths) / float(size)
+    n = np.asarray(n, np.float64)
+    ratio = tgt / np.maximum(n, 1.0)
+    held = np.zeros(len(n), bool) if floors is None else (n <= np.maximum(np.asarray(floors), 1)) & (ratio < lo)
+    off_side = ((ratio < lo) | (ratio > hi)) & ~held
+    off_side[list(want)] = False
+    out = []
+    for p, (t, m) in enumerate(zip(templates, mults)):
+        if any(off_side[np.asarray(x, np.int64)].any() for x in sides.patch_sides[p]):
+            out.append(p)
+            continue
+        tau = np.asarray(chord_targets[p] if chord_targets is not None else t.chord_widths() / float(size), np.float64)
+        r = tau / np.maximum(np.asarray(m, np.float64), 1.0)
+        if np.any(((r < lo) & (np.asarray(m) > 1)) | (r > hi)):
+            out.append(p)
+    return out
+
+
+def _internal(t) -> int:
+    """Internal vertices of template ``t`` (a :class:`~jaxmatch.placement.templates.PatchTemplate`)."""
+    return int(t.match.internal_vertices)
+
+
+def _same_template(a, b) -> bool:
+    """Whether two templates of one patch are the same catalogue mesh fitted the same way."""
+    return a.mesh_id == b.mesh_id and int(a.match.rotation) == int(b.match.rotation) and \
+        bool(a.match.reflected) == bool(b.match.reflected) and np.array_equal(a.match.alignment, b.match.alignment)
+
+
+def _offered(shape: Shape, base, own, catalogue, lattice) -> list:
+    """The templates offered to a patch off the size (``base`` first, its template now): of up
+    to :data:`TRANSITION_TEMPLATES` of each size of the :data:`ALL_SIZES` group after ``base``'s
+    and then its own candidates ``own``, one per form of side matrix (:func:`_chord_form`):
+    those that reach side counts ``base`` cannot (:func:`_new_counts`; with ``base``,
+    :data:`TRANSITION_OFFERS` at most), then those with more chords than ``base``
+    (:data:`TRANSITION_CHORDS` at most)."""
+    out = [base]
+    k = _internal(base)
+    at = next((i for i, g in enumerate(ALL_SIZES) if k in g), len(ALL_SIZES))
+    nxt = ALL_SIZES[at + 1] if at + 1 < len(ALL_SIZES) else None
+    groups = []
+    if nxt is not None:
+        ks = [x for x in nxt if x in catalogue.internal]
+        if ks:
+            groups.append(lazy_patch_templates(shape, catalogue, lattice, limit=TRANSITION_TEMPLATES, internal=ks))
+    groups.append(own)
+    seen = {_chord_form(base.side_matrix())}
+    more = []  # templates reaching no new side counts but with more chords inside (a size field's rows)
+    nb = base.side_matrix().shape[1]
+    for g in groups:
+        for t in _each(g):  # (placed one by one: no more than the offers need)
+            if len(out) >= TRANSITION_OFFERS and len(more) >= TRANSITION_CHORDS:
+                return out + more
+            A = t.side_matrix()
+            if _chord_form(A) in seen:
+                continue
+            seen.add(_chord_form(A))
+            if _new_counts(base.side_matrix(), A):
+                if len(out) < TRANSITION_OFFERS:
+                    out.append(t)
+            elif A.shape[1] > nb and len(more) < TRANSITION_CHORDS:
+                more.append(t)
+    return out + more
+
+
+def _each(templates):
+    """The templates of a sequence one by one (a :class:`~jaxmatch.placement.templates.LazyTemplates`
+    places each when asked for), none when its walk finds no match."""
+    j = 0
+    while True:
+        try:
+            t = templates[j]
+        except (IndexError, InputError, UnmatchableError):
+            return
+        yield t
+        j += 1
+
+
+def _chord_form(A: np.ndarray) -> tuple:
+    """Side matrix ``A (n, c)`` up to the order of its chords: templates with the same form
+    reach the same side counts."""
+    return tuple(sorted(map(tuple, np.asarray(A, np.int64).T.tolist())))
+
+
+def _new_counts(base: np.ndarray, A: np.ndarray) -> bool:
+    """Whether side matrix ``A`` can reach side counts that ``base`` cannot: ``base``'s counts obey
+    the equalities ``y @ counts = 0`` of its left null space (a grid: opposite sides equal);
+    ``A`` is new when one of them does not hold for its columns. A ``base`` without equalities
+    (a 3-sided template) takes every other form (they may reach fewer edges on a side)."""
+    base = np.asarray(base, np.float64)
+    _, sv, vt = np.linalg.svd(base.T)
+    rank = int(np.count_nonzero(sv > 1e-9))
+    Y = vt[rank:]
+    if Y.shape[0] == 0:
+        return True
+    return bool(np.abs(Y @ np.asarray(A, np.float64)).max() > 1e-9)
+
+
+def _transition_rounds(layout: Layout, sides: Sides, shapes, cands, moved, best: tuple, want, size, floors, equal,
+                       side_targets, f, quality: Quality, catalogue, lattice) -> tuple:
+    """The best round of :func:`_rounds` with templates chosen for size: the patches off the size
+    (:func:`off_size_patches`; a translate's with its original) are offered their other
+    candidates and larger templates (:func:`_offered`), and ONE integer program
+    (:func:`~jaxmatch.placement.milp.solve_choice`) chooses every patch's template and
+    multiplicities, a larger template costing ``quality.transition_gain`` per internal vertex
+    more than the patch's template now. The refined patches that fold or fall below
+    ``quality.good_sj`` lose that template and the program is solved again (at most
+    :data:`TRANSITION_ROUNDS` times). Returns the new round ``(key, templates, multiplicities, counts, refined
+    patches)`` when its size objective is lower than ``best``'s and no patch folds or falls
+    below ``quality.good_sj``; else ``best``."""
+    cache = catalogue.cache
+    _, tmpl, mults, n, _ = best
+    ct = None if side_targets is None else [t.chord_targets(f) for t in tmpl]
+    flagged = off_size_patches(sides, tmpl, mults, n, size, quality, side_targets=side_targets, chord_targets=ct,
+                               floors=floors, want=want)
+    tgt = np.asarray(side_targets, np.float64) if side_targets is not None else sides.lengths / float(size)
+    off = {}  # original patch -> how far its sides are off their targets (edges), over its translates
+    for p in flagged:
+        ids = np.unique(np.concatenate([np.asarray(x, np.int64).ravel() for x in sides.patch_sides[p]]))
+        off[moved[p].of] = off.get(moved[p].of, 0.0) + float(np.sum(np.abs(np.asarray(n)[ids] - tgt[ids])))
+    originals = sorted(sorted(off, key=lambda q: (-off[q], q))[:TRANSITION_PATCHES])
+    if not originals:
+        return best
+    plain = count_cost(sides, mults, n, size=size, widths=[t.chord_widths() for t in tmpl], counts=want,
+                       side_targets=side_targets, chord_targets=ct, chord_weight=TRANSITION_CHORD_WEIGHT)
+    offered = {}  # original patch -> its templates offered (unturned)
+    for q in originals:
+        offered[q] = _offered(shapes[q], tmpl[q], cands[q], catalogue, lattice)
+    alts, origs = [], []  # per patch: templates as this patch sees them, and the originals to refine
+    for p in range(len(shapes)):
+        q = moved[p].of
+        if q not in offered:
+            alts.append([tmpl[p]])
+            origs.append([next(t for t in _each(cands[q]) if _same_template(t, tmpl[p]))] if q != p else [tmpl[p]])
+            continue
+        origs.append(offered[q])
+        alts.append(offered[q] if q == p else list(_Turned(offered[q], moved[p].turn, shapes[p])))
+    top = max([float(np.max(m)) for m in mults] + [float(np.max(sides.lengths)) / float(size)]
+              + ([float(np.max(side_targets))] if side_targets is not None else []))
+    bound = 3 * int(math.ceil(top)) + 4
+    most = np.maximum.reduce([np.asarray(n, np.float64), np.ceil(tgt / quality.size_band[0]) + 1,
+                              np.ones(len(n)) if floors is None else np.asarray(floors, np.float64)])
+    for s_, c_ in want.items():
+        most[s_] = max(most[s_], c_)
+    banned = [set() for _ in alts]
+    for _ in range(TRANSITION_ROUNDS):
+        keep = [[j for j in range(len(a)) if j not in banned[p]] for p, a in enumerate(alts)]
+        pick = [[alts[p][j] for j in keep[p]] for p in range(len(alts))]
+        pen = [[0.0 if j == 0 else quality.transition_gain * max(_internal(alts[p][j]) - _internal(alts[p][0]), 0)
+                + TRANSITION_TIE for j in keep[p]] for p in range(len(alts))]
+        try:
+            ch = solve_choice(sides, [[t.side_matrix() for t in a] for a in pick], penalties=pen, size=size,
+                              widths=[[t.chord_widths() for t in a] for a in pick], floors=floors, counts=want,
+                              equal=equal, side_targets=side_targets,
+                              chord_targets=None if f is None else [[t.chord_targets(f) for t in a] for a in pick],
+                              chord_weight=TRANSITION_CHORD_WEIGHT, bound=bound, most=most,
+                              start=(mults, n), max_nodes=TRANSITION_NODES, screen=TRANSITION_SCREEN,
+                              source=layout.source)
+        except LayoutInfeasible:
+            return best
+        chosen = [keep[p][j] for p, j in enumerate(ch.choice)]
+        if not any(chosen) or not ch.size_cost < plain:
+            return best
+        refined, new_tmpl = [], []
+        for p, j in enumerate(chosen):
+            q, m = moved[p].of, ch.multiplicities[p]
+            t = alts[p][j]
+            rm = refine_and_place(origs[p][j], m, quality=quality, cache=cache)
+            if q != p:
+                rm = _translated(rm, moved[p], shapes[p], t)
+            if any(len(parts) > 1 for parts in sides.patch_sides[p]):
+                rm = _fitted(rm, fit_sides(layout, sides, p, rm, ch.counts, quality=quality, cache=cache))
+            refined.append(rm)
+            new_tmpl.append(t)
+        keys = [_round_key(r) for r in refined]
+        bad = [p for p, k in enumerate(keys) if k[0] > 0 or -k[1] < quality.good_sj]
+        if not bad:
+            total = (0, max(k[1] for k in keys))
+            return (total, new_tmpl, ch.multiplicities, ch.counts, refined)
+        if any(chosen[p] == 0 for p in bad):
+            return best  # a patch kept its template and still folds at the new counts
+        for p in bad:
+            banned[p].add(chosen[p])
     return best
 
 
