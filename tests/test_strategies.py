@@ -240,13 +240,18 @@ def test_a_graded_rectangle_takes_transitions_for_the_field(cat):
     assert _min_sj(m.xy, m.quads) > QUALITY.good_sj
 
 
-@pytest.mark.xfail(strict=True, reason="the arcs' area floors (curve_floors: 7 edges on 3.4 h of the outer arc, 5 on "
-                                       "1.2 h of each slot end) hold 38 % of its edges below 0.5 h; no template changes "
-                                       "them (docs/meshing.md, 'The size band')")
 def test_the_slotted_link_at_p40_reaches_the_size_band(cat):
-    """The issue's criterion: at least 75 % of the edges within [0.5 h, 1.5 h] where gmsh has 94 %."""
+    """The issue's criterion: at least 75 % of the edges within [0.5 h, 1.5 h] where gmsh has 94 %.
+    The ring partition misses it (its curved sides' floors from the whole boundary's share of the
+    area budget); the lean curves' floors, allocated where they pay and by sign
+    (:func:`~jaxmatch.placement.layout.lean_curve_floors`), meet the size band and keep the area."""
     import json
 
     truth = json.loads((EX / "parts" / "truth" / "slotted-link.json").read_text())
     m = jaxmatch.mesh(EX / "parts" / "slotted-link.json", size=truth["outer_perimeter"] / 40, catalogue=cat)
     assert _band(m) >= 0.75
+    assert m.chosen == "rings" + S.LEAN
+    xy, q = np.asarray(m.xy), np.asarray(m.quads)
+    x, y = xy[q, 0], xy[q, 1]  # (Q, 4) each: the quads' shoelace, here
+    area = 0.5 * float(np.sum(x * np.roll(y, -1, axis=1) - np.roll(x, -1, axis=1) * y))
+    assert abs(area / truth["area"] - 1.0) <= QUALITY.area_tol  # (the part's exact area: arcs, not their samples)

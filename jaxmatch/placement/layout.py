@@ -643,16 +643,18 @@ def _region_shares(layout: Layout, sides: Sides) -> np.ndarray:
 
 
 def curve_floors(layout: Layout, sides: Sides, area_tol: float, region: float | None = None, *,
-                 lean: bool = False) -> np.ndarray:
+                 lean: bool = False, size: float | None = None) -> np.ndarray:
     """``(S,) int64`` the fewest edges each side may have so that its chords keep the region's
     area: a boundary side whose points do not lie on one line gets at least the edges that keep
     the area between it and its chords within its share of :data:`CURVE_SHARE` ``* area_tol`` of
-    the region's area: its length over the whole boundary's, or with ``lean`` over the curved
-    boundary sides' total (a straight side loses no area and takes none: coarser curves, nearer
-    the size, where the outline also has straight sides); every other side 1. ``region``:
-    :func:`region_area` of ``layout`` when the caller has it. An assembly's layout
-    (``layout.regions``): a side between two regions is kept like a boundary side of each, its
-    budget the smaller of the two regions' shares (``lean`` does not apply)."""
+    the region's area: its length over the whole boundary's; every other side 1. With ``lean``
+    the curved boundary sides share the budget alone (a straight side loses no area and takes
+    none: coarser curves, nearer the size, where the outline also has straight sides), allocated
+    where it pays and by sign (:func:`lean_curve_floors`; ``size``: the target edge length, the
+    curved sides' starting counts). ``region``: :func:`region_area` of ``layout`` when the caller
+    has it. An assembly's layout (``layout.regions``): a side between two regions is kept like a
+    boundary side of each, its budget the smaller of the two regions' shares (``lean`` does not
+    apply)."""
     floors = np.ones(len(sides.chains), np.int64)
     own = _region_shares(layout, sides) if layout.regions is not None else None
     bound = np.flatnonzero(sides.outer if own is None else ~np.isinf(own))
@@ -662,7 +664,11 @@ def curve_floors(layout: Layout, sides: Sides, area_tol: float, region: float | 
     if region is None and own is None:
         region = region_area(layout)
     curved = [s for s in bound if err1[int(s)] > CURVE_ZERO * region] if lean and own is None else bound
-    total = float(np.sum(sides.lengths[curved])) if len(curved) else 1.0  # (lean: straight sides need no share)
+    if lean and own is None:
+        chains = [layout.points[sides.chains[s]] for s in curved]
+        floors[curved] = lean_curve_floors(chains, CURVE_SHARE * area_tol * region, size)
+        return floors
+    total = float(np.sum(sides.lengths[curved])) if len(curved) else 1.0
     for s in bound:
         poly = layout.points[sides.chains[s]]
         if poly.shape[0] <= 2:
@@ -681,6 +687,87 @@ def curve_floors(layout: Layout, sides: Sides, area_tol: float, region: float | 
             lo, hi = (lo, mid) if chord_area_error(poly, mid) <= budget else (mid, hi)
         floors[s] = hi
     return floors
+
+
+def chord_piece_areas(polyline: np.ndarray, n: int) -> np.ndarray:
+    """``(n,) float64`` the signed area each of the ``n`` pieces of ``polyline (k, 2)`` encloses
+    with its chord, the pieces' ends evenly spaced by arc length as in :func:`chord_area_error`
+    (whose error is the sum of their absolute values; user units squared). The sign is the
+    shoelace's of the ring (the piece's first chord point, the polyline's points strictly inside
+    it, its last chord point): positive where the polyline runs to the right of its chord. Along
+    a boundary side of a counter-clockwise patch loop (the region on its left): positive, the
+    area the chord cuts off the region (a convex stretch); negative, the area it adds (a concave
+    stretch, a hole's side)."""
+    p0 = np.asarray(polyline, np.float64)
+    k, n = p0.shape[0], int(n)
+    if k <= 2:
+        return np.zeros(n)
+    centre = 0.5 * (p0.min(axis=0) + p0.max(axis=0))  # (cross products of small coordinates)
+    p = p0 - centre
+    cum = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(p0, axis=0), axis=1))])
+    q = side_points(p0, n) - centre
+    t = np.linspace(0.0, cum[-1], n + 1)
+    a = np.searchsorted(cum, t[:-1], side="right")  # each piece's points inside: p[a:b]
+    b = np.searchsorted(cum, t[1:], side="left")
+
+    def cross(u, v):
+        return u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
+
+    pre = np.concatenate([[0.0], np.cumsum(cross(p[:-1], p[1:]))])  # pre[j]: the polyline's terms before point j
+    ai, bi = np.minimum(a, k - 1), np.clip(b - 1, 0, k - 1)
+    ring = cross(q[:-1], p[ai]) + (pre[np.maximum(bi, ai)] - pre[ai]) + cross(p[bi], q[1:]) + cross(q[1:], q[:-1])
+    return np.where(b > a, 0.5 * ring, 0.0)
+
+
+def lean_curve_floors(chains: Sequence[np.ndarray], budget: float, size: float | None = None) -> np.ndarray:
+    """``(C,) int64`` the fewest edges of each curved boundary side ``chains[i] (k_i, 2)`` (user
+    units, each run along a counter-clockwise patch loop: the region on its left) that keep the
+    region's area within ``budget`` (user units squared), the budget allocated where it pays.
+
+    Signs: a piece's chord cuts area off the region where the side is convex there and adds area
+    where it is concave (:func:`chord_piece_areas`), and the area check is signed
+    (``|mesh area / region - 1| <= area_tol``). If the pieces that lose area lose at most
+    ``budget`` in all and those that add area add at most ``budget``, the net change is at most
+    ``budget``: each sign group has the whole budget (a side with pieces of both signs counts in
+    both).
+
+    Allocation by marginal gain: every side starts at its size count (``round(length / size)``,
+    at least 1; 1 without ``size``) and, while a sign group's total exceeds ``budget``, the side
+    whose next edge lowers the exceeding groups' totals most gets it (greedy: the fewest edges in
+    all when each side's error is convex and decreasing in its count, as a circular arc's is,
+    ~ 1 / n^2). A small hole keeps few edges (its error is small) and the budget goes to the
+    long arcs. A side stops at ``4 * k_i`` edges. The floors keep their meaning as long as a
+    side's errors fall as edges are added (at or above its floor, whatever count is chosen)."""
+    C = len(chains)
+    if not C:
+        return np.zeros(0, np.int64)
+    lengths = np.array([float(np.linalg.norm(np.diff(c, axis=0), axis=1).sum()) for c in chains])
+    n = np.ones(C, np.int64) if size is None else np.maximum(1, np.rint(lengths / float(size))).astype(np.int64)
+    cap = np.array([4 * c.shape[0] for c in chains], np.int64)
+    n = np.minimum(n, cap)
+
+    def groups(i: int, m: int) -> np.ndarray:  # (2,) area lost, area added
+        a = chord_piece_areas(chains[i], m)
+        return np.array([a[a > 0].sum(), -a[a < 0].sum()])
+
+    now = np.array([groups(i, int(n[i])) for i in range(C)])  # (C, 2)
+    nxt = np.array([groups(i, int(n[i]) + 1) for i in range(C)])
+    total = now.sum(axis=0)
+    x = None if size is None else np.maximum(lengths / float(size), 1e-12)  # (the size counts, unrounded)
+
+    def cost(m: np.ndarray) -> np.ndarray:  # edges, or their squared log distance to the size
+        return m.astype(np.float64) if x is None else m * np.log(m / x) ** 2
+
+    while np.any(total > budget):
+        over = (total > budget).astype(np.float64)
+        gain = np.where(n < cap, (now - nxt) @ over / np.maximum(cost(n + 1) - cost(n), 1e-12), -np.inf)
+        i = int(np.argmax(gain))
+        if not np.isfinite(gain[i]):
+            break
+        n[i] += 1
+        total += nxt[i] - now[i]
+        now[i], nxt[i] = nxt[i], groups(i, int(n[i]) + 1)
+    return n
 
 
 # ---------------------------------------------------------------------------------------------

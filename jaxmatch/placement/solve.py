@@ -219,7 +219,7 @@ def lean_floors_help(layout: Layout, catalogue: Catalogue, size: float, quality:
     short = sides.lengths / fine < quality.size_band[0] * float(size)
     if not np.any(short & (fine > 1)):
         return False
-    lean = curve_floors(layout, sides, quality.area_tol, region, lean=True)
+    lean = curve_floors(layout, sides, quality.area_tol, region, lean=True, size=size)
     return bool(np.any(short & (sides.lengths / lean >= quality.size_band[0] * float(size))))
 
 
@@ -347,7 +347,8 @@ def _mesh_layout(layout: Layout, catalogue: Catalogue, lattice: Lattice, *, size
         if not (j >= 0 and _has(cands[p], j)):
             raise IndexError(f"patch {p} has {len(cands[p])} candidate templates, not {j + 1}")
     made: dict = {}
-    floors = curve_floors(layout, sides, quality.area_tol, region, lean=lean_curves) if size is not None else None
+    floors = curve_floors(layout, sides, quality.area_tol, region, lean=lean_curves,
+                          size=size) if size is not None else None
     best = _rounds(layout, sides, shapes, cands, moved, list(choice0), want, size, floors, equal, side_targets, f, made,
                    quality, lkey, cache)
     if transitions and size is not None:
