@@ -720,9 +720,9 @@ def chord_piece_areas(polyline: np.ndarray, n: int) -> np.ndarray:
 
 
 def lean_curve_floors(chains: Sequence[np.ndarray], budget: float, size: float | None = None) -> np.ndarray:
-    """``(C,) int64`` the fewest edges of each curved boundary side ``chains[i] (k_i, 2)`` (user
-    units, each run along a counter-clockwise patch loop: the region on its left) that keep the
-    region's area within ``budget`` (user units squared), the budget allocated where it pays.
+    """``(C,) int64`` the floors of the curved boundary sides ``chains[i] (k_i, 2)`` (user units,
+    each run along a counter-clockwise patch loop: the region on its left): edge counts that keep
+    the region's area within ``budget`` (user units squared), the budget allocated where it pays.
 
     Signs: a piece's chord cuts area off the region where the side is convex there and adds area
     where it is concave (:func:`chord_piece_areas`), and the area check is signed
@@ -733,11 +733,14 @@ def lean_curve_floors(chains: Sequence[np.ndarray], budget: float, size: float |
 
     Allocation by marginal gain: every side starts at its size count (``round(length / size)``,
     at least 1; 1 without ``size``) and, while a sign group's total exceeds ``budget``, the side
-    whose next edge lowers the exceeding groups' totals most gets it (greedy: the fewest edges in
-    all when each side's error is convex and decreasing in its count, as a circular arc's is,
-    ~ 1 / n^2). A small hole keeps few edges (its error is small) and the budget goes to the
-    long arcs. A side stops at ``4 * k_i`` edges. The floors keep their meaning as long as a
-    side's errors fall as edges are added (at or above its floor, whatever count is chosen)."""
+    whose next edge lowers the exceeding groups' totals most per unit of size deviation gets it
+    (the deviation of ``n`` edges of length ``L / n``: ``n * log(L / (n size))^2``; without
+    ``size``, per edge). Greedy: the least deviation (the fewest edges) for one sign group when
+    each side's error is convex and decreasing in its count, as a circular arc's is (~ 1 / n^2).
+    A small hole or slot end keeps about its size count (its error is small) and the budget goes
+    to the long arcs, where an edge more stays near the size. A side stops at ``4 * k_i`` edges.
+    The floors keep their meaning as long as a side's errors fall as edges are added (at or
+    above its floor, whatever count is chosen)."""
     C = len(chains)
     if not C:
         return np.zeros(0, np.int64)
