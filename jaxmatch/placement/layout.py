@@ -584,41 +584,61 @@ def chord_area_error(polyline: np.ndarray, n: int) -> float:
     """Area between ``polyline (k, 2)`` and the chords through its ``n + 1`` points evenly spaced
     by arc length (:func:`jaxmatch.placement.refine.side_points`, where the mesh puts its
     vertices): the sum over the ``n`` pieces of the absolute area each piece encloses with its
-    chord (user units squared; 0 for a straight side).
+    chord (user units squared; 0 for a straight side). :func:`chord_area_errors` of one count."""
+    return float(chord_area_errors(polyline, [n])[0])
 
-    All pieces at once: each piece's ring (its first chord point, the polyline's points strictly
-    inside it, its last chord point) laid end to end in one array, the shoelace terms summed per
-    ring (``np.add.reduceat``); the same terms as a ring at a time, summed in another order (the
-    same area to round-off, tested), in a third of the time (it runs ~10 times per curved side in
-    the search for the fewest pieces, :func:`curve_floors`)."""
+
+def chord_area_errors(polyline: np.ndarray, counts) -> np.ndarray:
+    """:func:`chord_area_error` of ``polyline (k, 2)`` for each piece count of ``counts (c,)``:
+    ``(c,) float64`` (user units squared), every count's pieces at once.
+
+    Each piece's ring (its first chord point, the polyline's points strictly inside it, its last
+    chord point) is laid end to end in one array and its shoelace terms summed per ring
+    (``np.add.reduceat``; a piece with no point inside is its chord: 0 exactly); a count's
+    absolute areas are added piece by piece, in order. The chord points are those of
+    :func:`~jaxmatch.placement.refine.side_points` and the pieces' ends those of
+    ``np.linspace(0, length, n + 1)``, computed by the same operations (the same doubles,
+    tested), so a count's error does not depend on the other counts asked with it."""
     p = np.asarray(polyline, np.float64)
-    if p.shape[0] <= 2:
-        return 0.0
+    ns = np.asarray(counts, np.int64).reshape(-1)
+    k = p.shape[0]
+    if k <= 2 or not ns.size:
+        return np.zeros(ns.shape[0])
     seg = np.linalg.norm(np.diff(p, axis=0), axis=1)
     cum = np.concatenate([[0.0], np.cumsum(seg)])
-    q = side_points(p, n)
-    t = np.linspace(0.0, cum[-1], n + 1)
-    cut = np.searchsorted(cum, t[:-1], side="right")  # vertices strictly after each piece start
-    m = np.searchsorted(cum, t[1:], side="left") - cut  # and strictly before its end
-    some = np.flatnonzero(m > 0)  # a piece with no vertex inside is its chord: no area
-    if not some.size:
-        return 0.0
-    cut, m = cut[some], m[some]
-    size = m + 2  # each ring: q[i], the inner points, q[i + 1]
+    flip = (not np.array_equal(p[0], p[-1])) and tuple(p[-1]) < tuple(p[0])  # (as side_points)
+    f, fseg = (p[::-1], seg[::-1]) if flip else (p, seg)
+    fcum = np.concatenate([[0.0], np.cumsum(fseg)]) if flip else cum
+    per = ns + 1  # each count's chord points
+    first = np.concatenate([[0], np.cumsum(per)[:-1]])
+    of = np.repeat(first, per)
+    j = np.arange(int(per.sum())) - of  # the point's place among its count's
+    big_n = np.repeat(ns, per)
+    t = j / big_n * fcum[-1]  # side_points: np.arange(N + 1) / N * length
+    idx = np.clip(np.searchsorted(fcum, t, side="right") - 1, 0, k - 2)
+    w = np.where(fseg[idx] > 0, (t - fcum[idx]) / np.where(fseg[idx] > 0, fseg[idx], 1.0), 0.0)
+    q = f[idx] + w[:, None] * (f[idx + 1] - f[idx])
+    q[first], q[first + ns] = f[0], f[-1]
+    if flip:
+        q = q[of + big_n - j]
+    ends = j * (cum[-1] / big_n) + 0.0  # np.linspace(0, cum[-1], n + 1)
+    ends[first + ns] = cum[-1]
+    piece = np.flatnonzero(j < big_n)  # piece i of a count runs from its point i to i + 1
+    cut = np.searchsorted(cum, ends[piece], side="right")  # vertices strictly after the piece start
+    m = np.searchsorted(cum, ends[piece + 1], side="left") - cut  # and strictly before its end
+    size = np.maximum(m, 0) + 2
     starts = np.concatenate([[0], np.cumsum(size)[:-1]])
     at = np.arange(int(size.sum())) - np.repeat(starts, size)  # place within its ring
-    ring = p[np.clip(np.repeat(cut - 1, size) + at, 0, p.shape[0] - 1)]
-    ring[starts] = q[some]
+    ring = p[np.clip(np.repeat(cut - 1, size) + at, 0, k - 1)]
     last = starts + size - 1
-    ring[last] = q[some + 1]
+    ring[starts], ring[last] = q[piece], q[piece + 1]
     nxt = np.arange(1, ring.shape[0] + 1)
     nxt[last] = starts  # each ring closes on its first point
     x, y = ring[:, 0], ring[:, 1]
-    area = 0.5 * np.add.reduceat(x * y[nxt] - x[nxt] * y, starts)
-    total = 0.0
-    for a in area.tolist():  # piece by piece, in order
-        total += abs(a)
-    return total
+    area = np.abs(0.5 * np.add.reduceat(x * y[nxt] - x[nxt] * y, starts))
+    table = np.zeros((ns.shape[0], int(ns.max())))  # one row a count, its pieces in order
+    table[np.repeat(np.arange(ns.shape[0]), ns), j[piece]] = area
+    return np.cumsum(table, axis=1)[:, -1]  # added in order, as one at a time
 
 
 CURVE_SHARE = 0.8
@@ -690,14 +710,37 @@ def curve_floors(layout: Layout, sides: Sides, area_tol: float, region: float | 
             budget = CURVE_SHARE * area_tol * region * float(sides.lengths[s]) / total
         if err1[int(s)] <= budget:
             continue
-        lo, hi = 1, 2
-        while chord_area_error(poly, hi) > budget and hi < poly.shape[0] * 4:
-            lo, hi = hi, hi * 2
-        while hi - lo > 1:  # the error falls as pieces are added: the fewest that keep the budget
-            mid = (lo + hi) // 2
-            lo, hi = (lo, mid) if chord_area_error(poly, mid) <= budget else (mid, hi)
-        floors[s] = hi
+        floors[s] = _fewest_pieces(poly, budget)
     return floors
+
+
+CURVE_TABLE = 64
+"""A curved side whose search for the fewest pieces (:func:`_fewest_pieces`) may ask for at most
+this many is measured at every count up to there in one :func:`chord_area_errors` call (about
+the time of three counts one at a time; the search asks for ~8)."""
+
+
+def _fewest_pieces(poly: np.ndarray, budget: float) -> int:
+    """The pieces that :func:`curve_floors` gives the curved side ``poly (k, 2)`` for ``budget``
+    (user units squared), whose one chord exceeds it: counts doubled from 2 until the error
+    (:func:`chord_area_error`) keeps the budget or the count reaches ``4 k``, then halved back to
+    the fewest that keep it (the error falls as pieces are added). Where the largest count that
+    search can reach is at most :data:`CURVE_TABLE`, every count's error is measured at once."""
+    most = 2
+    while most < poly.shape[0] * 4:
+        most *= 2
+    if most <= CURVE_TABLE:
+        table = chord_area_errors(poly, np.arange(1, most + 1))
+        err = lambda n: float(table[n - 1])  # noqa: E731
+    else:
+        err = lambda n: chord_area_error(poly, n)  # noqa: E731
+    lo, hi = 1, 2
+    while err(hi) > budget and hi < poly.shape[0] * 4:
+        lo, hi = hi, hi * 2
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        lo, hi = (lo, mid) if err(mid) <= budget else (mid, hi)
+    return hi
 
 
 # ---------------------------------------------------------------------------------------------
