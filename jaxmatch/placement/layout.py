@@ -714,32 +714,44 @@ def curve_floors(layout: Layout, sides: Sides, area_tol: float, region: float | 
     return floors
 
 
-CURVE_TABLE = 64
-"""A curved side whose search for the fewest pieces (:func:`_fewest_pieces`) may ask for at most
-this many is measured at every count up to there in one :func:`chord_area_errors` call (about
-the time of three counts one at a time; the search asks for ~8)."""
+CURVE_BATCH = 2048
+"""Pieces measured together (:func:`chord_area_errors`) in the search for a curved side's fewest
+pieces (:func:`_fewest_pieces`): the doubling counts up to this many pieces in all, then every
+count between the last two if they are at most this many."""
 
 
 def _fewest_pieces(poly: np.ndarray, budget: float) -> int:
     """The pieces that :func:`curve_floors` gives the curved side ``poly (k, 2)`` for ``budget``
     (user units squared), whose one chord exceeds it: counts doubled from 2 until the error
     (:func:`chord_area_error`) keeps the budget or the count reaches ``4 k``, then halved back to
-    the fewest that keep it (the error falls as pieces are added). Where the largest count that
-    search can reach is at most :data:`CURVE_TABLE`, every count's error is measured at once."""
-    most = 2
-    while most < poly.shape[0] * 4:
-        most *= 2
-    if most <= CURVE_TABLE:
-        table = chord_area_errors(poly, np.arange(1, most + 1))
-        err = lambda n: float(table[n - 1])  # noqa: E731
-    else:
-        err = lambda n: chord_area_error(poly, n)  # noqa: E731
+    the fewest that keep it (the error falls as pieces are added). The counts it may ask for are
+    measured in two batches (:data:`CURVE_BATCH`): each costs about as much as one count alone,
+    and a count's error is the same however it is asked for (the same floors, tested)."""
+    most = poly.shape[0] * 4
+    known: dict[int, float] = {}
+
+    def ask(counts) -> None:
+        new = [n for n in counts if n not in known]
+        if new:
+            known.update(zip(new, chord_area_errors(poly, new).tolist()))
+
+    steps = [2]
+    while steps[-1] < most:
+        steps.append(steps[-1] * 2)
+    ask([n for n, total in zip(steps, np.cumsum(steps)) if total <= CURVE_BATCH])
     lo, hi = 1, 2
-    while err(hi) > budget and hi < poly.shape[0] * 4:
+    while True:
+        ask([hi])
+        if not (known[hi] > budget and hi < most):
+            break
         lo, hi = hi, hi * 2
+    between = range(lo + 1, hi)
+    if sum(between) <= CURVE_BATCH:
+        ask(between)
     while hi - lo > 1:
         mid = (lo + hi) // 2
-        lo, hi = (lo, mid) if err(mid) <= budget else (mid, hi)
+        ask([mid])
+        lo, hi = (lo, mid) if known[mid] <= budget else (mid, hi)
     return hi
 
 
