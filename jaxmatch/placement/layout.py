@@ -695,7 +695,8 @@ def curve_floors(layout: Layout, sides: Sides, area_tol: float, region: float | 
     bound = np.flatnonzero(sides.outer if own is None else ~np.isinf(own))
     if not bound.size:
         return floors
-    err1 = {int(s): chord_area_error(layout.points[sides.chains[s]], 1) for s in bound}
+    known = {int(s): _first_errors(layout.points[sides.chains[s]]) for s in bound}  # (one chord, the doubling counts)
+    err1 = {s: errs[1] for s, errs in known.items()}
     if region is None and own is None:
         region = region_area(layout)
     curved = [s for s in bound if err1[int(s)] > CURVE_ZERO * region] if lean and own is None else bound
@@ -710,7 +711,7 @@ def curve_floors(layout: Layout, sides: Sides, area_tol: float, region: float | 
             budget = CURVE_SHARE * area_tol * region * float(sides.lengths[s]) / total
         if err1[int(s)] <= budget:
             continue
-        floors[s] = _fewest_pieces(poly, budget)
+        floors[s] = _fewest_pieces(poly, budget, known[int(s)])
     return floors
 
 
@@ -720,25 +721,49 @@ pieces (:func:`_fewest_pieces`): the doubling counts up to this many pieces in a
 count between the last two if they are at most this many."""
 
 
-def _fewest_pieces(poly: np.ndarray, budget: float) -> int:
+CURVE_POINTS = 64
+"""A side of at most this many points is measured at the doubling counts of
+:func:`_fewest_pieces` together with its one chord (:func:`_first_errors`), before it is known to
+need them: a short side's extra counts cost less than another call; a long, straight side (a
+densely traced outline) is measured at one piece only."""
+
+
+def _doubling(k: int) -> list[int]:
+    """The counts :func:`_fewest_pieces` doubles through on a side of ``k`` points (2, 4, ... up
+    to the first at least ``4 k``) that fit in :data:`CURVE_BATCH` pieces in all."""
+    steps = [2]
+    while steps[-1] < 4 * k:
+        steps.append(steps[-1] * 2)
+    return [n for n, total in zip(steps, np.cumsum(steps)) if total <= CURVE_BATCH]
+
+
+def _first_errors(poly: np.ndarray) -> dict[int, float]:
+    """``{count: error}`` (:func:`chord_area_error`) of the side ``poly (k, 2)`` at one piece and,
+    up to :data:`CURVE_POINTS` points, at the counts of :func:`_doubling`, in one
+    :func:`chord_area_errors` call; ``{1: 0.0}`` for a two-point side."""
+    if poly.shape[0] <= 2:
+        return {1: 0.0}
+    counts = [1] + (_doubling(poly.shape[0]) if poly.shape[0] <= CURVE_POINTS else [])
+    return dict(zip(counts, chord_area_errors(poly, counts).tolist()))
+
+
+def _fewest_pieces(poly: np.ndarray, budget: float, known: dict[int, float] | None = None) -> int:
     """The pieces that :func:`curve_floors` gives the curved side ``poly (k, 2)`` for ``budget``
     (user units squared), whose one chord exceeds it: counts doubled from 2 until the error
     (:func:`chord_area_error`) keeps the budget or the count reaches ``4 k``, then halved back to
     the fewest that keep it (the error falls as pieces are added). The counts it may ask for are
-    measured in two batches (:data:`CURVE_BATCH`): each costs about as much as one count alone,
-    and a count's error is the same however it is asked for (the same floors, tested)."""
+    measured in two batches (:data:`CURVE_BATCH`; ``known``: :func:`_first_errors` of ``poly``,
+    the first of them, when the caller has it): each costs about as much as one count alone, and
+    a count's error is the same however it is asked for (the same floors, tested)."""
     most = poly.shape[0] * 4
-    known: dict[int, float] = {}
+    known = dict(_first_errors(poly) if known is None else known)
 
     def ask(counts) -> None:
         new = [n for n in counts if n not in known]
         if new:
             known.update(zip(new, chord_area_errors(poly, new).tolist()))
 
-    steps = [2]
-    while steps[-1] < most:
-        steps.append(steps[-1] * 2)
-    ask([n for n, total in zip(steps, np.cumsum(steps)) if total <= CURVE_BATCH])
+    ask(_doubling(poly.shape[0]))
     lo, hi = 1, 2
     while True:
         ask([hi])
