@@ -32,6 +32,7 @@ from jaxmatch.errors import EXIT_BAD_INPUT, InputError
 from jaxmatch.placement.layout import (
     CURVE_SHARE,
     LayoutInfeasible,
+    chord_area_error,
     curve_floors,
     layout_sides,
     load_layout,
@@ -45,6 +46,7 @@ from jaxmatch.io.meshfile import write_mesh
 from jaxmatch.meshing.build import from_layout
 from jaxmatch.meshing.pipeline import strategy_names
 from jaxmatch.placement import solve as lay_solve
+from jaxmatch.placement.refine import side_points
 from jaxmatch.placement.solve import lean_floors_help, mesh_layout
 from jaxmatch.scoring.lattice import load_lattice
 
@@ -893,6 +895,25 @@ def _even_points(poly: np.ndarray, n: int) -> np.ndarray:
 
 def _shoelace(p: np.ndarray) -> float:
     return 0.5 * abs(float(np.sum(p[:, 0] * np.roll(p[:, 1], -1) - np.roll(p[:, 0], -1) * p[:, 1])))
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.floats(0.0, 1.0), min_size=1, max_size=60, unique=True), st.floats(0.2, 5.5),
+       st.integers(1, 90), st.booleans())
+def test_chord_area_error_is_the_area_between_a_convex_arc_and_its_chords(fracs, span, n, backwards):
+    """On a convex arc every piece lies on one side of its chord, so the pieces' areas add up to
+    the arc's polygon less the chords' polygon (both closed by the same end chord; shapely's
+    areas), whichever way the arc runs; a straight polyline loses none."""
+    import shapely
+
+    t = span * np.array(sorted({0.0, 1.0, *fracs}))
+    arc = np.stack([3.0 + 2.0 * np.cos(t), -1.0 + 2.0 * np.sin(t)], axis=1)
+    arc = arc[::-1].copy() if backwards else arc
+    chords = side_points(arc, n)
+    want = (shapely.Polygon(arc).area - (shapely.Polygon(chords).area if n > 1 else 0.0)) if len(arc) > 2 else 0.0
+    assert chord_area_error(arc, n) == pytest.approx(want, rel=1e-9, abs=1e-12)
+    line = np.linspace([0.0, 1.0], [5.0, -2.0], len(arc))
+    assert chord_area_error(line, n) == pytest.approx(0.0, abs=1e-12)
 
 
 def _bulge(width: float):

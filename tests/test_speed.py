@@ -9,6 +9,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from jaxmatch.errors import UnmatchableError
 from jaxmatch.io.readers import load_shape
@@ -429,3 +431,30 @@ def test_the_choice_rules_counts_kept_on_a_mesh_equal_fresh_ones(cat):
     assert m.irregular_bound == fresh.irregular_bound
     m.irregular[:] = -1  # a copy: the kept array stays
     np.testing.assert_array_equal(m.irregular, fresh.irregular)
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(3, 300), st.floats(0.3, 6.0), st.floats(1e-6, 0.5), st.booleans(), st.integers(0, 2**31 - 1))
+def test_the_fewest_chord_pieces_from_batches_are_those_of_the_search_one_count_at_a_time(k, span, share, backwards,
+                                                                                          seed):
+    """``curve_floors``' search for the fewest pieces of a curved side gives the same count when
+    the counts it may ask for are measured in batches as when each is measured alone, and a
+    batch's errors are each count's own, bit for bit."""
+    from jaxmatch.placement import layout as L
+
+    rng = np.random.default_rng(seed)
+    t = np.sort(rng.uniform(0.0, span, k))
+    r = 2.0 + 0.1 * rng.standard_normal(k)
+    arc = np.stack([1.0 + r * np.cos(t), -3.0 + r * np.sin(t)], axis=1)
+    arc = arc[::-1].copy() if backwards else arc
+    budget = share * L.chord_area_error(arc, 1)
+    counts = rng.permutation(np.arange(1, 4 * k + 1))[:40]
+    batch = L.chord_area_errors(arc, counts)
+    assert batch.tolist() == [L.chord_area_error(arc, int(n)) for n in counts]
+    fast = L._fewest_pieces(arc, budget)
+    old = L.CURVE_BATCH
+    try:
+        L.CURVE_BATCH = 0
+        assert L._fewest_pieces(arc, budget) == fast
+    finally:
+        L.CURVE_BATCH = old

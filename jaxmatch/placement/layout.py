@@ -584,24 +584,61 @@ def chord_area_error(polyline: np.ndarray, n: int) -> float:
     """Area between ``polyline (k, 2)`` and the chords through its ``n + 1`` points evenly spaced
     by arc length (:func:`jaxmatch.placement.refine.side_points`, where the mesh puts its
     vertices): the sum over the ``n`` pieces of the absolute area each piece encloses with its
-    chord (user units squared; 0 for a straight side)."""
+    chord (user units squared; 0 for a straight side). :func:`chord_area_errors` of one count."""
+    return float(chord_area_errors(polyline, [n])[0])
+
+
+def chord_area_errors(polyline: np.ndarray, counts) -> np.ndarray:
+    """:func:`chord_area_error` of ``polyline (k, 2)`` for each piece count of ``counts (c,)``:
+    ``(c,) float64`` (user units squared), every count's pieces at once.
+
+    Each piece's ring (its first chord point, the polyline's points strictly inside it, its last
+    chord point) is laid end to end in one array and its shoelace terms summed per ring
+    (``np.add.reduceat``; a piece with no point inside is its chord: 0 exactly); a count's
+    absolute areas are added piece by piece, in order. The chord points are those of
+    :func:`~jaxmatch.placement.refine.side_points` and the pieces' ends those of
+    ``np.linspace(0, length, n + 1)``, computed by the same operations (the same doubles,
+    tested), so a count's error does not depend on the other counts asked with it."""
     p = np.asarray(polyline, np.float64)
-    if p.shape[0] <= 2:
-        return 0.0
+    ns = np.asarray(counts, np.int64).reshape(-1)
+    k = p.shape[0]
+    if k <= 2 or not ns.size:
+        return np.zeros(ns.shape[0])
     seg = np.linalg.norm(np.diff(p, axis=0), axis=1)
     cum = np.concatenate([[0.0], np.cumsum(seg)])
-    q = side_points(p, n)
-    t = np.linspace(0.0, cum[-1], n + 1)
-    cut = np.searchsorted(cum, t, side="right")  # vertices strictly after each piece start
-    total = 0.0
-    for i in range(n):
-        inner = p[cut[i]:np.searchsorted(cum, t[i + 1], side="left")]
-        if not len(inner):
-            continue
-        ring = np.vstack([q[i], inner, q[i + 1]])
-        x, y = ring[:, 0], ring[:, 1]
-        total += abs(0.5 * float(np.sum(x * roll(y, -1) - roll(x, -1) * y)))
-    return total
+    flip = (not np.array_equal(p[0], p[-1])) and tuple(p[-1]) < tuple(p[0])  # (as side_points)
+    f, fseg = (p[::-1], seg[::-1]) if flip else (p, seg)
+    fcum = np.concatenate([[0.0], np.cumsum(fseg)]) if flip else cum
+    per = ns + 1  # each count's chord points
+    first = np.concatenate([[0], np.cumsum(per)[:-1]])
+    of = np.repeat(first, per)
+    j = np.arange(int(per.sum())) - of  # the point's place among its count's
+    big_n = np.repeat(ns, per)
+    t = j / big_n * fcum[-1]  # side_points: np.arange(N + 1) / N * length
+    idx = np.clip(np.searchsorted(fcum, t, side="right") - 1, 0, k - 2)
+    w = np.where(fseg[idx] > 0, (t - fcum[idx]) / np.where(fseg[idx] > 0, fseg[idx], 1.0), 0.0)
+    q = f[idx] + w[:, None] * (f[idx + 1] - f[idx])
+    q[first], q[first + ns] = f[0], f[-1]
+    if flip:
+        q = q[of + big_n - j]
+    ends = j * (cum[-1] / big_n) + 0.0  # np.linspace(0, cum[-1], n + 1)
+    ends[first + ns] = cum[-1]
+    piece = np.flatnonzero(j < big_n)  # piece i of a count runs from its point i to i + 1
+    cut = np.searchsorted(cum, ends[piece], side="right")  # vertices strictly after the piece start
+    m = np.searchsorted(cum, ends[piece + 1], side="left") - cut  # and strictly before its end
+    size = np.maximum(m, 0) + 2
+    starts = np.concatenate([[0], np.cumsum(size)[:-1]])
+    at = np.arange(int(size.sum())) - np.repeat(starts, size)  # place within its ring
+    ring = p[np.clip(np.repeat(cut - 1, size) + at, 0, k - 1)]
+    last = starts + size - 1
+    ring[starts], ring[last] = q[piece], q[piece + 1]
+    nxt = np.arange(1, ring.shape[0] + 1)
+    nxt[last] = starts  # each ring closes on its first point
+    x, y = ring[:, 0], ring[:, 1]
+    area = np.abs(0.5 * np.add.reduceat(x * y[nxt] - x[nxt] * y, starts))
+    table = np.zeros((ns.shape[0], int(ns.max())))  # one row a count, its pieces in order
+    table[np.repeat(np.arange(ns.shape[0]), ns), j[piece]] = area
+    return np.cumsum(table, axis=1)[:, -1]  # added in order, as one at a time
 
 
 CURVE_SHARE = 0.8
@@ -660,7 +697,8 @@ def curve_floors(layout: Layout, sides: Sides, area_tol: float, region: float | 
     bound = np.flatnonzero(sides.outer if own is None else ~np.isinf(own))
     if not bound.size:
         return floors
-    err1 = {int(s): chord_area_error(layout.points[sides.chains[s]], 1) for s in bound}
+    known = {int(s): _first_errors(layout.points[sides.chains[s]]) for s in bound}  # (one chord, the doubling counts)
+    err1 = {s: errs[1] for s, errs in known.items()}
     if region is None and own is None:
         region = region_area(layout)
     curved = [s for s in bound if err1[int(s)] > CURVE_ZERO * region] if lean and own is None else bound
@@ -679,13 +717,7 @@ def curve_floors(layout: Layout, sides: Sides, area_tol: float, region: float | 
             budget = CURVE_SHARE * area_tol * region * float(sides.lengths[s]) / total
         if err1[int(s)] <= budget:
             continue
-        lo, hi = 1, 2
-        while chord_area_error(poly, hi) > budget and hi < poly.shape[0] * 4:
-            lo, hi = hi, hi * 2
-        while hi - lo > 1:  # the error falls as pieces are added: the fewest that keep the budget
-            mid = (lo + hi) // 2
-            lo, hi = (lo, mid) if chord_area_error(poly, mid) <= budget else (mid, hi)
-        floors[s] = hi
+        floors[s] = _fewest_pieces(poly, budget, known[int(s)])
     return floors
 
 
@@ -771,6 +803,71 @@ def lean_curve_floors(chains: Sequence[np.ndarray], budget: float, size: float |
         total += nxt[i] - now[i]
         now[i], nxt[i] = nxt[i], groups(i, int(n[i]) + 1)
     return n
+
+
+CURVE_BATCH = 2048
+"""Pieces measured together (:func:`chord_area_errors`) in the search for a curved side's fewest
+pieces (:func:`_fewest_pieces`): the doubling counts up to this many pieces in all, then every
+count between the last two if they are at most this many."""
+
+
+CURVE_POINTS = 64
+"""A side of at most this many points is measured at the doubling counts of
+:func:`_fewest_pieces` together with its one chord (:func:`_first_errors`), before it is known to
+need them: a short side's extra counts cost less than another call; a long, straight side (a
+densely traced outline) is measured at one piece only."""
+
+
+def _doubling(k: int) -> list[int]:
+    """The counts :func:`_fewest_pieces` doubles through on a side of ``k`` points (2, 4, ... up
+    to the first at least ``4 k``) that fit in :data:`CURVE_BATCH` pieces in all."""
+    steps = [2]
+    while steps[-1] < 4 * k:
+        steps.append(steps[-1] * 2)
+    return [n for n, total in zip(steps, np.cumsum(steps)) if total <= CURVE_BATCH]
+
+
+def _first_errors(poly: np.ndarray) -> dict[int, float]:
+    """``{count: error}`` (:func:`chord_area_error`) of the side ``poly (k, 2)`` at one piece and,
+    up to :data:`CURVE_POINTS` points, at the counts of :func:`_doubling`, in one
+    :func:`chord_area_errors` call; ``{1: 0.0}`` for a two-point side."""
+    if poly.shape[0] <= 2:
+        return {1: 0.0}
+    counts = [1] + (_doubling(poly.shape[0]) if poly.shape[0] <= CURVE_POINTS else [])
+    return dict(zip(counts, chord_area_errors(poly, counts).tolist()))
+
+
+def _fewest_pieces(poly: np.ndarray, budget: float, known: dict[int, float] | None = None) -> int:
+    """The pieces that :func:`curve_floors` gives the curved side ``poly (k, 2)`` for ``budget``
+    (user units squared), whose one chord exceeds it: counts doubled from 2 until the error
+    (:func:`chord_area_error`) keeps the budget or the count reaches ``4 k``, then halved back to
+    the fewest that keep it (the error falls as pieces are added). The counts it may ask for are
+    measured in two batches (:data:`CURVE_BATCH`; ``known``: :func:`_first_errors` of ``poly``,
+    the first of them, when the caller has it): each costs about as much as one count alone, and
+    a count's error is the same however it is asked for (the same floors, tested)."""
+    most = poly.shape[0] * 4
+    known = dict(_first_errors(poly) if known is None else known)
+
+    def ask(counts) -> None:
+        new = [n for n in counts if n not in known]
+        if new:
+            known.update(zip(new, chord_area_errors(poly, new).tolist()))
+
+    ask(_doubling(poly.shape[0]))
+    lo, hi = 1, 2
+    while True:
+        ask([hi])
+        if not (known[hi] > budget and hi < most):
+            break
+        lo, hi = hi, hi * 2
+    between = range(lo + 1, hi)
+    if sum(between) <= CURVE_BATCH:
+        ask(between)
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        ask([mid])
+        lo, hi = (lo, mid) if known[mid] <= budget else (mid, hi)
+    return hi
 
 
 # ---------------------------------------------------------------------------------------------
