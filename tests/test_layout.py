@@ -29,11 +29,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from jaxmatch.errors import EXIT_BAD_INPUT, InputError
+from jaxmatch.placement.floors import CURVE_SHARE, chord_area_error, curve_floors
 from jaxmatch.placement.layout import (
-    CURVE_SHARE,
     LayoutInfeasible,
-    chord_area_error,
-    curve_floors,
     layout_sides,
     load_layout,
     make_layout,

@@ -18,8 +18,8 @@ from hypothesis import strategies as st
 
 from jaxmatch.defaults import QUALITY
 from jaxmatch.meshing.region import canonical, load_region
-from jaxmatch.placement.layout import (CURVE_SHARE, chord_area_error, chord_piece_areas, curve_floors, layout_sides,
-                                       lean_curve_floors)
+from jaxmatch.placement.floors import CURVE_SHARE, chord_area_error, chord_piece_areas, curve_floors, lean_curve_floors
+from jaxmatch.placement.layout import layout_sides
 from jaxmatch.placement.rings import ring_layout
 from jaxmatch.placement.solve import mesh_layout
 from jaxmatch.scoring.lattice import load_lattice

@@ -440,7 +440,7 @@ def test_the_fewest_chord_pieces_from_batches_are_those_of_the_search_one_count_
     """``curve_floors``' search for the fewest pieces of a curved side gives the same count when
     the counts it may ask for are measured in batches as when each is measured alone, and a
     batch's errors are each count's own, bit for bit."""
-    from jaxmatch.placement import layout as L
+    from jaxmatch.placement import floors as L
 
     rng = np.random.default_rng(seed)
     t = np.sort(rng.uniform(0.0, span, k))

@@ -244,7 +244,7 @@ def test_the_slotted_link_at_p40_reaches_the_size_band(cat):
     """The issue's criterion: at least 75 % of the edges within [0.5 h, 1.5 h] where gmsh has 94 %.
     The ring partition misses it (its curved sides' floors from the whole boundary's share of the
     area budget); the lean curves' floors, allocated where they pay and by sign
-    (:func:`~jaxmatch.placement.layout.lean_curve_floors`), meet the size band and keep the area."""
+    (:func:`~jaxmatch.placement.floors.lean_curve_floors`), meet the size band and keep the area."""
     import json
 
     truth = json.loads((EX / "parts" / "truth" / "slotted-link.json").read_text())

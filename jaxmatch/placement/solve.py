@@ -13,7 +13,7 @@ fitted to them (:func:`~jaxmatch.placement.layout.fit_sides`), and the patches a
 scaled Jacobian below ``quality.good_sj``) is given its next template and the program is solved
 again; the best round is kept (fewest inverted quads, then the highest minimum scaled Jacobian of
 the worst patch). The side counts' floors keep the area
-(:func:`~jaxmatch.placement.layout.curve_floors`; ``lean_curves``: the area budget shared by the
+(:func:`~jaxmatch.placement.floors.curve_floors`; ``lean_curves``: the area budget shared by the
 curved sides alone, tried by :class:`jaxmatch.meshing.strategies.LeanCurves`). A patch that
 is a translate of an earlier one takes that patch's templates and
 refinement, moved. With ``transitions`` (:class:`jaxmatch.meshing.strategies.Transitions`), the
@@ -39,7 +39,8 @@ from jaxmatch.defaults import QUALITY, Quality
 from jaxmatch.errors import InputError, UnmatchableError
 from jaxmatch.field import line_integral
 from jaxmatch.placement.embed import sj_inverted, smooth_in_frame, smooth_near
-from jaxmatch.placement.layout import (Layout, LayoutMesh, Sides, _boundary_loops, curve_floors, fit_sides,
+from jaxmatch.placement.floors import curve_floors
+from jaxmatch.placement.layout import (Layout, LayoutMesh, Sides, _boundary_loops, fit_sides,
                                        layout_sides, merge_patches, parse_counts, patch_shapes, region_area)
 from jaxmatch.placement.milp import LayoutInfeasible, count_cost, solve_choice, solve_counts
 from jaxmatch.placement.refine import SMOOTH_ALWAYS, SMOOTH_ITERS_LARGE, refine_and_place, side_points, side_polylines
@@ -114,7 +115,7 @@ def mesh_layout(layout: Layout, catalogue: Catalogue, lattice: Lattice, *, size:
     (:func:`jaxmatch.placement.embed.smooth`; for decompositions, whose inner sides are not
     the user's): it never lowers the minimum scaled Jacobian.
     lean_curves: the area budget of the curved sides' chords shared by the curved boundary sides
-    alone, not by the whole boundary (:func:`~jaxmatch.placement.layout.curve_floors`): curves
+    alone, not by the whole boundary (:func:`~jaxmatch.placement.floors.curve_floors`): curves
     nearer the size where the outline also has straight sides.
     transitions: after the rounds, the patches whose sides or chords are off the size band
     (:func:`off_size_patches`) are offered larger templates too (transition patterns: opposite
@@ -210,7 +211,7 @@ def layout_sides_kept(layout: Layout, catalogue: Catalogue, lkey: tuple | None =
 def lean_floors_help(layout: Layout, catalogue: Catalogue, size: float, quality: Quality = QUALITY) -> bool:
     """Whether meshing ``layout`` with ``lean_curves`` (:func:`mesh_layout`) can bring a side
     nearer the size: some boundary side's floor from the whole boundary's share of the area
-    budget (:func:`~jaxmatch.placement.layout.curve_floors`) makes its edges shorter than
+    budget (:func:`~jaxmatch.placement.floors.curve_floors`) makes its edges shorter than
     ``quality.size_band[0] * size`` and the curved sides' share alone lets them be that long.
     (Where it cannot, the lean solve gives a mesh no nearer the size band.)"""
     sides = layout_sides_kept(layout, catalogue)
