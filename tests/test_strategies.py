@@ -152,11 +152,25 @@ def _min_sj(xy: np.ndarray, quads: np.ndarray) -> float:
 
 @pytest.fixture(scope="module")
 def star_p40(cat):
-    """The 8-pointed star part at h = outer perimeter / 40 (a near miss of the size band)."""
+    """The 8-pointed star part at h = outer perimeter / 40 (a near miss of the size band), with the
+    transitions of one-size meshing on (``Quality.uniform_transitions``)."""
     import json
 
     truth = json.loads((EX / "parts" / "truth" / "star-8.json").read_text())
-    return jaxmatch.mesh(EX / "parts" / "star-8.json", size=truth["outer_perimeter"] / 40, catalogue=cat), truth
+    q = dataclasses.replace(QUALITY, uniform_transitions=True)
+    return jaxmatch.mesh(EX / "parts" / "star-8.json", size=truth["outer_perimeter"] / 40, catalogue=cat,
+                         quality=q), truth
+
+
+def test_one_size_meshes_try_the_transitions_only_when_asked(star_p40, cat):
+    """Off by default for one size (their cost: ``Quality.uniform_transitions``): the star keeps the
+    ring partition's mesh; with the option its transitions are tried."""
+    import json
+
+    truth = json.loads((EX / "parts" / "truth" / "star-8.json").read_text())
+    plain = jaxmatch.mesh(EX / "parts" / "star-8.json", size=truth["outer_perimeter"] / 40, catalogue=cat)
+    assert not any(c.name.endswith(S.TRANSITIONS) for c in plain.tried)
+    assert any(c.name.endswith(S.TRANSITIONS) for c in star_p40[0].tried)
 
 
 def test_transitions_bring_the_star_into_the_size_band(star_p40):

@@ -297,8 +297,8 @@ def _mesh_size(shape, cat, lat, h, strategies, quality, budget_s, progress, corn
 
         if quality.field is None:
             lean = LeanCurves(layouts.strategies + ((Rings(),) if rings else ()))
-            plan = (layouts, Larger(), Conforming()) + rings + (lean, Transitions(lean.strategies),
-                                                                 Bends(layouts, rejudge))
+            trans = (Transitions(lean.strategies),) if quality.uniform_transitions else ()
+            plan = (layouts, Larger(), Conforming()) + rings + (lean,) + trans + (Bends(layouts, rejudge),)
         else:  # graded: the ring partition before the larger templates, tried only if it too misses the field
             trans = Transitions(layouts.strategies + ((Rings(),) if rings else ()))
             plan = (layouts,) + rings + (trans, Larger(), Bends(layouts, rejudge))

@@ -20,8 +20,10 @@ strategy                candidates                                              
                                                                                          size band
 :class:`LeanCurves`     the best mesh's layout again, the curves' area budget shared by   the best nearly meets the
                         the curved sides alone (``" +lean curves"``), kept at the band    size band (curved sides)
-:class:`Transitions`    the best mesh's layout again, templates chosen for size in the    the best misses the size
-                        one integer program (``" +transitions"``), kept nearer the band   band (near miss) or the field
+:class:`Transitions`    the best mesh's layout again, templates chosen for size in the    the best misses the field,
+                        one integer program (``" +transitions"``), kept nearer the band   or the size band (near
+                                                                                         miss; one size only with
+                                                                                         uniform_transitions)
 :class:`Bends`          the layouts again with a curved outline's bends as corners        every candidate folds
 :class:`Smooth`         a region with fewer than two corners: a refined template and the  (its own plan)
                         central block (``"disk"``)
@@ -421,7 +423,7 @@ TRANSITIONS = " +transitions"
 
 class Transitions:
     """The best mesh so far misses the size band by a near miss (:meth:`QuadMesh.near_size_band`;
-    one size), or misses the size field (its size conformity or its size band): the best mesh's
+    one size, in the plan only with ``Quality.uniform_transitions``), or misses the size field (its size conformity or its size band): the best mesh's
     layout meshed again (``" +transitions"``; one solve, none when the best mesh is not one of
     ``strategies``', with lean curves when it had them) with templates chosen for size
     (``transitions`` of :func:`~jaxmatch.placement.solve.mesh_layout`: a patch whose sides or
