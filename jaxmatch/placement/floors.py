@@ -129,12 +129,16 @@ def curve_floors(layout: Layout, sides: Sides, area_tol: float, region: float | 
     bound = np.flatnonzero(sides.outer if own is None else ~np.isinf(own))
     if not bound.size:
         return floors
-    known = {int(s): _first_errors(layout.points[sides.chains[s]]) for s in bound}  # (one chord, the doubling counts)
-    err1 = {s: errs[1] for s, errs in known.items()}
+    lean = lean and own is None
+    if lean:  # (only the one chord's error: which sides are curved)
+        err1 = {int(s): _one_chord_error(layout.points[sides.chains[s]]) for s in bound}
+    else:
+        known = {int(s): _first_errors(layout.points[sides.chains[s]]) for s in bound}  # (one chord, the doubling counts)
+        err1 = {s: errs[1] for s, errs in known.items()}
     if region is None and own is None:
         region = region_area(layout)
-    curved = [s for s in bound if err1[int(s)] > CURVE_ZERO * region] if lean and own is None else bound
-    if lean and own is None:
+    curved = [s for s in bound if err1[int(s)] > CURVE_ZERO * region] if lean else bound
+    if lean:
         chains = [layout.points[sides.chains[s]] for s in curved]
         floors[curved] = lean_curve_floors(chains, CURVE_SHARE * area_tol * region, size)
         return floors
@@ -257,6 +261,12 @@ def _doubling(k: int) -> list[int]:
     while steps[-1] < 4 * k:
         steps.append(steps[-1] * 2)
     return [n for n, total in zip(steps, np.cumsum(steps)) if total <= CURVE_BATCH]
+
+
+def _one_chord_error(poly: np.ndarray) -> float:
+    """:func:`chord_area_error` of the side ``poly (k, 2)`` at one piece (the value
+    :func:`_first_errors` gives for count 1); 0.0 for a two-point side."""
+    return 0.0 if poly.shape[0] <= 2 else float(chord_area_errors(poly, [1])[0])
 
 
 def _first_errors(poly: np.ndarray) -> dict[int, float]:
