@@ -96,30 +96,38 @@ static inline double powsq(double x, double power, int squarings) {
 }
 
 /* energy at pos, gradient into grad (V, 2); INFINITY (grad zero) where not finite. sq:
-   squarings(power). k, r, h: (F, 4) scratch; e: (F, 4, 4) scratch (each corner's e1, e2) */
+   squarings(power). k, r, h: (F, 4) scratch; e: (F, 4, 4) scratch (per quad e1x, e1y, e2x, e2y of its
+   four corners). Written a quad at a time, its four corners side by side (the compiler computes them
+   in vector lanes: the same operations on each, so the same doubles), the sums in corner order. */
 static double energy(const double *pos, const i64 *quads, i64 V, i64 F, double delta, double power, int sq,
                      double *grad, double *k, double *r, double *h, double *e) {
     double d2 = 4.0 * delta * delta, kmax = -INFINITY;
-    i64 p, nx, pv;
-    double e1x, e1y, e2x, e2y;
-    for (i64 q = 0; q < F; q++)
+    for (i64 q = 0; q < F; q++) {
+        const i64 *v = quads + 4 * q;
+        double X[4], Y[4], *e1x = e + 16 * q, *e1y = e1x + 4, *e2x = e1x + 8, *e2y = e1x + 12;
+        double *kq = k + 4 * q, *rq = r + 4 * q, *hq = h + 4 * q;
         for (int c = 0; c < 4; c++) {
-            corner(pos, quads, q, c, &p, &nx, &pv, &e1x, &e1y, &e2x, &e2y);
-            double *ec = e + 4 * (4 * q + c);
-            ec[0] = e1x;
-            ec[1] = e1y;
-            ec[2] = e2x;
-            ec[3] = e2y;
-            double a = e1x * e2y - e1y * e2x;
+            X[c] = pos[2 * v[c]];
+            Y[c] = pos[2 * v[c] + 1];
+        }
+        for (int c = 0; c < 4; c++) {
+            e1x[c] = X[(c + 1) & 3] - X[c];
+            e1y[c] = Y[(c + 1) & 3] - Y[c];
+            e2x[c] = X[(c + 3) & 3] - X[c];
+            e2y[c] = Y[(c + 3) & 3] - Y[c];
+        }
+        for (int c = 0; c < 4; c++) {
+            double a = e1x[c] * e2y[c] - e1y[c] * e2x[c];
             double rr = sqrt(a * a + d2);
             double hh = a >= 0 ? 0.5 * (a + rr) : d2 / (2.0 * (rr - a));
-            double N = e1x * e1x + e1y * e1y + e2x * e2x + e2y * e2y;
-            double kk = N / (2.0 * hh);
-            r[4 * q + c] = rr;
-            h[4 * q + c] = hh;
-            k[4 * q + c] = kk;
-            if (!(kk <= kmax)) kmax = kk; /* NaN propagates */
+            double N = e1x[c] * e1x[c] + e1y[c] * e1y[c] + e2x[c] * e2x[c] + e2y[c] * e2y[c];
+            rq[c] = rr;
+            hq[c] = hh;
+            kq[c] = N / (2.0 * hh);
         }
+        for (int c = 0; c < 4; c++)
+            if (!(kq[c] <= kmax)) kmax = kq[c]; /* NaN propagates */
+    }
     memset(grad, 0, sizeof(double) * 2 * V);
     if (!(isfinite(kmax) && kmax > 0)) return INFINITY;
     double C = 4.0 * (double)F;
@@ -127,29 +135,42 @@ static double energy(const double *pos, const i64 *quads, i64 V, i64 F, double d
     for (i64 i = 0; i < 4 * F; i++) acc += powsq(k[i] / kmax, power, sq);
     double f = kmax * pow(acc / C, 1.0 / power);
     if (!isfinite(f)) return INFINITY;
-    for (i64 q = 0; q < F; q++)
+    for (i64 q = 0; q < F; q++) {
+        const i64 *v = quads + 4 * q;
+        const double *e1x = e + 16 * q, *e1y = e1x + 4, *e2x = e1x + 8, *e2y = e1x + 12;
+        const double *kq = k + 4 * q, *rq = r + 4 * q, *hq = h + 4 * q;
+        double x[4], t[4], dk[4], g1x[4], g1y[4], g2x[4], g2y[4];
+        int pos_all = sq >= 0;
         for (int c = 0; c < 4; c++) {
-            i64 i = 4 * q + c;
-            p = quads[i];
-            nx = quads[4 * q + (c + 1) % 4];
-            pv = quads[4 * q + (c + 3) % 4];
-            e1x = e[4 * i];
-            e1y = e[4 * i + 1];
-            e2x = e[4 * i + 2];
-            e2y = e[4 * i + 3];
-            double x = k[i] / f;
-            double dk = x > 0 ? powsq(x, power, sq) / x / C : pow(k[i] / f, power - 1.0) / C;
-            double gN = dk / (2.0 * h[i]);
-            double ga = -dk * k[i] / r[i];
-            double g1x = 2.0 * gN * e1x + ga * e2y, g1y = 2.0 * gN * e1y - ga * e2x;
-            double g2x = 2.0 * gN * e2x - ga * e1y, g2y = 2.0 * gN * e2y + ga * e1x;
-            grad[2 * p] -= g1x + g2x;
-            grad[2 * p + 1] -= g1y + g2y;
-            grad[2 * nx] += g1x;
-            grad[2 * nx + 1] += g1y;
-            grad[2 * pv] += g2x;
-            grad[2 * pv + 1] += g2y;
+            x[c] = kq[c] / f;
+            t[c] = x[c];
+            pos_all &= x[c] > 0;
         }
+        if (pos_all) {
+            for (int s = 0; s < sq; s++)
+                for (int c = 0; c < 4; c++) t[c] = t[c] * t[c];
+            for (int c = 0; c < 4; c++) dk[c] = t[c] / x[c] / C;
+        } else
+            for (int c = 0; c < 4; c++)
+                dk[c] = x[c] > 0 ? powsq(x[c], power, sq) / x[c] / C : pow(kq[c] / f, power - 1.0) / C;
+        for (int c = 0; c < 4; c++) {
+            double gN = dk[c] / (2.0 * hq[c]);
+            double ga = -dk[c] * kq[c] / rq[c];
+            g1x[c] = 2.0 * gN * e1x[c] + ga * e2y[c];
+            g1y[c] = 2.0 * gN * e1y[c] - ga * e2x[c];
+            g2x[c] = 2.0 * gN * e2x[c] - ga * e1y[c];
+            g2y[c] = 2.0 * gN * e2y[c] + ga * e1x[c];
+        }
+        for (int c = 0; c < 4; c++) {
+            i64 p = v[c], nx = v[(c + 1) & 3], pv = v[(c + 3) & 3];
+            grad[2 * p] -= g1x[c] + g2x[c];
+            grad[2 * p + 1] -= g1y[c] + g2y[c];
+            grad[2 * nx] += g1x[c];
+            grad[2 * nx + 1] += g1y[c];
+            grad[2 * pv] += g2x[c];
+            grad[2 * pv + 1] += g2y[c];
+        }
+    }
     for (i64 v = 0; v < 2 * V; v++)
         if (!isfinite(grad[v])) {
             memset(grad, 0, sizeof(double) * 2 * V);
