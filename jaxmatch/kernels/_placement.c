@@ -132,7 +132,22 @@ static double energy(const double *pos, const i64 *quads, i64 V, i64 F, double d
     if (!(isfinite(kmax) && kmax > 0)) return INFINITY;
     double C = 4.0 * (double)F;
     double acc = 0.0;
-    for (i64 i = 0; i < 4 * F; i++) acc += powsq(k[i] / kmax, power, sq);
+    switch (sq) { /* powsq's squarings written out: the same products, no inner loop */
+#define ACC(expr)                                                                                                      \
+    for (i64 i = 0; i < 4 * F; i++) {                                                                                  \
+        double t = k[i] / kmax;                                                                                        \
+        acc += (expr);                                                                                                 \
+    }                                                                                                                  \
+    break;
+    case 0: ACC(t)
+    case 1: ACC(t * t)
+    case 2: ACC((t = t * t, t * t))
+    case 3: ACC((t = t * t, t = t * t, t * t))
+    case 4: ACC((t = t * t, t = t * t, t = t * t, t * t))
+    default:
+        for (i64 i = 0; i < 4 * F; i++) acc += powsq(k[i] / kmax, power, sq);
+#undef ACC
+    }
     double f = kmax * pow(acc / C, 1.0 / power);
     if (!isfinite(f)) return INFINITY;
     for (i64 q = 0; q < F; q++) {
