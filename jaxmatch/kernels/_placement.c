@@ -286,29 +286,52 @@ static void lbfgs(const Problem *P, double *x, i64 n, double delta, double power
             if (a > gmax) gmax = a; /* as fmax(gmax, a), which passes over a NaN too */
         }
         if (gmax <= gtol) break;
-        memcpy(q, g, sizeof(double) * n);
+        /* the two-loop recursion; each pass over q also sums the dot product the next step needs
+           (the terms and order of dot()) */
+        double d = 0.0;
+        const double *nv = cnt > 0 ? Sm + (head + cnt - 1) % mem * n : NULL;
+        if (nv)
+            for (i64 i = 0; i < n; i++) {
+                q[i] = g[i];
+                d += nv[i] * q[i];
+            }
+        else
+            memcpy(q, g, sizeof(double) * n);
         for (i64 t = cnt - 1; t >= 0; t--) {
             i64 row = (head + t) % mem;
             double rho = rhos[row];
-            double a = rho * dot(Sm + row * n, q, n);
-            for (i64 i = 0; i < n; i++) q[i] -= a * Ym[row * n + i];
+            double a = rho * d;
+            const double *y = Ym + row * n;
             crho[t] = rho;
             ca[t] = a;
+            if (t > 0) {
+                nv = Sm + (head + t - 1) % mem * n;
+                d = 0.0;
+                for (i64 i = 0; i < n; i++) {
+                    q[i] -= a * y[i];
+                    d += nv[i] * q[i];
+                }
+            } else
+                for (i64 i = 0; i < n; i++) q[i] -= a * y[i];
         }
-        if (cnt > 0) {
-            i64 last = (head + cnt - 1) % mem;
-            double sc = sys[last] / yys[last];
-            for (i64 i = 0; i < n; i++) q[i] *= sc;
-        } else {
-            double sc = 0.05 / fmax(gmax, 1e-300);
-            for (i64 i = 0; i < n; i++) q[i] *= sc;
+        double sc = cnt > 0 ? sys[(head + cnt - 1) % mem] / yys[(head + cnt - 1) % mem] : 0.05 / fmax(gmax, 1e-300);
+        nv = cnt > 0 ? Ym + head % mem * n : g;
+        d = 0.0;
+        for (i64 i = 0; i < n; i++) {
+            q[i] *= sc;
+            d += nv[i] * q[i];
         }
         for (i64 t = 0; t < cnt; t++) {
-            i64 row = (head + t) % mem;
-            double b = ca[t] - crho[t] * dot(Ym + row * n, q, n);
-            for (i64 i = 0; i < n; i++) q[i] += Sm[row * n + i] * b;
+            double b = ca[t] - crho[t] * d;
+            const double *sr = Sm + (head + t) % mem * n;
+            nv = t + 1 < cnt ? Ym + (head + t + 1) % mem * n : g;
+            d = 0.0;
+            for (i64 i = 0; i < n; i++) {
+                q[i] += sr[i] * b;
+                d += nv[i] * q[i];
+            }
         }
-        double slope = -dot(g, q, n);
+        double slope = -d; /* -dot(g, q) */
         if (!(slope < 0)) {
             cnt = 0;
             head = 0;
