@@ -95,12 +95,15 @@ static inline double powsq(double x, double power, int squarings) {
     return x;
 }
 
-/* energy at pos, gradient into grad (V, 2); INFINITY (grad zero) where not finite. sq:
-   squarings(power). k, r, h: (F, 4) scratch; e: (F, 4, 4) scratch (per quad e1x, e1y, e2x, e2y of its
-   four corners). Written a quad at a time, its four corners side by side (the compiler computes them
-   in vector lanes: the same operations on each, so the same doubles), the sums in corner order. */
-static double energy(const double *pos, const i64 *quads, i64 V, i64 F, double delta, double power, int sq,
-                     double *grad, double *k, double *r, double *h, double *e) {
+/* The energy in two passes: energy_value at pos (INFINITY where not finite), keeping each corner's
+   k, r, h ((F, 4) scratch) and edge vectors e ((F, 4, 4) scratch: per quad e1x, e1y, e2x, e2y of its
+   four corners); then, only where needed (a line search asks for the gradient of accepted points
+   alone), energy_grad: the gradient (V, 2) from what the value pass kept, and f, or INFINITY (grad
+   zero) where the gradient is not finite. sq: squarings(power). Written a quad at a time, its four
+   corners side by side (the compiler computes them in vector lanes: the same operations on each, so
+   the same doubles), the sums in corner order. */
+static double energy_value(const double *pos, const i64 *quads, i64 F, double delta, double power, int sq, double *k,
+                           double *r, double *h, double *e) {
     double d2 = 4.0 * delta * delta, kmax = -INFINITY;
     for (i64 q = 0; q < F; q++) {
         const i64 *v = quads + 4 * q;
@@ -128,7 +131,6 @@ static double energy(const double *pos, const i64 *quads, i64 V, i64 F, double d
         for (int c = 0; c < 4; c++)
             if (!(kq[c] <= kmax)) kmax = kq[c]; /* NaN propagates */
     }
-    memset(grad, 0, sizeof(double) * 2 * V);
     if (!(isfinite(kmax) && kmax > 0)) return INFINITY;
     double C = 4.0 * (double)F;
     double acc = 0.0;
@@ -149,7 +151,13 @@ static double energy(const double *pos, const i64 *quads, i64 V, i64 F, double d
 #undef ACC
     }
     double f = kmax * pow(acc / C, 1.0 / power);
-    if (!isfinite(f)) return INFINITY;
+    return isfinite(f) ? f : INFINITY;
+}
+
+static double energy_grad(const i64 *quads, i64 V, i64 F, double power, int sq, double f, double *grad,
+                          const double *k, const double *r, const double *h, const double *e) {
+    double C = 4.0 * (double)F;
+    memset(grad, 0, sizeof(double) * 2 * V);
     for (i64 q = 0; q < F; q++) {
         const i64 *v = quads + 4 * q;
         const double *e1x = e + 16 * q, *e1y = e1x + 4, *e2x = e1x + 8, *e2y = e1x + 12;
@@ -192,6 +200,17 @@ static double energy(const double *pos, const i64 *quads, i64 V, i64 F, double d
             return INFINITY;
         }
     return f;
+}
+
+/* energy at pos and its gradient into grad (V, 2); INFINITY (grad zero) where not finite */
+static double energy(const double *pos, const i64 *quads, i64 V, i64 F, double delta, double power, int sq,
+                     double *grad, double *k, double *r, double *h, double *e) {
+    double f = energy_value(pos, quads, F, delta, power, sq, k, r, h, e);
+    if (!isfinite(f)) {
+        memset(grad, 0, sizeof(double) * 2 * V);
+        return INFINITY;
+    }
+    return energy_grad(quads, V, F, power, sq, f, grad, k, r, h, e);
 }
 
 /* the gradient (n,) in x of a function of the positions, from its gradient gpos (V, 2) there
@@ -250,17 +269,33 @@ static void scratch_free(Scratch *W) {
     for (int i = 0; i < 19; i++) free(bufs[i]);
 }
 
-/* sq: squarings(power) */
-static double objective(const Problem *P, const double *x, double delta, double power, int sq, double *g, Scratch *W,
-                        i64 n) {
+/* the objective at x (its value pass: objective_grad may follow for the same x); sq: squarings(power) */
+static double objective_value(const Problem *P, const double *x, double delta, double power, int sq, Scratch *W) {
     positions(P, x, W->pos);
-    double f = energy(W->pos, P->quads, P->V, P->F, delta, power, sq, W->gpos, W->k, W->r, W->h, W->e);
+    return energy_value(W->pos, P->quads, P->F, delta, power, sq, W->k, W->r, W->h, W->e);
+}
+
+/* its gradient g (n,) at the x of the last objective_value, whose finite value f was; returns f, or
+   INFINITY (g zero) where the gradient is not finite */
+static double objective_grad(const Problem *P, double power, int sq, double f, double *g, Scratch *W, i64 n) {
+    f = energy_grad(P->quads, P->V, P->F, power, sq, f, W->gpos, W->k, W->r, W->h, W->e);
     if (!isfinite(f)) {
         memset(g, 0, sizeof(double) * n);
         return INFINITY;
     }
     pull(P, W->gpos, g, W->gu);
     return f;
+}
+
+/* objective and gradient g (n,) at x; INFINITY (g zero) where not finite */
+static double objective(const Problem *P, const double *x, double delta, double power, int sq, double *g, Scratch *W,
+                        i64 n) {
+    double f = objective_value(P, x, delta, power, sq, W);
+    if (!isfinite(f)) {
+        memset(g, 0, sizeof(double) * n);
+        return INFINITY;
+    }
+    return objective_grad(P, power, sq, f, g, W, n);
 }
 
 static double dot(const double *a, const double *b, i64 n) {
@@ -342,8 +377,11 @@ static void lbfgs(const Problem *P, double *x, i64 n, double delta, double power
         double step = 1.0, fn;
         for (;;) {
             for (i64 i = 0; i < n; i++) xn[i] = x[i] - step * q[i];
-            fn = objective(P, xn, delta, power, sq, gn, W, n);
-            if (isfinite(fn) && fn <= f + 1e-4 * step * slope) break;
+            fn = objective_value(P, xn, delta, power, sq, W); /* the gradient only where the step is taken */
+            if (isfinite(fn) && fn <= f + 1e-4 * step * slope) {
+                fn = objective_grad(P, power, sq, fn, gn, W, n);
+                if (isfinite(fn)) break;
+            }
             step *= 0.5;
             if (step < 1e-12) return;
         }
