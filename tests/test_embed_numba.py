@@ -72,13 +72,15 @@ def test_objective_with_sliding_vertices_equals_the_reference(nb, seed, amp):
 @pytest.mark.parametrize("seed", range(4))
 @pytest.mark.parametrize("power", [1.0, 4.0, 16.0])
 def test_lbfgs_iterates_match_the_reference(nb, seed, power):
-    """A few iterations follow the same path (identical up to round-off); the minimum found
-    after many is the same to optimiser precision."""
+    """A few iterations follow the same path (identical up to round-off), also past the point
+    where the oldest of the LBFGS_MEMORY pairs is overwritten (20 iterations: the kept pairs'
+    products, 1 / s.y and y.y, stay with their pair); the minimum found after many is the same
+    to optimiser precision."""
     mesh, xy, internal, slides = _strip_case(seed, 0.25)
     params = _Params(xy, internal, slides)
     q = np.asarray(mesh.quads, np.int64)
     x0 = params.start(xy)
-    for iters, tol in ((3, 1e-9), (200, 1e-5)):
+    for iters, tol in ((3, 1e-9), (2 * LBFGS_MEMORY + 4, 1e-9), (200, 1e-5)):
         ref = _lbfgs(lambda z: _objective(z, params, q, 1e-3, power), x0, iters)
         got = nb.lbfgs(x0, params.base, internal.astype(np.int64), *params.flat, q, 1e-3, power, iters,
                        LBFGS_MEMORY, LBFGS_FTOL, LBFGS_GTOL)

@@ -37,12 +37,15 @@ static inline void corner(const double *pos, const i64 *quads, i64 q, int c, i64
     *e2y = pos[2 * *pv + 1] - pos[2 * *p + 1];
 }
 
-static inline void softmax_norm(const double *x, i64 off, i64 count, double *zmax, double *tot) {
+/* the softmax of x[off .. off + count): w[i] = exp(x[off + i] - max) / total (w: (count,)) */
+static inline void softmax(const double *x, i64 off, i64 count, double *w) {
     double m = -INFINITY, t = 0.0;
     for (i64 i = 0; i < count; i++) m = fmax(m, x[off + i]);
-    for (i64 i = 0; i < count; i++) t += exp(x[off + i] - m);
-    *zmax = m;
-    *tot = t;
+    for (i64 i = 0; i < count; i++) {
+        w[i] = exp(x[off + i] - m);
+        t += w[i];
+    }
+    for (i64 i = 0; i < count; i++) w[i] = w[i] / t;
 }
 
 typedef struct {
@@ -52,8 +55,10 @@ typedef struct {
     const i64 *free_;   /* (nf,) */
     const double *sa, *sb; /* (S, 2) */
     const i64 *sp, *sv; /* (S + 1,), (R,) */
+    double *w; /* (R + S,) scratch: the softmax weights of the last positions() */
 } Problem;
 
+/* positions (V, 2) of the flat vector x; the slides' softmax weights into P->w */
 static void positions(const Problem *P, const double *x, double *pos) {
     memcpy(pos, P->base, sizeof(double) * 2 * P->V);
     for (i64 i = 0; i < P->nf; i++) {
@@ -63,11 +68,11 @@ static void positions(const Problem *P, const double *x, double *pos) {
     i64 off = 2 * P->nf;
     for (i64 s = 0; s < P->S; s++) {
         i64 r = P->sp[s + 1] - P->sp[s];
-        double zmax, tot;
-        softmax_norm(x, off, r + 1, &zmax, &tot);
+        double *w = P->w + (off - 2 * P->nf);
+        softmax(x, off, r + 1, w);
         double u = 0.0, dx = P->sb[2 * s] - P->sa[2 * s], dy = P->sb[2 * s + 1] - P->sa[2 * s + 1];
         for (i64 i = 0; i < r; i++) {
-            u += exp(x[off + i] - zmax) / tot;
+            u += w[i];
             i64 v = P->sv[P->sp[s] + i];
             pos[2 * v] = P->sa[2 * s] + u * dx;
             pos[2 * v + 1] = P->sa[2 * s + 1] + u * dy;
@@ -76,59 +81,119 @@ static void positions(const Problem *P, const double *x, double *pos) {
     }
 }
 
+/* e where power == 2^e (0 <= e < 7), else -1 (then powsq calls pow) */
+static int squarings(double power) {
+    int sq = -1;
+    for (int e = 0; e < 7; e++)
+        if (power == ldexp(1.0, e)) sq = e;
+    return sq;
+}
+
 static inline double powsq(double x, double power, int squarings) {
     if (squarings < 0) return pow(x, power);
     for (int i = 0; i < squarings; i++) x = x * x;
     return x;
 }
 
-/* energy at pos, gradient into grad (V, 2); INFINITY (grad zero) where not finite.
-   k, r, h: (F, 4) scratch */
-static double energy(const double *pos, const i64 *quads, i64 V, i64 F, double delta, double power, double *grad,
-                     double *k, double *r, double *h) {
+/* The energy in two passes: energy_value at pos (INFINITY where not finite), keeping each corner's
+   k, r, h ((F, 4) scratch) and edge vectors e ((F, 4, 4) scratch: per quad e1x, e1y, e2x, e2y of its
+   four corners); then, only where needed (a line search asks for the gradient of accepted points
+   alone), energy_grad: the gradient (V, 2) from what the value pass kept, and f, or INFINITY (grad
+   zero) where the gradient is not finite. sq: squarings(power). Written a quad at a time, its four
+   corners side by side (the compiler computes them in vector lanes: the same operations on each, so
+   the same doubles), the sums in corner order. */
+static double energy_value(const double *pos, const i64 *quads, i64 F, double delta, double power, int sq, double *k,
+                           double *r, double *h, double *e) {
     double d2 = 4.0 * delta * delta, kmax = -INFINITY;
-    i64 p, nx, pv;
-    double e1x, e1y, e2x, e2y;
-    for (i64 q = 0; q < F; q++)
+    for (i64 q = 0; q < F; q++) {
+        const i64 *v = quads + 4 * q;
+        double X[4], Y[4], *e1x = e + 16 * q, *e1y = e1x + 4, *e2x = e1x + 8, *e2y = e1x + 12;
+        double *kq = k + 4 * q, *rq = r + 4 * q, *hq = h + 4 * q;
         for (int c = 0; c < 4; c++) {
-            corner(pos, quads, q, c, &p, &nx, &pv, &e1x, &e1y, &e2x, &e2y);
-            double a = e1x * e2y - e1y * e2x;
+            X[c] = pos[2 * v[c]];
+            Y[c] = pos[2 * v[c] + 1];
+        }
+        for (int c = 0; c < 4; c++) {
+            e1x[c] = X[(c + 1) & 3] - X[c];
+            e1y[c] = Y[(c + 1) & 3] - Y[c];
+            e2x[c] = X[(c + 3) & 3] - X[c];
+            e2y[c] = Y[(c + 3) & 3] - Y[c];
+        }
+        for (int c = 0; c < 4; c++) {
+            double a = e1x[c] * e2y[c] - e1y[c] * e2x[c];
             double rr = sqrt(a * a + d2);
             double hh = a >= 0 ? 0.5 * (a + rr) : d2 / (2.0 * (rr - a));
-            double N = e1x * e1x + e1y * e1y + e2x * e2x + e2y * e2y;
-            double kk = N / (2.0 * hh);
-            r[4 * q + c] = rr;
-            h[4 * q + c] = hh;
-            k[4 * q + c] = kk;
-            if (!(kk <= kmax)) kmax = kk; /* NaN propagates */
+            double N = e1x[c] * e1x[c] + e1y[c] * e1y[c] + e2x[c] * e2x[c] + e2y[c] * e2y[c];
+            rq[c] = rr;
+            hq[c] = hh;
+            kq[c] = N / (2.0 * hh);
         }
-    memset(grad, 0, sizeof(double) * 2 * V);
+        for (int c = 0; c < 4; c++)
+            if (!(kq[c] <= kmax)) kmax = kq[c]; /* NaN propagates */
+    }
     if (!(isfinite(kmax) && kmax > 0)) return INFINITY;
     double C = 4.0 * (double)F;
-    int sq = -1;
-    for (int e = 0; e < 7; e++)
-        if (power == ldexp(1.0, e)) sq = e;
     double acc = 0.0;
-    for (i64 i = 0; i < 4 * F; i++) acc += powsq(k[i] / kmax, power, sq);
+    switch (sq) { /* powsq's squarings written out: the same products, no inner loop */
+#define ACC(expr)                                                                                                      \
+    for (i64 i = 0; i < 4 * F; i++) {                                                                                  \
+        double t = k[i] / kmax;                                                                                        \
+        acc += (expr);                                                                                                 \
+    }                                                                                                                  \
+    break;
+    case 0: ACC(t)
+    case 1: ACC(t * t)
+    case 2: ACC((t = t * t, t * t))
+    case 3: ACC((t = t * t, t = t * t, t * t))
+    case 4: ACC((t = t * t, t = t * t, t = t * t, t * t))
+    default:
+        for (i64 i = 0; i < 4 * F; i++) acc += powsq(k[i] / kmax, power, sq);
+#undef ACC
+    }
     double f = kmax * pow(acc / C, 1.0 / power);
-    if (!isfinite(f)) return INFINITY;
-    for (i64 q = 0; q < F; q++)
+    return isfinite(f) ? f : INFINITY;
+}
+
+static double energy_grad(const i64 *quads, i64 V, i64 F, double power, int sq, double f, double *grad,
+                          const double *k, const double *r, const double *h, const double *e) {
+    double C = 4.0 * (double)F;
+    memset(grad, 0, sizeof(double) * 2 * V);
+    for (i64 q = 0; q < F; q++) {
+        const i64 *v = quads + 4 * q;
+        const double *e1x = e + 16 * q, *e1y = e1x + 4, *e2x = e1x + 8, *e2y = e1x + 12;
+        const double *kq = k + 4 * q, *rq = r + 4 * q, *hq = h + 4 * q;
+        double x[4], t[4], dk[4], g1x[4], g1y[4], g2x[4], g2y[4];
+        int pos_all = sq >= 0;
         for (int c = 0; c < 4; c++) {
-            corner(pos, quads, q, c, &p, &nx, &pv, &e1x, &e1y, &e2x, &e2y);
-            i64 i = 4 * q + c;
-            double x = k[i] / f;
-            double dk = x > 0 ? powsq(x, power, sq) / x / C : pow(k[i] / f, power - 1.0) / C;
-            double gN = dk / (2.0 * h[i]);
-            double ga = -dk * k[i] / r[i];
-            double g1x = 2.0 * gN * e1x + ga * e2y, g1y = 2.0 * gN * e1y - ga * e2x;
-            double g2x = 2.0 * gN * e2x - ga * e1y, g2y = 2.0 * gN * e2y + ga * e1x;
-            grad[2 * p] -= g1x + g2x;
-            grad[2 * p + 1] -= g1y + g2y;
-            grad[2 * nx] += g1x;
-            grad[2 * nx + 1] += g1y;
-            grad[2 * pv] += g2x;
-            grad[2 * pv + 1] += g2y;
+            x[c] = kq[c] / f;
+            t[c] = x[c];
+            pos_all &= x[c] > 0;
         }
+        if (pos_all) {
+            for (int s = 0; s < sq; s++)
+                for (int c = 0; c < 4; c++) t[c] = t[c] * t[c];
+            for (int c = 0; c < 4; c++) dk[c] = t[c] / x[c] / C;
+        } else
+            for (int c = 0; c < 4; c++)
+                dk[c] = x[c] > 0 ? powsq(x[c], power, sq) / x[c] / C : pow(kq[c] / f, power - 1.0) / C;
+        for (int c = 0; c < 4; c++) {
+            double gN = dk[c] / (2.0 * hq[c]);
+            double ga = -dk[c] * kq[c] / rq[c];
+            g1x[c] = 2.0 * gN * e1x[c] + ga * e2y[c];
+            g1y[c] = 2.0 * gN * e1y[c] - ga * e2x[c];
+            g2x[c] = 2.0 * gN * e2x[c] - ga * e1y[c];
+            g2y[c] = 2.0 * gN * e2y[c] + ga * e1x[c];
+        }
+        for (int c = 0; c < 4; c++) {
+            i64 p = v[c], nx = v[(c + 1) & 3], pv = v[(c + 3) & 3];
+            grad[2 * p] -= g1x[c] + g2x[c];
+            grad[2 * p + 1] -= g1y[c] + g2y[c];
+            grad[2 * nx] += g1x[c];
+            grad[2 * nx + 1] += g1y[c];
+            grad[2 * pv] += g2x[c];
+            grad[2 * pv + 1] += g2y[c];
+        }
+    }
     for (i64 v = 0; v < 2 * V; v++)
         if (!isfinite(grad[v])) {
             memset(grad, 0, sizeof(double) * 2 * V);
@@ -137,7 +202,20 @@ static double energy(const double *pos, const i64 *quads, i64 V, i64 F, double d
     return f;
 }
 
-static void pull(const Problem *P, const double *x, const double *gpos, double *g, double *gu) {
+/* energy at pos and its gradient into grad (V, 2); INFINITY (grad zero) where not finite */
+static double energy(const double *pos, const i64 *quads, i64 V, i64 F, double delta, double power, int sq,
+                     double *grad, double *k, double *r, double *h, double *e) {
+    double f = energy_value(pos, quads, F, delta, power, sq, k, r, h, e);
+    if (!isfinite(f)) {
+        memset(grad, 0, sizeof(double) * 2 * V);
+        return INFINITY;
+    }
+    return energy_grad(quads, V, F, power, sq, f, grad, k, r, h, e);
+}
+
+/* the gradient (n,) in x of a function of the positions, from its gradient gpos (V, 2) there
+   (P->w: the weights positions() computed at x) */
+static void pull(const Problem *P, const double *gpos, double *g, double *gu) {
     for (i64 i = 0; i < P->nf; i++) {
         g[2 * i] = gpos[2 * P->free_[i]];
         g[2 * i + 1] = gpos[2 * P->free_[i] + 1];
@@ -145,13 +223,12 @@ static void pull(const Problem *P, const double *x, const double *gpos, double *
     i64 off = 2 * P->nf;
     for (i64 s = 0; s < P->S; s++) {
         i64 r = P->sp[s + 1] - P->sp[s];
-        double zmax, tot;
-        softmax_norm(x, off, r + 1, &zmax, &tot);
+        const double *w = P->w + (off - 2 * P->nf);
         double dx = P->sb[2 * s] - P->sa[2 * s], dy = P->sb[2 * s + 1] - P->sa[2 * s + 1];
         double u = 0.0, dot = 0.0;
         for (i64 i = 0; i <= r; i++) gu[i] = 0.0;
         for (i64 i = 0; i < r; i++) {
-            u += exp(x[off + i] - zmax) / tot;
+            u += w[i];
             i64 v = P->sv[P->sp[s] + i];
             gu[i] = gpos[2 * v] * dx + gpos[2 * v + 1] * dy;
             dot += gu[i] * u;
@@ -159,39 +236,66 @@ static void pull(const Problem *P, const double *x, const double *gpos, double *
         double tail = 0.0;
         for (i64 i = r; i >= 0; i--) {
             tail += gu[i];
-            g[off + i] = exp(x[off + i] - zmax) / tot * (tail - dot);
+            g[off + i] = w[i] * (tail - dot);
         }
         off += r + 1;
     }
 }
 
+/* every buffer the smoother needs, allocated once a call: the objective's (pos, gpos: (V, 2); k, r, h:
+   (F, 4); e: (F, 4, 4); gu, w: (n + 1,)) and L-BFGS's (g, q, xn, gn: (n,); Sm, Ym: (mem, n); crho, ca,
+   rho, sy, yy: (mem,)) */
 typedef struct {
-    double *pos, *gpos, *k, *r, *h, *gu;
+    double *pos, *gpos, *k, *r, *h, *e, *gu, *w;
+    double *g, *q, *xn, *gn, *Sm, *Ym, *crho, *ca, *rho, *sy, *yy;
 } Scratch;
 
-static int scratch_alloc(Scratch *W, i64 V, i64 F, i64 n) {
-    W->pos = malloc(sizeof(double) * 2 * (V > 0 ? V : 1));
-    W->gpos = malloc(sizeof(double) * 2 * (V > 0 ? V : 1));
-    W->k = malloc(sizeof(double) * 4 * (F > 0 ? F : 1));
-    W->r = malloc(sizeof(double) * 4 * (F > 0 ? F : 1));
-    W->h = malloc(sizeof(double) * 4 * (F > 0 ? F : 1));
-    W->gu = malloc(sizeof(double) * (n + 1));
-    return W->pos && W->gpos && W->k && W->r && W->h && W->gu;
+static int scratch_alloc(Scratch *W, i64 V, i64 F, i64 n, i64 mem) {
+    i64 v = V > 0 ? V : 1, f = F > 0 ? F : 1, m = mem > 0 ? mem : 1, nn = n > 0 ? n : 1;
+    double **bufs[] = {&W->pos, &W->gpos, &W->k, &W->r, &W->h, &W->e, &W->gu, &W->w, &W->g, &W->q, &W->xn, &W->gn,
+                       &W->Sm, &W->Ym, &W->crho, &W->ca, &W->rho, &W->sy, &W->yy};
+    i64 sizes[] = {2 * v, 2 * v, 4 * f, 4 * f, 4 * f, 16 * f, n + 1, n + 1, nn, nn, nn, nn, m * nn, m * nn, m, m, m, m, m};
+    int ok = 1;
+    for (int i = 0; i < 19; i++) {
+        *bufs[i] = malloc(sizeof(double) * sizes[i]);
+        ok = ok && *bufs[i];
+    }
+    return ok;
 }
 
 static void scratch_free(Scratch *W) {
-    free(W->pos); free(W->gpos); free(W->k); free(W->r); free(W->h); free(W->gu);
+    double *bufs[] = {W->pos, W->gpos, W->k, W->r, W->h, W->e, W->gu, W->w, W->g, W->q, W->xn, W->gn,
+                      W->Sm, W->Ym, W->crho, W->ca, W->rho, W->sy, W->yy};
+    for (int i = 0; i < 19; i++) free(bufs[i]);
 }
 
-static double objective(const Problem *P, const double *x, double delta, double power, double *g, Scratch *W, i64 n) {
+/* the objective at x (its value pass: objective_grad may follow for the same x); sq: squarings(power) */
+static double objective_value(const Problem *P, const double *x, double delta, double power, int sq, Scratch *W) {
     positions(P, x, W->pos);
-    double f = energy(W->pos, P->quads, P->V, P->F, delta, power, W->gpos, W->k, W->r, W->h);
+    return energy_value(W->pos, P->quads, P->F, delta, power, sq, W->k, W->r, W->h, W->e);
+}
+
+/* its gradient g (n,) at the x of the last objective_value, whose finite value f was; returns f, or
+   INFINITY (g zero) where the gradient is not finite */
+static double objective_grad(const Problem *P, double power, int sq, double f, double *g, Scratch *W, i64 n) {
+    f = energy_grad(P->quads, P->V, P->F, power, sq, f, W->gpos, W->k, W->r, W->h, W->e);
     if (!isfinite(f)) {
         memset(g, 0, sizeof(double) * n);
         return INFINITY;
     }
-    pull(P, x, W->gpos, g, W->gu);
+    pull(P, W->gpos, g, W->gu);
     return f;
+}
+
+/* objective and gradient g (n,) at x; INFINITY (g zero) where not finite */
+static double objective(const Problem *P, const double *x, double delta, double power, int sq, double *g, Scratch *W,
+                        i64 n) {
+    double f = objective_value(P, x, delta, power, sq, W);
+    if (!isfinite(f)) {
+        memset(g, 0, sizeof(double) * n);
+        return INFINITY;
+    }
+    return objective_grad(P, power, sq, f, g, W, n);
 }
 
 static double dot(const double *a, const double *b, i64 n) {
@@ -200,44 +304,69 @@ static double dot(const double *a, const double *b, i64 n) {
     return s;
 }
 
-/* L-BFGS from x (n,), in place; returns 0, or -1 when out of memory */
-static int lbfgs(const Problem *P, double *x, i64 n, double delta, double power, i64 maxiter, i64 mem, double ftol,
-                 double gtol, Scratch *W) {
-    double *g = malloc(sizeof(double) * n), *q = malloc(sizeof(double) * n), *xn = malloc(sizeof(double) * n),
-           *gn = malloc(sizeof(double) * n), *Sm = calloc(mem * n, sizeof(double)), *Ym = calloc(mem * n, sizeof(double)),
-           *crho = malloc(sizeof(double) * mem), *ca = malloc(sizeof(double) * mem);
-    int ok = g && q && xn && gn && Sm && Ym && crho && ca;
-    if (!ok) goto out;
-    double f = objective(P, x, delta, power, g, W, n);
-    if (!isfinite(f)) goto out;
+/* L-BFGS from x (n,), in place (its buffers in W). Each stored pair keeps s.y (the sum the step
+   computed: the same double as dot(s, y)), 1 / s.y and y.y, so no iteration computes them again. */
+static void lbfgs(const Problem *P, double *x, i64 n, double delta, double power, i64 maxiter, i64 mem, double ftol,
+                  double gtol, Scratch *W) {
+    double *g = W->g, *q = W->q, *xn = W->xn, *gn = W->gn, *Sm = W->Sm, *Ym = W->Ym, *crho = W->crho, *ca = W->ca,
+           *rhos = W->rho, *sys = W->sy, *yys = W->yy;
+    int sq = squarings(power);
+    double f = objective(P, x, delta, power, sq, g, W, n);
+    if (!isfinite(f)) return;
     i64 cnt = 0, head = 0;
     for (i64 it = 0; it < maxiter; it++) {
         double gmax = 0.0;
-        for (i64 i = 0; i < n; i++) gmax = fmax(gmax, fabs(g[i]));
+        for (i64 i = 0; i < n; i++) {
+            double a = fabs(g[i]);
+            if (a > gmax) gmax = a; /* as fmax(gmax, a), which passes over a NaN too */
+        }
         if (gmax <= gtol) break;
-        memcpy(q, g, sizeof(double) * n);
+        /* the two-loop recursion; each pass over q also sums the dot product the next step needs
+           (the terms and order of dot()) */
+        double d = 0.0;
+        const double *nv = cnt > 0 ? Sm + (head + cnt - 1) % mem * n : NULL;
+        if (nv)
+            for (i64 i = 0; i < n; i++) {
+                q[i] = g[i];
+                d += nv[i] * q[i];
+            }
+        else
+            memcpy(q, g, sizeof(double) * n);
         for (i64 t = cnt - 1; t >= 0; t--) {
             i64 row = (head + t) % mem;
-            double rho = 1.0 / dot(Ym + row * n, Sm + row * n, n);
-            double a = rho * dot(Sm + row * n, q, n);
-            for (i64 i = 0; i < n; i++) q[i] -= a * Ym[row * n + i];
+            double rho = rhos[row];
+            double a = rho * d;
+            const double *y = Ym + row * n;
             crho[t] = rho;
             ca[t] = a;
+            if (t > 0) {
+                nv = Sm + (head + t - 1) % mem * n;
+                d = 0.0;
+                for (i64 i = 0; i < n; i++) {
+                    q[i] -= a * y[i];
+                    d += nv[i] * q[i];
+                }
+            } else
+                for (i64 i = 0; i < n; i++) q[i] -= a * y[i];
         }
-        if (cnt > 0) {
-            i64 last = (head + cnt - 1) % mem;
-            double sc = dot(Sm + last * n, Ym + last * n, n) / dot(Ym + last * n, Ym + last * n, n);
-            for (i64 i = 0; i < n; i++) q[i] *= sc;
-        } else {
-            double sc = 0.05 / fmax(gmax, 1e-300);
-            for (i64 i = 0; i < n; i++) q[i] *= sc;
+        double sc = cnt > 0 ? sys[(head + cnt - 1) % mem] / yys[(head + cnt - 1) % mem] : 0.05 / fmax(gmax, 1e-300);
+        nv = cnt > 0 ? Ym + head % mem * n : g;
+        d = 0.0;
+        for (i64 i = 0; i < n; i++) {
+            q[i] *= sc;
+            d += nv[i] * q[i];
         }
         for (i64 t = 0; t < cnt; t++) {
-            i64 row = (head + t) % mem;
-            double b = ca[t] - crho[t] * dot(Ym + row * n, q, n);
-            for (i64 i = 0; i < n; i++) q[i] += Sm[row * n + i] * b;
+            double b = ca[t] - crho[t] * d;
+            const double *sr = Sm + (head + t) % mem * n;
+            nv = t + 1 < cnt ? Ym + (head + t + 1) % mem * n : g;
+            d = 0.0;
+            for (i64 i = 0; i < n; i++) {
+                q[i] += sr[i] * b;
+                d += nv[i] * q[i];
+            }
         }
-        double slope = -dot(g, q, n);
+        double slope = -d; /* -dot(g, q) */
         if (!(slope < 0)) {
             cnt = 0;
             head = 0;
@@ -248,10 +377,13 @@ static int lbfgs(const Problem *P, double *x, i64 n, double delta, double power,
         double step = 1.0, fn;
         for (;;) {
             for (i64 i = 0; i < n; i++) xn[i] = x[i] - step * q[i];
-            fn = objective(P, xn, delta, power, gn, W, n);
-            if (isfinite(fn) && fn <= f + 1e-4 * step * slope) break;
+            fn = objective_value(P, xn, delta, power, sq, W); /* the gradient only where the step is taken */
+            if (isfinite(fn) && fn <= f + 1e-4 * step * slope) {
+                fn = objective_grad(P, power, sq, fn, gn, W, n);
+                if (isfinite(fn)) break;
+            }
             step *= 0.5;
-            if (step < 1e-12) goto out;
+            if (step < 1e-12) return;
         }
         double sy = 0.0, ss = 0.0;
         for (i64 i = 0; i < n; i++) {
@@ -272,6 +404,9 @@ static int lbfgs(const Problem *P, double *x, i64 n, double delta, double power,
                 Sm[row * n + i] = xn[i] - x[i];
                 Ym[row * n + i] = gn[i] - g[i];
             }
+            sys[row] = sy;
+            rhos[row] = 1.0 / sy;
+            yys[row] = dot(Ym + row * n, Ym + row * n, n);
         }
         int done = f - fn <= ftol * fmax(1.0, fabs(f));
         memcpy(x, xn, sizeof(double) * n);
@@ -279,9 +414,6 @@ static int lbfgs(const Problem *P, double *x, i64 n, double delta, double power,
         f = fn;
         if (done) break;
     }
-out:
-    free(g); free(q); free(xn); free(gn); free(Sm); free(Ym); free(crho); free(ca);
-    return ok ? 0 : -1;
 }
 
 static void start(const Problem *P, const double *xy, double *x) {
@@ -346,11 +478,12 @@ static int better(Key k, Key b, double tol) {
 int jm_smooth(const double *xy, i64 V, const i64 *quads, i64 F, const i64 *free_, i64 nf, const double *sa,
               const double *sb, const i64 *sp, const i64 *sv, i64 S, i64 iters, const double *powers, i64 npow,
               i64 untangle_rounds, i64 mem, double ftol, double gtol, double *out) {
-    Problem P = {V, F, nf, S, xy, quads, free_, sa, sb, sp, sv};
+    Problem P = {V, F, nf, S, xy, quads, free_, sa, sb, sp, sv, NULL};
     i64 n = 2 * nf + (S ? sp[S] : 0) + S;
     Scratch W;
     double *cur = malloc(sizeof(double) * 2 * V), *x = malloc(sizeof(double) * (n > 0 ? n : 1));
-    int ok = scratch_alloc(&W, V, F, n) && cur && x;
+    int ok = scratch_alloc(&W, V, F, n, mem) && cur && x;
+    P.w = W.w;
     if (!ok) goto out;
     double area = 0.0;
     for (i64 q = 0; q < F; q++) {
@@ -378,7 +511,7 @@ int jm_smooth(const double *xy, i64 V, const i64 *quads, i64 F, const i64 *free_
         if (s_min >= eps) break;
         double delta = sqrt(eps * (eps - s_min));
         start(&P, cur, x);
-        if (lbfgs(&P, x, n, delta, 1.0, iters, mem, ftol, gtol, &W)) { ok = 0; goto out; }
+        lbfgs(&P, x, n, delta, 1.0, iters, mem, ftol, gtol, &W);
         positions(&P, x, cur);
         Key k = quality_key(cur, quads, F);
         if (better(k, bk, 1e-9)) {
@@ -389,7 +522,7 @@ int jm_smooth(const double *xy, i64 V, const i64 *quads, i64 F, const i64 *free_
     memcpy(cur, out, sizeof(double) * 2 * V);
     for (i64 i = 0; i < npow; i++) {
         start(&P, cur, x);
-        if (lbfgs(&P, x, n, floor_, powers[i], iters, mem, ftol, gtol, &W)) { ok = 0; goto out; }
+        lbfgs(&P, x, n, floor_, powers[i], iters, mem, ftol, gtol, &W);
         positions(&P, x, cur);
         Key k = quality_key(cur, quads, F);
         if (better(k, bk, 1e-9)) {
@@ -398,7 +531,7 @@ int jm_smooth(const double *xy, i64 V, const i64 *quads, i64 F, const i64 *free_
         }
     }
 out:
-    if (W.pos) scratch_free(&W);
+    scratch_free(&W);
     free(cur); free(x);
     return ok ? 0 : -1;
 }
@@ -406,9 +539,9 @@ out:
 /* energy and gradient (V, 2) at pos (tests) */
 double jm_energy(const double *pos, i64 V, const i64 *quads, i64 F, double delta, double power, double *grad) {
     double *k = malloc(sizeof(double) * 4 * (F > 0 ? F : 1)), *r = malloc(sizeof(double) * 4 * (F > 0 ? F : 1)),
-           *h = malloc(sizeof(double) * 4 * (F > 0 ? F : 1));
-    double f = (k && r && h) ? energy(pos, quads, V, F, delta, power, grad, k, r, h) : NAN;
-    free(k); free(r); free(h);
+           *h = malloc(sizeof(double) * 4 * (F > 0 ? F : 1)), *e = malloc(sizeof(double) * 16 * (F > 0 ? F : 1));
+    double f = (k && r && h && e) ? energy(pos, quads, V, F, delta, power, squarings(power), grad, k, r, h, e) : NAN;
+    free(k); free(r); free(h); free(e);
     return f;
 }
 
@@ -416,9 +549,11 @@ double jm_energy(const double *pos, i64 V, const i64 *quads, i64 F, double delta
 double jm_objective(const double *x, i64 n, const double *base, i64 V, const i64 *quads, i64 F, const i64 *free_,
                     i64 nf, const double *sa, const double *sb, const i64 *sp, const i64 *sv, i64 S, double delta,
                     double power, double *g) {
-    Problem P = {V, F, nf, S, base, quads, free_, sa, sb, sp, sv};
+    Problem P = {V, F, nf, S, base, quads, free_, sa, sb, sp, sv, NULL};
     Scratch W;
-    double f = scratch_alloc(&W, V, F, n) ? objective(&P, x, delta, power, g, &W, n) : NAN;
+    int ok = scratch_alloc(&W, V, F, n, 1);
+    P.w = W.w;
+    double f = ok ? objective(&P, x, delta, power, squarings(power), g, &W, n) : NAN;
     scratch_free(&W);
     return f;
 }
@@ -427,9 +562,11 @@ double jm_objective(const double *x, i64 n, const double *base, i64 V, const i64
 int jm_lbfgs(double *x, i64 n, const double *base, i64 V, const i64 *quads, i64 F, const i64 *free_, i64 nf,
              const double *sa, const double *sb, const i64 *sp, const i64 *sv, i64 S, double delta, double power,
              i64 maxiter, i64 mem, double ftol, double gtol) {
-    Problem P = {V, F, nf, S, base, quads, free_, sa, sb, sp, sv};
+    Problem P = {V, F, nf, S, base, quads, free_, sa, sb, sp, sv, NULL};
     Scratch W;
-    int rc = scratch_alloc(&W, V, F, n) ? lbfgs(&P, x, n, delta, power, maxiter, mem, ftol, gtol, &W) : -1;
+    int rc = scratch_alloc(&W, V, F, n, mem) ? 0 : -1;
+    P.w = W.w;
+    if (rc == 0) lbfgs(&P, x, n, delta, power, maxiter, mem, ftol, gtol, &W);
     scratch_free(&W);
     return rc;
 }
