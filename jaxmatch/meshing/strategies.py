@@ -159,8 +159,8 @@ def try_layouts(shape: Shape, strategies: Sequence["LayoutStrategy"], cat, lat, 
                 grid = 1.0
             if grid < bound:
                 bound, why = grid, "no template of its sizes refines into a grid"
-            if quality.field is not None and not cannot_win(best[0], 1, i, bound, quality):
-                try:  # (graded: its candidate templates' corners and internal vertices)
+            if quality.field is not None and not transitions and not cannot_win(best[0], 1, i, bound, quality):
+                try:  # (graded: its candidate templates' corners and internal vertices; transitions offer others)
                     tmpl = template_sj_bound(lay, cat, lat, sizes=sizes)
                 except FAILED:
                     tmpl = 1.0
