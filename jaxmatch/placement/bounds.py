@@ -149,7 +149,8 @@ def template_sj_bound(layout: Layout, catalogue: Catalogue, lattice, *, template
         inner = np.ones(xy.shape[0], bool)
         inner[np.concatenate([np.asarray(sp, np.int64) for sp in tmpl.side_path])] = False
         caps = [_exact_split_sj(lo, hi, int(uses[v])) for (lo, hi), v in zip(angles, at.tolist())]
-        caps += [_exact_split_sj(2 * math.pi, 2 * math.pi, int(d)) for d in np.unique(uses[inner & (uses > 0)]).tolist()]
+        valences = np.unique(uses[inner & (uses > 0)]).tolist()
+        caps += [_exact_split_sj(2 * math.pi, 2 * math.pi, int(d)) for d in valences]
         bound = max(bound, min(caps))
         if bound >= 1.0:
             return 1.0

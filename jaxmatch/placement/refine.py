@@ -106,13 +106,12 @@ SMOOTH_ITERS = 200
 """L-BFGS iterations per round of :func:`jaxmatch.placement.embed.smooth` for refined meshes."""
 
 SMOOTH_ITERS_GRADED = 50
-"""L-BFGS iterations per round for refined meshes, the layout's fitted patches and the merged
-mesh's cuts with a size field (``Quality.field``): the smoother is blind to size and the
-relaxation towards the field (:func:`jaxmatch.meshing.grading.follow_field`) moves the inner
-vertices last. On docs/graded.md's six cases the cuts' smoothing at 50 instead of 200 keeps
-five meshes' figures and changes the rectangle's (share of edges in the band 0.852 -> 0.873,
-in the refined zone 0.823 -> 0.805, min SJ 0.699 either way); at 200 it took 12.7 ms of the
-L's 43 (both its layouts' cuts, each undone: the smoother lowered their min scaled Jacobian)."""
+"""L-BFGS iterations per round for refined meshes (and the layout's fitted patches) with a size
+field (``Quality.field``): the smoother is blind to size, the merged mesh's cuts are smoothed
+with :data:`SMOOTH_ITERS` after them where a probe of this many finds better positions
+(:data:`jaxmatch.placement.solve.CUT_PROBE_GRADED`) and the relaxation towards the field
+(:func:`jaxmatch.meshing.grading.follow_field`) moves the inner vertices last; on
+docs/graded.md's cases the meshes are no worse."""
 
 SMOOTH_ITERS_LARGE = 50
 """Iterations per round for larger meshes, which are smoothed only when the interpolated
