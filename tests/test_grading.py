@@ -9,15 +9,11 @@ import numpy as np
 import pytest
 
 from jaxmatch.defaults import QUALITY
-from jaxmatch.field import Field, Near, load_field
-from jaxmatch.inputs import load_catalogue
+from jaxmatch.field import Field, Near
 from jaxmatch.meshing.grading import follow_field, laplacian_solve
 from jaxmatch.meshing.pipeline import mesh
-from jaxmatch.placement import solve
-from jaxmatch.io.readers import load_shape
 from jaxmatch.shape import make_shape
 
-GRADED = Path(__file__).resolve().parent.parent / "examples" / "graded"
 SQUARE = make_shape([[0.0, 0.0], [2.0, 0.0], [2.0, 2.0], [0.0, 2.0]])
 QUAD = make_shape([[0.0, 0.0], [2.0, 0.0], [2.3, 2.0], [0.2, 1.8]])
 
@@ -107,30 +103,7 @@ def test_with_a_field_the_patches_are_smoothed_with_fewer_iterations(monkeypatch
     mesh(L, size=Field(0.2, (Near("point", (1.0, 1.0), 0.05, 0.8),)) if graded_size else 0.1)
     want = refine.SMOOTH_ITERS_GRADED if graded_size else refine.SMOOTH_ITERS
     assert seen["patches"] and set(seen["patches"]) == {want}
-    # the merged mesh's cuts: one size, the full run; a field, a probe of SMOOTH_ITERS_GRADED first (and the
-    # merged mesh framed back, 0 iterations, to compare with), the full run only after a probe that moved it
-    cuts = seen["cuts"]
-    if not graded_size:
-        assert cuts and set(cuts) == {refine.SMOOTH_ITERS}
-    else:
-        assert cuts and cuts[0] == solve.CUT_PROBE_GRADED == refine.SMOOTH_ITERS_GRADED
-        assert set(cuts) <= {solve.CUT_PROBE_GRADED, 0, refine.SMOOTH_ITERS}
-
-
-@pytest.mark.parametrize("name", ["lshape", "plate-hole"])
-def test_the_probe_of_the_cuts_gives_the_mesh_of_the_full_smoothing(monkeypatch, name):
-    """With a size field the cuts' smoothing is probed with fewer iterations first; where the probe
-    finds nothing (the L: the smoother lowers its min scaled Jacobian) the full run is skipped,
-    where it finds better positions (the plate) the full run is made: the same mesh either way as
-    the full run alone gives (``CUT_PROBE_GRADED = 0``)."""
-    shp, field = load_shape(GRADED / f"{name}.json"), load_field(GRADED / f"{name}.field.json")
-    load_catalogue().cache.forget_shapes()
-    probed = mesh(shp, size=field)
-    monkeypatch.setattr(solve, "CUT_PROBE_GRADED", 0)
-    load_catalogue().cache.forget_shapes()
-    full = mesh(shp, size=field)
-    assert probed.chosen == full.chosen
-    assert np.array_equal(probed.xy, full.xy) and np.array_equal(probed.quads, full.quads)
+    assert seen["cuts"] and set(seen["cuts"]) == {refine.SMOOTH_ITERS}  # the merged mesh's cuts: as for one size
 
 
 def test_a_mesh_with_every_edge_in_the_band_is_returned_as_is():

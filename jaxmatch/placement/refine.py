@@ -108,8 +108,7 @@ SMOOTH_ITERS = 200
 SMOOTH_ITERS_GRADED = 50
 """L-BFGS iterations per round for refined meshes (and the layout's fitted patches) with a size
 field (``Quality.field``): the smoother is blind to size, the merged mesh's cuts are smoothed
-with :data:`SMOOTH_ITERS` after them where a probe of this many finds better positions
-(:data:`jaxmatch.placement.solve.CUT_PROBE_GRADED`) and the relaxation towards the field
+with :data:`SMOOTH_ITERS` after them and the relaxation towards the field
 (:func:`jaxmatch.meshing.grading.follow_field`) moves the inner vertices last; on
 docs/graded.md's cases the meshes are no worse."""
 

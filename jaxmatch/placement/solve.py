@@ -43,8 +43,7 @@ from jaxmatch.placement.floors import curve_floors
 from jaxmatch.placement.layout import (Layout, LayoutMesh, Sides, _boundary_loops, fit_sides,
                                        layout_sides, merge_patches, parse_counts, patch_shapes, region_area)
 from jaxmatch.placement.milp import LayoutInfeasible, count_cost, solve_choice, solve_counts
-from jaxmatch.placement.refine import (SMOOTH_ALWAYS, SMOOTH_ITERS_GRADED, SMOOTH_ITERS_LARGE, refine_and_place,
-                                       side_points, side_polylines)
+from jaxmatch.placement.refine import SMOOTH_ALWAYS, SMOOTH_ITERS_LARGE, refine_and_place, side_points, side_polylines
 from jaxmatch.placement.templates import first_group_templates, lazy_patch_templates
 from jaxmatch.shape import Shape
 
@@ -254,30 +253,14 @@ cuts): the patches come smoothed already, and smoothing every vertex was ~80% of
 25,000-quad L-shape."""
 
 
-CUT_PROBE_GRADED = SMOOTH_ITERS_GRADED
-"""With a size field, the merged mesh's cuts are smoothed with this many L-BFGS iterations a round
-first (:func:`_smooth_cuts`), the full :data:`~jaxmatch.placement.refine.SMOOTH_ITERS` only where
-that finds better positions: the smoother minimises condition numbers, blind to size, and on a
-graded mesh it often finds none whose min scaled Jacobian is as high (the L's and the square's
-cuts of docs/graded.md: 12.7 and 8.3 ms at 200 for nothing)."""
-
-
-def _smooth_cuts(xy: np.ndarray, quads: np.ndarray, fixed: np.ndarray, sides: Sides, side_ids,
-                 probe: int = 0) -> np.ndarray:
+def _smooth_cuts(xy: np.ndarray, quads: np.ndarray, fixed: np.ndarray, sides: Sides, side_ids) -> np.ndarray:
     """The merged mesh smoothed with the outer loops ``fixed``
     (:func:`jaxmatch.placement.embed.smooth_in_frame`): every other vertex up to
-    :data:`~jaxmatch.placement.refine.SMOOTH_ALWAYS` quads
-    (:data:`~jaxmatch.placement.refine.SMOOTH_ITERS` L-BFGS iterations a round; with ``probe``, a
-    run of that many first: where it finds no better positions than the merged mesh's, the merged
-    mesh is kept without the full run); above, with
+    :data:`~jaxmatch.placement.refine.SMOOTH_ALWAYS` quads; above, with
     :data:`~jaxmatch.placement.refine.SMOOTH_ITERS_LARGE` iterations, only the vertices within
     :data:`CUT_RINGS` rings of the inner sides (the quads around them smoothed as a submesh
     whose other vertices stay)."""
     if quads.shape[0] <= SMOOTH_ALWAYS:
-        if probe > 0:
-            first = smooth_in_frame(xy, quads, fixed, iters=probe)
-            if np.array_equal(first, smooth_in_frame(xy, quads, fixed, iters=0)):  # (the merged mesh, framed back)
-                return first
         return smooth_in_frame(xy, quads, fixed)
     inner = [np.asarray(side_ids[s], np.int64) for s in range(len(side_ids)) if sides.users[s, 1] >= 0]
     if not inner:
@@ -372,19 +355,18 @@ def _mesh_layout(layout: Layout, catalogue: Catalogue, lattice: Lattice, *, size
     if transitions and size is not None:
         best = _transition_rounds(layout, sides, shapes, cands, moved, best, want, size, floors, equal, side_targets,
                                   f, quality, catalogue, lattice)
-    return _merged(layout, sides, best, smooth_cuts, region, 0 if f is None else CUT_PROBE_GRADED)
+    return _merged(layout, sides, best, smooth_cuts, region)
 
 
-def _merged(layout: Layout, sides: Sides, best: tuple, smooth_cuts: bool, region: float,
-            probe: int = 0) -> LayoutMesh:
+def _merged(layout: Layout, sides: Sides, best: tuple, smooth_cuts: bool, region: float) -> LayoutMesh:
     """The :class:`LayoutMesh` of a best round of :func:`_rounds`: its patches merged, the cuts
-    smoothed when ``smooth_cuts`` (``probe``: :func:`_smooth_cuts`)."""
+    smoothed when ``smooth_cuts``."""
     _, tmpl, mults, n, refined = best
     xy, quads, patch, side_ids, gap = merge_patches(layout, sides, refined, n)
     loops = _boundary_loops(layout, sides, side_ids, xy)
     outer, holes = loops[0], tuple(loops[1:])
     if smooth_cuts:
-        xy = _smooth_cuts(xy, quads, np.concatenate(loops), sides, side_ids, probe)
+        xy = _smooth_cuts(xy, quads, np.concatenate(loops), sides, side_ids)
     return LayoutMesh(layout=layout, sides=sides, xy=xy, quads=quads, patch=patch, side_vertices=side_ids,
                       counts=n, outer=outer, holes=holes, templates=tuple(t.mesh_id for t in tmpl),
                       multiplicities=tuple(mults), shared_gap=gap, region_area=float(region))
