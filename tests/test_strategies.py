@@ -11,7 +11,7 @@ import pytest
 
 import jaxmatch
 from jaxmatch.defaults import QUALITY, Quality
-from jaxmatch.field import Field
+from jaxmatch.field import Field, load_field
 from jaxmatch.meshing import strategies as S
 from jaxmatch.meshing.result import Candidate
 from jaxmatch.placement import refine, solve
@@ -269,3 +269,19 @@ def test_the_slotted_link_at_p40_reaches_the_size_band(cat):
     x, y = xy[q, 0], xy[q, 1]  # (Q, 4) each: the quads' shoelace, here
     area = 0.5 * float(np.sum(x * np.roll(y, -1, axis=1) - np.roll(x, -1, axis=1) * y))
     assert abs(area / truth["area"] - 1.0) <= QUALITY.area_tol  # (the part's exact area: arcs, not their samples)
+
+
+def test_graded_single_patch_ruled_out_by_its_templates_gives_the_same_mesh(monkeypatch):
+    """With a size field, a single patch whose candidate templates cap its min scaled Jacobian
+    below the best mesh's (:func:`~jaxmatch.placement.bounds.template_sj_bound`: the L's
+    templates meet its inner corner with two quads) is not meshed, and the choice is the one
+    meshing it too gives."""
+    shp, field = jaxmatch.load_shape(EX / "graded" / "lshape.json"), load_field(EX / "graded" / "lshape.field.json")
+    m = jaxmatch.mesh(shp, size=field)
+    single = next(c for c in m.tried if c.name == "single")
+    assert single.mesh is None and "every template of its sizes" in single.note
+    monkeypatch.setattr(S, "template_sj_bound", lambda *a, **k: 1.0)
+    every = jaxmatch.mesh(shp, size=field)
+    assert next(c for c in every.tried if c.name == "single").mesh is not None
+    assert (m.chosen, m.rule, m.runner_up) == (every.chosen, every.rule, every.runner_up)
+    assert np.array_equal(m.xy, every.xy) and np.array_equal(m.quads, every.quads)

@@ -51,7 +51,7 @@ from jaxmatch.meshing.build import from_layout, from_refined
 from jaxmatch.meshing.choose import best_possible_key, cannot_win, mesh_key
 from jaxmatch.meshing.region import corner_points
 from jaxmatch.meshing.result import Candidate, QuadMesh
-from jaxmatch.placement.bounds import node_sj_bound, single_sj_bound
+from jaxmatch.placement.bounds import node_sj_bound, single_sj_bound, template_sj_bound
 from jaxmatch.placement.decompose import _same, decompose, disk_layout, same_cuts, single_patch
 from jaxmatch.placement.layout import check_layout
 from jaxmatch.placement.rings import ring_layout
@@ -105,8 +105,10 @@ def try_layouts(shape: Shape, strategies: Sequence["LayoutStrategy"], cat, lat, 
     (:func:`~jaxmatch.meshing.choose.cannot_win`: by its patch count and an upper bound on its min
     scaled Jacobian: :func:`~jaxmatch.placement.bounds.node_sj_bound` from the angles its nodes
     split, and for the single patch :func:`~jaxmatch.placement.bounds.single_sj_bound` from its
-    template sizes) is not meshed, so the choice is the one meshing all of them would give. A
-    strategy whose cuts or solve fail for any reason is skipped with that reason. ``lean_curves``:
+    template sizes and, with a size field, :func:`~jaxmatch.placement.bounds.template_sj_bound`
+    from its candidate templates' corners and internal vertices) is not meshed, so the choice is
+    the one meshing all of them would give. A strategy whose cuts or solve fail for any reason is
+    skipped with that reason. ``lean_curves``:
     the solve's curve floors from the curved sides' share alone
     (:func:`~jaxmatch.placement.solve.mesh_layout`); ``transitions``: templates chosen for size
     in the solve (the same); ``best``: ``(key, name, valid)`` of the best
@@ -157,6 +159,13 @@ def try_layouts(shape: Shape, strategies: Sequence["LayoutStrategy"], cat, lat, 
                 grid = 1.0
             if grid < bound:
                 bound, why = grid, "no template of its sizes refines into a grid"
+            if quality.field is not None and not transitions and not cannot_win(best[0], 1, i, bound, quality):
+                try:  # (graded: its candidate templates' corners and internal vertices; transitions offer others)
+                    tmpl = template_sj_bound(lay, cat, lat, sizes=sizes)
+                except FAILED:
+                    tmpl = 1.0
+                if tmpl < bound:
+                    bound, why = tmpl, "every template of its sizes splits a corner's angle or has an irregular vertex"
         if best is not None and cannot_win(best[0], lay.n_patches, i, bound, quality):
             tried[i] = Candidate(label, None, f"min scaled Jacobian at most {bound:.2f} cannot beat {best[1]}; {why}"
                                  if not cannot_win(best[0], lay.n_patches, i, 1.0, quality) else

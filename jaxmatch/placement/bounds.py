@@ -2,7 +2,8 @@
 that cannot beat the best mesh so far (:func:`jaxmatch.meshing.choose.cannot_win`).
 
 :func:`node_sj_bound` from the angles its nodes split; :func:`single_sj_bound` for a single patch,
-from its template sizes (:func:`grid_templates_exist`).
+from its template sizes (:func:`grid_templates_exist`); :func:`template_sj_bound` for a single
+patch, from the quads its candidate templates put at each corner and internal vertex.
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ import numpy as np
 
 from jaxmatch.arrays import roll
 from jaxmatch.catalogue.mesh import mesh_valences
-from jaxmatch.geometry import turning_angles
+from jaxmatch.geometry import signed_area, turning_angles
 from jaxmatch.placement.layout import Layout
 from jaxmatch.placement.solve import TEMPLATE_SIZES, TEMPLATES_PER_PATCH, patch_shapes_kept
 from jaxmatch.placement.templates import first_group_templates
@@ -22,7 +23,7 @@ from jaxmatch.placement.templates import first_group_templates
 if TYPE_CHECKING:  # pragma: no cover
     from jaxmatch.catalogue.store import Catalogue
 
-__all__ = ["NO_GRID_SJ", "grid_templates_exist", "node_sj_bound", "single_sj_bound"]
+__all__ = ["NO_GRID_SJ", "grid_templates_exist", "node_sj_bound", "single_sj_bound", "template_sj_bound"]
 
 
 def grid_templates_exist(catalogue: Catalogue, ks: Sequence[int], corners: Sequence[int]) -> bool:
@@ -101,6 +102,70 @@ def single_sj_bound(layout: Layout, catalogue: Catalogue, lattice, *, templates_
     if grid_templates_exist(catalogue, ks, corners):
         return 1.0
     return NO_GRID_SJ
+
+
+def template_sj_bound(layout: Layout, catalogue: Catalogue, lattice, *, templates_per_patch: int = TEMPLATES_PER_PATCH,
+                      sizes=TEMPLATE_SIZES) -> float:
+    """An upper bound on the min scaled Jacobian of :func:`mesh_layout` of a one-patch ``layout``
+    with these options (a mesh that does not fold; one that folds loses on that first), from the
+    candidate templates it takes one of (:func:`first_group_templates`, found as it finds them:
+    every one is placed, kept in the catalogue's cache). Refinement keeps the number of quads at
+    every template vertex, so around a corner of angle ``a`` met by ``q`` quads some quad's angle
+    is at least ``a / q`` and one at most, and its scaled Jacobian at most ``sin(a / q)`` (1 where
+    ``q`` right angles fit ``a``; ``a`` within the outline's angle range there, as in
+    :func:`node_sj_bound`), and around an internal vertex of valence ``d``, ``sin(2 pi / d)``. A
+    template's bound is the least over its vertices; the layout's, the largest over its
+    templates. E.g. an L-shape whose templates all meet the 270-degree corner with two quads:
+    sin 135 degrees. 1 for several patches, no templates, or corners it cannot match up."""
+    if layout.n_patches != 1:
+        return 1.0
+    shp = patch_shapes_kept(layout, catalogue)[0]
+    if shp.holes or signed_area(shp.points) <= 0:
+        return 1.0
+    t = first_group_templates(shp, catalogue, lattice, templates_per_patch, sizes)
+    if not t:
+        return 1.0
+    pts, corners = np.asarray(shp.points, np.float64), np.asarray(shp.corners, np.int64)
+    n, c = pts.shape[0], corners.shape[0]
+    angles = []  # each corner's angle range (radians), the corners in the templates' side order
+    for i in range(c):
+        v, after, before = int(corners[i]), int(corners[(i + 1) % c]), int(corners[i - 1])
+        ahead = [(v + j) % n for j in range(1, (after - v) % n + 1 if c > 1 else n)]
+        behind = [(v - j) % n for j in range(1, (v - before) % n + 1 if c > 1 else n)]
+        lo, hi = _outline_angle(pts, v, ahead, behind)
+        angles.append((lo - NODE_ANGLE_TOL, hi + NODE_ANGLE_TOL))
+    user = np.asarray(shp.user_points, np.float64)[corners]
+    tol = 1e-9 * max(float(np.ptp(user, axis=0).max()), 1.0)
+    bound = 0.0
+    for tmpl in t:
+        if len(tmpl.side_path) != c:
+            return 1.0
+        xy = np.asarray(tmpl.placement.xy, np.float64)
+        at = np.array([int(sp[0]) for sp in tmpl.side_path], np.int64)
+        if np.abs(xy[at] - user).max() > tol:  # (corner i of the sides is not the shape's corner i)
+            return 1.0
+        quads = np.asarray(tmpl.placement.mesh.quads, np.int64)
+        uses = np.bincount(quads.ravel(), minlength=xy.shape[0])
+        inner = np.ones(xy.shape[0], bool)
+        inner[np.concatenate([np.asarray(sp, np.int64) for sp in tmpl.side_path])] = False
+        caps = [_exact_split_sj(lo, hi, int(uses[v])) for (lo, hi), v in zip(angles, at.tolist())]
+        valences = np.unique(uses[inner & (uses > 0)]).tolist()
+        caps += [_exact_split_sj(2 * math.pi, 2 * math.pi, int(d)) for d in valences]
+        bound = max(bound, min(caps))
+        if bound >= 1.0:
+            return 1.0
+    return bound
+
+
+def _exact_split_sj(lo: float, hi: float, q: int) -> float:
+    """The largest scaled Jacobian the worst of exactly ``q`` convex quads at a vertex can have
+    when their angles there add up to an angle in ``[lo, hi]``: 1 where ``q`` right angles fit,
+    else ``sin(angle / q)`` at the nearer end, 0 when ``angle / q >= pi``."""
+    if q < 1:
+        return 1.0
+    if lo / q <= math.pi / 2 <= hi / q:
+        return 1.0
+    return max(math.sin(a) if 0.0 < a < math.pi else 0.0 for a in (lo / q, hi / q))
 
 
 NODE_ANGLE_TOL = 1e-6
