@@ -14,7 +14,8 @@ import numpy as np
 from jaxmatch.errors import InputError, SolverError
 
 __all__ = ["CHORD_WEIGHT", "Choice", "FEASIBILITY_JUMP", "LayoutInfeasible", "MILP_TIME_LIMIT", "OneSides", "SparseRows",
-           "one_patch_sides", "count_cost", "run_milp", "solve_choice", "solve_counts"]
+           "STRIPS", "STRIP_MARGIN", "one_patch_sides", "count_cost", "run_milp", "solve_choice", "solve_counts",
+           "strip_counts"]
 
 
 class LayoutInfeasible(InputError):
@@ -166,6 +167,9 @@ def solve_counts(sides, matrices: Sequence[np.ndarray], *, counts: Mapping[int, 
         targets = {s: float(side_targets[s]) for s in range(S) if s not in counts}
     else:
         targets = {s: float(sides.lengths[s]) / h for s in range(S) if s not in counts}
+    sol = None if equal or not STRIPS else strip_counts(sides, matrices, counts, targets, tau_m, floors, chord_weight)
+    if sol is not None:
+        return sol
     sol = program(counts, targets)
     if sol is not None:
         return sol
@@ -179,6 +183,102 @@ def solve_counts(sides, matrices: Sequence[np.ndarray], *, counts: Mapping[int, 
     raise LayoutInfeasible(f"the requested edge counts cannot be met together ({detail}; every patch needs an even "
                            "number of boundary edges, and both ends of a strip of quads get the same count)",
                            where=source, nearest=nearest)
+
+
+STRIPS = True
+"""Whether :func:`solve_counts` first tries :func:`strip_counts` (no HiGHS run where the program
+falls apart into strips, each with one best count); off, every program goes to HiGHS."""
+
+STRIP_MARGIN = 1e-3
+""":func:`strip_counts` answers only when every other integer solution costs more than the best
+one by this share of its cost (at least this much): HiGHS stops within a relative gap of
+``1e-4`` of the optimum, so with a wider margin its answer is that one solution too."""
+
+
+def strip_counts(sides, matrices: Sequence[np.ndarray], counts: Mapping[int, int], targets: Mapping[int, float],
+                 tau_m: np.ndarray, floors: np.ndarray | None = None,
+                 chord_weight: float = CHORD_WEIGHT) -> tuple[list[np.ndarray], np.ndarray] | None:
+    """:func:`solve_counts`' program solved without HiGHS where it falls apart into strips, or None.
+
+    It does when every patch side is one layout side and crosses one chord once (a row of its side
+    matrix is a single 1: four-sided templates without internal vertices): each constraint is then
+    ``m_c = n_s``, so the chords and sides joined by them (a strip of quads through the layout)
+    take one count ``x`` and the cost is a sum over the strips of ``g(x) = sum |x - target_s| +
+    chord_weight * sum |x - tau_c|``, convex in ``x``. A strip's best ``x`` is the requested count
+    when one of its sides has one (all of them equal and none below another side's floor, else
+    None: HiGHS says why), else among the
+    integers at its targets and its lower bound (1, a side's floor); the next integers on either
+    side tell how much worse the second best is. The answer is given only when the whole program
+    has that one optimum by more than :data:`STRIP_MARGIN` (ties: None), so it is HiGHS's.
+
+    sides: a layout's sides (:class:`~jaxmatch.placement.layout.Sides` or :class:`OneSides`);
+    matrices: per patch ``(n_p, c_p)`` side matrix; counts: ``{side: count}`` requested;
+    targets: ``{side: length / size}`` of the other sides; tau_m: ``(M,)`` every chord's target
+    (patch by patch); floors: ``(S,)`` the fewest edges per side (None: 1). Returns
+    ``(multiplicities per patch ((c_p,) int64), counts per side ((S,) int64))`` as
+    :func:`solve_counts`, or None."""
+    S = len(sides.chains)
+    nc = [int(np.asarray(A).shape[1]) for A in matrices]
+    off = np.concatenate([[0], np.cumsum(nc)]).astype(int)
+    M = int(off[-1])
+    parent = list(range(M + S))  # chords 0..M-1, then sides
+
+    def root(x: int) -> int:
+        while parent[x] != x:
+            parent[x] = parent[parent[x]]
+            x = parent[x]
+        return x
+
+    for p, A in enumerate(matrices):
+        A = np.asarray(A)
+        ps = sides.patch_sides[p]
+        if A.shape[0] < len(ps):
+            return None
+        for i in range(len(ps)):
+            nz = np.flatnonzero(A[i])
+            ids = np.unique(np.asarray(ps[i], np.int64).ravel())
+            if nz.size != 1 or A[i, nz[0]] != 1 or ids.size != 1:
+                return None
+            a, b = root(int(off[p] + nz[0])), root(M + int(ids[0]))
+            if a != b:
+                parent[max(a, b)] = min(a, b)
+    low = np.ones(M + S)
+    if floors is not None:
+        low[M:] = np.maximum(np.asarray(floors, np.float64), 1.0)
+    tau = np.concatenate([np.asarray(tau_m, np.float64), np.zeros(S)])
+    weight = np.concatenate([np.full(M, float(chord_weight)), np.zeros(S)])
+    for s, t in targets.items():
+        tau[M + s], weight[M + s] = float(t), 1.0
+    comps: dict[int, list[int]] = {}
+    for x in range(M + S):
+        comps.setdefault(root(x), []).append(x)
+    value = np.zeros(M + S, np.int64)
+    total, margin = 0.0, math.inf
+    for members in comps.values():
+        idx = np.asarray(members, np.int64)
+        fixed = {int(counts[x - M]) for x in members if x >= M and (x - M) in counts}
+        if fixed:  # (a requested count stands for its side's floor, as in the program)
+            free = [x for x in members if not (x >= M and (x - M) in counts)]
+            if len(fixed) > 1 or (free and min(fixed) < float(np.max(low[free]))):
+                return None  # contradictory, or below another side's floor: HiGHS's program says so
+            value[idx] = fixed.pop()
+            continue
+        lo = float(np.max(low[idx]))
+        w, t = weight[idx], tau[idx]
+
+        def cost(x: float) -> float:
+            return float(np.sum(w * np.abs(x - t)))
+
+        cands = {lo} | {float(v) for v in np.concatenate([np.floor(t), np.ceil(t)]) if v >= lo}
+        best = min(cands, key=lambda v: (cost(v), v))
+        g = cost(best)
+        nxt = [cost(best + 1.0)] + ([cost(best - 1.0)] if best - 1.0 >= lo else [])
+        margin = min(margin, min(nxt) - g)  # convex: the second best is a neighbour
+        total += g
+        value[idx] = int(best)
+    if not margin > STRIP_MARGIN * max(1.0, total):
+        return None
+    return [value[off[p]:off[p + 1]].copy() for p in range(len(matrices))], value[M:].copy()
 
 
 class Choice(NamedTuple):
