@@ -6,9 +6,9 @@ Specification:
 * on grids of rectangles (each patch side one layout side, one chord along it) every answer
   ``strip_counts`` gives is HiGHS's answer to the same program, and the one optimum of a brute
   force search over the strips' counts;
-* it gives no answer (None: HiGHS solves the program) where a patch side is several layout
-  sides (a T-junction), where a side crosses several chords, on a tie, and on requested counts
-  that contradict each other;
+* so also where T-junctions tie strips together (rectangles cut across again and again);
+* it gives no answer (None: HiGHS solves the program) where a side crosses several chords, on a
+  tie, and on requested counts that contradict each other;
 * meshes are the same with it and without it.
 """
 
@@ -125,14 +125,77 @@ def test_strips_are_highs_answer_and_the_brute_force_optimum(widths, heights, si
         assert np.array_equal(A @ m, [n[np.asarray(parts).ravel()].sum() for parts in sd.patch_sides[p]])
 
 
-def test_no_answer_where_the_program_does_not_fall_apart_into_strips():
+def guillotine(cuts):
+    """A rectangle cut again and again: ``cuts`` are ``(piece, vertical, fraction)``, each cutting
+    that piece (by index, modulo the pieces so far) across at that fraction of its width or
+    height, so that later cuts end on earlier ones (T-junctions). Returns ``(layout, sides)``."""
+    rects = [(0.0, 0.0, 3.0, 2.0)]
+    for k, vertical, f in cuts:
+        x0, y0, x1, y1 = rects.pop(k % len(rects))
+        if vertical:
+            xm = x0 + f * (x1 - x0)
+            rects += [(x0, y0, xm, y1), (xm, y0, x1, y1)]
+        else:
+            ym = y0 + f * (y1 - y0)
+            rects += [(x0, y0, x1, ym), (x0, ym, x1, y1)]
+    pts = sorted({(x, y) for r in rects for x, y in ((r[0], r[1]), (r[2], r[1]), (r[2], r[3]), (r[0], r[3]))})
+    P = np.array(pts)
+    patches = []
+    for x0, y0, x1, y1 in rects:  # every point on the rectangle's outline, counter-clockwise from (x0, y0)
+        def along(x, y):
+            if y == y0 and x0 <= x < x1:
+                return x - x0
+            if x == x1 and y0 <= y < y1:
+                return (x1 - x0) + (y - y0)
+            if y == y1 and x0 < x <= x1:
+                return (x1 - x0) + (y1 - y0) + (x1 - x)
+            if x == x0 and y0 < y <= y1:
+                return 2 * (x1 - x0) + (y1 - y0) + (y1 - y)
+            return None
+        on = [(along(x, y), i) for i, (x, y) in enumerate(pts) if along(x, y) is not None]
+        patches.append([i for _, i in sorted(on)])
+    lay = make_layout(P.tolist(), patches, corners=list(range(len(pts))))
+    return lay, layout_sides(lay)
+
+
+@settings(max_examples=60)
+@given(cuts=st.lists(st.tuples(st.integers(0, 5), st.booleans(), st.sampled_from([0.25, 0.4, 0.5, 0.6])),
+                     min_size=1, max_size=5),
+       size=st.sampled_from([0.35, 0.5, 0.7, 1.0]), data=st.data())
+def test_t_junctions_strips_are_highs_answer(cuts, size, data):
+    """Rectangles cut across again and again (T-junctions, requested counts, floors): every
+    answer strip_counts gives is HiGHS's to the same program."""
+    lay, sd = guillotine(cuts)
+    S = len(sd.chains)
+    mats = [QUAD] * lay.n_patches
+    counts = data.draw(st.dictionaries(st.integers(0, S - 1), st.integers(1, 6), max_size=1))
+    floors = np.array(data.draw(st.lists(st.integers(1, 2), min_size=S, max_size=S)))
+    L = sd.lengths
+    tau = []
+    for ps in sd.patch_sides:
+        side = [float(L[np.asarray(x).ravel()].sum()) for x in ps]
+        tau.append(np.maximum(np.array([(side[0] + side[2]) / 2, (side[1] + side[3]) / 2]) / size, 1.0))
+    targets = {s: float(L[s]) / size for s in range(S) if s not in counts}
+    got = strip_counts(sd, mats, counts, targets, np.concatenate(tau), floors)
+    try:
+        ref = highs(sd, mats, counts=counts, size=size, widths=[t * size for t in tau], floors=floors)
+    except LayoutInfeasible:
+        assert got is None
+        return
+    if got is not None:
+        assert got[1].tolist() == ref[1].tolist() and all(a.tolist() == b.tolist() for a, b in zip(got[0], ref[0]))
+
+
+def test_t_junction_answered_and_no_answer_where_the_program_does_not_fall_apart_into_strips():
     # a 2 x 1 block below two squares: the block's top side is two layout sides (a T-junction)
     lay = make_layout([[0, 0], [2, 0], [2, 1], [0.7, 1], [0, 1], [0.7, 2], [0, 2], [2, 2]],
                       [[0, 1, 2, 3, 4], [4, 3, 5, 6], [3, 2, 7, 5]])
     sd = layout_sides(lay)
     targets = {s: float(sd.lengths[s]) / 0.3 for s in range(len(sd.chains))}
-    assert strip_counts(sd, [QUAD] * 3, {}, targets, np.ones(6)) is None
-    assert solve_counts(sd, [QUAD] * 3, size=0.3) is not None  # (HiGHS answers)
+    mults, n = strip_counts(sd, [QUAD] * 3, {}, targets, np.ones(6))
+    ref = highs(sd, [QUAD] * 3, size=0.3)
+    assert n.tolist() == ref[1].tolist() == [6, 3, 4, 2, 3, 3, 2, 3, 3, 4]
+    assert n[2] + n[3] == n[0] == mults[0][0]  # the block's top: the two squares' bottoms together
     tri = make_layout([[0, 0], [1, 0], [0, 1]], [[0, 1, 2]])
     st_ = layout_sides(tri)
     assert strip_counts(st_, [TRI], {}, {s: 2.0 for s in range(3)}, np.ones(3)) is None  # two chords a side

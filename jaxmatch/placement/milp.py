@@ -14,7 +14,7 @@ import numpy as np
 from jaxmatch.errors import InputError, SolverError
 
 __all__ = ["CHORD_WEIGHT", "Choice", "FEASIBILITY_JUMP", "LayoutInfeasible", "MILP_TIME_LIMIT", "OneSides", "SparseRows",
-           "STRIPS", "STRIP_MARGIN", "one_patch_sides", "count_cost", "run_milp", "solve_choice", "solve_counts",
+           "STRIPS", "STRIP_MARGIN", "STRIP_POINTS", "one_patch_sides", "count_cost", "run_milp", "solve_choice", "solve_counts",
            "strip_counts"]
 
 
@@ -187,12 +187,16 @@ def solve_counts(sides, matrices: Sequence[np.ndarray], *, counts: Mapping[int, 
 
 STRIPS = True
 """Whether :func:`solve_counts` first tries :func:`strip_counts` (no HiGHS run where the program
-falls apart into strips, each with one best count); off, every program goes to HiGHS."""
+falls apart into strips with one best answer); off, every program goes to HiGHS."""
 
 STRIP_MARGIN = 1e-3
 """:func:`strip_counts` answers only when every other integer solution costs more than the best
 one by this share of its cost (at least this much): HiGHS stops within a relative gap of
 ``1e-4`` of the optimum, so with a wider margin its answer is that one solution too."""
+
+STRIP_POINTS = 20_000
+"""Most combinations of counts :func:`strip_counts` enumerates for the strips that T-junctions
+tie together (past it, HiGHS solves the program)."""
 
 
 def strip_counts(sides, matrices: Sequence[np.ndarray], counts: Mapping[int, int], targets: Mapping[int, float],
@@ -200,16 +204,19 @@ def strip_counts(sides, matrices: Sequence[np.ndarray], counts: Mapping[int, int
                  chord_weight: float = CHORD_WEIGHT) -> tuple[list[np.ndarray], np.ndarray] | None:
     """:func:`solve_counts`' program solved without HiGHS where it falls apart into strips, or None.
 
-    It does when every patch side is one layout side and crosses one chord once (a row of its side
-    matrix is a single 1: four-sided templates without internal vertices): each constraint is then
-    ``m_c = n_s``, so the chords and sides joined by them (a strip of quads through the layout)
-    take one count ``x`` and the cost is a sum over the strips of ``g(x) = sum |x - target_s| +
-    chord_weight * sum |x - tau_c|``, convex in ``x``. A strip's best ``x`` is the requested count
-    when one of its sides has one (all of them equal and none below another side's floor, else
-    None: HiGHS says why), else among the
-    integers at its targets and its lower bound (1, a side's floor); the next integers on either
-    side tell how much worse the second best is. The answer is given only when the whole program
-    has that one optimum by more than :data:`STRIP_MARGIN` (ties: None), so it is HiGHS's.
+    It does when every patch side crosses one chord once (a row of its side matrix is a single 1:
+    four-sided templates without internal vertices). A patch side that is one layout side gives
+    ``m_c = n_s``: the chords and sides joined so (a strip of quads) take one count ``x``, whose
+    cost ``g(x) = sum |x - target_s| + chord_weight * sum |x - tau_c|`` is convex. A patch side
+    made of several layout sides (a T-junction) ties strips: ``x_chord = sum of x_side``. A strip
+    with a requested count takes it. Strips that no T-junction ties are solved alone: the best
+    integer at their targets or lower bound (1, a side's floor), the next integers on either side
+    telling how much worse the second best is. The tied ones are enumerated together within
+    ``g(x) <= min g + slack`` of every strip (a solution outside costs more than the sum of the
+    minima plus the slack; the slack doubles until the best found is inside it, at most
+    :data:`STRIP_POINTS` combinations). The answer is given only when the whole program has that
+    one optimum by more than :data:`STRIP_MARGIN`, so it is HiGHS's; else None (ties, requests
+    that contradict each other or a floor, a template with internal vertices: HiGHS solves it).
 
     sides: a layout's sides (:class:`~jaxmatch.placement.layout.Sides` or :class:`OneSides`);
     matrices: per patch ``(n_p, c_p)`` side matrix; counts: ``{side: count}`` requested;
@@ -229,6 +236,7 @@ def strip_counts(sides, matrices: Sequence[np.ndarray], counts: Mapping[int, int
             x = parent[x]
         return x
 
+    junctions = []  # (chord, [side nodes]): a patch side of several layout sides
     for p, A in enumerate(matrices):
         A = np.asarray(A)
         ps = sides.patch_sides[p]
@@ -237,8 +245,11 @@ def strip_counts(sides, matrices: Sequence[np.ndarray], counts: Mapping[int, int
         for i in range(len(ps)):
             nz = np.flatnonzero(A[i])
             ids = np.unique(np.asarray(ps[i], np.int64).ravel())
-            if nz.size != 1 or A[i, nz[0]] != 1 or ids.size != 1:
+            if nz.size != 1 or A[i, nz[0]] != 1 or ids.size < 1:
                 return None
+            if ids.size > 1:
+                junctions.append((int(off[p] + nz[0]), [M + int(x) for x in ids]))
+                continue
             a, b = root(int(off[p] + nz[0])), root(M + int(ids[0]))
             if a != b:
                 parent[max(a, b)] = min(a, b)
@@ -252,33 +263,121 @@ def strip_counts(sides, matrices: Sequence[np.ndarray], counts: Mapping[int, int
     comps: dict[int, list[int]] = {}
     for x in range(M + S):
         comps.setdefault(root(x), []).append(x)
-    value = np.zeros(M + S, np.int64)
+    strips = list(comps.values())
+    of = {r: g for g, r in enumerate(comps)}
+    ties = [(of[root(c)], np.bincount([of[root(x)] for x in xs], minlength=len(strips))) for c, xs in junctions]
+    tied = {g for g0, coef in ties for g in [g0] + np.flatnonzero(coef).tolist()}
+    value = np.zeros(len(strips), np.int64)
     total, margin = 0.0, math.inf
-    for members in comps.values():
-        idx = np.asarray(members, np.int64)
+    table = {}  # tied strip -> (first x, costs of x, x + 1, ...) within the slack
+    fixed_at = {}
+    best_x, best_g = {}, {}
+    for g, members in enumerate(strips):
         fixed = {int(counts[x - M]) for x in members if x >= M and (x - M) in counts}
         if fixed:  # (a requested count stands for its side's floor, as in the program)
             free = [x for x in members if not (x >= M and (x - M) in counts)]
             if len(fixed) > 1 or (free and min(fixed) < float(np.max(low[free]))):
                 return None  # contradictory, or below another side's floor: HiGHS's program says so
-            value[idx] = fixed.pop()
+            fixed_at[g] = value[g] = fixed.pop()
             continue
-        lo = float(np.max(low[idx]))
-        w, t = weight[idx], tau[idx]
-
-        def cost(x: float) -> float:
-            return float(np.sum(w * np.abs(x - t)))
-
+        idx = np.asarray(members, np.int64)
+        w, t, lo = weight[idx], tau[idx], float(np.max(low[idx]))
+        if not np.any(w > 0):
+            return None
         cands = {lo} | {float(v) for v in np.concatenate([np.floor(t), np.ceil(t)]) if v >= lo}
-        best = min(cands, key=lambda v: (cost(v), v))
-        g = cost(best)
-        nxt = [cost(best + 1.0)] + ([cost(best - 1.0)] if best - 1.0 >= lo else [])
-        margin = min(margin, min(nxt) - g)  # convex: the second best is a neighbour
-        total += g
-        value[idx] = int(best)
+        best = min(cands, key=lambda v: (float(np.sum(w * np.abs(v - t))), v))
+        best_x[g], best_g[g] = best, float(np.sum(w * np.abs(best - t)))
+        if g in tied:
+            table[g] = (w, t, lo)
+            continue
+        nxt = [best + 1.0] + ([best - 1.0] if best - 1.0 >= lo else [])
+        margin = min(margin, min(float(np.sum(w * np.abs(v - t))) for v in nxt) - best_g[g])  # convex: a neighbour
+        total += best_g[g]
+        value[g] = int(best)
+    if ties:
+        joint = _tied_strips(ties, tied, table, fixed_at, best_x, best_g)
+        if joint is None:
+            return None
+        vals, g_star, second = joint
+        for g, v in vals.items():
+            value[g] = v
+        total += g_star
+        margin = min(margin, second - g_star)
     if not margin > STRIP_MARGIN * max(1.0, total):
         return None
-    return [value[off[p]:off[p + 1]].copy() for p in range(len(matrices))], value[M:].copy()
+    x = np.array([value[of[root(i)]] for i in range(M + S)], np.int64)
+    return [x[off[p]:off[p + 1]].copy() for p in range(len(matrices))], x[M:].copy()
+
+
+def _tied_strips(ties, tied, table, fixed_at, best_x, best_g):
+    """The strips of :func:`strip_counts` that T-junctions tie, enumerated: ``({strip: count},
+    best cost, second best cost or a bound below it)``, or None (no solution within
+    :data:`STRIP_POINTS` combinations, or the ties do not resolve strip by strip).
+
+    ties: ``(strip g0, (strips,) coefficients)``: ``x_g0 = coefficients @ x``; table: per tied
+    strip without a request ``(weights, targets, lower bound)`` of its cost; fixed_at: requested
+    strips' counts; best_x, best_g: each free strip's best count and cost alone."""
+    order = sorted(tied)
+    lhs = {g0 for g0, _ in ties}
+    if any(coef[g0] for g0, coef in ties):
+        return None  # a strip made of itself and more: no count of at least 1
+    base = sum(best_g[g] for g in order if g in best_g)
+    for slack in (2.0, 4.0, 8.0, 16.0, 32.0):
+        ranges = {}
+        for g in order:
+            if g in fixed_at:
+                ranges[g] = np.array([float(fixed_at[g])])
+                continue
+            w, t, lo = table[g]
+            cost = lambda v: float(np.sum(w * np.abs(v - t)))  # noqa: E731
+            a = b = best_x[g]
+            while a - 1.0 >= lo and cost(a - 1.0) <= best_g[g] + slack:
+                a -= 1.0
+            while cost(b + 1.0) <= best_g[g] + slack:
+                b += 1.0
+            ranges[g] = np.arange(a, b + 1.0)
+        free = [g for g in order if g not in lhs]
+        size = 1
+        for g in free:
+            size *= len(ranges[g])
+        if size > STRIP_POINTS:
+            return None
+        grids = np.meshgrid(*[ranges[g] for g in free], indexing="ij") if free else []
+        x = {g: grid.ravel() for g, grid in zip(free, grids)}
+        n = size
+        ok = np.ones(n, bool)
+        pending = list(range(len(ties)))
+        while pending:  # each strip a tie defines, once its parts are known; the other ties checked
+            step = [j for j in pending if all(g in x for g in np.flatnonzero(ties[j][1]).tolist())]
+            if not step:
+                return None
+            for j in step:
+                g0, coef = ties[j]
+                v = sum(coef[g] * x[g] for g in np.flatnonzero(coef).tolist())
+                if g0 in x:
+                    ok &= x[g0] == v
+                else:
+                    r = ranges[g0]
+                    ok &= (v >= r[0]) & (v <= r[-1])
+                    x[g0] = v
+            pending = [j for j in pending if j not in step]
+        if not ok.any():
+            continue
+        F = np.zeros(n)
+        for g in order:
+            if g in fixed_at:
+                continue
+            w, t, _ = table[g]
+            F = F + np.sum(w[None, :] * np.abs(x[g][:, None] - t[None, :]), axis=1)
+        F = np.where(ok, F, np.inf)
+        i = int(np.argmin(F))
+        outside = base + slack  # every solution outside the ranges costs more than this
+        if F[i] > outside:
+            continue
+        rest = np.delete(F, i)
+        second = min(float(rest.min()) if rest.size else math.inf, outside)
+        return {g: int(x[g][i]) for g in order}, float(F[i]), second
+    return None
 
 
 class Choice(NamedTuple):
