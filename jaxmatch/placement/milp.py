@@ -189,10 +189,11 @@ STRIPS = True
 """Whether :func:`solve_counts` first tries :func:`strip_counts` (no HiGHS run where the program
 falls apart into strips with one best answer); off, every program goes to HiGHS."""
 
-STRIP_MARGIN = 1e-3
+STRIP_MARGIN = 2e-4
 """:func:`strip_counts` answers only when every other integer solution costs more than the best
-one by this share of its cost (at least this much): HiGHS stops within a relative gap of
-``1e-4`` of the optimum, so with a wider margin its answer is that one solution too."""
+one by this share of its cost (at least this much): HiGHS stops once its solution is within
+``mip_rel_gap`` (``1e-4``) of the optimum, relative to its cost (``mip_abs_gap``: ``1e-6``), so
+with twice that margin its answer is that one solution too."""
 
 STRIP_POINTS = 20_000
 """Most combinations of counts :func:`strip_counts` enumerates for the strips that T-junctions
