@@ -197,7 +197,7 @@ with twice that margin its answer is that one solution too."""
 
 STRIP_POINTS = 20_000
 """Most combinations of counts :func:`strip_counts` enumerates for the strips that T-junctions
-tie together (past it, HiGHS solves the program)."""
+tie together, and most counts it tabulates for one strip (past it, HiGHS solves the program)."""
 
 
 def strip_counts(sides, matrices: Sequence[np.ndarray], counts: Mapping[int, int], targets: Mapping[int, float],
@@ -270,33 +270,36 @@ def strip_counts(sides, matrices: Sequence[np.ndarray], counts: Mapping[int, int
     tied = {g for g0, coef in ties for g in [g0] + np.flatnonzero(coef).tolist()}
     value = np.zeros(len(strips), np.int64)
     total, margin = 0.0, math.inf
-    table = {}  # tied strip -> (first x, costs of x, x + 1, ...) within the slack
-    fixed_at = {}
-    best_x, best_g = {}, {}
+    tables, fixed_at = {}, {}  # strip -> (first count, (k,) cost of it and the next k - 1); requested counts
     for g, members in enumerate(strips):
+        idx = np.asarray(members, np.int64)
+        w, t = weight[idx], tau[idx]
         fixed = {int(counts[x - M]) for x in members if x >= M and (x - M) in counts}
         if fixed:  # (a requested count stands for its side's floor, as in the program)
             free = [x for x in members if not (x >= M and (x - M) in counts)]
             if len(fixed) > 1 or (free and min(fixed) < float(np.max(low[free]))):
                 return None  # contradictory, or below another side's floor: HiGHS's program says so
             fixed_at[g] = value[g] = fixed.pop()
+            total += float(np.sum(w * np.abs(value[g] - t)))
             continue
-        idx = np.asarray(members, np.int64)
-        w, t, lo = weight[idx], tau[idx], float(np.max(low[idx]))
-        if not np.any(w > 0):
+        slope = float(np.sum(w))  # of the cost past the largest target
+        if not slope > 0:
             return None
-        cands = {lo} | {float(v) for v in np.concatenate([np.floor(t), np.ceil(t)]) if v >= lo}
-        best = min(cands, key=lambda v: (float(np.sum(w * np.abs(v - t))), v))
-        best_x[g], best_g[g] = best, float(np.sum(w * np.abs(best - t)))
+        x0 = int(np.max(low[idx]))
+        k = max(int(math.ceil(float(np.max(t)))) - x0, 0) + 3 + int(math.ceil(STRIP_SLACKS[-1] / slope))
+        if k > STRIP_POINTS:
+            return None
+        cost = np.sum(w[None, :] * np.abs(np.arange(x0, x0 + k, dtype=np.float64)[:, None] - t[None, :]), axis=1)
+        tables[g] = (x0, cost)
         if g in tied:
-            table[g] = (w, t, lo)
             continue
-        nxt = [best + 1.0] + ([best - 1.0] if best - 1.0 >= lo else [])
-        margin = min(margin, min(float(np.sum(w * np.abs(v - t))) for v in nxt) - best_g[g])  # convex: a neighbour
-        total += best_g[g]
-        value[g] = int(best)
+        i = int(np.argmin(cost))
+        nxt = cost[i + 1] if i == 0 else min(cost[i - 1], cost[i + 1])  # convex: the second best is a neighbour
+        margin = min(margin, float(nxt - cost[i]))
+        total += float(cost[i])
+        value[g] = x0 + i
     if ties:
-        joint = _tied_strips(ties, tied, table, fixed_at, best_x, best_g)
+        joint = _tied_strips(ties, tied, tables, fixed_at)
         if joint is None:
             return None
         vals, g_star, second = joint
@@ -310,42 +313,43 @@ def strip_counts(sides, matrices: Sequence[np.ndarray], counts: Mapping[int, int
     return [x[off[p]:off[p + 1]].copy() for p in range(len(matrices))], x[M:].copy()
 
 
-def _tied_strips(ties, tied, table, fixed_at, best_x, best_g):
-    """The strips of :func:`strip_counts` that T-junctions tie, enumerated: ``({strip: count},
-    best cost, second best cost or a bound below it)``, or None (no solution within
-    :data:`STRIP_POINTS` combinations, or the ties do not resolve strip by strip).
+STRIP_SLACKS = (1.0, 2.0, 4.0, 8.0, 16.0, 32.0)
+"""The slacks :func:`_tied_strips` tries in turn (cost above each strip's best)."""
 
-    ties: ``(strip g0, (strips,) coefficients)``: ``x_g0 = coefficients @ x``; table: per tied
-    strip without a request ``(weights, targets, lower bound)`` of its cost; fixed_at: requested
-    strips' counts; best_x, best_g: each free strip's best count and cost alone."""
+
+def _tied_strips(ties, tied, tables, fixed_at):
+    """The strips of :func:`strip_counts` that T-junctions tie, enumerated: ``({strip: count},
+    best cost, second best cost or a bound below it)`` (the cost of the strips without a request),
+    or None (no solution within :data:`STRIP_SLACKS` and :data:`STRIP_POINTS` combinations, or ties
+    that do not resolve strip by strip).
+
+    ties: ``(strip g0, (strips,) coefficients)``: ``x_g0 = coefficients @ x``; tables: per strip
+    without a request ``(first count, costs (k,))``; fixed_at: requested strips' counts."""
     order = sorted(tied)
     lhs = {g0 for g0, _ in ties}
     if any(coef[g0] for g0, coef in ties):
         return None  # a strip made of itself and more: no count of at least 1
-    base = sum(best_g[g] for g in order if g in best_g)
-    for slack in (2.0, 4.0, 8.0, 16.0, 32.0):
-        ranges = {}
+    best = {g: float(tables[g][1].min()) for g in order if g not in fixed_at}
+    base = sum(best.values())
+    for slack in STRIP_SLACKS:
+        span = {}
         for g in order:
             if g in fixed_at:
-                ranges[g] = np.array([float(fixed_at[g])])
+                span[g] = (fixed_at[g], fixed_at[g])
                 continue
-            w, t, lo = table[g]
-            cost = lambda v: float(np.sum(w * np.abs(v - t)))  # noqa: E731
-            a = b = best_x[g]
-            while a - 1.0 >= lo and cost(a - 1.0) <= best_g[g] + slack:
-                a -= 1.0
-            while cost(b + 1.0) <= best_g[g] + slack:
-                b += 1.0
-            ranges[g] = np.arange(a, b + 1.0)
+            x0, cost = tables[g]
+            inside = np.flatnonzero(cost <= best[g] + slack)  # (one run: the cost is convex)
+            if inside[-1] == cost.size - 1:
+                return None  # (the table ends within the slack)
+            span[g] = (x0 + int(inside[0]), x0 + int(inside[-1]))
         free = [g for g in order if g not in lhs]
-        size = 1
+        n = 1
         for g in free:
-            size *= len(ranges[g])
-        if size > STRIP_POINTS:
+            n *= span[g][1] - span[g][0] + 1
+        if n > STRIP_POINTS:
             return None
-        grids = np.meshgrid(*[ranges[g] for g in free], indexing="ij") if free else []
+        grids = np.meshgrid(*[np.arange(span[g][0], span[g][1] + 1) for g in free], indexing="ij") if free else []
         x = {g: grid.ravel() for g, grid in zip(free, grids)}
-        n = size
         ok = np.ones(n, bool)
         pending = list(range(len(ties)))
         while pending:  # each strip a tie defines, once its parts are known; the other ties checked
@@ -354,30 +358,28 @@ def _tied_strips(ties, tied, table, fixed_at, best_x, best_g):
                 return None
             for j in step:
                 g0, coef = ties[j]
-                v = sum(coef[g] * x[g] for g in np.flatnonzero(coef).tolist())
+                v = sum(int(coef[g]) * x[g] for g in np.flatnonzero(coef).tolist())
                 if g0 in x:
                     ok &= x[g0] == v
                 else:
-                    r = ranges[g0]
-                    ok &= (v >= r[0]) & (v <= r[-1])
+                    ok &= (v >= span[g0][0]) & (v <= span[g0][1])
                     x[g0] = v
             pending = [j for j in pending if j not in step]
         if not ok.any():
             continue
         F = np.zeros(n)
         for g in order:
-            if g in fixed_at:
-                continue
-            w, t, _ = table[g]
-            F = F + np.sum(w[None, :] * np.abs(x[g][:, None] - t[None, :]), axis=1)
+            if g not in fixed_at:
+                x0, cost = tables[g]
+                F = F + cost[np.clip(x[g] - x0, 0, cost.size - 1)]
         F = np.where(ok, F, np.inf)
         i = int(np.argmin(F))
-        outside = base + slack  # every solution outside the ranges costs more than this
+        outside = base + slack  # every solution outside the spans costs more than this
         if F[i] > outside:
             continue
-        rest = np.delete(F, i)
-        second = min(float(rest.min()) if rest.size else math.inf, outside)
-        return {g: int(x[g][i]) for g in order}, float(F[i]), second
+        g_star = float(F[i])
+        F[i] = np.inf
+        return {g: int(x[g][i]) for g in order}, g_star, min(float(F.min()), outside)
     return None
 
 
