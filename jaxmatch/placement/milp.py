@@ -14,7 +14,7 @@ import numpy as np
 from jaxmatch.errors import InputError, SolverError
 
 __all__ = ["CHORD_WEIGHT", "Choice", "FEASIBILITY_JUMP", "LayoutInfeasible", "MILP_TIME_LIMIT", "OneSides", "SparseRows",
-           "STRIPS", "STRIP_MARGIN", "STRIP_POINTS", "one_patch_sides", "count_cost", "run_milp", "solve_choice", "solve_counts",
+           "STRIPS", "STRIP_FREE", "STRIP_MARGIN", "STRIP_POINTS", "one_patch_sides", "count_cost", "run_milp", "solve_choice", "solve_counts",
            "strip_counts"]
 
 
@@ -195,6 +195,10 @@ one by this share of its cost (at least this much): HiGHS stops once its solutio
 ``mip_rel_gap`` (``1e-4``) of the optimum, relative to its cost (``mip_abs_gap``: ``1e-6``), so
 with twice that margin its answer is that one solution too."""
 
+STRIP_FREE = 6
+"""Most strips :func:`strip_counts` enumerates together (those that no tie defines); with more,
+HiGHS solves the program."""
+
 STRIP_POINTS = 20_000
 """Most combinations of counts :func:`strip_counts` enumerates for the strips that T-junctions
 tie together, and most counts it tabulates for one strip (past it, HiGHS solves the program)."""
@@ -238,6 +242,7 @@ def strip_counts(sides, matrices: Sequence[np.ndarray], counts: Mapping[int, int
         return x
 
     junctions = []  # (chord, [side nodes]): a patch side of several layout sides
+    sums = []  # (side, [(chord, edges)]): a layout side along which several chords run
     for p, A in enumerate(matrices):
         A = np.asarray(A)
         ps = sides.patch_sides[p]
@@ -246,8 +251,13 @@ def strip_counts(sides, matrices: Sequence[np.ndarray], counts: Mapping[int, int
         for i in range(len(ps)):
             nz = np.flatnonzero(A[i])
             ids = np.unique(np.asarray(ps[i], np.int64).ravel())
-            if nz.size != 1 or A[i, nz[0]] != 1 or ids.size < 1:
+            if nz.size < 1 or ids.size < 1:
                 return None
+            if nz.size > 1 or A[i, nz[0]] != 1:  # several chords (or one twice) along one layout side
+                if ids.size > 1:
+                    return None
+                sums.append((M + int(ids[0]), [(int(off[p] + c), int(A[i, c])) for c in nz]))
+                continue
             if ids.size > 1:
                 junctions.append((int(off[p] + nz[0]), [M + int(x) for x in ids]))
                 continue
@@ -267,7 +277,11 @@ def strip_counts(sides, matrices: Sequence[np.ndarray], counts: Mapping[int, int
     strips = list(comps.values())
     of = {r: g for g, r in enumerate(comps)}
     ties = [(of[root(c)], np.bincount([of[root(x)] for x in xs], minlength=len(strips))) for c, xs in junctions]
+    ties += [(of[root(s_)], np.bincount([of[root(c)] for c, _ in cs], weights=[e for _, e in cs], minlength=len(strips)))
+             for s_, cs in sums]
     tied = {g for g0, coef in ties for g in [g0] + np.flatnonzero(coef).tolist()}
+    if len(tied - {g0 for g0, _ in ties}) > STRIP_FREE:
+        return None  # (too many to enumerate)
     value = np.zeros(len(strips), np.int64)
     total, margin = 0.0, math.inf
     tables, fixed_at = {}, {}  # strip -> (first count, (k,) cost of it and the next k - 1); requested counts
@@ -286,7 +300,7 @@ def strip_counts(sides, matrices: Sequence[np.ndarray], counts: Mapping[int, int
         if not slope > 0:
             return None
         x0 = int(np.max(low[idx]))
-        k = max(int(math.ceil(float(np.max(t)))) - x0, 0) + 3 + int(math.ceil(STRIP_SLACKS[-1] / slope))
+        k = max(int(math.ceil(float(np.max(t)))) - x0, 0) + 3 + min(int(math.ceil(STRIP_SLACKS[-1] / slope)), 256)
         if k > STRIP_POINTS:
             return None
         cost = np.sum(w[None, :] * np.abs(np.arange(x0, x0 + k, dtype=np.float64)[:, None] - t[None, :]), axis=1)
@@ -314,7 +328,8 @@ def strip_counts(sides, matrices: Sequence[np.ndarray], counts: Mapping[int, int
 
 
 STRIP_SLACKS = (1.0, 2.0, 4.0, 8.0, 16.0, 32.0)
-"""The slacks :func:`_tied_strips` tries in turn (cost above each strip's best)."""
+"""The slacks :func:`_tied_strips` tries in turn (cost above each strip's best; one that cannot
+hold the best solution an earlier one found is passed over)."""
 
 
 def _tied_strips(ties, tied, tables, fixed_at):
@@ -331,7 +346,10 @@ def _tied_strips(ties, tied, tables, fixed_at):
         return None  # a strip made of itself and more: no count of at least 1
     best = {g: float(tables[g][1].min()) for g in order if g not in fixed_at}
     base = sum(best.values())
+    need = 0.0  # (the slack the best solution found so far would need)
     for slack in STRIP_SLACKS:
+        if slack < need:
+            continue
         span = {}
         for g in order:
             if g in fixed_at:
@@ -339,9 +357,18 @@ def _tied_strips(ties, tied, tables, fixed_at):
                 continue
             x0, cost = tables[g]
             inside = np.flatnonzero(cost <= best[g] + slack)  # (one run: the cost is convex)
-            if inside[-1] == cost.size - 1:
-                return None  # (the table ends within the slack)
-            span[g] = (x0 + int(inside[0]), x0 + int(inside[-1]))
+            span[g] = (x0 + int(inside[0]), x0 + int(inside[-1]))  # (to the table's end: a sum bounds it below)
+        for _ in range(len(ties)):  # a strip in a sum is at most the sum less the others' least
+            for g0, coef in ties:
+                parts = np.flatnonzero(coef).tolist()
+                least = sum(int(coef[h]) * span[h][0] for h in parts)
+                for g in parts:
+                    top = (span[g0][1] - least + int(coef[g]) * span[g][0]) // int(coef[g])
+                    span[g] = (span[g][0], min(span[g][1], top))
+        if any(g not in fixed_at and span[g][1] >= tables[g][0] + tables[g][1].size - 1 for g in order):
+            return None  # (a span the table does not hold)
+        if any(a > b for a, b in span.values()):
+            continue
         free = [g for g in order if g not in lhs]
         n = 1
         for g in free:
@@ -376,6 +403,7 @@ def _tied_strips(ties, tied, tables, fixed_at):
         i = int(np.argmin(F))
         outside = base + slack  # every solution outside the spans costs more than this
         if F[i] > outside:
+            need = float(F[i]) - base  # (within that slack of their best, its strips are in the spans)
             continue
         g_star = float(F[i])
         F[i] = np.inf
