@@ -6,7 +6,8 @@ Specification:
 * on grids of rectangles (each patch side one layout side, one chord along it) every answer
   ``strip_counts`` gives is HiGHS's answer to the same program, and the one optimum of a brute
   force search over the strips' counts;
-* so also where T-junctions tie strips together (rectangles cut across again and again);
+* so also where T-junctions tie strips together (rectangles cut across again and again) and
+  where several chords run along one side (three quads around a vertex);
 * it gives no answer (None: HiGHS solves the program) where a side crosses several chords, on a
   tie, and on requested counts that contradict each other;
 * meshes are the same with it and without it.

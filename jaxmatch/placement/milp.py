@@ -187,7 +187,8 @@ def solve_counts(sides, matrices: Sequence[np.ndarray], *, counts: Mapping[int, 
 
 STRIPS = True
 """Whether :func:`solve_counts` first tries :func:`strip_counts` (no HiGHS run where the program
-falls apart into strips with one best answer); off, every program goes to HiGHS."""
+falls apart into strips with one best answer: a HiGHS run costs ~1 ms of CPU time, however small
+the program); off, every program goes to HiGHS."""
 
 STRIP_MARGIN = 2e-4
 """:func:`strip_counts` answers only when every other integer solution costs more than the best
@@ -209,19 +210,20 @@ def strip_counts(sides, matrices: Sequence[np.ndarray], counts: Mapping[int, int
                  chord_weight: float = CHORD_WEIGHT) -> tuple[list[np.ndarray], np.ndarray] | None:
     """:func:`solve_counts`' program solved without HiGHS where it falls apart into strips, or None.
 
-    It does when every patch side crosses one chord once (a row of its side matrix is a single 1:
-    four-sided templates without internal vertices). A patch side that is one layout side gives
-    ``m_c = n_s``: the chords and sides joined so (a strip of quads) take one count ``x``, whose
-    cost ``g(x) = sum |x - target_s| + chord_weight * sum |x - tau_c|`` is convex. A patch side
-    made of several layout sides (a T-junction) ties strips: ``x_chord = sum of x_side``. A strip
-    with a requested count takes it. Strips that no T-junction ties are solved alone: the best
-    integer at their targets or lower bound (1, a side's floor), the next integers on either side
-    telling how much worse the second best is. The tied ones are enumerated together within
-    ``g(x) <= min g + slack`` of every strip (a solution outside costs more than the sum of the
-    minima plus the slack; the slack doubles until the best found is inside it, at most
-    :data:`STRIP_POINTS` combinations). The answer is given only when the whole program has that
-    one optimum by more than :data:`STRIP_MARGIN`, so it is HiGHS's; else None (ties, requests
-    that contradict each other or a floor, a template with internal vertices: HiGHS solves it).
+    A patch side that is one layout side and crosses one chord once gives ``m_c = n_s``: the chords
+    and sides joined so (a strip of quads) take one count ``x``, whose cost ``g(x) = sum |x -
+    target_s| + chord_weight * sum |x - tau_c|`` is convex. The other rows tie strips together: a
+    patch side made of several layout sides (a T-junction) ``x_chord = sum of x_side``, a layout
+    side along which several chords run (a template with internal vertices) ``x_side = sum of
+    edges * x_chord``; a patch side that is both gives None. A strip with a requested count takes
+    it. Strips that nothing ties are solved alone: the best integer of their cost (from the lower
+    bound: 1, a side's floor), the next integers on either side telling how much worse the second
+    best is. The tied ones (at most :data:`STRIP_FREE` not defined by a tie) are enumerated
+    together within ``g(x) <= min g + slack`` of every strip (:func:`_tied_strips`: a solution
+    outside costs more than the sum of the minima plus the slack). The answer is given only when
+    the whole program has that one optimum by more than :data:`STRIP_MARGIN`, so it is HiGHS's;
+    else None (ties, requests that contradict each other or a floor, too many strips: HiGHS
+    solves it).
 
     sides: a layout's sides (:class:`~jaxmatch.placement.layout.Sides` or :class:`OneSides`);
     matrices: per patch ``(n_p, c_p)`` side matrix; counts: ``{side: count}`` requested;
@@ -333,12 +335,13 @@ hold the best solution an earlier one found is passed over)."""
 
 
 def _tied_strips(ties, tied, tables, fixed_at):
-    """The strips of :func:`strip_counts` that T-junctions tie, enumerated: ``({strip: count},
+    """The strips of :func:`strip_counts` that rows tie together, enumerated: ``({strip: count},
     best cost, second best cost or a bound below it)`` (the cost of the strips without a request),
     or None (no solution within :data:`STRIP_SLACKS` and :data:`STRIP_POINTS` combinations, or ties
     that do not resolve strip by strip).
 
-    ties: ``(strip g0, (strips,) coefficients)``: ``x_g0 = coefficients @ x``; tables: per strip
+    ties: ``(strip g0, (strips,) coefficients)``: ``x_g0 = coefficients @ x`` (a strip in a sum is
+    at most the sum's span less the others' least); tables: per strip
     without a request ``(first count, costs (k,))``; fixed_at: requested strips' counts."""
     order = sorted(tied)
     lhs = {g0 for g0, _ in ties}
