@@ -14,7 +14,8 @@ import numpy as np
 from jaxmatch.errors import InputError, SolverError
 
 __all__ = ["CHORD_WEIGHT", "Choice", "FEASIBILITY_JUMP", "LayoutInfeasible", "MILP_TIME_LIMIT", "OneSides", "SparseRows",
-           "one_patch_sides", "count_cost", "run_milp", "solve_choice", "solve_counts"]
+           "STRIPS", "STRIP_FREE", "STRIP_MARGIN", "STRIP_POINTS", "one_patch_sides", "count_cost", "run_milp", "solve_choice", "solve_counts",
+           "strip_counts"]
 
 
 class LayoutInfeasible(InputError):
@@ -166,6 +167,9 @@ def solve_counts(sides, matrices: Sequence[np.ndarray], *, counts: Mapping[int, 
         targets = {s: float(side_targets[s]) for s in range(S) if s not in counts}
     else:
         targets = {s: float(sides.lengths[s]) / h for s in range(S) if s not in counts}
+    sol = None if equal or not STRIPS else strip_counts(sides, matrices, counts, targets, tau_m, floors, chord_weight)
+    if sol is not None:
+        return sol
     sol = program(counts, targets)
     if sol is not None:
         return sol
@@ -179,6 +183,235 @@ def solve_counts(sides, matrices: Sequence[np.ndarray], *, counts: Mapping[int, 
     raise LayoutInfeasible(f"the requested edge counts cannot be met together ({detail}; every patch needs an even "
                            "number of boundary edges, and both ends of a strip of quads get the same count)",
                            where=source, nearest=nearest)
+
+
+STRIPS = True
+"""Whether :func:`solve_counts` first tries :func:`strip_counts` (no HiGHS run where the program
+falls apart into strips with one best answer: a HiGHS run costs ~1 ms of CPU time, however small
+the program); off, every program goes to HiGHS."""
+
+STRIP_MARGIN = 2e-4
+""":func:`strip_counts` answers only when every other integer solution costs more than the best
+one by this share of its cost (at least this much): HiGHS stops once its solution is within
+``mip_rel_gap`` (``1e-4``) of the optimum, relative to its cost (``mip_abs_gap``: ``1e-6``), so
+with twice that margin its answer is that one solution too."""
+
+STRIP_FREE = 6
+"""Most strips :func:`strip_counts` enumerates together (those that no tie defines); with more,
+HiGHS solves the program."""
+
+STRIP_POINTS = 20_000
+"""Most combinations of counts :func:`strip_counts` enumerates for the strips that T-junctions
+tie together, and most counts it tabulates for one strip (past it, HiGHS solves the program)."""
+
+
+def strip_counts(sides, matrices: Sequence[np.ndarray], counts: Mapping[int, int], targets: Mapping[int, float],
+                 tau_m: np.ndarray, floors: np.ndarray | None = None,
+                 chord_weight: float = CHORD_WEIGHT) -> tuple[list[np.ndarray], np.ndarray] | None:
+    """:func:`solve_counts`' program solved without HiGHS where it falls apart into strips, or None.
+
+    A patch side that is one layout side and crosses one chord once gives ``m_c = n_s``: the chords
+    and sides joined so (a strip of quads) take one count ``x``, whose cost ``g(x) = sum |x -
+    target_s| + chord_weight * sum |x - tau_c|`` is convex. The other rows tie strips together: a
+    patch side made of several layout sides (a T-junction) ``x_chord = sum of x_side``, a layout
+    side along which several chords run (a template with internal vertices) ``x_side = sum of
+    edges * x_chord``; a patch side that is both gives None. A strip with a requested count takes
+    it. Strips that nothing ties are solved alone: the best integer of their cost (from the lower
+    bound: 1, a side's floor), the next integers on either side telling how much worse the second
+    best is. The tied ones (at most :data:`STRIP_FREE` not defined by a tie) are enumerated
+    together within ``g(x) <= min g + slack`` of every strip (:func:`_tied_strips`: a solution
+    outside costs more than the sum of the minima plus the slack). The answer is given only when
+    the whole program has that one optimum by more than :data:`STRIP_MARGIN`, so it is HiGHS's;
+    else None (ties, requests that contradict each other or a floor, too many strips: HiGHS
+    solves it).
+
+    sides: a layout's sides (:class:`~jaxmatch.placement.layout.Sides` or :class:`OneSides`);
+    matrices: per patch ``(n_p, c_p)`` side matrix; counts: ``{side: count}`` requested;
+    targets: ``{side: length / size}`` of the other sides; tau_m: ``(M,)`` every chord's target
+    (patch by patch); floors: ``(S,)`` the fewest edges per side (None: 1). Returns
+    ``(multiplicities per patch ((c_p,) int64), counts per side ((S,) int64))`` as
+    :func:`solve_counts`, or None."""
+    S = len(sides.chains)
+    nc = [int(np.asarray(A).shape[1]) for A in matrices]
+    off = np.concatenate([[0], np.cumsum(nc)]).astype(int)
+    M = int(off[-1])
+    parent = list(range(M + S))  # chords 0..M-1, then sides
+
+    def root(x: int) -> int:
+        while parent[x] != x:
+            parent[x] = parent[parent[x]]
+            x = parent[x]
+        return x
+
+    junctions = []  # (chord, [side nodes]): a patch side of several layout sides
+    sums = []  # (side, [(chord, edges)]): a layout side along which several chords run
+    for p, A in enumerate(matrices):
+        A = np.asarray(A)
+        ps = sides.patch_sides[p]
+        if A.shape[0] < len(ps):
+            return None
+        for i in range(len(ps)):
+            nz = np.flatnonzero(A[i])
+            ids = np.unique(np.asarray(ps[i], np.int64).ravel())
+            if nz.size < 1 or ids.size < 1:
+                return None
+            if nz.size > 1 or A[i, nz[0]] != 1:  # several chords (or one twice) along one layout side
+                if ids.size > 1:
+                    return None
+                sums.append((M + int(ids[0]), [(int(off[p] + c), int(A[i, c])) for c in nz]))
+                continue
+            if ids.size > 1:
+                junctions.append((int(off[p] + nz[0]), [M + int(x) for x in ids]))
+                continue
+            a, b = root(int(off[p] + nz[0])), root(M + int(ids[0]))
+            if a != b:
+                parent[max(a, b)] = min(a, b)
+    low = np.ones(M + S)
+    if floors is not None:
+        low[M:] = np.maximum(np.asarray(floors, np.float64), 1.0)
+    tau = np.concatenate([np.asarray(tau_m, np.float64), np.zeros(S)])
+    weight = np.concatenate([np.full(M, float(chord_weight)), np.zeros(S)])
+    for s, t in targets.items():
+        tau[M + s], weight[M + s] = float(t), 1.0
+    comps: dict[int, list[int]] = {}
+    for x in range(M + S):
+        comps.setdefault(root(x), []).append(x)
+    strips = list(comps.values())
+    of = {r: g for g, r in enumerate(comps)}
+    ties = [(of[root(c)], np.bincount([of[root(x)] for x in xs], minlength=len(strips))) for c, xs in junctions]
+    ties += [(of[root(s_)], np.bincount([of[root(c)] for c, _ in cs], weights=[e for _, e in cs], minlength=len(strips)))
+             for s_, cs in sums]
+    tied = {g for g0, coef in ties for g in [g0] + np.flatnonzero(coef).tolist()}
+    if len(tied - {g0 for g0, _ in ties}) > STRIP_FREE:
+        return None  # (too many to enumerate)
+    value = np.zeros(len(strips), np.int64)
+    total, margin = 0.0, math.inf
+    tables, fixed_at = {}, {}  # strip -> (first count, (k,) cost of it and the next k - 1); requested counts
+    for g, members in enumerate(strips):
+        idx = np.asarray(members, np.int64)
+        w, t = weight[idx], tau[idx]
+        fixed = {int(counts[x - M]) for x in members if x >= M and (x - M) in counts}
+        if fixed:  # (a requested count stands for its side's floor, as in the program)
+            free = [x for x in members if not (x >= M and (x - M) in counts)]
+            if len(fixed) > 1 or (free and min(fixed) < float(np.max(low[free]))):
+                return None  # contradictory, or below another side's floor: HiGHS's program says so
+            fixed_at[g] = value[g] = fixed.pop()
+            total += float(np.sum(w * np.abs(value[g] - t)))
+            continue
+        slope = float(np.sum(w))  # of the cost past the largest target
+        if not slope > 0:
+            return None
+        x0 = int(np.max(low[idx]))
+        k = max(int(math.ceil(float(np.max(t)))) - x0, 0) + 3 + min(int(math.ceil(STRIP_SLACKS[-1] / slope)), 256)
+        if k > STRIP_POINTS:
+            return None
+        cost = np.sum(w[None, :] * np.abs(np.arange(x0, x0 + k, dtype=np.float64)[:, None] - t[None, :]), axis=1)
+        tables[g] = (x0, cost)
+        if g in tied:
+            continue
+        i = int(np.argmin(cost))
+        nxt = cost[i + 1] if i == 0 else min(cost[i - 1], cost[i + 1])  # convex: the second best is a neighbour
+        margin = min(margin, float(nxt - cost[i]))
+        total += float(cost[i])
+        value[g] = x0 + i
+    if ties:
+        joint = _tied_strips(ties, tied, tables, fixed_at)
+        if joint is None:
+            return None
+        vals, g_star, second = joint
+        for g, v in vals.items():
+            value[g] = v
+        total += g_star
+        margin = min(margin, second - g_star)
+    if not margin > STRIP_MARGIN * max(1.0, total):
+        return None
+    x = np.array([value[of[root(i)]] for i in range(M + S)], np.int64)
+    return [x[off[p]:off[p + 1]].copy() for p in range(len(matrices))], x[M:].copy()
+
+
+STRIP_SLACKS = (1.0, 2.0, 4.0, 8.0, 16.0, 32.0)
+"""The slacks :func:`_tied_strips` tries in turn (cost above each strip's best; one that cannot
+hold the best solution an earlier one found is passed over)."""
+
+
+def _tied_strips(ties, tied, tables, fixed_at):
+    """The strips of :func:`strip_counts` that rows tie together, enumerated: ``({strip: count},
+    best cost, second best cost or a bound below it)`` (the cost of the strips without a request),
+    or None (no solution within :data:`STRIP_SLACKS` and :data:`STRIP_POINTS` combinations, or ties
+    that do not resolve strip by strip).
+
+    ties: ``(strip g0, (strips,) coefficients)``: ``x_g0 = coefficients @ x`` (a strip in a sum is
+    at most the sum's span less the others' least); tables: per strip
+    without a request ``(first count, costs (k,))``; fixed_at: requested strips' counts."""
+    order = sorted(tied)
+    lhs = {g0 for g0, _ in ties}
+    if any(coef[g0] for g0, coef in ties):
+        return None  # a strip made of itself and more: no count of at least 1
+    best = {g: float(tables[g][1].min()) for g in order if g not in fixed_at}
+    base = sum(best.values())
+    need = 0.0  # (the slack the best solution found so far would need)
+    for slack in STRIP_SLACKS:
+        if slack < need:
+            continue
+        span = {}
+        for g in order:
+            if g in fixed_at:
+                span[g] = (fixed_at[g], fixed_at[g])
+                continue
+            x0, cost = tables[g]
+            inside = np.flatnonzero(cost <= best[g] + slack)  # (one run: the cost is convex)
+            span[g] = (x0 + int(inside[0]), x0 + int(inside[-1]))  # (to the table's end: a sum bounds it below)
+        for _ in range(len(ties)):  # a strip in a sum is at most the sum less the others' least
+            for g0, coef in ties:
+                parts = np.flatnonzero(coef).tolist()
+                least = sum(int(coef[h]) * span[h][0] for h in parts)
+                for g in parts:
+                    top = (span[g0][1] - least + int(coef[g]) * span[g][0]) // int(coef[g])
+                    span[g] = (span[g][0], min(span[g][1], top))
+        if any(g not in fixed_at and span[g][1] >= tables[g][0] + tables[g][1].size - 1 for g in order):
+            return None  # (a span the table does not hold)
+        if any(a > b for a, b in span.values()):
+            continue
+        free = [g for g in order if g not in lhs]
+        n = 1
+        for g in free:
+            n *= span[g][1] - span[g][0] + 1
+        if n > STRIP_POINTS:
+            return None
+        grids = np.meshgrid(*[np.arange(span[g][0], span[g][1] + 1) for g in free], indexing="ij") if free else []
+        x = {g: grid.ravel() for g, grid in zip(free, grids)}
+        ok = np.ones(n, bool)
+        pending = list(range(len(ties)))
+        while pending:  # each strip a tie defines, once its parts are known; the other ties checked
+            step = [j for j in pending if all(g in x for g in np.flatnonzero(ties[j][1]).tolist())]
+            if not step:
+                return None
+            for j in step:
+                g0, coef = ties[j]
+                v = sum(int(coef[g]) * x[g] for g in np.flatnonzero(coef).tolist())
+                if g0 in x:
+                    ok &= x[g0] == v
+                else:
+                    ok &= (v >= span[g0][0]) & (v <= span[g0][1])
+                    x[g0] = v
+            pending = [j for j in pending if j not in step]
+        if not ok.any():
+            continue
+        F = np.zeros(n)
+        for g in order:
+            if g not in fixed_at:
+                x0, cost = tables[g]
+                F = F + cost[np.clip(x[g] - x0, 0, cost.size - 1)]
+        F = np.where(ok, F, np.inf)
+        i = int(np.argmin(F))
+        outside = base + slack  # every solution outside the spans costs more than this
+        if F[i] > outside:
+            need = float(F[i]) - base  # (within that slack of their best, its strips are in the spans)
+            continue
+        g_star = float(F[i])
+        F[i] = np.inf
+        return {g: int(x[g][i]) for g in order}, g_star, min(float(F.min()), outside)
+    return None
 
 
 class Choice(NamedTuple):
