@@ -103,3 +103,31 @@ def test_random_programs_have_the_same_optimum_capped_or_not(seed):
         assert cost @ capped == pytest.approx(cost @ plain, rel=1e-4, abs=1e-6)  # HiGHS's gap
         lo, hi = args[2], args[3]
         assert np.all(np.asarray(args[1]) @ capped >= lo - 1e-6) and np.all(np.asarray(args[1]) @ capped <= hi + 1e-6)
+
+
+def _chord_matrix(rng, n_sides: int, n_chords: int) -> np.ndarray:
+    """A side matrix as a template's: each chord's two ends on one side or two."""
+    A = np.zeros((n_sides, n_chords), np.int64)
+    for c in range(n_chords):
+        a, b = rng.integers(0, n_sides, 2)
+        A[a, c] += 1
+        A[b, c] += 1
+    for s in np.flatnonzero(A.sum(axis=1) == 0):  # every side gets an end
+        A[s, rng.integers(0, n_chords)] += 1
+    return A
+
+
+@pytest.mark.parametrize("seed", range(16))
+def test_counts_feasible_says_whether_solve_counts_answers(seed):
+    rng = np.random.default_rng(100 + seed)
+    S = int(rng.integers(3, 6))
+    A = _chord_matrix(rng, S, int(rng.integers(2, 5)))
+    counts = rng.integers(1, 6, S)
+    sides = milp.one_patch_sides(counts.astype(np.float64))
+    want = {int(s): int(counts[s]) for s in range(S) if rng.uniform() < 0.7}
+    try:
+        milp.solve_counts(sides, [A], counts=want, size=1.0)
+        answered = True
+    except milp.LayoutInfeasible:
+        answered = False
+    assert milp.counts_feasible(sides, [A], counts=want) is answered
