@@ -130,7 +130,7 @@ def solve_counts(sides, matrices: Sequence[np.ndarray], *, counts: Mapping[int, 
         for s, v in fixed.items():
             lb[M + s] = ub[M + s] = float(v)
         integrality = np.concatenate([np.ones(M + S), np.zeros(T + M)])
-        x = _capped_milp(cost, A, lo, hi, integrality, lb, ub, M + np.fromiter(targets.keys(), np.int64, T), tau[:T])
+        x = run_milp(cost, A, lo, hi, integrality, lb, ub)
         if x is None:
             return None
         x = np.rint(x).astype(np.int64)
@@ -358,49 +358,6 @@ def solve_choice(sides, alternatives: Sequence[Sequence[np.ndarray]], *, penalti
         if M else np.zeros(0, np.int64)
     size_cost = float(np.sum(np.abs(n[ts] - tv)) + chord_weight * np.sum(np.abs(xi[chosen] - tau_m[chosen])))
     return Choice(tuple(choice), mults, n, size_cost)
-
-
-COUNT_SLACK = 8.0
-"""Edges above its target (plus :data:`COUNT_SLACK_PER_SIDE` per side with a target) that :func:`_capped_milp`
-first lets a side's count go: HiGHS's root reduced-cost fixing walks every value of an integer
-variable up to its upper bound (1,024 of them when it has none), which took 19 % of the CPU time
-of 150 random parts at P/32, 4.5 s of it in 55 programs of 10-300 ms, each ~1 ms of simplex."""
-
-COUNT_SLACK_PER_SIDE = 1.5
-"""Edges added to :data:`COUNT_SLACK` per side with a target: the answers' cost beyond what the
-sides' lower bounds force is at most 3 edges a side (median 0.87; 6 of 1,220 programs of 150
-random parts at P/32 above 8 + 1.5 a side, each solved again without the caps)."""
-
-
-def _capped_milp(cost, A, lo, hi, integrality, lb, ub, cols: np.ndarray, tau: np.ndarray):
-    """:func:`run_milp` of a count program whose side counts ``x[cols]`` (``(T,)`` integer
-    columns, the sides with a target) cost ``|x - tau|`` each (weight 1, ``tau (T,)`` their
-    targets) with those counts first capped at ``tau + COUNT_SLACK + COUNT_SLACK_PER_SIDE * T`` (at least their lower
-    bound): a count past its cap costs more than its cap minus its target, plus what every other
-    side's lower bound above its target forces, so when that exceeds the answer's cost every
-    solution at least as good lies within the caps, and the answer is the program's. Else the
-    program is solved again with the caps that cost allows (``tau + cost - what the other sides'
-    lower bounds force``: every solution at least as good lies within them); one infeasible
-    within the first caps, without caps. The same optimum as :func:`run_milp` without caps
-    (between solutions of equal cost HiGHS may take another)."""
-    lb = np.asarray(lb, np.float64)
-    ub = np.asarray(ub, np.float64)
-    if cols.size == 0:
-        return run_milp(cost, A, lo, hi, integrality, lb, ub)
-    cap = ub.copy()
-    cap[cols] = np.minimum(ub[cols], np.maximum(lb[cols], np.floor(tau + COUNT_SLACK + COUNT_SLACK_PER_SIDE * cols.size)))
-    x = run_milp(cost, A, lo, hi, integrality, lb, cap)
-    if x is None:  # (infeasible within the caps: perhaps not without them)
-        return run_milp(cost, A, lo, hi, integrality, lb, ub)
-    forced = np.maximum(lb[cols] - tau, 0.0)  # what each side's lower bound costs at least
-    rest = forced.sum() - forced  # what the other sides' lower bounds cost at least
-    c = float(np.dot(np.asarray(cost, np.float64), x))
-    c += 1e-9 * max(1.0, abs(c))
-    if np.all((cap[cols] >= ub[cols]) | (cap[cols] + 1.0 - tau + rest > c)):
-        return x  # a count past its cap costs more than this answer
-    # this answer's cost bounds every count of a solution at least as good: the caps it allows
-    cap[cols] = np.minimum(ub[cols], np.maximum(lb[cols], np.floor(tau + c - rest)))
-    return run_milp(cost, A, lo, hi, integrality, lb, cap)
 
 
 def _side_rows(sides, matrices: Sequence[np.ndarray], equal: Sequence = ()):
