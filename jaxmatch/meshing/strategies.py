@@ -576,12 +576,7 @@ def conforming_templates(shape: Shape, cat, lat, h, first: QuadMesh, quality: Qu
     """A single-template candidate whose side counts follow ``h``: the nearest even counts
     (:func:`_target_counts`), each met exactly by the best template of the catalogue that can
     (:func:`jaxmatch.placement.refine.refine_mesh`), named ``"single <template id>"``."""
-    templates = walk(shape, cat, lat, limit=DEFAULT_LIMIT)  # placed as far as used
-    try:
-        if not templates:
-            return []
-    except UnmatchableError:
-        return []
+    templates = walk(shape, cat, lat, limit=DEFAULT_LIMIT)  # placed as far as used (none: no count vector is met)
     out, seen = [], {first.templates}
     f = quality.field
     targets = side_lengths(shape) if f is None else np.array([line_integral(f, p)[-1] for p in side_polylines(shape)])
@@ -591,6 +586,8 @@ def conforming_templates(shape: Shape, cat, lat, h, first: QuadMesh, quality: Qu
                                  quality=quality)
         except (InfeasibleRequest, SolverError):
             continue
+        except UnmatchableError:  # no catalogue mesh matches the shape: none matches it for other counts
+            return out
         m = from_refined(shape, choice.mesh, size=h, field=quality.field)
         if m.templates not in seen and not m.sides_off_size(quality.size_tol):
             seen.add(m.templates)

@@ -14,8 +14,8 @@ import numpy as np
 from jaxmatch.errors import InputError, SolverError
 
 __all__ = ["CHORD_WEIGHT", "Choice", "FEASIBILITY_JUMP", "LayoutInfeasible", "MILP_TIME_LIMIT", "OneSides", "SparseRows",
-           "STRIPS", "STRIP_FREE", "STRIP_MARGIN", "STRIP_POINTS", "one_patch_sides", "count_cost", "run_milp", "solve_choice", "solve_counts",
-           "strip_counts"]
+           "STRIPS", "STRIP_FREE", "STRIP_MARGIN", "STRIP_POINTS", "one_patch_sides", "count_cost", "counts_feasible", "run_milp",
+           "solve_choice", "solve_counts", "strip_counts"]
 
 
 class LayoutInfeasible(InputError):
@@ -108,33 +108,7 @@ def solve_counts(sides, matrices: Sequence[np.ndarray], *, counts: Mapping[int, 
     else:
         tau_m = np.ones(M)
 
-    rr, cc, vv = [], [], []  # the rows of the patch sides, then of the pairs of `equal`: built once
-    k = 0
-    for p, A in enumerate(matrices):
-        ps = sides.patch_sides[p]
-        A = np.asarray(A, dtype=np.float64)[:len(ps)]
-        i, j = np.nonzero(A)  # a chord's edges on the side
-        parts = [np.asarray(x, np.int64).ravel() for x in ps]
-        rows = k + np.repeat(np.arange(len(ps)), [x.size for x in parts])
-        cols = M + np.concatenate(parts) if parts else np.zeros(0, np.int64)
-        _, first = np.unique(rows * (M + S) + cols, return_index=True)  # a side listed twice: one entry
-        rr += [k + i, rows[first]]
-        cc += [off[p] + j, cols[first]]
-        vv += [A[i, j], np.full(first.size, -1.0)]
-        k += len(ps)
-    for ids_a, ids_b in equal:  # periodic sides: one count
-        a = np.unique(np.asarray(ids_a, np.int64))
-        b = np.unique(np.asarray(ids_b, np.int64))
-        cols = np.union1d(a, b)
-        vals = np.isin(cols, a).astype(np.float64) - np.isin(cols, b)
-        rr.append(np.full(int(np.count_nonzero(vals)), k))
-        cc.append(M + cols[vals != 0])
-        vv.append(vals[vals != 0])
-        k += 1
-    n0 = k
-    row0 = np.concatenate(rr).astype(np.int64) if rr else np.zeros(0, np.int64)
-    col0 = np.concatenate(cc).astype(np.int64) if cc else np.zeros(0, np.int64)
-    val0 = np.concatenate(vv).astype(np.float64) if vv else np.zeros(0)
+    row0, col0, val0, n0 = _side_rows(sides, matrices, equal)
 
     def program(fixed: Mapping[int, int], targets: Mapping[int, float]):
         """Variables: m (M), n (S), t (T side deviations), u (M chord deviations). The rows, in
@@ -617,6 +591,61 @@ def solve_choice(sides, alternatives: Sequence[Sequence[np.ndarray]], *, penalti
         if M else np.zeros(0, np.int64)
     size_cost = float(np.sum(np.abs(n[ts] - tv)) + chord_weight * np.sum(np.abs(xi[chosen] - tau_m[chosen])))
     return Choice(tuple(choice), mults, n, size_cost)
+
+
+def _side_rows(sides, matrices: Sequence[np.ndarray], equal: Sequence = ()):
+    """The equality rows of :func:`solve_counts`' program over its columns ``m`` (every patch's
+    chords, patch after patch) then ``n`` (one per side): one row per patch side, ``A_p[i] @ m_p -
+    sum of n_s over the layout sides along it = 0``, then one per pair of ``equal``. Returns
+    ``(row, col, val, number of rows)`` (entries as :class:`SparseRows`)."""
+    S = len(sides.chains)
+    nc = [int(np.asarray(A).shape[1]) for A in matrices]
+    off = np.concatenate([[0], np.cumsum(nc)]).astype(int)
+    M = int(off[-1])
+    rr, cc, vv = [], [], []  # the rows of the patch sides, then of the pairs of `equal`
+    k = 0
+    for p, A in enumerate(matrices):
+        ps = sides.patch_sides[p]
+        A = np.asarray(A, dtype=np.float64)[:len(ps)]
+        i, j = np.nonzero(A)  # a chord's edges on the side
+        parts = [np.asarray(x, np.int64).ravel() for x in ps]
+        rows = k + np.repeat(np.arange(len(ps)), [x.size for x in parts])
+        cols = M + np.concatenate(parts) if parts else np.zeros(0, np.int64)
+        _, first = np.unique(rows * (M + S) + cols, return_index=True)  # a side listed twice: one entry
+        rr += [k + i, rows[first]]
+        cc += [off[p] + j, cols[first]]
+        vv += [A[i, j], np.full(first.size, -1.0)]
+        k += len(ps)
+    for ids_a, ids_b in equal:  # periodic sides: one count
+        a = np.unique(np.asarray(ids_a, np.int64))
+        b = np.unique(np.asarray(ids_b, np.int64))
+        cols = np.union1d(a, b)
+        vals = np.isin(cols, a).astype(np.float64) - np.isin(cols, b)
+        rr.append(np.full(int(np.count_nonzero(vals)), k))
+        cc.append(M + cols[vals != 0])
+        vv.append(vals[vals != 0])
+        k += 1
+    n0 = k
+    row0 = np.concatenate(rr).astype(np.int64) if rr else np.zeros(0, np.int64)
+    col0 = np.concatenate(cc).astype(np.int64) if cc else np.zeros(0, np.int64)
+    val0 = np.concatenate(vv).astype(np.float64) if vv else np.zeros(0)
+    return row0, col0, val0, n0
+
+
+def counts_feasible(sides, matrices: Sequence[np.ndarray], *, counts: Mapping[int, int] | None = None,
+                    equal: Sequence = (), floors: np.ndarray | None = None) -> bool:
+    """Whether :func:`solve_counts` of these ``sides``, side ``matrices``, requested ``counts``,
+    ``equal`` pairs and ``floors`` has an answer (else it raises :class:`LayoutInfeasible`): its
+    constraints alone, one HiGHS run without an objective (the targets only price a solution)."""
+    S = len(sides.chains)
+    M = sum(int(np.asarray(A).shape[1]) for A in matrices)
+    row, col, val, n0 = _side_rows(sides, matrices, equal)
+    lb = np.concatenate([np.ones(M), np.ones(S) if floors is None else np.maximum(floors, 1)])
+    ub = np.full(M + S, np.inf)
+    for s, v in dict(counts or {}).items():
+        lb[M + s] = ub[M + s] = float(v)
+    return run_milp(np.zeros(M + S), SparseRows((n0, M + S), row, col, val), np.zeros(n0), np.zeros(n0),
+                    np.ones(M + S), lb, ub) is not None
 
 
 def count_cost(sides, mults: Sequence[np.ndarray], n: np.ndarray, *, size: float, widths=None, counts=None,

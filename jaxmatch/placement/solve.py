@@ -42,7 +42,7 @@ from jaxmatch.placement.embed import sj_inverted, smooth_in_frame, smooth_near
 from jaxmatch.placement.floors import curve_floors
 from jaxmatch.placement.layout import (Layout, LayoutMesh, Sides, _boundary_loops, fit_sides,
                                        layout_sides, merge_patches, parse_counts, patch_shapes, region_area)
-from jaxmatch.placement.milp import LayoutInfeasible, count_cost, solve_choice, solve_counts
+from jaxmatch.placement.milp import LayoutInfeasible, count_cost, counts_feasible, solve_choice, solve_counts
 from jaxmatch.placement.refine import SMOOTH_ALWAYS, SMOOTH_ITERS_LARGE, refine_and_place, side_points, side_polylines
 from jaxmatch.placement.templates import first_group_templates, lazy_patch_templates
 from jaxmatch.shape import Shape
@@ -172,10 +172,15 @@ whose template change makes a layout's program feasible: past it the layout is g
 
 def _advance_for_feasibility(sides, cands, choice, want, size, source, equal=(), f=None, side_targets=None) -> bool:
     """Switch one patch to another template so that the program becomes feasible; True when
-    one was found (``choice`` is changed in place) within :data:`FEASIBILITY_TRIES` programs."""
+    one was found (``choice`` is changed in place) within :data:`FEASIBILITY_TRIES` programs.
+    Each try asks whether the program's constraints have a solution
+    (:func:`~jaxmatch.placement.milp.counts_feasible`; ``size``, ``f`` and ``side_targets`` only
+    price a solution, they decide none)."""
     tries = 0
     for p in range(len(cands)):
-        for j in range(len(cands[p])):
+        j = -1
+        while _has(cands[p], j + 1):  # (each candidate placed when reached: len() would place them all)
+            j += 1
             if j == choice[p]:
                 continue
             tries += 1
@@ -183,13 +188,8 @@ def _advance_for_feasibility(sides, cands, choice, want, size, source, equal=(),
                 return False
             trial = list(choice)
             trial[p] = j
-            try:
-                solve_counts(sides, [cands[q][trial[q]].side_matrix() for q in range(len(cands))], counts=want,
-                             size=size, widths=[cands[q][trial[q]].chord_widths() for q in range(len(cands))],
-                             source=source, equal=equal, side_targets=side_targets,
-                             chord_targets=None if f is None else [cands[q][trial[q]].chord_targets(f)
-                                                                   for q in range(len(cands))])
-            except LayoutInfeasible:
+            if not counts_feasible(sides, [cands[q][trial[q]].side_matrix() for q in range(len(cands))], counts=want,
+                                   equal=equal):  # (the program's constraints alone: its targets only price it)
                 continue
             choice[p] = j
             return True
