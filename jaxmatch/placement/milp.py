@@ -89,8 +89,7 @@ def solve_counts(sides, matrices: Sequence[np.ndarray], *, counts: Mapping[int, 
     """
     counts = dict(counts or {})
     S = len(sides.chains)
-    nc = [int(np.asarray(A).shape[1]) for A in matrices]
-    off = np.concatenate([[0], np.cumsum(nc)]).astype(int)
+    off = _chord_offsets(matrices)
     M = int(off[-1])
     if size is None:
         if not counts:
@@ -206,8 +205,7 @@ def strip_counts(sides, matrices: Sequence[np.ndarray], counts: Mapping[int, int
     ``(multiplicities per patch ((c_p,) int64), counts per side ((S,) int64))`` as
     :func:`solve_counts`, or None."""
     S = len(sides.chains)
-    nc = [int(np.asarray(A).shape[1]) for A in matrices]
-    off = np.concatenate([[0], np.cumsum(nc)]).astype(int)
+    off = _chord_offsets(matrices)
     M = int(off[-1])
     parent = list(range(M + S))  # chords 0..M-1, then sides
 
@@ -593,14 +591,19 @@ def solve_choice(sides, alternatives: Sequence[Sequence[np.ndarray]], *, penalti
     return Choice(tuple(choice), mults, n, size_cost)
 
 
+def _chord_offsets(matrices: Sequence[np.ndarray]) -> np.ndarray:
+    """``(P + 1,) int``: where each patch's chords start among the program's chord columns (patch
+    after patch; the last entry is their number ``M``), from the ``(n_p, c_p)`` side matrices."""
+    return np.concatenate([[0], np.cumsum([int(np.asarray(A).shape[1]) for A in matrices])]).astype(int)
+
+
 def _side_rows(sides, matrices: Sequence[np.ndarray], equal: Sequence = ()):
     """The equality rows of :func:`solve_counts`' program over its columns ``m`` (every patch's
     chords, patch after patch) then ``n`` (one per side): one row per patch side, ``A_p[i] @ m_p -
     sum of n_s over the layout sides along it = 0``, then one per pair of ``equal``. Returns
     ``(row, col, val, number of rows)`` (entries as :class:`SparseRows`)."""
     S = len(sides.chains)
-    nc = [int(np.asarray(A).shape[1]) for A in matrices]
-    off = np.concatenate([[0], np.cumsum(nc)]).astype(int)
+    off = _chord_offsets(matrices)
     M = int(off[-1])
     rr, cc, vv = [], [], []  # the rows of the patch sides, then of the pairs of `equal`
     k = 0
@@ -638,7 +641,7 @@ def counts_feasible(sides, matrices: Sequence[np.ndarray], *, counts: Mapping[in
     ``equal`` pairs and ``floors`` has an answer (else it raises :class:`LayoutInfeasible`): its
     constraints alone, one HiGHS run without an objective (the targets only price a solution)."""
     S = len(sides.chains)
-    M = sum(int(np.asarray(A).shape[1]) for A in matrices)
+    M = int(_chord_offsets(matrices)[-1])
     row, col, val, n0 = _side_rows(sides, matrices, equal)
     lb = np.concatenate([np.ones(M), np.ones(S) if floors is None else np.maximum(floors, 1)])
     ub = np.full(M + S, np.inf)
