@@ -107,7 +107,7 @@ def solve_counts(sides, matrices: Sequence[np.ndarray], *, counts: Mapping[int, 
     else:
         tau_m = np.ones(M)
 
-    row0, col0, val0, n0 = _side_rows(sides, matrices, equal)
+    rows: list = []  # (the patch sides' rows, made when a program is solved: strip_counts answers most without)
 
     def program(fixed: Mapping[int, int], targets: Mapping[int, float]):
         """Variables: m (M), n (S), t (T side deviations), u (M chord deviations). The rows, in
@@ -115,6 +115,9 @@ def solve_counts(sides, matrices: Sequence[np.ndarray], *, counts: Mapping[int, 
         per side target then per chord the rows of :func:`_deviation_rows`; built as a
         :class:`SparseRows` (the gear's programs have thousands of rows of thousands of
         variables, each with two or three entries)."""
+        if not rows:
+            rows.append(_side_rows(sides, matrices, equal))
+        row0, col0, val0, n0 = rows[0]
         T = len(targets)
         nv = M + S + T + M
         tau = np.concatenate([np.fromiter(targets.values(), np.float64, T), tau_m])
@@ -217,25 +220,28 @@ def strip_counts(sides, matrices: Sequence[np.ndarray], counts: Mapping[int, int
 
     junctions = []  # (chord, [side nodes]): a patch side of several layout sides
     sums = []  # (side, [(chord, edges)]): a layout side along which several chords run
-    for p, A in enumerate(matrices):
+    offs = off.tolist()
+    for p, A in enumerate(matrices):  # (Python lists: a few entries per patch side)
         A = np.asarray(A)
         ps = sides.patch_sides[p]
         if A.shape[0] < len(ps):
             return None
+        rows = A[:len(ps)].tolist()
         for i in range(len(ps)):
-            nz = np.flatnonzero(A[i])
-            ids = np.unique(np.asarray(ps[i], np.int64).ravel())
-            if nz.size < 1 or ids.size < 1:
+            row = rows[i]
+            nz = [c for c, v in enumerate(row) if v]
+            ids = sorted(set(np.asarray(ps[i], np.int64).ravel().tolist()))
+            if len(nz) < 1 or len(ids) < 1:
                 return None
-            if nz.size > 1 or A[i, nz[0]] != 1:  # several chords (or one twice) along one layout side
-                if ids.size > 1:
+            if len(nz) > 1 or row[nz[0]] != 1:  # several chords (or one twice) along one layout side
+                if len(ids) > 1:
                     return None
-                sums.append((M + int(ids[0]), [(int(off[p] + c), int(A[i, c])) for c in nz]))
+                sums.append((M + ids[0], [(offs[p] + c, int(row[c])) for c in nz]))
                 continue
-            if ids.size > 1:
-                junctions.append((int(off[p] + nz[0]), [M + int(x) for x in ids]))
+            if len(ids) > 1:
+                junctions.append((offs[p] + nz[0], [M + x for x in ids]))
                 continue
-            a, b = root(int(off[p] + nz[0])), root(M + int(ids[0]))
+            a, b = root(offs[p] + nz[0]), root(M + ids[0])
             if a != b:
                 parent[max(a, b)] = min(a, b)
     low = np.ones(M + S)
@@ -259,13 +265,14 @@ def strip_counts(sides, matrices: Sequence[np.ndarray], counts: Mapping[int, int
     value = np.zeros(len(strips), np.int64)
     total, margin = 0.0, math.inf
     tables, fixed_at = {}, {}  # strip -> (first count, (k,) cost of it and the next k - 1); requested counts
+    lows, taus = low.tolist(), tau.tolist()
     for g, members in enumerate(strips):
         idx = np.asarray(members, np.int64)
         w, t = weight[idx], tau[idx]
         fixed = {int(counts[x - M]) for x in members if x >= M and (x - M) in counts}
         if fixed:  # (a requested count stands for its side's floor, as in the program)
             free = [x for x in members if not (x >= M and (x - M) in counts)]
-            if len(fixed) > 1 or (free and min(fixed) < float(np.max(low[free]))):
+            if len(fixed) > 1 or (free and min(fixed) < max(lows[x] for x in free)):
                 return None  # contradictory, or below another side's floor: HiGHS's program says so
             fixed_at[g] = value[g] = fixed.pop()
             total += float(np.sum(w * np.abs(value[g] - t)))
@@ -273,8 +280,8 @@ def strip_counts(sides, matrices: Sequence[np.ndarray], counts: Mapping[int, int
         slope = float(np.sum(w))  # of the cost past the largest target
         if not slope > 0:
             return None
-        x0 = int(np.max(low[idx]))
-        k = max(int(math.ceil(float(np.max(t)))) - x0, 0) + 3 + min(int(math.ceil(STRIP_SLACKS[-1] / slope)), 256)
+        x0 = int(max(lows[x] for x in members))
+        k = max(int(math.ceil(max(taus[x] for x in members))) - x0, 0) + 3 + min(int(math.ceil(STRIP_SLACKS[-1] / slope)), 256)
         if k > STRIP_POINTS:
             return None
         cost = np.sum(w[None, :] * np.abs(np.arange(x0, x0 + k, dtype=np.float64)[:, None] - t[None, :]), axis=1)
@@ -297,7 +304,8 @@ def strip_counts(sides, matrices: Sequence[np.ndarray], counts: Mapping[int, int
         margin = min(margin, second - g_star)
     if not margin > STRIP_MARGIN * max(1.0, total):
         return None
-    x = np.array([value[of[root(i)]] for i in range(M + S)], np.int64)
+    vals = value.tolist()
+    x = np.array([vals[of[root(i)]] for i in range(M + S)], np.int64)
     return [x[off[p]:off[p + 1]].copy() for p in range(len(matrices))], x[M:].copy()
 
 
@@ -321,6 +329,7 @@ def _tied_strips(ties, tied, tables, fixed_at):
         return None  # a strip made of itself and more: no count of at least 1
     best = {g: float(tables[g][1].min()) for g in order if g not in fixed_at}
     base = sum(best.values())
+    terms = [[(h, int(coef[h])) for h in np.flatnonzero(coef).tolist()] for _, coef in ties]  # (strip, coefficient)
     need = 0.0  # (the slack the best solution found so far would need)
     for slack in STRIP_SLACKS:
         if slack < need:
@@ -334,11 +343,10 @@ def _tied_strips(ties, tied, tables, fixed_at):
             inside = np.flatnonzero(cost <= best[g] + slack)  # (one run: the cost is convex)
             span[g] = (x0 + int(inside[0]), x0 + int(inside[-1]))  # (to the table's end: a sum bounds it below)
         for _ in range(len(ties)):  # a strip in a sum is at most the sum less the others' least
-            for g0, coef in ties:
-                parts = np.flatnonzero(coef).tolist()
-                least = sum(int(coef[h]) * span[h][0] for h in parts)
-                for g in parts:
-                    top = (span[g0][1] - least + int(coef[g]) * span[g][0]) // int(coef[g])
+            for (g0, _), parts in zip(ties, terms):
+                least = sum(c * span[h][0] for h, c in parts)
+                for g, c in parts:
+                    top = (span[g0][1] - least + c * span[g][0]) // c
                     span[g] = (span[g][0], min(span[g][1], top))
         if any(g not in fixed_at and span[g][1] >= tables[g][0] + tables[g][1].size - 1 for g in order):
             return None  # (a span the table does not hold)
@@ -355,12 +363,12 @@ def _tied_strips(ties, tied, tables, fixed_at):
         ok = np.ones(n, bool)
         pending = list(range(len(ties)))
         while pending:  # each strip a tie defines, once its parts are known; the other ties checked
-            step = [j for j in pending if all(g in x for g in np.flatnonzero(ties[j][1]).tolist())]
+            step = [j for j in pending if all(g in x for g, _ in terms[j])]
             if not step:
                 return None
             for j in step:
-                g0, coef = ties[j]
-                v = sum(int(coef[g]) * x[g] for g in np.flatnonzero(coef).tolist())
+                g0 = ties[j][0]
+                v = sum(c * x[g] for g, c in terms[j])
                 if g0 in x:
                     ok &= x[g0] == v
                 else:
