@@ -401,16 +401,17 @@ def _check_coincident(pts: np.ndarray, tol: float, source: str) -> None:
         raise InputError(f"points {i} and {j} are at the same place", where=source)
 
 
-def _segments(loop: np.ndarray) -> np.ndarray:
-    """``(k, 2) int64`` directed segments of a closed loop."""
-    return np.stack([loop, roll(loop, -1)], axis=1)
+def _segments(loop: np.ndarray) -> list[tuple[int, int]]:
+    """The ``k`` directed segments ``(a, b)`` of a closed loop ``(k,)`` of point ids, as Python ints."""
+    ids = np.asarray(loop).tolist()
+    return list(zip(ids, ids[1:] + ids[:1]))
 
 
 def _check_segments(loops: Sequence[np.ndarray], source: str) -> None:
     """No segment used by three patches, or twice in the same direction."""
     users: dict[tuple[int, int], list[tuple[int, bool]]] = {}
     for p, loop in enumerate(loops):
-        for a, b in _segments(loop).tolist():
+        for a, b in _segments(loop):
             users.setdefault((min(a, b), max(a, b)), []).append((p, a < b))
     for (a, b), us in users.items():
         if len(us) > 2:
@@ -441,7 +442,7 @@ def _check_cover(pts, loops, polys, tol: float, source: str):
     count: dict[tuple[int, int], int] = {}
     owner: dict[tuple[int, int], int] = {}
     for p, loop in enumerate(loops):
-        for a, b in _segments(loop).tolist():
+        for a, b in _segments(loop):
             key = (min(a, b), max(a, b))
             count[key] = count.get(key, 0) + 1
             owner[key] = p
@@ -461,30 +462,35 @@ def layout_sides(layout: Layout) -> Sides:
     """The sides of ``layout`` (see :class:`Sides`)."""
     pts = layout.points
     users: dict[tuple[int, int], list[int]] = {}
+    keys = []  # per patch, its segments' undirected keys
     for p, loop in enumerate(layout.patches):
-        for a, b in _segments(loop).tolist():
-            users.setdefault((min(a, b), max(a, b)), []).append(p)
+        ks = [(a, b) if a < b else (b, a) for a, b in _segments(loop)]
+        keys.append(ks)
+        for k in ks:
+            users.setdefault(k, []).append(p)
     node = np.zeros(pts.shape[0], bool)
-    for loop, pc in zip(layout.patches, layout.patch_corner):
+    for loop, pc, ks in zip(layout.patches, layout.patch_corner, keys):
         node[loop[pc]] = True
-        seg = [tuple(users[(min(a, b), max(a, b))]) for a, b in _segments(loop).tolist()]
-        change = np.array([seg[i - 1] != seg[i] for i in range(len(seg))])  # users differ before/after point i
+        seg = [users[k] for k in ks]
+        change = [i for i in range(len(seg)) if seg[i - 1] != seg[i]]  # users differ before/after point i
         node[loop[change]] = True
-    chains: list[np.ndarray] = []
+    chains: list[list[int]] = []  # (Python lists here, arrays in the answer)
     owner: list[list[int]] = []
     by_first: dict[tuple[int, int], int] = {}  # first directed segment of a chain -> side id
     patch_sides, patch_rev = [], []
+    is_node = node.tolist()
     for p, (loop, pc) in enumerate(zip(layout.patches, layout.patch_corner)):
-        k = loop.size
-        nodes = np.flatnonzero(node[loop])  # starts with 0: the loop starts at a corner
+        lp = loop.tolist()
+        k = len(lp)
+        nodes = [i for i, v in enumerate(lp) if is_node[v]]  # starts with 0: the loop starts at a corner
         corners = set(np.flatnonzero(pc).tolist())
         ids, rev = [], []
         cur_ids, cur_rev = [], []
-        for j, start in enumerate(nodes.tolist()):
-            stop = nodes[j + 1] if j + 1 < nodes.size else k
-            chain = loop[np.arange(start, stop + 1) % k]
-            back = (int(chain[-1]), int(chain[-2]))  # the other patch's first segment, if it ran it before
-            if back in by_first and np.array_equal(chains[by_first[back]], chain[::-1]):
+        for j, start in enumerate(nodes):
+            stop = nodes[j + 1] if j + 1 < len(nodes) else k
+            chain = lp[start:stop + 1] if stop < k else lp[start:] + lp[:1]
+            back = (chain[-1], chain[-2])  # the other patch's first segment, if it ran it before
+            if back in by_first and chains[by_first[back]] == chain[::-1]:
                 sid = by_first[back]
                 owner[sid].append(p)
                 cur_ids.append(sid)
@@ -493,10 +499,10 @@ def layout_sides(layout: Layout) -> Sides:
                 sid = len(chains)
                 chains.append(chain)
                 owner.append([p])
-                by_first[(int(chain[0]), int(chain[1]))] = sid
+                by_first[(chain[0], chain[1])] = sid
                 cur_ids.append(sid)
                 cur_rev.append(False)
-            if int(stop) % k in corners:
+            if stop % k in corners:
                 ids.append(np.asarray(cur_ids, np.int64))
                 rev.append(np.asarray(cur_rev, bool))
                 cur_ids, cur_rev = [], []
@@ -504,20 +510,19 @@ def layout_sides(layout: Layout) -> Sides:
         patch_rev.append(tuple(rev))
     ends_count: dict[tuple[int, int], int] = {}
     for c in chains:
-        key = (min(int(c[0]), int(c[-1])), max(int(c[0]), int(c[-1])))
+        key = (min(c[0], c[-1]), max(c[0], c[-1]))
         ends_count[key] = ends_count.get(key, 0) + 1
-    names = tuple(
-        f"{int(c[0])}-{int(c[-1])}" if ends_count[(min(int(c[0]), int(c[-1])), max(int(c[0]), int(c[-1])))] == 1
-        else _chain_name(c) for c in chains)
+    names = tuple(f"{c[0]}-{c[-1]}" if ends_count[(min(c[0], c[-1]), max(c[0], c[-1]))] == 1 else _chain_name(c)
+                  for c in chains)
     u = np.full((len(chains), 2), -1, np.int64)
     for sid, us in enumerate(owner):
         if len(us) > 2:  # cannot happen after _check_segments
             raise InputError(f"side {names[sid]} is used by {len(us)} patches", where=layout.source)
         u[sid, : len(us)] = us
-    seg = np.linalg.norm(np.diff(pts[np.concatenate(chains)], axis=0), axis=1)  # the chains' segments, end to end
-    ends = np.cumsum([len(c) for c in chains])
-    lengths = np.array([float(seg[a:b - 1].sum()) for a, b in zip(np.concatenate([[0], ends[:-1]]), ends)])
-    return Sides(tuple(chains), names, tuple(patch_sides), tuple(patch_rev), u, lengths)
+    seg = np.linalg.norm(np.diff(pts[[v for c in chains for v in c]], axis=0), axis=1)  # the chains' segments, end to end
+    ends = np.cumsum([len(c) for c in chains]).tolist()
+    lengths = np.array([float(seg[a:b - 1].sum()) for a, b in zip([0] + ends[:-1], ends)])
+    return Sides(tuple(np.array(c, np.int64) for c in chains), names, tuple(patch_sides), tuple(patch_rev), u, lengths)
 
 
 def _chain_name(chain) -> str:
@@ -605,43 +610,48 @@ def merge_patches(layout: Layout, sides: Sides, refined: Sequence, counts: np.nd
     side counts disagree with ``counts`` (a bug, not bad input).
     """
     S = len(sides.chains)
-    node_pts = np.unique(np.concatenate([c[[0, -1]] for c in sides.chains]))
+    ends = [(int(c[0]), int(c[-1])) for c in sides.chains]
+    node_pts = np.array(sorted({v for e in ends for v in e}), np.int64)
     nid = np.full(layout.points.shape[0], -1, np.int64)
     nid[node_pts] = np.arange(node_pts.size)
-    nxt = node_pts.size
-    side_ids = []
-    for s in range(S):
-        n = int(counts[s])
-        ids = np.empty(n + 1, np.int64)
-        ids[0], ids[-1] = nid[sides.chains[s][0]], nid[sides.chains[s][-1]]
-        ids[1:-1] = np.arange(nxt, nxt + n - 1)
-        nxt += n - 1
-        side_ids.append(ids)
+    cl = [int(c) for c in np.asarray(counts).tolist()]
+    # every side's ids in one array (its end nodes, then its inner vertices numbered side after side), cut into sides
+    stop = np.cumsum(np.asarray(cl, np.int64) + 1)
+    start = stop - (np.asarray(cl, np.int64) + 1)
+    flat = np.empty(int(stop[-1]) if S else 0, np.int64)
+    inner = np.ones(flat.size, bool)
+    inner[start], inner[stop - 1] = False, False
+    nxt = node_pts.size + int(np.count_nonzero(inner))
+    flat[inner] = np.arange(node_pts.size, nxt)
+    flat[start] = nid[[e[0] for e in ends]]
+    flat[stop - 1] = nid[[e[1] for e in ends]]
+    side_ids = [flat[a:b] for a, b in zip(start.tolist(), stop.tolist())]
     xy_side = np.full((nxt, 2), np.nan)
     gap = 0.0
     xy_parts, quad_parts, patch_parts = [], [], []
-    cl = [int(c) for c in np.asarray(counts).tolist()]
     for p, rm in enumerate(refined):
         rxy = np.asarray(rm.xy, dtype=np.float64)
         local = np.full(rxy.shape[0], -1, np.int64)
+        svs, gs = [], []  # (all sides of the patch at once)
         for i, (parts, revs) in enumerate(zip(sides.patch_sides[p], sides.patch_reversed[p])):
-            sv = np.asarray(rm.side_vertices[i], dtype=np.int64)
+            sv = rm.side_vertices[i]
             parts, revs = parts.tolist(), revs.tolist()
             want = sum(cl[s] for s in parts)
-            if sv.size != want + 1:
-                raise ValueError(f"patch {p} side {i} has {sv.size - 1} edges, the program chose {want}")
+            if len(sv) != want + 1:
+                raise ValueError(f"patch {p} side {i} has {len(sv) - 1} edges, the program chose {want}")
             ids = [side_ids[s][::-1] if r else side_ids[s] for s, r in zip(parts, revs)]
-            g = ids[0] if len(ids) == 1 else np.concatenate([x[:-1] for x in ids] + [ids[-1][-1:]])
-            old = local[sv]
-            if np.any((old >= 0) & (old != g)):
-                raise ValueError(f"patch {p}: a vertex is on two sides at different places")
-            local[sv] = g
-            pos = rxy[sv]
-            have = ~np.isnan(xy_side[g, 0])
-            if have.any():
-                d = xy_side[g[have]] - pos[have]
-                gap = max(gap, math.sqrt(float(np.max(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1]))))
-            xy_side[g[~have]] = pos[~have]
+            svs.append(sv)
+            gs.append(ids[0] if len(ids) == 1 else np.concatenate([x[:-1] for x in ids] + [ids[-1][-1:]]))
+        sv, g = np.concatenate(svs).astype(np.int64, copy=False), np.concatenate(gs)
+        local[sv] = g
+        if np.any(local[sv] != g):
+            raise ValueError(f"patch {p}: a vertex is on two sides at different places")
+        pos = rxy[sv]
+        have = ~np.isnan(xy_side[g, 0])  # (placed by an earlier patch)
+        if have.any():
+            d = xy_side[g[have]] - pos[have]
+            gap = max(gap, math.sqrt(float(np.max(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1]))))
+        xy_side[g[~have]] = pos[~have]
         inner = np.flatnonzero(local < 0)
         local[inner] = nxt + np.arange(inner.size)
         nxt += inner.size
