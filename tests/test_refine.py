@@ -281,6 +281,29 @@ def test_refined_topology_is_a_disk_without_new_irregular_vertices(cat, data):
     assert np.allclose(W.sum(axis=1), 1.0)
 
 
+@settings(max_examples=20, deadline=None)
+@given(st.sampled_from(["square.json", "triangle.json", "hexagon.json"]), st.integers(0, 3), st.data())
+def test_refined_side_vertices_step_each_template_edge(templates, name, j, data):
+    """The refined vertices of every template side (all sides made at once) are, side by side,
+    each template edge of its path stepped from its first end (``along``, edge by edge here),
+    then the side's last template vertex; ``counts[i] + 1`` of them."""
+    shp, ts = templates(EXAMPLES / name)
+    t = ts[min(j, len(ts) - 1)]
+    m = np.array(data.draw(st.lists(st.integers(1, 4), min_size=t.n_chords, max_size=t.n_chords)), np.int64)
+    tq = np.asarray(t.placement.mesh.quads, np.int64)
+    _, _, along, _, _ = R._refine_topology(tq, t.edge_list, t.edge_chord, t.quad_chords, m)
+    *_, side_vertices = R._refined_topology(tq, t, m)
+    assert len(side_vertices) == len(t.side_path)
+    for path, sv, c in zip(t.side_path, side_vertices, t.side_matrix() @ m):
+        want = []
+        for a, b in zip(path[:-1], path[1:]):
+            e = next(i for i, (u, w) in enumerate(t.edge_list.tolist()) if (u, w) == (min(a, b), max(a, b)))
+            me = int(m[t.edge_chord[e]])
+            want += [int(along(np.int64(a), np.int64(b), k, me)) for k in range(me)]
+        want.append(int(path[-1]))
+        assert sv.dtype == np.int64 and sv.tolist() == want and sv.size == c + 1
+
+
 # ---------------------------------------------------------------------------------------------
 # integer programs
 

@@ -573,20 +573,20 @@ def _refined_topology(tq: np.ndarray, template: PatchTemplate, m: np.ndarray, ca
 
 def _make_refined_topology(tq: np.ndarray, template: PatchTemplate, m: np.ndarray):
     """:func:`_refined_topology`, made."""
-    if True:
-        nv, quads, along, W, VV = _refine_topology(tq, template.edge_list, template.edge_chord, template.quad_chords, m)
-        V0 = int(tq.max()) + 1
-        ekey = template.edge_list[:, 0] * V0 + template.edge_list[:, 1]
-        side_vertices = []
-        for path in template.side_path:  # all its template edges at once: steps 0 .. me - 1 of each, then its end
-            path = np.asarray(path, np.int64)
-            a, b = path[:-1], path[1:]
-            me = np.asarray(m, np.int64)[template.edge_chord[np.searchsorted(ekey, np.minimum(a, b) * V0 + np.maximum(a, b))]]
-            first = np.repeat(np.cumsum(me) - me, me)  # where each edge's steps start
-            k = np.arange(int(me.sum()), dtype=np.int64) - first
-            ids = along(np.repeat(a, me), np.repeat(b, me), k, np.repeat(me, me))
-            side_vertices.append(np.concatenate([ids, path[-1:]]).astype(np.int64))
-        return nv, quads, W, VV, tuple(side_vertices)
+    nv, quads, along, W, VV = _refine_topology(tq, template.edge_list, template.edge_chord, template.quad_chords, m)
+    V0 = int(tq.max()) + 1
+    ekey = template.edge_list[:, 0] * V0 + template.edge_list[:, 1]
+    # every side's template edges at once: steps 0 .. me - 1 of each edge, side after side, then each side its end
+    paths = [np.asarray(path, np.int64) for path in template.side_path]
+    a = np.concatenate([path[:-1] for path in paths])
+    b = np.concatenate([path[1:] for path in paths])
+    me = np.asarray(m, np.int64)[template.edge_chord[np.searchsorted(ekey, np.minimum(a, b) * V0 + np.maximum(a, b))]]
+    first = np.repeat(np.cumsum(me) - me, me)  # where each edge's steps start
+    k = np.arange(int(me.sum()), dtype=np.int64) - first
+    ids = along(np.repeat(a, me), np.repeat(b, me), k, np.repeat(me, me))
+    steps = np.concatenate([[0], np.cumsum(me)])[np.cumsum([0] + [len(path) - 1 for path in paths])].tolist()
+    side_vertices = tuple(np.concatenate([ids[s0:s1], path[-1:]]) for s0, s1, path in zip(steps, steps[1:], paths))
+    return nv, quads, W, VV, side_vertices
 
 
 def _laplacian(quads: np.ndarray, nv: int) -> scipy.sparse.csr_matrix:
