@@ -185,9 +185,9 @@ def side_points(polyline: np.ndarray, count: int, field=None) -> np.ndarray:
         return graded_points(field, polyline, count)
     poly = np.asarray(polyline, dtype=np.float64)
     N = int(count)
-    first, last = poly[0], poly[-1]
-    closed = bool(np.array_equal(first, last))
-    flip = (not closed) and tuple(last) < tuple(first)
+    first, last = poly[0].tolist(), poly[-1].tolist()  # (Python floats: the same comparisons, no numpy calls)
+    closed = first == last
+    flip = (not closed) and last < first
     p = poly[::-1] if flip else poly
     frac = np.arange(N + 1, dtype=np.float64) / N
     if p.shape[0] == 2:
@@ -666,15 +666,18 @@ def _refine_and_place(template: PatchTemplate, mult, *, smooth_iters: int | None
     # harmonic extension of the boundary displacement
     xy = xy + harmonic_displacement(quads, nv, bverts, bxy - xy[bverts], cache=cache)
     xy[bverts] = bxy
-    sj, inv = sj_inverted(xy, quads)
-    bad = bad_quads(sj, inv, quality.good_sj)
+    sj = inv = bad = None  # (the interpolated placement's figures: measured only where they decide or are the answer)
     local = smooth_iters is None and quads.shape[0] > SMOOTH_LOCAL
     if smooth_iters is not None:
         iters = int(smooth_iters)
     elif quads.shape[0] <= SMOOTH_ALWAYS:
         iters = SMOOTH_ITERS if quality.field is None else SMOOTH_ITERS_GRADED
     else:
+        sj, inv = sj_inverted(xy, quads)
+        bad = bad_quads(sj, inv, quality.good_sj)
         iters = SMOOTH_ITERS_LARGE if bad.any() else 0
+    if iters <= 0 and sj is None:
+        sj, inv = sj_inverted(xy, quads)
     if iters > 0:
         xy[bverts] = bxy  # exact boundary positions
         if local:
