@@ -508,7 +508,7 @@ def _refine_topology(quads: np.ndarray, edge_list: np.ndarray, edge_chord: np.nd
     V = int(q.max()) + 1
     E = edge_list.shape[0]
     me = mult[edge_chord]
-    edge_base = V + np.concatenate([[0], np.cumsum(me - 1)[:-1]])
+    edge_base = V + np.cumsum(me - 1) - (me - 1)  # (where each edge's inner points start)
     nv = V + int((me - 1).sum())
     key = edge_list[:, 0] * V + edge_list[:, 1]
     ma_all, mb_all = mult[quad_chords[:, 0]], mult[quad_chords[:, 1]]
@@ -526,15 +526,18 @@ def _refine_topology(quads: np.ndarray, edge_list: np.ndarray, edge_chord: np.nd
     ks = np.concatenate([np.arange(1, m) for m in me.tolist()]) if nv > V else np.zeros(0, np.int64)
     eidx = np.repeat(np.arange(E), me - 1)
     s = ks / me[eidx]
-    w_rows.append(np.stack([1 - s, s, np.zeros_like(s), np.zeros_like(s)], axis=1))
-    v_rows.append(np.stack([edge_list[eidx, 0], edge_list[eidx, 1], edge_list[eidx, 0], edge_list[eidx, 1]], axis=1))
-    span = int(mb_all.max(initial=0)) + 1  # (ma, mb) pairs in lexicographic order, as np.unique(axis=0) gives them
-    pairs = [divmod(int(c), span) for c in np.unique(ma_all.astype(np.int64) * span + mb_all)]
+    we = np.zeros((s.size, 4))
+    we[:, 0], we[:, 1] = 1 - s, s
+    w_rows.append(we)
+    v_rows.append(edge_list[eidx][:, [0, 1, 0, 1]])
+    pairs = sorted(set(zip(ma_all.tolist(), mb_all.tolist())))  # (ma, mb) pairs in lexicographic order
     base = nv
     for ma, mb in pairs:
-        f = np.flatnonzero((ma_all == ma) & (mb_all == mb))
-        nf = f.size
-        Q = q[f]
+        if len(pairs) == 1:  # (every quad)
+            nf, Q = q.shape[0], q
+        else:
+            f = np.flatnonzero((ma_all == ma) & (mb_all == mb))
+            nf, Q = f.size, q[f]
         G = np.empty((nf, ma + 1, mb + 1), np.int64)
         i = np.arange(ma + 1)
         j = np.arange(mb + 1)
@@ -656,7 +659,7 @@ def _refine_and_place(template: PatchTemplate, mult, *, smooth_iters: int | None
     xy[:V0] = pl.xy[:V0]
     xy[V0:] = np.einsum("ik,ikd->id", W, pl.xy[VV])
     # boundary
-    counts = template.side_matrix() @ m
+    counts = np.array([len(sv) - 1 for sv in side_vertices], np.int64)  # (= side_matrix @ m: the sides' refined edges)
     polys = side_polylines(template.shape)
     bpos = [side_points(p, int(c), quality.field) for p, c in zip(polys, counts)]
     bverts = np.concatenate([sv[:-1] for sv in side_vertices])
@@ -689,7 +692,7 @@ def _refine_and_place(template: PatchTemplate, mult, *, smooth_iters: int | None
     el = np.linalg.norm(p[:, [1, 2, 3, 0]] - p, axis=-1)
     ratio = el.max(axis=1) / np.maximum(el.min(axis=1), np.finfo(float).tiny)
     return RefinedMesh(
-        xy=xy, quads=quads, side_vertices=tuple(side_vertices), counts=counts.astype(np.int64), mult=m,
+        xy=xy, quads=quads, side_vertices=tuple(side_vertices), counts=counts, mult=m,
         boundary=loop, scaled_jacobian=sj, inverted=int(inv.sum()), edge_ratio=ratio,
         region_area=template.shape.user_area, mesh_area=float(quad_areas(xy, quads).sum()),
         template=template,
