@@ -358,8 +358,10 @@ def _tied_strips(ties, tied, tables, fixed_at):
             n *= span[g][1] - span[g][0] + 1
         if n > STRIP_POINTS:
             return None
-        grids = np.meshgrid(*[np.arange(span[g][0], span[g][1] + 1) for g in free], indexing="ij") if free else []
-        x = {g: grid.ravel() for g, grid in zip(free, grids)}
+        x = {}  # each free strip's count at every combination, in np.meshgrid's "ij" order
+        if free:
+            grid = np.indices([span[g][1] - span[g][0] + 1 for g in free]).reshape(len(free), -1)
+            x = {g: span[g][0] + grid[d] for d, g in enumerate(free)}
         ok = np.ones(n, bool)
         pending = list(range(len(ties)))
         while pending:  # each strip a tie defines, once its parts are known; the other ties checked
@@ -381,7 +383,7 @@ def _tied_strips(ties, tied, tables, fixed_at):
         for g in order:
             if g not in fixed_at:
                 x0, cost = tables[g]
-                F = F + cost[np.clip(x[g] - x0, 0, cost.size - 1)]
+                F = F + cost[np.minimum(np.maximum(x[g] - x0, 0), cost.size - 1)]  # (np.clip's values)
         F = np.where(ok, F, np.inf)
         i = int(np.argmin(F))
         outside = base + slack  # every solution outside the spans costs more than this
