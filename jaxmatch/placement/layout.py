@@ -735,7 +735,7 @@ def _boundary_loops(layout: Layout, sides: Sides, side_ids, xy: np.ndarray) -> l
             seen.add(v)
             ids = nxt[v]
             out.append(ids[:-1])
-            seen.update(int(i) for i in ids[1:-1])
+            seen.update(ids[1:-1].tolist())
             v = int(ids[-1])
         loops.append(np.concatenate(out))
     if len(loops) > 1:  # (loops of the same area up to round-off, e.g. two equal holes, in the order found)

@@ -161,8 +161,7 @@ def side_polylines(shape: Shape) -> tuple[np.ndarray, ...]:
     for j, rev in shape.side_frame:
         a, b = int(shape.corners[j]), int(shape.corners[(j + 1) % n])
         stop = b if b > a else b + P
-        idx = np.arange(a, stop + 1) % P
-        poly = xy[idx]
+        poly = xy[a:stop + 1].copy() if stop < P else np.concatenate([xy[a:], xy[:stop + 1 - P]])  # (points a..stop mod P)
         out.append(poly[::-1].copy() if rev else poly)
     return tuple(out)
 
