@@ -319,23 +319,25 @@ def make_layout(points, patches, corners=None, sides=None, *, source: str = "<la
         if not isinstance(loop, list) or len(loop) < 3:
             raise InputError(f"patch {p} must be a list of at least 3 point indices", where=source)
         if all(type(v) is int for v in loop):  # (the common case, without a call per entry)
-            ids = np.array(loop, dtype=np.int64)
+            ids, vals = np.array(loop, dtype=np.int64), loop
         else:
             ids = np.array([_int(v, f"patch {p} entry {i}", source) for i, v in enumerate(loop)], dtype=np.int64)
-        out = ids[(ids < 0) | (ids >= P)]
-        if out.size:
+            vals = ids.tolist()
+        if min(vals) < 0 or max(vals) >= P:
+            out = ids[(ids < 0) | (ids >= P)]
             raise InputError(f"patch {p}: point index {int(out[0])} is out of range (there are {P} points)", where=source)
-        if len(set(ids.tolist())) < ids.size:
+        if len(set(vals)) < len(vals):
             uniq, cnt = np.unique(ids, return_counts=True)
             raise InputError(f"patch {p} lists point {int(uniq[cnt > 1][0])} twice", where=source)
-        area = polygon_area(pts[ids])
+        xy = pts[ids]
+        area = polygon_area(xy)
         if not abs(area) > tol * extent:
             raise InputError(f"patch {p} has zero area", where=source)
         if check:
             polys.append(_simple_patch(pts, ids, p, source))
         if area < 0:
-            ids = ids[::-1]
-        pc = corner[ids] & ~_straight(pts[ids])
+            ids, xy = ids[::-1], xy[::-1]
+        pc = corner[ids] & ~_straight(xy)
         cpos = np.flatnonzero(pc)
         if cpos.size < 2:
             raise InputError(f"patch {p} has {cpos.size} corner(s); a patch needs at least 2", where=source)
@@ -381,7 +383,7 @@ def _simple_patch(pts: np.ndarray, ids: np.ndarray, p: int, source: str):
 def _straight(loop_xy: np.ndarray) -> np.ndarray:
     """``(k,) bool``: the closed loop goes straight on at the point (turn below 1e-9 rad)."""
     e_in = loop_xy - roll(loop_xy, 1)
-    e_out = roll(loop_xy, -1) - loop_xy
+    e_out = roll(e_in, -1)  # (point i + 1's incoming edge: the same differences)
     cross = e_in[:, 0] * e_out[:, 1] - e_in[:, 1] * e_out[:, 0]
     dot = np.sum(e_in * e_out, axis=1)
     return (np.abs(np.arctan2(cross, dot)) <= 1e-9)
