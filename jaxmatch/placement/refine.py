@@ -532,11 +532,8 @@ def _refine_topology(quads: np.ndarray, edge_list: np.ndarray, edge_chord: np.nd
     pairs = sorted(set(zip(ma_all.tolist(), mb_all.tolist())))  # (ma, mb) pairs in lexicographic order
     base = nv
     for ma, mb in pairs:
-        if len(pairs) == 1:  # (every quad)
-            nf, Q = q.shape[0], q
-        else:
-            f = np.flatnonzero((ma_all == ma) & (mb_all == mb))
-            nf, Q = f.size, q[f]
+        f = np.flatnonzero((ma_all == ma) & (mb_all == mb))
+        nf, Q = f.size, q[f]
         G = np.empty((nf, ma + 1, mb + 1), np.int64)
         i = np.arange(ma + 1)
         j = np.arange(mb + 1)
