@@ -624,6 +624,23 @@ def test_large_mesh_paths_keep_the_refined_mesh_valid(templates, monkeypatch):
     assert a.inverted == 0 and plain.inverted == 0
 
 
+@pytest.mark.parametrize("smooth_iters, always, good_sj", [(None, R.SMOOTH_ALWAYS, 0.3), (0, R.SMOOTH_ALWAYS, 0.3),
+                                                           (5, R.SMOOTH_ALWAYS, 0.3), (None, 0, 0.0), (None, 0, 2.0)])
+def test_refined_figures_are_those_of_the_final_positions(templates, monkeypatch, smooth_iters, always, good_sj):
+    """Whichever way a refinement is smoothed (always, never, only when a quad is bad: above
+    SMOOTH_ALWAYS, forced here), its scaled Jacobians and inverted count are those of the positions
+    it returns (measured again here), and its side counts the side matrix's."""
+    shp, ts = templates(EXAMPLES / "lshape.json")
+    t = ts[0]
+    m = np.full(t.n_chords, 3, np.int64)
+    monkeypatch.setattr(R, "SMOOTH_ALWAYS", always)
+    rm = R._refine_and_place(t, m, smooth_iters=smooth_iters, quality=Quality(good_sj=good_sj))
+    sj, inv = R.sj_inverted(rm.xy, rm.quads)
+    assert np.array_equal(rm.scaled_jacobian, sj) and rm.inverted == int(inv.sum())
+    assert rm.counts.dtype == np.int64 and np.array_equal(rm.counts, t.side_matrix() @ m)
+    check_refined(rm, shp)
+
+
 @pytest.mark.parametrize("path", [EXAMPLES / "plus.json", LABELLED / "stairs.json", LABELLED / "ushape.json",
                                   EXAMPLES / "lshape.json"])
 def test_sizes_too_short_for_the_corners_are_not_ranked_and_change_nothing(cat, lat, monkeypatch, path):
