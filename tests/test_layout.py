@@ -397,6 +397,35 @@ def test_merge_grids_is_conforming():
     assert gap < 1e-15
 
 
+def test_merge_takes_the_first_patchs_side_vertices_and_measures_the_gap():
+    """A shared side's vertices are the first patch's own positions; ``gap`` is the largest
+    distance from the other patch's own position of one of them (here one moved by (3, 4) / 1000:
+    5 / 1000), measured again here."""
+    lay, sd = strip([1.0, 2.0])
+    n = np.zeros(len(sd.chains), np.int64)
+    patches = []
+    for p, loop in enumerate(lay.patches):
+        g = grid_patch(lay.points[loop], 2, 4)
+        for i, (s,) in enumerate(sd.patch_sides[p]):
+            n[s] = g.counts[i]
+        patches.append(g)
+    i = next(i for i, (s,) in enumerate(sd.patch_sides[1]) if sd.users[s, 1] >= 0)  # patch 1's side on the cut
+    s = int(sd.patch_sides[1][i][0])
+    moved_xy = patches[1].xy.copy()
+    v = patches[1].side_vertices[i][2]  # an inner vertex of that side
+    moved_xy[v] += [0.003, 0.004]
+    xy, quads, patch, side_ids, gap = merge_patches(lay, sd, [patches[0], patches[1]._replace(xy=moved_xy)], n)
+    k = next(k for k, (t,) in enumerate(sd.patch_sides[0]) if int(t) == s)
+    mine = patches[0].xy[patches[0].side_vertices[k]]
+    ids = side_ids[s] if not sd.patch_reversed[0][k][0] else side_ids[s][::-1]
+    assert np.array_equal(xy[ids], mine)  # the first patch's positions, bit for bit
+    own = moved_xy[patches[1].side_vertices[i]]
+    ids1 = side_ids[s][::-1] if sd.patch_reversed[1][i][0] else side_ids[s]
+    assert gap == pytest.approx(float(np.max(np.linalg.norm(xy[ids1] - own, axis=1))), abs=1e-15)
+    assert gap == pytest.approx(0.005, abs=1e-12)
+    check_conforming(xy, quads, outline_of(lay))
+
+
 def test_merge_refuses_counts_that_disagree():
     lay, sd = strip([1.0, 1.0])
     patches = [grid_patch(lay.points[lay.patches[0]], 2, 2), grid_patch(lay.points[lay.patches[1]], 2, 3)]

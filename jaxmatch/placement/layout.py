@@ -628,13 +628,11 @@ def merge_patches(layout: Layout, sides: Sides, refined: Sequence, counts: np.nd
     flat[start] = nid[[e[0] for e in ends]]
     flat[stop - 1] = nid[[e[1] for e in ends]]
     side_ids = [flat[a:b] for a, b in zip(start.tolist(), stop.tolist())]
-    xy_side = np.full((nxt, 2), np.nan)
-    gap = 0.0
-    xy_parts, quad_parts, patch_parts = [], [], []
+    # every patch at once: patch p's vertex v is v + start[p] of the patches' vertices end to end
+    rxy = [np.asarray(rm.xy, dtype=np.float64) for rm in refined]
+    start = np.cumsum([0] + [x.shape[0] for x in rxy]).tolist()
+    svs, gs, qs = [], [], []
     for p, rm in enumerate(refined):
-        rxy = np.asarray(rm.xy, dtype=np.float64)
-        local = np.full(rxy.shape[0], -1, np.int64)
-        svs, gs = [], []  # (all sides of the patch at once)
         for i, (parts, revs) in enumerate(zip(sides.patch_sides[p], sides.patch_reversed[p])):
             sv = rm.side_vertices[i]
             parts, revs = parts.tolist(), revs.tolist()
@@ -642,27 +640,29 @@ def merge_patches(layout: Layout, sides: Sides, refined: Sequence, counts: np.nd
             if len(sv) != want + 1:
                 raise ValueError(f"patch {p} side {i} has {len(sv) - 1} edges, the program chose {want}")
             ids = [side_ids[s][::-1] if r else side_ids[s] for s, r in zip(parts, revs)]
-            svs.append(sv)
+            svs.append(np.asarray(sv, np.int64) + start[p])
             gs.append(ids[0] if len(ids) == 1 else np.concatenate([x[:-1] for x in ids] + [ids[-1][-1:]]))
-        sv, g = np.concatenate(svs).astype(np.int64, copy=False), np.concatenate(gs)
-        local[sv] = g
-        if np.any(local[sv] != g):
-            raise ValueError(f"patch {p}: a vertex is on two sides at different places")
-        pos = rxy[sv]
-        have = ~np.isnan(xy_side[g, 0])  # (placed by an earlier patch)
-        if have.any():
-            d = xy_side[g[have]] - pos[have]
-            gap = max(gap, math.sqrt(float(np.max(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1]))))
-        xy_side[g[~have]] = pos[~have]
-        inner = np.flatnonzero(local < 0)
-        local[inner] = nxt + np.arange(inner.size)
-        nxt += inner.size
-        xy_parts.append(rxy[inner])
-        quad_parts.append(local[np.asarray(rm.quads, dtype=np.int64)])
-        patch_parts.append(np.full(len(rm.quads), p, np.int64))
-    xy = np.concatenate([xy_side] + xy_parts)
+        qs.append(np.asarray(rm.quads, dtype=np.int64) + start[p])
+    sv, g = np.concatenate(svs), np.concatenate(gs)
+    local = np.full(start[-1], -1, np.int64)
+    local[sv] = g
+    wrong = np.flatnonzero(local[sv] != g)
+    if wrong.size:
+        p = int(np.searchsorted(start, sv[wrong[0]], side="right")) - 1
+        raise ValueError(f"patch {p}: a vertex is on two sides at different places")
+    pos = np.concatenate(rxy)
+    _, first = np.unique(g, return_index=True)  # each side vertex placed by the first patch along it
+    xy_side = np.full((nxt, 2), np.nan)
+    xy_side[g[first]] = pos[sv[first]]
+    d = xy_side[g] - pos[sv]  # (0 for the first patch's own)
+    gap = math.sqrt(float(np.max(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1]))) if d.size else 0.0
+    inner = np.flatnonzero(local < 0)  # patch by patch, each in its vertex order
+    local[inner] = nxt + np.arange(inner.size)
+    xy = np.concatenate([xy_side, pos[inner]])
     xy[nid[node_pts]] = layout.points[node_pts]  # nodes: exactly the layout's coordinates
-    return xy, np.concatenate(quad_parts), np.concatenate(patch_parts), tuple(side_ids), gap
+    quads = local[np.concatenate(qs)]
+    patch = np.repeat(np.arange(len(qs), dtype=np.int64), [x.shape[0] for x in qs])
+    return xy, quads, patch, tuple(side_ids), gap
 
 
 def fit_sides(layout: Layout, sides: Sides, p: int, refined, counts: np.ndarray, *, smooth_iters: int = 200,
