@@ -604,7 +604,10 @@ def solve_choice(sides, alternatives: Sequence[Sequence[np.ndarray]], *, penalti
 def _chord_offsets(matrices: Sequence[np.ndarray]) -> np.ndarray:
     """``(P + 1,) int``: where each patch's chords start among the program's chord columns (patch
     after patch; the last entry is their number ``M``), from the ``(n_p, c_p)`` side matrices."""
-    return np.concatenate([[0], np.cumsum([int(np.asarray(A).shape[1]) for A in matrices])]).astype(int)
+    off = [0]
+    for A in matrices:  # (a few patches: Python ints)
+        off.append(off[-1] + int(np.shape(A)[1]))
+    return np.array(off, dtype=int)
 
 
 def _side_rows(sides, matrices: Sequence[np.ndarray], equal: Sequence = ()):
