@@ -48,7 +48,7 @@ from jaxmatch.defaults import QUALITY, Quality
 from jaxmatch.errors import InputError
 from jaxmatch.field import graded_points
 from jaxmatch.placement.milp import LayoutInfeasible, one_patch_sides, solve_counts
-from jaxmatch.placement.reach import reachable
+from jaxmatch.placement.reach import reachable_cols
 from jaxmatch.placement.embed import DENSE_TUTTE, Placement, smooth_in_frame, smooth_near, tutte
 from jaxmatch.placement.templates import PatchTemplate, walk
 from jaxmatch.quality import quad_areas, quality, sj_inverted
@@ -335,16 +335,22 @@ def _exact(template: PatchTemplate, counts: np.ndarray, h: float, widths: np.nda
 def feasible(template: PatchTemplate, counts) -> bool:
     """Whether some multiplicities give exactly ``counts`` ``(n_sides,)`` edges per side: every
     chord at least once (``A @ 1``), the rest any sums of chords
-    (:func:`jaxmatch.placement.reach.reachable`), or the integer program when there are too
+    (:func:`jaxmatch.placement.reach.reachable_cols`), or the integer program when there are too
     many count vectors to enumerate."""
-    c = np.asarray(counts, np.int64)
-    if c.sum() % 2:
+    c = [int(v) for v in np.asarray(counts, np.int64).tolist()]
+    if sum(c) % 2:
         return False
-    A = template.side_matrix()
-    found = reachable(A, c - A.sum(axis=1))
+    sides = template.side_chords  # (the side matrix's columns, in plain Python: most answers come from the forced moves)
+    if len(c) != len(sides):
+        raise ValueError(f"{len(c)} counts for {len(sides)} sides")
+    cols = [[0] * len(sides) for _ in range(template.n_chords)]
+    for i, ch in enumerate(sides):
+        for k in ch.tolist():
+            cols[k][i] += 1
+    found = reachable_cols(cols, [n - len(ch) for n, ch in zip(c, sides)])
     if found is not None:
         return found
-    return _exact(template, c, 1.0, widths=np.ones(A.shape[1])) is not None
+    return _exact(template, np.asarray(c, np.int64), 1.0, widths=np.ones(template.n_chords)) is not None
 
 
 def nearest_counts(template: PatchTemplate, counts) -> np.ndarray:
