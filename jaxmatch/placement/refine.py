@@ -48,6 +48,7 @@ from jaxmatch.defaults import QUALITY, Quality
 from jaxmatch.errors import InputError
 from jaxmatch.field import graded_points
 from jaxmatch.placement.milp import LayoutInfeasible, one_patch_sides, solve_counts
+from jaxmatch.placement.reach import reachable_cols
 from jaxmatch.placement.embed import DENSE_TUTTE, Placement, smooth_in_frame, smooth_near, tutte
 from jaxmatch.placement.templates import PatchTemplate, walk
 from jaxmatch.quality import quad_areas, quality, sj_inverted
@@ -330,50 +331,25 @@ def _exact(template: PatchTemplate, counts: np.ndarray, h: float, widths: np.nda
     return m
 
 
-FEASIBLE_STATES = 100_000
-"""Largest number of count vectors :func:`feasible` enumerates (every vector below the counts);
-beyond it the integer program answers."""
-
-
-def _reachable(A: np.ndarray, target: np.ndarray) -> bool | None:
-    """Whether ``A @ x == target`` for some integer ``x >= 0`` (``A``: ``(S, C)`` nonnegative
-    integers, ``target``: ``(S,)``), by marking every vector ``<= target`` that sums of columns
-    reach, one column at a time: the marks shifted by ``a``, ``2a``, ``4a``, ... (each a slice of
-    the ``target + 1`` box) close them under adding any number of copies of column ``a``; None
-    when there are more than :data:`FEASIBLE_STATES` such vectors."""
-    t = np.asarray(target, np.int64)
-    if np.any(t < 0):
-        return False
-    dims = tuple(int(d) for d in t + 1)
-    if math.prod(dims) > FEASIBLE_STATES:
-        return None
-    reach = np.zeros(dims, bool)
-    reach[(0,) * len(dims)] = True
-    goal = tuple(t.tolist())
-    for a in np.asarray(A, np.int64).T.tolist():  # Python ints: a few steps of tiny boxes
-        step = a
-        while any(step) and all(s <= g for s, g in zip(step, goal)):
-            dst = tuple(slice(s, None) for s in step)
-            src = tuple(slice(0, d - s) for d, s in zip(dims, step))
-            reach[dst] |= reach[src]
-            step = [2 * s for s in step]
-        if reach[goal]:  # marks are only ever added
-            return True
-    return bool(reach[goal])
-
-
 def feasible(template: PatchTemplate, counts) -> bool:
     """Whether some multiplicities give exactly ``counts`` ``(n_sides,)`` edges per side: every
-    chord at least once (``A @ 1``), the rest any sums of chords (:func:`_reachable`), or the
-    integer program when there are too many count vectors to enumerate."""
-    c = np.asarray(counts, np.int64)
-    if c.sum() % 2:
+    chord at least once (``A @ 1``), the rest any sums of chords
+    (:func:`jaxmatch.placement.reach.reachable_cols`), or the integer program when there are too
+    many count vectors to enumerate."""
+    c = [int(v) for v in np.asarray(counts, np.int64).tolist()]
+    if sum(c) % 2:
         return False
-    A = template.side_matrix()
-    found = _reachable(A, c - A.sum(axis=1))
+    sides = template.side_chords  # (the side matrix's columns, in plain Python: most answers come from the forced moves)
+    if len(c) != len(sides):
+        raise ValueError(f"{len(c)} counts for {len(sides)} sides")
+    cols = [[0] * len(sides) for _ in range(template.n_chords)]
+    for i, ch in enumerate(sides):
+        for k in ch.tolist():
+            cols[k][i] += 1
+    found = reachable_cols(cols, [n - len(ch) for n, ch in zip(c, sides)])
     if found is not None:
         return found
-    return _exact(template, c, 1.0, widths=np.ones(A.shape[1])) is not None
+    return _exact(template, np.asarray(c, np.int64), 1.0, widths=np.ones(template.n_chords)) is not None
 
 
 def nearest_counts(template: PatchTemplate, counts) -> np.ndarray:
