@@ -397,8 +397,8 @@ def place_match(shape: Shape, annotation: Annotation, catalogue: Catalogue, matc
                 kept = placement_key(best[1]) if best[0] is None else best[0]
                 best = (key, pl, u) if key < kept else (kept, best[1], best[2])
         _, pl, u = best  # boundary paths only for the one kept
-        pl = dataclasses.replace(pl, boundary_paths=exact_paths(shape.points, u, pl.xy[pl.mesh.boundary], shape.arc_length))
-        user = to_user_placement(shape, pl)
+        user = to_user_placement(shape, pl, boundary_paths=exact_paths(shape.points, u, pl.xy[pl.mesh.boundary],
+                                                                       shape.arc_length))
     if placements is not None:
         placements[cache_key] = user
     return user
@@ -420,25 +420,23 @@ def _place_pinned(shape: Shape, annotation: Annotation, mesh, match: Match, al: 
     between them), and no boundary vertex slides (none lies between two corners); the same
     :class:`Placement`, its figures computed as :func:`place` and :func:`to_user_placement`
     compute them. Without internal vertices nothing is smoothed either: the placement is built
-    directly (without the unit-box quality that :func:`to_user_placement` measures again)."""
+    directly in user coordinates (:func:`_user_fields`, what :func:`to_user_placement` sets)."""
     u = np.mod(np.asarray(annotation.t, dtype=np.float64)[al], float(shape.arc_length[-1]))
     bxy = np.asarray(annotation.positions)[al]
     miss = missed_corners(annotation, bxy)
     if int(mesh.n_vertices) > al.shape[0]:  # internal vertices: placed and smoothed as the search places them
         pl = place(shape.points, annotation.t, al, mesh, match.rotation, match.reflected, boundary_xy=bxy,
                    smooth_iters=smooth_iters, paths=False, region_area=shape.area)
-        pl = dataclasses.replace(pl, missed_corners=miss, corners=shape.n_corners)
-    else:
-        om, loop = oriented_boundary(mesh, match.rotation, match.reflected)
-        xy = np.empty((om.n_vertices, 2))
-        xy[loop] = bxy  # (what place() puts there: no vertex is free)
-        none = np.zeros(0)  # the quality figures: to_user_placement measures them in user coordinates
-        pl = Placement(mesh=om, xy=xy, scaled_jacobian=none, min_angle=none, max_angle=none, inverted=0,
-                       irregular=np.zeros(0, np.int64), alignment=al, region_area=float(shape.area),
-                       mesh_area=float(quad_areas(xy, om.quads).sum()), rotation=int(match.rotation),
-                       reflected=bool(match.reflected), missed_corners=miss, corners=shape.n_corners)
-    pl = dataclasses.replace(pl, boundary_paths=exact_paths(shape.points, u, pl.xy[pl.mesh.boundary], shape.arc_length))
-    return to_user_placement(shape, pl)
+        paths = exact_paths(shape.points, u, pl.xy[pl.mesh.boundary], shape.arc_length)
+        return to_user_placement(shape, pl, missed_corners=miss, corners=shape.n_corners, boundary_paths=paths)
+    om, loop = oriented_boundary(mesh, match.rotation, match.reflected)
+    xy = np.empty((om.n_vertices, 2))
+    xy[loop] = bxy  # (what place() puts there: no vertex is free)
+    paths = exact_paths(shape.points, u, bxy, shape.arc_length)  # (bxy: xy[om.boundary])
+    return Placement(mesh=om, irregular=np.zeros(0, np.int64), alignment=al, rotation=int(match.rotation),
+                     reflected=bool(match.reflected), corners=shape.n_corners,
+                     **_user_fields(shape, xy, om.quads, miss, paths, float(shape.area),
+                                    float(quad_areas(xy, om.quads).sum())))
 
 
 def _pin_keys(annotation: Annotation, alignments: Sequence[np.ndarray]) -> list[bytes]:
@@ -482,25 +480,32 @@ def _place_candidate(shape, annotation, mesh, rot, refl, al, smooth_iters, b: Bo
         yield put(b.slide_groups)
 
 
-def to_user_placement(shape: Shape, pl: Placement) -> Placement:
-    """A unit-box placement mapped to user coordinates (``shape.to_user``), quality recomputed."""
-    xy = shape.to_user(pl.xy)
-    quads = pl.mesh.quads
-    sj, amin, amax, folded = quality_inverted(xy, quads)
+def to_user_placement(shape: Shape, pl: Placement, **unit) -> Placement:
+    """A unit-box placement mapped to user coordinates (``shape.to_user``), quality recomputed.
+    ``unit``: fields of ``pl`` to set first (unit box; e.g. ``boundary_paths``), in the same copy."""
+    def get(name):
+        return unit[name] if name in unit else getattr(pl, name)
+
+    fields = _user_fields(shape, get("xy"), pl.mesh.quads, get("missed_corners"), get("boundary_paths"),
+                          get("region_area"), get("mesh_area"))
+    return dataclasses.replace(pl, **{**unit, **fields})
+
+
+def _user_fields(shape: Shape, xy: np.ndarray, quads: np.ndarray, missed: np.ndarray, paths: tuple,
+                 region_area: float, mesh_area: float) -> dict:
+    """The :class:`Placement` fields that :func:`to_user_placement` maps or measures, from the
+    unit-box ``xy (V, 2)``, ``missed (c, 2)``, ``paths`` (``(k_j, 2)`` each) and areas: positions
+    in user coordinates (the paths mapped as one array, sliced back), quality measured there."""
+    user = shape.to_user(xy)
+    sj, amin, amax, folded = quality_inverted(user, quads)
     s2 = float(shape.scale) ** 2
-    return dataclasses.replace(
-        pl,
-        xy=xy,
-        edge_ratio=edge_ratios(xy, quads),
-        missed_corners=shape.to_user(pl.missed_corners).reshape(-1, 2),
-        scaled_jacobian=sj,
-        min_angle=amin,
-        max_angle=amax,
-        inverted=int(folded.sum()),
-        boundary_paths=tuple(shape.to_user(p) for p in pl.boundary_paths),
-        region_area=pl.region_area * s2,
-        mesh_area=pl.mesh_area * s2,
-    )
+    if paths:
+        lens = np.cumsum([len(q) for q in paths]).tolist()
+        flat = shape.to_user(np.concatenate(paths))
+        paths = tuple(flat[i:j] for i, j in zip([0] + lens[:-1], lens))
+    return dict(xy=user, edge_ratio=edge_ratios(user, quads), missed_corners=shape.to_user(missed).reshape(-1, 2),
+                scaled_jacobian=sj, min_angle=amin, max_angle=amax, inverted=int(folded.sum()),
+                boundary_paths=tuple(paths), region_area=region_area * s2, mesh_area=mesh_area * s2)
 
 
 # ---------------------------------------------------------------------------------------------

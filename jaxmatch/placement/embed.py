@@ -708,13 +708,38 @@ def place(
 def exact_paths(points: np.ndarray, t_aligned: np.ndarray, bxy: np.ndarray,
                 cum: np.ndarray | None = None) -> tuple[np.ndarray, ...]:
     """:func:`boundary_paths` between the parameters ``t_aligned (n,)`` whose end points are
-    exactly the boundary vertex positions ``bxy (n, 2)`` (``cum``: as there)."""
-    paths = boundary_paths(points, t_aligned, cum)
-    n = len(paths)
-    out = []
-    for j, p in enumerate(paths):
-        p = p.copy()
-        p[0] = bxy[j]
-        p[-1] = bxy[(j + 1) % n]
-        out.append(p)
-    return tuple(out)
+    exactly the boundary vertex positions ``bxy (n, 2)`` (``cum``: as there).
+
+    The same polyline vertices as :func:`boundary_paths` picks, gathered for all paths in one
+    array (its ends never computed: they are ``bxy``); path ``j`` is a slice of it."""
+    p = np.asarray(points, dtype=np.float64)
+    cum = arc_lengths(p) if cum is None else cum
+    ta = np.asarray(t_aligned, dtype=np.float64).ravel()
+    n, P = ta.shape[0], p.shape[0]
+    if n == 0 or n * 3 * P > 4_000_000:  # as boundary_paths: one piece at a time
+        out = []
+        for j, q in enumerate(boundary_paths(p, ta, cum)):
+            q = q.copy()
+            q[0] = bxy[j]
+            q[-1] = bxy[(j + 1) % n]
+            out.append(q)
+        return tuple(out)
+    per = cum[-1]
+    t1 = roll(ta, -1)
+    t1 = np.where(t1 <= ta, t1 + per, t1)
+    tol = VERTEX_SNAP * per
+    c3 = np.concatenate([cum[:-1], cum[:-1] + per, cum[:-1] + 2 * per])
+    inside = (c3[None, :] > ta[:, None] + tol) & (c3[None, :] < t1[:, None] - tol)  # (n, 3P), as boundary_paths
+    rows, cols = np.nonzero(inside)  # path by path, each in loop order
+    lens = np.bincount(rows, minlength=n) + 2  # the two ends and the vertices between
+    ends = np.cumsum(lens)
+    starts = ends - lens
+    flat = np.empty((int(ends[-1]), 2))
+    b = np.asarray(bxy, dtype=np.float64).reshape(n, 2)
+    flat[starts] = b
+    flat[ends - 1] = roll(b, -1)
+    inner = np.ones(flat.shape[0], bool)
+    inner[starts] = False
+    inner[ends - 1] = False
+    flat[inner] = p[cols % P]
+    return tuple(flat[i:j] for i, j in zip(starts.tolist(), ends.tolist()))
