@@ -666,6 +666,30 @@ def test_boundary_paths_are_the_sub_polylines(seed, n, P):
         np.testing.assert_array_equal(got[j], want)
 
 
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), n=st.integers(1, 12), P=st.integers(3, 40), at_vertices=st.booleans())
+def test_exact_paths_are_the_boundary_paths_with_given_ends(seed, n, P, at_vertices):
+    """:func:`exact_paths` (every path gathered at once, ends never computed) gives bit for bit
+    the pieces of :func:`boundary_paths` with their ends replaced by the vertex positions, also
+    for parameters on polyline vertices (which a piece must not repeat) and one-vertex loops."""
+    from jaxmatch.placement.embed import exact_paths
+
+    rng = np.random.default_rng(seed)
+    ang = np.sort(rng.uniform(0, 2 * np.pi, P))
+    pts = np.c_[np.cos(ang), np.sin(ang)] * rng.uniform(0.5, 1.5, (P, 1))
+    cum = arc_lengths(pts)
+    t = np.unique(rng.choice(cum[:-1], min(n, P), replace=False) if at_vertices else rng.uniform(0, cum[-1], n))
+    bxy = rng.normal(size=(t.shape[0], 2))
+    want = [p.copy() for p in boundary_paths(pts, t, cum)]
+    for j, p in enumerate(want):
+        p[0], p[-1] = bxy[j], bxy[(j + 1) % len(want)]
+    for cum_given in (cum, None):
+        got = exact_paths(pts, t, bxy, cum_given)
+        assert len(got) == len(want)
+        for g, w in zip(got, want):
+            assert g.dtype == w.dtype and g.shape == w.shape and g.tobytes() == w.tobytes()
+
+
 def test_sj_inverted_refuses_vertex_ids_out_of_range():
     """A quad naming a vertex that does not exist is an IndexError (numpy's), not a read past the array."""
     xy = np.zeros((4, 2))

@@ -768,6 +768,29 @@ def _same_placement(a, b) -> bool:
     return True
 
 
+@pytest.mark.parametrize("name", ["triangle", "lshape", "square"])
+def test_to_user_placement_maps_every_field_alone(ranked, cat, name):
+    """:func:`to_user_placement` (paths mapped as one array, fields set in one copy) gives each
+    position array bit for bit what ``shape.to_user`` gives it alone, and measures quality on
+    the mapped positions; fields given as ``unit`` replace the placement's before mapping."""
+    from jaxmatch.placement.choose import to_user_placement
+    from jaxmatch.quality import edge_ratios, quality_inverted
+
+    shp, r, _ = ranked[name]
+    for m in r.results[:4]:
+        pl = place(shp.points, r.annotation.t, m.alignment, cat.mesh(m.mesh_id), m.rotation, m.reflected)
+        assert len(pl.boundary_paths) == len(m.alignment)
+        miss = r.annotation.positions[:2]
+        user = to_user_placement(shp, pl, missed_corners=miss, corners=7)
+        assert user.corners == 7 and user.xy.tobytes() == shp.to_user(pl.xy).tobytes()
+        assert user.missed_corners.tobytes() == shp.to_user(miss).tobytes()
+        assert [p.tobytes() for p in user.boundary_paths] == [shp.to_user(p).tobytes() for p in pl.boundary_paths]
+        sj, amin, amax, folded = quality_inverted(user.xy, pl.mesh.quads)
+        assert user.scaled_jacobian.tobytes() == sj.tobytes() and user.inverted == int(folded.sum())
+        assert user.edge_ratio.tobytes() == edge_ratios(user.xy, pl.mesh.quads).tobytes()
+        assert user.mesh_area == pl.mesh_area * float(shp.scale) ** 2
+
+
 def _template_on_corners(cat, lat, ranking, n: int) -> list:
     """The ranking's meshes of boundary length ``n`` (the single quad for four corners, the mesh
     of one internal vertex for six), each as a match whose boundary vertices all stand on the
