@@ -566,6 +566,27 @@ def test_snap_picks_the_nearest_increasing_assignment(seed):
         assert np.all(np.diff(got) > 0) and sum((even[got] - tc) ** 2) == pytest.approx(best, abs=1e-12)
 
 
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), n=st.integers(1, 14), pinned=st.integers(1, 14))
+def test_run_arrays_are_the_runs(seed, n, pinned):
+    """:func:`_run_arrays` (every run between pinned vertices at once, as corner_boundary spreads
+    them) holds bit for bit what :func:`_runs` yields run by run, one pinned vertex included."""
+    from jaxmatch.placement.choose import _run_arrays, _runs
+
+    rng = np.random.default_rng(seed)
+    m = n + int(rng.integers(0, 10))
+    per = float(rng.uniform(0.5, 5.0))
+    tt = np.sort(rng.uniform(0, per, m))
+    P = np.sort(rng.choice(n, min(pinned, n), replace=False))
+    pin = dict(zip(P.tolist(), np.sort(rng.choice(m, P.size, replace=False)).tolist()))
+    want = list(_runs(P, lambda j: pin[j], tt, n, per))
+    got = _run_arrays(P, pin, tt, n, per)
+    assert all(len(a) == len(want) for a in got)
+    for q, (ja, jb, r, ta, tb) in enumerate(want):
+        assert (int(got[0][q]), int(got[1][q]), int(got[2][q])) == (int(ja), int(jb), int(r))
+        assert float(got[3][q]).hex() == float(ta).hex() and float(got[4][q]).hex() == float(tb).hex()
+
+
 def test_spare_vertices_take_the_corners_an_alignment_skipped():
     """An alignment of the L shape that skips the concave corner, with vertices on straight
     points around it: unsnapped, the corner is missed; snapped, one of those vertices stands

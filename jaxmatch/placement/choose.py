@@ -124,12 +124,12 @@ def corner_boundary(shape: Shape, annotation: Annotation, alignment: np.ndarray,
     pts = shape.points
     J = np.flatnonzero(codes[al] != S_CODE)
     u = tt[al].astype(np.float64).copy()
-    pin = {int(j): int(al[j]) for j in J}  # vertex -> corner point it stands on
+    pin = dict(zip(J.tolist(), al[J].tolist()))  # vertex -> corner point it stands on
     if J.size == 0:
         step = per / n
         phase = float(np.mean(tt[al] - step * np.arange(n)))
         u = phase + step * np.arange(n)
-    elif snap:
+    elif snap and len(pin) < int(np.count_nonzero(codes != S_CODE)):  # (every corner taken: none to snap)
         corner_pts = np.flatnonzero(codes != S_CODE)
         taken = set(pin.values())
         for ja, jb, r, ta, tb in _runs(J, lambda j: al[j], tt, n, per):
@@ -143,18 +143,32 @@ def corner_boundary(shape: Shape, annotation: Annotation, alignment: np.ndarray,
     cum = shape.arc_length
     if pin:
         P = np.array(sorted(pin))
-        L = cum[-1]
-        loop3 = (np.concatenate([cum[:-1], cum[:-1] + L, cum[:-1] + 2 * L]), np.concatenate([pts, pts, pts]))
-        for ja, jb, r, ta, tb in _runs(P, lambda j: pin[j], tt, n, per):
-            u[ja] = ta
-            js = (ja + 1 + np.arange(r)) % n
-            u[js] = ta + (tb - ta) * (np.arange(1, r + 1) / (r + 1))
-            if r and P.size > 1 and _straight(pts, cum, ta, tb, loop3):
-                groups.append((int(ja), int(jb), js.astype(np.int64)))
+        ja, jb, r, ta, tb = _run_arrays(P, pin, tt, n, per)
+        u[ja] = ta  # the runs' vertices are disjoint: all runs set at once, as one by one
+        each = np.repeat(np.arange(P.size), r)
+        k = np.arange(each.size) - np.repeat(np.cumsum(r) - r, r) + 1  # 1..r within each run
+        u[(ja[each] + k) % n] = ta[each] + (tb[each] - ta[each]) * (k / (r[each] + 1))
+        if P.size > 1 and r.any():
+            L = cum[-1]
+            loop3 = (np.concatenate([cum[:-1], cum[:-1] + L, cum[:-1] + 2 * L]), np.concatenate([pts, pts, pts]))
+            for q in np.flatnonzero(r).tolist():
+                if _straight(pts, cum, ta[q], tb[q], loop3):
+                    groups.append((int(ja[q]), int(jb[q]), (ja[q] + 1 + np.arange(r[q])) % n))
     xy = shape_point_at(pts, u, cum) if len(pin) < n else np.empty((n, 2))  # (every vertex pinned: all set below)
-    for j, c in pin.items():
-        xy[j] = annotation.positions[c]  # corners exactly
+    if pin:
+        xy[list(pin)] = np.asarray(annotation.positions)[list(pin.values())]  # corners exactly
     return Boundary(u, xy, tuple(groups), missed_corners(annotation, xy))
+
+
+def _run_arrays(P: np.ndarray, pin: dict, tt: np.ndarray, n: int, per: float):
+    """:func:`_runs` of the pinned vertices ``P`` (sorted) as arrays ``(ja, jb, r, ta, tb)``,
+    each ``(len(P),)``: the same values (vertex ``j`` stands on point ``pin[j]``)."""
+    pt = np.asarray([pin[j] for j in P.tolist()], np.int64)
+    jb = roll(P, -1)
+    r = (jb - P - 1) % n if P.size > 1 else np.full(1, n - 1, np.int64)
+    ta = tt[pt]
+    tb = tt[roll(pt, -1)] if P.size > 1 else ta + per
+    return P, jb, r, ta, np.where(tb <= ta, tb + per, tb)
 
 
 def _runs(J: np.ndarray, point_of, tt: np.ndarray, n: int, per: float):
