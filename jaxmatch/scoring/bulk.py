@@ -46,6 +46,8 @@ from jaxmatch.scoring.exact import (  # numpy only: no JAX import here
     DEFAULT_BATCH,
     UNROLL,
     block_size,
+    dp_kinds,
+    dp_problem,
     exact_values,
     final_values,
     reduce_orientations,
@@ -401,6 +403,7 @@ def _values(codes, seqs, weights, *, devices=None, plan=None, **kw) -> np.ndarra
     """Per-orientation values of ``seqs`` on one device (threads) or sharded over ``devices``."""
     if devices is not None and not (isinstance(devices, (int, np.integer)) and int(devices) == 1):
         kw.pop("threads", None)
+        kw.pop("problem", None)
         return sharded_values(codes, seqs, weights, devices=devices, plan=plan, **kw)
     return final_values(codes, seqs, weights, plan=plan, **kw)
 
@@ -496,11 +499,29 @@ def top_k(
                 thr[g] = sorted(us, reverse=True)[top - 1]
         return thr
 
+    kinds: dict = {}  # boundary length -> DP number type (dp_kinds), read once
+    problems: dict = {}  # DP number type -> the shape's DP problem (dp_problem), its n set per part
+
+    def problem(n: int):
+        """``dp_problem([codes], weights, n)``: the shape padded and the model compiled once per
+        number type (only ``n`` differs between the parts' problems)."""
+        if not kinds:
+            kinds.update(dp_kinds(weights, sorted({int(p.n) for p in parts})))
+        kind = kinds[int(n)]
+        if kind not in problems:
+            problems[kind] = dp_problem([codes], weights, int(n), kind=kind)
+        return problems[kind]._replace(n=int(n))
+
     def score_some(p: Part, sel: np.ndarray, plan) -> None:
-        rep = _values(codes, p.groups.seqs[sel], weights, plan=plan, batch=batch, threads=threads, devices=devices)
-        mesh_rows = np.flatnonzero(np.isin(p.groups.index, sel))
-        # fan_out of the scored rows only (sel is sorted): no (U, 2n) array per call
-        at = np.searchsorted(sel, p.groups.index[mesh_rows])
+        rep = _values(codes, p.groups.seqs[sel], weights, plan=plan, batch=batch, threads=threads, devices=devices,
+                      problem=problem(p.n))
+        if len(sel) == len(p.groups.seqs):  # every sequence (sel sorted, distinct): every mesh, as below
+            mesh_rows = np.arange(len(p.groups.index))
+            at = np.asarray(p.groups.index)
+        else:
+            mesh_rows = np.flatnonzero(np.isin(p.groups.index, sel))
+            # fan_out of the scored rows only (sel is sorted): no (U, 2n) array per call
+            at = np.searchsorted(sel, p.groups.index[mesh_rows])
         res = reduce_orientations(np.asarray(rep)[at[:, None], p.groups.orient[mesh_rows]])
         ok = np.isfinite(res.utility)
         keep = ok & (res.utility >= cutoffs()[group_of(p.k[mesh_rows])])  # the others cannot be selected

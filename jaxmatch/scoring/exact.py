@@ -186,15 +186,25 @@ def dp_kind(weights, n: int) -> DPKind:
     int32, anything else float32 with :data:`NEG` (bit for bit the recurrence of
     :func:`dp_scan`). All three give identical utilities.
     """
+    return dp_kinds(weights, [n])[int(n)]
+
+
+def dp_kinds(weights, ns) -> dict[int, DPKind]:
+    """:func:`dp_kind` of every boundary length in ``ns`` (``{n: kind}``), the model read once
+    (a ranking scores several lengths against one model)."""
     t = skip_frame(weights).table
     w = t[t > NEG / 2]
     big = float(np.abs(w).max()) if w.size else 0.0
-    if w.size == 0 or np.all(w == np.round(w)):
-        if n * big < 2**13:
-            return DPKind(np.int16, float(NEG16))
-        if n * big < 2**29:
-            return DPKind(np.int32, float(NEG32))
-    return DPKind(np.float32, NEG)
+    integral = w.size == 0 or bool(np.all(w == np.round(w)))
+    out = {}
+    for n in ns:
+        kind = DPKind(np.float32, NEG)
+        if integral and int(n) * big < 2**13:
+            kind = DPKind(np.int16, float(NEG16))
+        elif integral and int(n) * big < 2**29:
+            kind = DPKind(np.int32, float(NEG32))
+        out[int(n)] = kind
+    return out
 
 
 def dp_table(weights, kind: DPKind) -> np.ndarray:
@@ -274,6 +284,7 @@ def exact_values(
     batch: int = DEFAULT_BATCH,
     m_pad: int | None = None,
     plan: tuple[int, int] | None = None,
+    problem: DPProblem | None = None,
 ) -> np.ndarray:
     """The exact host: best utility of every orientation of every mesh against every shape,
     ``(S, N, 2n) float32``, ``-inf`` where an orientation has no finite alignment (or ``n > m``).
@@ -282,12 +293,15 @@ def exact_values(
     (:func:`jaxmatch.kernels.model.weights_of`). Meshes are padded to whole calls of
     ``mesh_lanes x blocks per call x block`` (:func:`plan_chunks` of ``batch``, or ``plan``);
     ``backend`` (default :func:`jaxmatch.kernels.backends.default_backend`) computes the raw values.
+    ``problem``: ``dp_problem(codes_list, weights, n, m_pad)`` when the caller has it.
     """
     if backend is None:
         backend = default_backend()
     v = _check_vals(vals)
     big_n, n = v.shape
-    prob = dp_problem(codes_list, weights, n, m_pad)
+    prob = dp_problem(codes_list, weights, n, m_pad) if problem is None else problem
+    if prob.n != n:
+        raise ValueError(f"the problem is for boundary length {prob.n}, the meshes have {n}")
     lanes = max(int(backend.mesh_lanes), 1)
     block, per_call = plan if plan is not None else plan_chunks(-(-big_n // lanes), n, batch)
     chunk = lanes * per_call * block
@@ -312,14 +326,16 @@ def final_values(
     threads: int | None = None,
     plan: tuple[int, int] | None = None,
     backend: Backend | None = None,
+    problem: DPProblem | None = None,
 ) -> np.ndarray:
     """Best utility of every orientation for one shape: ``(N, 2n) float32``, ``-inf`` where the
     orientation has no finite alignment (or ``n > m``). Column ``o`` is orientation ``o`` of the
     module docstring. :func:`exact_values` for one shape (``threads``, ``unroll``: of the
-    default backend, :func:`jaxmatch.kernels.backends.default_backend`)."""
+    default backend, :func:`jaxmatch.kernels.backends.default_backend`; ``problem``: as there)."""
     if backend is None:
         backend = default_backend(threads, unroll)
-    return exact_values([codes], vals, weights, backend=backend, batch=batch, m_pad=m_pad, plan=plan)[0]
+    return exact_values([codes], vals, weights, backend=backend, batch=batch, m_pad=m_pad, plan=plan,
+                        problem=problem)[0]
 
 
 def reduce_orientations(values: np.ndarray) -> ScoreResult:
