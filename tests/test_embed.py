@@ -22,7 +22,8 @@ from jaxmatch.placement.embed import (
     to_user,
     tutte,
 )
-from jaxmatch.quality import edge_ratios, inverted_mask, quad_areas, quality, quality_inverted, sj_inverted
+from jaxmatch.quality import (edge_ratios, inverted_mask, placement_measures, quad_areas, quality, quality_inverted,
+                              sj_inverted)
 from jaxmatch.catalogue.mesh import boundary_valences, from_quads, validate, valences
 
 # ---------------------------------------------------------------------------------------------
@@ -688,6 +689,22 @@ def test_exact_paths_are_the_boundary_paths_with_given_ends(seed, n, P, at_verti
         assert len(got) == len(want)
         for g, w in zip(got, want):
             assert g.dtype == w.dtype and g.shape == w.shape and g.tobytes() == w.tobytes()
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), F=st.integers(0, 30), degenerate=st.booleans())
+def test_placement_measures_are_quality_and_edge_ratios(seed, F, degenerate):
+    """:func:`placement_measures` (one set of edge lengths for the scaled Jacobian and the edge
+    ratios) gives bit for bit :func:`quality_inverted` and :func:`edge_ratios`, also for folded
+    quads and quads with a repeated vertex (zero-length edges: ratio inf, scaled Jacobian 0)."""
+    rng = np.random.default_rng(seed)
+    xy = rng.normal(size=(12, 2)) * rng.uniform(1e-3, 1e3)
+    quads = rng.integers(0, 12 if not degenerate else 5, size=(F, 4))
+    got = placement_measures(xy, quads)
+    want = (*quality_inverted(xy, quads), edge_ratios(xy, quads))
+    assert len(got) == 5
+    for g, w in zip(got, want):
+        assert g.dtype == w.dtype and g.shape == w.shape and g.tobytes() == w.tobytes()
 
 
 def test_sj_inverted_refuses_vertex_ids_out_of_range():

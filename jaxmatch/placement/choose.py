@@ -37,7 +37,7 @@ from jaxmatch.kernels import placement as kernels
 from jaxmatch.placement.embed import Placement, exact_paths, oriented_boundary, place
 from jaxmatch.placement.spread import (MAX_TIED_ALIGNMENTS, orientation_utilities, spread_alignment,
                                        spread_optimal_alignment, spread_setup)
-from jaxmatch.quality import edge_ratios, quad_areas, quality_inverted
+from jaxmatch.quality import placement_measures, quad_areas
 from jaxmatch.shape import S as S_CODE
 from jaxmatch.shape import point_at as shape_point_at
 from jaxmatch.scoring.rank import TIE_CAP, Match, Ranking, TieBreaker
@@ -511,13 +511,13 @@ def _user_fields(shape: Shape, xy: np.ndarray, quads: np.ndarray, missed: np.nda
     unit-box ``xy (V, 2)``, ``missed (c, 2)``, ``paths`` (``(k_j, 2)`` each) and areas: positions
     in user coordinates (the paths mapped as one array, sliced back), quality measured there."""
     user = shape.to_user(xy)
-    sj, amin, amax, folded = quality_inverted(user, quads)
+    sj, amin, amax, folded, ratio = placement_measures(user, quads)
     s2 = float(shape.scale) ** 2
     if paths:
         lens = np.cumsum([len(q) for q in paths]).tolist()
         flat = shape.to_user(np.concatenate(paths))
         paths = tuple(flat[i:j] for i, j in zip([0] + lens[:-1], lens))
-    return dict(xy=user, edge_ratio=edge_ratios(user, quads), missed_corners=shape.to_user(missed).reshape(-1, 2),
+    return dict(xy=user, edge_ratio=ratio, missed_corners=shape.to_user(missed).reshape(-1, 2),
                 scaled_jacobian=sj, min_angle=amin, max_angle=amax, inverted=int(folded.sum()),
                 boundary_paths=tuple(paths), region_area=region_area * s2, mesh_area=mesh_area * s2)
 

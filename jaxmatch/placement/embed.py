@@ -51,7 +51,7 @@ import numpy as np
 from jaxmatch.catalogue.mesh import QuadMesh, edges, mesh_valences
 from jaxmatch.arrays import roll
 from jaxmatch.geometry import VERTEX_SNAP, cumulative_length, point_at, signed_area, sub_polyline
-from jaxmatch.quality import corner_vectors, edge_ratios, quad_areas, quality_inverted, sj_inverted
+from jaxmatch.quality import corner_vectors, placement_measures, quad_areas, sj_inverted
 
 __all__ = [
     "Placement",
@@ -674,7 +674,7 @@ def place(
         bxy[js] = bxy[ja] + u[:, None] * (bxy[jb] - bxy[ja])
     xy[loop] = bxy  # exact boundary positions (no round-off from normalisation)
 
-    sj, amin, amax, folded = quality_inverted(xy, quads)
+    sj, amin, amax, folded, ratio = placement_measures(xy, quads)
     val = mesh_valences(mesh)  # the oriented mesh has the same vertices
     internal = np.ones(V, bool)
     internal[loop] = False
@@ -698,7 +698,7 @@ def place(
         boundary_paths=paths,
         region_area=polygon_area(pts) if region_area is None else float(region_area),
         mesh_area=float(quad_areas(xy, quads).sum()),
-        edge_ratio=edge_ratios(xy, quads),
+        edge_ratio=ratio,
         rotation=int(rotation),
         reflected=bool(reflected),
         slid=bool(groups),
