@@ -59,6 +59,7 @@ __all__ = [
     "arc_lengths",
     "boundary_paths",
     "oriented_boundary",
+    "oriented_loop",
     "place",
     "point_at",
     "polygon_area",
@@ -163,13 +164,19 @@ def oriented_boundary(mesh: QuadMesh, rotation: int, reflected: bool) -> tuple[Q
     ``loop`` and its quads are ccw for a placement where ``loop`` runs ccw.
     """
     quads = np.asarray(mesh.quads, dtype=np.int32)
-    s = np.asarray(mesh.boundary, dtype=np.int32)
     if reflected:
         quads = quads[:, ::-1]
+    loop = oriented_loop(mesh, rotation, reflected)
+    return QuadMesh(quads=np.ascontiguousarray(quads), boundary=loop), loop
+
+
+def oriented_loop(mesh: QuadMesh, rotation: int, reflected: bool) -> np.ndarray:
+    """The ``loop`` of :func:`oriented_boundary` alone, ``(n,) int32`` (without the oriented quads)."""
+    s = np.asarray(mesh.boundary, dtype=np.int32)
+    if reflected:
         s = s[::-1]
     n = s.shape[0]
-    loop = roll(s, -(int(rotation) % n if n else 0)).astype(np.int32)
-    return QuadMesh(quads=np.ascontiguousarray(quads), boundary=loop), loop
+    return roll(s, -(int(rotation) % n if n else 0)).astype(np.int32)
 
 
 # ---------------------------------------------------------------------------------------------

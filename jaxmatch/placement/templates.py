@@ -23,7 +23,7 @@ from jaxmatch.cache import key as cache_key
 from jaxmatch.catalogue.mesh import edges
 from jaxmatch.errors import UnmatchableError
 from jaxmatch.placement.choose import place_match
-from jaxmatch.placement.embed import Placement, oriented_boundary
+from jaxmatch.placement.embed import Placement, oriented_boundary, oriented_loop
 from jaxmatch.scoring.bulk import prepared
 from jaxmatch.scoring.rank import rank
 from jaxmatch.shape import Shape
@@ -195,17 +195,24 @@ def _chords(quads: np.ndarray, boundary: np.ndarray, first_edges: Sequence[tuple
     ``quads`` when the caller has it. Returns ``(edge_list (E, 2), edge_chord (E,), quad_chords
     (F, 2), n_chords)``."""
     t = _chord_topology(quads) if topology is None else topology
-    E = t.edges.shape[0]
-    # renumber: by first boundary edge along the sides, then the rest by smallest edge (every
-    # chord has an edge, so each label occurs in `order`; its number is the rank of its first
-    # occurrence)
     fe = np.asarray(first_edges, np.int64).reshape(-1, 2)
-    order = np.concatenate([_edge_id(t.key, t.V, fe[:, 0], fe[:, 1]), np.arange(E)])
-    labels, first = np.unique(t.label[order], return_index=True)
-    rename = np.empty(t.n, np.int64)
-    rename[labels[np.argsort(first)]] = np.arange(labels.shape[0])
-    chord = rename[t.label]
+    chord = _chord_numbers(t, _edge_id(t.key, t.V, fe[:, 0], fe[:, 1]))
     return t.edges, chord, np.stack([chord[t.quad_edges[:, 0]], chord[t.quad_edges[:, 1]]], axis=1), int(t.n)
+
+
+def _chord_numbers(t: _ChordTopology, first_ids: np.ndarray) -> np.ndarray:
+    """``(E,) int64`` chord number of each edge of ``t``: the chords of the edges ``first_ids``
+    (edge ids, in order) numbered by their first one there, then the other chords by their
+    smallest edge (what ranking the first occurrences in ``first_ids`` followed by every edge
+    gives). ``t.label`` numbers the chords by their smallest edge already (:func:`_components`
+    names each by its smallest edge), so the others keep their order."""
+    met = list(dict.fromkeys(t.label[first_ids].tolist()))  # chords in order of first meeting
+    rest = np.ones(t.n, bool)
+    rest[met] = False
+    rename = np.empty(t.n, np.int64)
+    rename[met] = np.arange(len(met))
+    rename[rest] = np.arange(len(met), t.n)
+    return rename[t.label]
 
 
 def _corner_positions(shape: Shape, annotation, alignment: np.ndarray) -> np.ndarray | None:
@@ -231,8 +238,7 @@ def fit_template(shape: Shape, annotation, match: "Match", catalogue: "Catalogue
     a corner of the shape has no mesh vertex. The chords and sides do not depend on the
     placement: :func:`~jaxmatch.placement.choose.place_match` re-spreads the alignment only over
     points of the same type, and a match with every corner matched uses every corner point."""
-    om, loop32 = oriented_boundary(catalogue.mesh(match.mesh_id), match.rotation, match.reflected)
-    loop = np.asarray(loop32, np.int64)
+    loop = oriented_loop(catalogue.mesh(match.mesh_id), match.rotation, match.reflected).astype(np.int64)
     nb = loop.shape[0]
     if shape.n_corners == 0:
         a = np.zeros(1, np.int64)
@@ -257,15 +263,16 @@ def fit_template(shape: Shape, annotation, match: "Match", catalogue: "Catalogue
     verts = loop[np.where(rev[side], stop[side] - k, a[side] + k) % nb]
     inner = np.ones(verts.shape[0], bool)
     inner[ends - 1] = False  # an edge from each vertex but a side's last
-    first = np.stack([verts[:-1][inner[:-1]], verts[1:][inner[:-1]]], axis=1)  # (sum e_i, 2) side edges in order
     topo = _kept_topology(catalogue, match.mesh_id, match.reflected)
-    e, chord, qc, nc = _chords(om.quads, loop, first, topo)
-    along = chord[_edge_id(topo.key, topo.V, first[:, 0], first[:, 1])]
+    ids = _edge_id(topo.key, topo.V, verts[:-1][inner[:-1]], verts[1:][inner[:-1]])  # the side edges in order
+    chord = _chord_numbers(topo, ids)  # (what _chords gives for these first edges)
+    qc = np.stack([chord[topo.quad_edges[:, 0]], chord[topo.quad_edges[:, 1]]], axis=1)
+    along = chord[ids]
     edge_ends = (ends - np.arange(1, lens.shape[0] + 1)).tolist()  # side i's edges end here in `along`
     edge_starts = [0] + edge_ends[:-1]
     side_chords = tuple(along[i:j] for i, j in zip(edge_starts, edge_ends))
     bounds = zip(starts.tolist(), ends.tolist())
-    return PatchTemplate(shape, match.mesh_id, side_chords, nc, match, rank, None, qc, e, chord,
+    return PatchTemplate(shape, match.mesh_id, side_chords, int(topo.n), match, rank, None, qc, topo.edges, chord,
                          tuple(verts[i:j].copy() for i, j in bounds))
 
 
