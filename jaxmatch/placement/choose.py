@@ -437,7 +437,7 @@ def _place_pinned(shape: Shape, annotation: Annotation, mesh, match: Match, al: 
     directly in user coordinates (:func:`_user_fields`, what :func:`to_user_placement` sets)."""
     u = np.mod(np.asarray(annotation.t, dtype=np.float64)[al], float(shape.arc_length[-1]))
     bxy = np.asarray(annotation.positions)[al]
-    miss = missed_corners(annotation, bxy)
+    miss = np.asarray(annotation.positions)[:0]  # (0, 2): every corner point is a vertex's (missed_corners: none)
     if int(mesh.n_vertices) > al.shape[0]:  # internal vertices: placed and smoothed as the search places them
         pl = place(shape.points, annotation.t, al, mesh, match.rotation, match.reflected, boundary_xy=bxy,
                    smooth_iters=smooth_iters, paths=False, region_area=shape.area)

@@ -513,9 +513,10 @@ def top_k(
         return problems[kind]._replace(n=int(n))
 
     def score_some(p: Part, sel: np.ndarray, plan) -> None:
-        rep = _values(codes, p.groups.seqs[sel], weights, plan=plan, batch=batch, threads=threads, devices=devices,
-                      problem=problem(p.n))
-        if len(sel) == len(p.groups.seqs):  # every sequence (sel sorted, distinct): every mesh, as below
+        every = len(sel) == len(p.groups.seqs)  # (sel sorted, distinct: every sequence)
+        rep = _values(codes, p.groups.seqs if every else p.groups.seqs[sel], weights, plan=plan, batch=batch,
+                      threads=threads, devices=devices, problem=problem(p.n))
+        if every:  # every mesh, as below
             mesh_rows = np.arange(len(p.groups.index))
             at = np.asarray(p.groups.index)
         else:
