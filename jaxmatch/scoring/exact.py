@@ -89,7 +89,7 @@ import numpy as np
 from jaxmatch.arrays import roll
 from jaxmatch.catalogue.mesh import triples
 from jaxmatch.errors import UnmatchableError
-from jaxmatch.kernels.backends import c_align, c_kernel, default_backend
+from jaxmatch.kernels.backends import NumbaBackend, c_align, c_kernel, default_backend
 from jaxmatch.kernels.model import (  # noqa: F401 (SkipFrame re-exported)
     NEG,
     SkipFrame,
@@ -291,7 +291,9 @@ def exact_values(
 
     codes_list: ``S`` shapes ``(m_s,)``; vals: ``(N, n)`` boundary valences; weights: the model
     (:func:`jaxmatch.kernels.model.weights_of`). Meshes are padded to whole calls of
-    ``mesh_lanes x blocks per call x block`` (:func:`plan_chunks` of ``batch``, or ``plan``);
+    ``mesh_lanes x blocks per call x block`` (:func:`plan_chunks` of ``batch``, or ``plan``),
+    except for the int16 kernels of :class:`~jaxmatch.kernels.backends.NumbaBackend`, which
+    take the meshes as they are;
     ``backend`` (default :func:`jaxmatch.kernels.backends.default_backend`) computes the raw values.
     ``problem``: ``dp_problem(codes_list, weights, n, m_pad)`` when the caller has it.
     """
@@ -302,13 +304,18 @@ def exact_values(
     prob = dp_problem(codes_list, weights, n, m_pad) if problem is None else problem
     if prob.n != n:
         raise ValueError(f"the problem is for boundary length {prob.n}, the meshes have {n}")
-    lanes = max(int(backend.mesh_lanes), 1)
-    block, per_call = plan if plan is not None else plan_chunks(-(-big_n // lanes), n, batch)
-    chunk = lanes * per_call * block
-    n_calls = -(-big_n // chunk)
-    vp = np.full((n_calls * chunk, n), 2, np.int32)
-    vp[:big_n] = v
-    raw = backend.run(prob, vp.reshape(n_calls, lanes * per_call, block, n))[:, :big_n]
+    if isinstance(backend, NumbaBackend) and np.dtype(prob.kind.dtype) == np.int16:
+        # its int16 kernels (C or numba) take any number of meshes, each computed alone: no
+        # padding meshes (a part of 3 meshes is not scored as a block of 64)
+        raw = backend.run(prob, v.reshape(1, 1, big_n, n))
+    else:
+        lanes = max(int(backend.mesh_lanes), 1)
+        block, per_call = plan if plan is not None else plan_chunks(-(-big_n // lanes), n, batch)
+        chunk = lanes * per_call * block
+        n_calls = -(-big_n // chunk)
+        vp = np.full((n_calls * chunk, n), 2, np.int32)
+        vp[:big_n] = v
+        raw = backend.run(prob, vp.reshape(n_calls, lanes * per_call, block, n))[:, :big_n]
     out = raw.astype(np.float64) + prob.offset[:, None, None]
     out[raw <= prob.kind.neg / 2] = -np.inf
     out[prob.lengths < n] = -np.inf
