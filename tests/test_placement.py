@@ -812,6 +812,26 @@ def test_to_user_placement_maps_every_field_alone(ranked, cat, name):
         assert user.mesh_area == pl.mesh_area * float(shp.scale) ** 2
 
 
+def test_placed_before_is_the_placement_key_order(ranked, cat):
+    """``_placed_before`` (coordinates compared only on equal leading parts) orders every pair
+    as ``placement_key(a) < placement_key(b)`` does: equal keys, a difference in each part, a
+    NaN mean scaled Jacobian (no quads measured) and equal leading parts with other positions."""
+    from jaxmatch.placement.choose import _placed_before, placement_key
+
+    shp, r, _ = ranked["lshape"]
+    m = r.results[0]
+    pl = place(shp.points, r.annotation.t, m.alignment, cat.mesh(m.mesh_id), m.rotation, m.reflected)
+    rep = dataclasses.replace
+    variants = [pl, rep(pl), rep(pl, inverted=pl.inverted + 1), rep(pl, xy=pl.xy + 1e-3), rep(pl, xy=pl.xy - 1e-3),
+                rep(pl, scaled_jacobian=np.zeros(0)), rep(pl, scaled_jacobian=pl.scaled_jacobian * 0.5),
+                rep(pl, edge_ratio=pl.edge_ratio * 2), rep(pl, missed_corners=np.zeros((1, 2)))]
+    keys: dict = {}
+    for a in variants:
+        for b in variants:
+            assert _placed_before(a, b, keys) == (placement_key(a) < placement_key(b))
+    assert not _placed_before(variants[0], variants[1], {}) and _placed_before(variants[4], variants[3], {})
+
+
 def _template_on_corners(cat, lat, ranking, n: int) -> list:
     """The ranking's meshes of boundary length ``n`` (the single quad for four corners, the mesh
     of one internal vertex for six), each as a match whose boundary vertices all stand on the

@@ -269,14 +269,40 @@ def placement_key(pl: Placement) -> tuple:
     quads, higher min scaled Jacobian (:data:`SJ_DIGITS` decimals), lower max edge ratio
     (4 decimals), higher mean scaled Jacobian, then the sorted rounded vertex coordinates
     (a geometric, labelling-independent last resort: equal keys mean equal vertex positions)."""
+    return _key_head(pl) + (_key_coords(pl),)
+
+
+def _key_head(pl: Placement) -> tuple:
+    """:func:`placement_key` less its last part, the coordinates (:func:`_key_coords`): what
+    orders two placements unless it is equal."""
     sj = pl.min_scaled_jacobian
     sj = -math.inf if math.isnan(sj) else round(sj, SJ_DIGITS)
     er = pl.max_edge_ratio
     er = math.inf if math.isnan(er) else round(er, 4)
+    return (pl.missed_corners.shape[0], pl.inverted, -sj, er, -round(pl.mean_scaled_jacobian, SJ_DIGITS))
+
+
+def _key_coords(pl: Placement) -> tuple:
+    """The last part of :func:`placement_key`: the sorted rounded vertex coordinates."""
     coords = np.round(pl.xy, COORD_DIGITS) + 0.0  # -0.0 -> 0.0
     order = np.lexsort((coords[:, 1], coords[:, 0]))
-    return (pl.missed_corners.shape[0], pl.inverted, -sj, er, -round(pl.mean_scaled_jacobian, SJ_DIGITS),
-            tuple(coords[order].ravel().tolist()))
+    return tuple(coords[order].ravel().tolist())
+
+
+def _placed_before(a: Placement, b: Placement, keys: dict) -> bool:
+    """``placement_key(a) < placement_key(b)``, the coordinates compared only when the rest of
+    the keys is equal (a tuple comparison decides at the first unequal part). ``keys``: the
+    parts made so far, by ``(id(placement), part)`` (the caller keeps both placements alive)."""
+    def part(pl, which, make):
+        k = (id(pl), which)
+        if k not in keys:
+            keys[k] = make(pl)
+        return keys[k]
+
+    ha, hb = part(a, 0, _key_head), part(b, 0, _key_head)
+    if ha != hb:
+        return ha < hb
+    return part(a, 1, _key_coords) < part(b, 1, _key_coords)
 
 
 def match_candidates(annotation: Annotation, vals: np.ndarray, lattice, utility: float | None = None, *,
@@ -400,17 +426,16 @@ def place_match(shape: Shape, annotation: Annotation, catalogue: Catalogue, matc
                 loops[rot, refl] = val[oriented_boundary(mesh, rot, refl)[1]]
             sig = _boundary_signature(boundaries[key], loops[rot, refl])
             unique.setdefault(sig, (rot, refl, al, boundaries[key]))
-        best = None  # (key or None while no other placement needs comparing, placement, u)
+        best = None  # (placement, u): the best by placement_key so far
+        keys: dict = {}  # the parts of their keys made (_placed_before; every placement compared stays alive)
+        placed = []
         for sig in sorted(unique)[:MAX_CANDIDATES if min_utility is None else MAX_REORIENTED]:
             rot, refl, al, b = unique[sig]
             for pl, u in _place_candidate(shape, annotation, mesh, rot, refl, al, smooth_iters, b):
-                if best is None:
-                    best = (None, pl, u)
-                    continue
-                key = placement_key(pl)
-                kept = placement_key(best[1]) if best[0] is None else best[0]
-                best = (key, pl, u) if key < kept else (kept, best[1], best[2])
-        _, pl, u = best  # boundary paths only for the one kept
+                placed.append(pl)
+                if best is None or _placed_before(pl, best[0], keys):
+                    best = (pl, u)
+        pl, u = best  # boundary paths only for the one kept
         user = to_user_placement(shape, pl, boundary_paths=exact_paths(shape.points, u, pl.xy[pl.mesh.boundary],
                                                                        shape.arc_length))
     if placements is not None:
