@@ -98,15 +98,17 @@ def point_at(points, t, cum: np.ndarray | None = None) -> np.ndarray:
     t = np.asarray(t, dtype=np.float64)
     tt = np.mod(t, per) if per > 0 else np.zeros_like(t)
     P = p.shape[0]
-    idx = np.clip(np.searchsorted(cum, tt, side="right") - 1, 0, P - 1)
-    seg = cum[idx + 1] - cum[idx]
-    frac = np.where(seg > 0, (tt - cum[idx]) / np.where(seg > 0, seg, 1.0), 0.0)
-    a, b = p[idx], p[(idx + 1) % P]
+    idx = np.minimum(np.maximum(np.searchsorted(cum, tt, side="right") - 1, 0), P - 1)  # (np.clip's values)
+    nxt = idx + 1
+    c0, c1 = cum[idx], cum[nxt]
+    seg = c1 - c0
+    pos = seg > 0
+    frac = np.where(pos, (tt - c0) / np.where(pos, seg, 1.0), 0.0)
+    a, b = p[idx], p[nxt % P]
     out = a + frac[..., None] * (b - a)
     tol = VERTEX_SNAP * per
-    out = np.where((np.abs(tt - cum[idx]) <= tol)[..., None], a, out)
-    out = np.where((np.abs(cum[idx + 1] - tt) <= tol)[..., None], b, out)
-    return out
+    out = np.where((np.abs(tt - c0) <= tol)[..., None], a, out)
+    return np.where((np.abs(c1 - tt) <= tol)[..., None], b, out)
 
 
 def sub_polyline(points, t0: float, t1: float, cum: np.ndarray | None = None) -> np.ndarray:
