@@ -276,12 +276,12 @@ def largest_remainder(weights, total: int) -> np.ndarray:
     w = np.asarray(weights, dtype=np.float64)
     if w.size == 0:
         return np.zeros(0, np.int64)
-    quota = np.round(total * w / w.sum(), 6)
-    base = np.floor(quota).astype(np.int64)
-    rest = int(total - base.sum())
-    order = np.argsort(-(quota - base), kind="stable")  # ties: the lower index first
-    base[order[:rest]] += 1
-    return base
+    quota = np.round(total * w / w.sum(), 6).tolist()
+    base = [math.floor(q) for q in quota]  # (the few bins in plain numbers: the same floors and fractions)
+    rest = int(total - sum(base))
+    for i in sorted(range(len(base)), key=lambda i: base[i] - quota[i])[:rest]:  # (stable: ties to the lower index)
+        base[i] += 1
+    return np.array(base, np.int64)
 
 
 def _collinear(points) -> bool:
@@ -622,9 +622,9 @@ def _lowest(xy) -> int:
     """Index of the lowest point of ``xy (k, 2)`` (unit box): smallest ``y``, then smallest ``x``
     among the points within ``1e-9`` of that ``y`` (so that round-off cannot reorder points at
     the same height, e.g. a flat bottom after translating or scaling)."""
-    y = xy[:, 1]
-    low = np.flatnonzero(y <= y.min() + 1e-9)
-    return int(low[np.argmin(xy[low, 0])])
+    x, y = xy[:, 0].tolist(), xy[:, 1].tolist()
+    cut = min(y) + 1e-9
+    return min((i for i, v in enumerate(y) if v <= cut), key=x.__getitem__)  # (the first of equal x: argmin's)
 
 
 def _check_corners(corners, n: int, source: str) -> np.ndarray:
