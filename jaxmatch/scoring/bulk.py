@@ -41,6 +41,7 @@ from typing import Callable, Iterable, NamedTuple, Sequence
 import numpy as np
 
 from jaxmatch.files import atomic_open
+from jaxmatch.kernels.backends import default_backend
 from jaxmatch.kernels.model import NEG, skip_frame, skip_offset, weights_of
 from jaxmatch.scoring.exact import (  # numpy only: no JAX import here
     DEFAULT_BATCH,
@@ -499,6 +500,7 @@ def top_k(
                 thr[g] = sorted(us, reverse=True)[top - 1]
         return thr
 
+    backend: list = []  # the default backend (final_values'), chosen once for every part
     kinds: dict = {}  # boundary length -> DP number type (dp_kinds), read once
     problems: dict = {}  # DP number type -> the shape's DP problem (dp_problem), its n set per part
 
@@ -514,18 +516,23 @@ def top_k(
 
     def score_some(p: Part, sel: np.ndarray, plan) -> None:
         every = len(sel) == len(p.groups.seqs)  # (sel sorted, distinct: every sequence)
+        one = devices is None or (isinstance(devices, (int, np.integer)) and int(devices) == 1)
+        if one and not backend:
+            backend.append(default_backend(threads, UNROLL))
         rep = _values(codes, p.groups.seqs if every else p.groups.seqs[sel], weights, plan=plan, batch=batch,
-                      threads=threads, devices=devices, problem=problem(p.n))
+                      threads=threads, devices=devices, problem=problem(p.n),
+                      **({"backend": backend[0]} if one else {}))
         if every:  # every mesh, as below
             mesh_rows = np.arange(len(p.groups.index))
-            at = np.asarray(p.groups.index)
+            at, orient, ks = np.asarray(p.groups.index), p.groups.orient, p.k
         else:
             mesh_rows = np.flatnonzero(np.isin(p.groups.index, sel))
             # fan_out of the scored rows only (sel is sorted): no (U, 2n) array per call
             at = np.searchsorted(sel, p.groups.index[mesh_rows])
-        res = reduce_orientations(np.asarray(rep)[at[:, None], p.groups.orient[mesh_rows]])
+            orient, ks = p.groups.orient[mesh_rows], p.k[mesh_rows]
+        res = reduce_orientations(np.asarray(rep)[at[:, None], orient])
         ok = np.isfinite(res.utility)
-        keep = ok & (res.utility >= cutoffs()[group_of(p.k[mesh_rows])])  # the others cannot be selected
+        keep = ok & (res.utility >= cutoffs()[group_of(ks)])  # the others cannot be selected
         st["rows"] = _select(st["rows"] + [
             (float(res.utility[i]), int(p.k[r]), p.n, str(p.ids[r]), int(res.rotation[i]), bool(res.reflected[i]), p.valences[r])
             for i, r in zip(np.flatnonzero(keep), mesh_rows[keep])], top, per_size)

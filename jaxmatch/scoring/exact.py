@@ -143,8 +143,9 @@ def bucket_length(m: int) -> int:
     return 64 * -(-m // 64)
 
 
-def pad_codes(codes, m_pad: int | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """``(codes_pad (m_pad,) int32, valid (m_pad,) bool)``; padded points are invalid (skipped)."""
+def _checked_codes(codes, m_pad: int | None) -> tuple[np.ndarray, int]:
+    """``(codes (m,) int32, m_pad)`` (default :func:`bucket_length`); ValueError for a code other
+    than 0/1/2 or ``m_pad < m``."""
     c = np.asarray(codes, dtype=np.int32).reshape(-1)
     m = c.shape[0]
     if c.size and (c.min() < 0 or c.max() > 2):
@@ -152,6 +153,13 @@ def pad_codes(codes, m_pad: int | None = None) -> tuple[np.ndarray, np.ndarray]:
     m_pad = bucket_length(m) if m_pad is None else int(m_pad)
     if m_pad < m:
         raise ValueError(f"m_pad={m_pad} < m={m}")
+    return c, m_pad
+
+
+def pad_codes(codes, m_pad: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """``(codes_pad (m_pad,) int32, valid (m_pad,) bool)``; padded points are invalid (skipped)."""
+    c, m_pad = _checked_codes(codes, m_pad)
+    m = c.shape[0]
     out = np.zeros(m_pad, np.int32)
     out[:m] = c
     return out, np.arange(m_pad) < m
@@ -194,8 +202,8 @@ def dp_kinds(weights, ns) -> dict[int, DPKind]:
     (a ranking scores several lengths against one model)."""
     t = skip_frame(weights).table
     w = t[t > NEG / 2]
-    big = float(np.abs(w).max()) if w.size else 0.0
-    integral = w.size == 0 or bool(np.all(w == np.round(w)))
+    big = float(abs(w).max()) if w.size else 0.0
+    integral = w.size == 0 or bool((w == w.round()).all())
     out = {}
     for n in ns:
         kind = DPKind(np.float32, NEG)
@@ -268,7 +276,7 @@ def dp_problem(codes_list: Sequence, weights, n: int, m_pad: int | None = None, 
     mp = bucket_length(max((len(c) for c in shapes), default=1)) if m_pad is None else int(m_pad)
     codes = np.full((len(shapes), mp), _INVALID, np.int32)
     for i, c in enumerate(shapes):
-        codes[i] = dp_codes(c, mp)
+        codes[i, :c.shape[0]] = _checked_codes(c, mp)[0]  # (dp_codes: padding points get code 3)
     kind = dp_kind(w, n) if kind is None else kind
     return DPProblem(codes, np.asarray([len(c) for c in shapes], np.int64),
                      np.asarray([skip_offset(c, w) for c in shapes], np.float64),
