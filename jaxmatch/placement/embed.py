@@ -606,9 +606,10 @@ def _pick(best, best_key, cand, quads, tol: float = 1e-9):
 def _check_alignment(alignment: np.ndarray, m: int, n: int) -> None:
     if alignment.ndim != 1 or alignment.shape[0] != n:
         raise ValueError(f"alignment has {alignment.shape[0] if alignment.ndim else 0} entries, mesh boundary has {n}")
-    if n and (alignment.min() < 0 or alignment.max() >= m):
+    a = alignment.tolist()  # (a few dozen indices: plain numbers)
+    if n and (min(a) < 0 or max(a) >= m):
         raise ValueError(f"alignment indices must lie in [0, {m})")
-    if np.any(np.diff(alignment) <= 0):
+    if any(x >= y for x, y in zip(a, a[1:])):
         raise ValueError("alignment must be strictly increasing")
 
 
@@ -664,8 +665,8 @@ def place(
     quads = om.quads
 
     # normalised frame: centred on the boundary vertices, unit RMS radius
-    offset = bxy.mean(axis=0)
-    scale = float(np.sqrt(np.mean(np.sum((bxy - offset) ** 2, axis=1)))) or 1.0
+    offset = np.add.reduce(bxy, axis=0) / bxy.shape[0]  # (np.mean's sum and division, without its wrapper)
+    scale = float(np.sqrt(np.add.reduce(np.add.reduce((bxy - offset) ** 2, axis=1)) / bxy.shape[0])) or 1.0
     nb = (bxy - offset) / scale
     groups = [(int(ja), int(jb), np.asarray(js, np.int64)) for ja, jb, js in slide_groups if len(js)]
     slides = tuple(Slide(nb[ja], nb[jb], loop[js]) for ja, jb, js in groups)
