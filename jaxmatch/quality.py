@@ -85,10 +85,12 @@ def placement_measures(xy: np.ndarray, quads: np.ndarray):
     if q.size == 0:
         return (*quality_inverted(xy, q), np.zeros(0))
     e1, e2, cross = corner_vectors(xy, q)
-    dot = np.sum(e1 * e2, axis=-1)
+    dot = np.add.reduce(e1 * e2, axis=-1)  # (np.sum's reduction)
     ang = np.degrees(np.mod(np.arctan2(cross, dot), 2 * np.pi))
-    l1 = np.linalg.norm(e1, axis=-1)  # (F, 4) edge lengths
-    sj = _scaled_jacobian(e1, e2, cross, l1 * l1[:, _PREV])
+    l1 = np.sqrt(np.add.reduce(e1 * e1, axis=-1))  # (F, 4) edge lengths (np.linalg.norm's operations)
+    ln = l1 * l1[:, _PREV]
+    ok = ln > _TINY  # the scaled Jacobian as _scaled_jacobian computes it
+    sj = np.minimum(np.maximum(np.where(ok, cross / np.where(ok, ln, 1.0), 0.0).min(axis=1), -1.0), 1.0)  # (np.clip's)
     lo, hi = l1.min(axis=1), l1.max(axis=1)
     with np.errstate(divide="ignore", invalid="ignore"):
         ratio = np.where(lo > 0, hi / np.where(lo > 0, lo, 1.0), np.inf)
