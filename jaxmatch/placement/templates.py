@@ -238,42 +238,34 @@ def fit_template(shape: Shape, annotation, match: "Match", catalogue: "Catalogue
     a corner of the shape has no mesh vertex. The chords and sides do not depend on the
     placement: :func:`~jaxmatch.placement.choose.place_match` re-spreads the alignment only over
     points of the same type, and a match with every corner matched uses every corner point."""
-    loop = oriented_loop(catalogue.mesh(match.mesh_id), match.rotation, match.reflected).astype(np.int64)
-    nb = loop.shape[0]
+    loop = oriented_loop(catalogue.mesh(match.mesh_id), match.rotation, match.reflected).tolist()
+    nb = len(loop)
     if shape.n_corners == 0:
-        a = np.zeros(1, np.int64)
-        stop = np.full(1, nb, np.int64)
-        rev = np.zeros(1, bool)
+        spans = [(0, nb, False)]
     else:
         pos = _corner_positions(shape, annotation, match.alignment)
         if pos is None:
             return None
         n = shape.n_corners
-        frame = np.asarray(shape.side_frame, np.int64).reshape(-1, 2)
-        a, b = pos[frame[:, 0]], pos[(frame[:, 0] + 1) % n]
-        stop = np.where(b > a, b, b + nb)
-        rev = frame[:, 1].astype(bool)
-    # side i's path: loop positions a_i .. stop_i (mod nb), backwards when the user runs it so;
-    # all sides' vertices in one array, side i's at [starts[i], starts[i] + lens[i])
-    lens = stop - a + 1
-    ends = np.cumsum(lens)
-    starts = ends - lens
-    side = np.repeat(np.arange(lens.shape[0]), lens)
-    k = np.arange(int(ends[-1])) - starts[side]
-    verts = loop[np.where(rev[side], stop[side] - k, a[side] + k) % nb]
-    inner = np.ones(verts.shape[0], bool)
-    inner[ends - 1] = False  # an edge from each vertex but a side's last
+        at = pos.tolist()
+        spans = []  # side i: loop positions a_i .. stop_i (mod nb), backwards when the user runs it so
+        for j, backwards in shape.side_frame:
+            a, b = at[j], at[(j + 1) % n]
+            spans.append((a, b if b > a else b + nb, bool(backwards)))
+    # (a patch's few sides in plain numbers)
+    paths = [[loop[i % nb] for i in (range(stop, a - 1, -1) if backwards else range(a, stop + 1))]
+             for a, stop, backwards in spans]
+    heads = np.array([v for p in paths for v in p[:-1]], np.int64)  # the side edges in order
+    tails = np.array([v for p in paths for v in p[1:]], np.int64)
     topo = _kept_topology(catalogue, match.mesh_id, match.reflected)
-    ids = _edge_id(topo.key, topo.V, verts[:-1][inner[:-1]], verts[1:][inner[:-1]])  # the side edges in order
+    ids = _edge_id(topo.key, topo.V, heads, tails)
     chord = _chord_numbers(topo, ids)  # (what _chords gives for these first edges)
     qc = np.stack([chord[topo.quad_edges[:, 0]], chord[topo.quad_edges[:, 1]]], axis=1)
     along = chord[ids]
-    edge_ends = (ends - np.arange(1, lens.shape[0] + 1)).tolist()  # side i's edges end here in `along`
-    edge_starts = [0] + edge_ends[:-1]
-    side_chords = tuple(along[i:j] for i, j in zip(edge_starts, edge_ends))
-    bounds = zip(starts.tolist(), ends.tolist())
+    edge_ends = np.cumsum([len(p) - 1 for p in paths]).tolist()  # side i's edges end here in `along`
+    side_chords = tuple(along[i:j] for i, j in zip([0] + edge_ends[:-1], edge_ends))
     return PatchTemplate(shape, match.mesh_id, side_chords, int(topo.n), match, rank, None, qc, topo.edges, chord,
-                         tuple(verts[i:j].copy() for i, j in bounds))
+                         tuple(np.array(p, np.int64) for p in paths))
 
 
 def _candidates(shape: Shape, catalogue: "Catalogue", lattice: "Lattice", *, limit: int,

@@ -445,7 +445,7 @@ def align(codes, vals_one, weights, rotation: int, reflected: bool, *, m_pad: in
     if n > m:
         raise UnmatchableError(f"mesh has {n} boundary vertices but the shape only {m} points")
     _check_vals(seq)
-    pad_codes(c, m_pad)  # checks the codes (and m_pad)
+    _checked_codes(c, m_pad)  # checks the codes (and m_pad)
     fr = skip_frame(weights)
     if c_kernel() is not None:  # the same rows and backtrack in C (jaxmatch/kernels/_dp.c)
         out = c_align(c, seq, fr.table, fr.gate, NEG)
