@@ -510,8 +510,9 @@ def _place_candidate(shape, annotation, mesh, rot, refl, al, smooth_iters, b: Bo
 
     def put(groups):
         pl = place(shape.points, annotation.t, al, mesh, rot, refl, boundary_xy=b.xy, slide_groups=groups,
-                   smooth_iters=smooth_iters, paths=False, region_area=shape.area)
-        return dataclasses.replace(pl, missed_corners=b.missed, corners=shape.n_corners), np.mod(b.u, per)
+                   smooth_iters=smooth_iters, paths=False, region_area=shape.area, missed_corners=b.missed,
+                   corners=shape.n_corners)
+        return pl, np.mod(b.u, per)
 
     pl, u = put(())
     yield pl, u

@@ -628,6 +628,8 @@ def place(
     smooth_iters: int = 200,
     paths: bool = True,
     region_area: float | None = None,
+    missed_corners: np.ndarray | None = None,
+    corners: int = 0,
 ) -> Placement:
     """Place ``mesh`` in the shape ``points`` following a match.
 
@@ -646,7 +648,8 @@ def place(
     smooth_iters: L-BFGS iterations per untangling/smoothing round (0: plain Tutte).
     paths: False leaves ``boundary_paths`` empty (for candidates that are only compared; the
     caller adds them to the one it keeps with :func:`exact_paths`). region_area: the area
-    enclosed by ``points``, when the caller has it (else computed).
+    enclosed by ``points``, when the caller has it (else computed). missed_corners, corners: recorded
+    as given (:class:`Placement`; this function knows no corners).
     """
     pts = np.asarray(points, dtype=np.float64)
     tt = np.asarray(t, dtype=np.float64).ravel()
@@ -710,6 +713,8 @@ def place(
         rotation=int(rotation),
         reflected=bool(reflected),
         slid=bool(groups),
+        missed_corners=np.zeros((0, 2)) if missed_corners is None else missed_corners,
+        corners=int(corners),
     )
 
 
