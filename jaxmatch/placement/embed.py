@@ -741,18 +741,16 @@ def exact_paths(points: np.ndarray, t_aligned: np.ndarray, bxy: np.ndarray,
     t1 = roll(ta, -1)
     t1 = np.where(t1 <= ta, t1 + per, t1)
     tol = VERTEX_SNAP * per
-    c3 = np.concatenate([cum[:-1], cum[:-1] + per, cum[:-1] + 2 * per])
-    inside = (c3[None, :] > ta[:, None] + tol) & (c3[None, :] < t1[:, None] - tol)  # (n, 3P), as boundary_paths
-    rows, cols = np.nonzero(inside)  # path by path, each in loop order
-    lens = np.bincount(rows, minlength=n) + 2  # the two ends and the vertices between
-    ends = np.cumsum(lens)
-    starts = ends - lens
-    flat = np.empty((int(ends[-1]), 2))
-    b = np.asarray(bxy, dtype=np.float64).reshape(n, 2)
-    flat[starts] = b
-    flat[ends - 1] = roll(b, -1)
-    inner = np.ones(flat.shape[0], bool)
-    inner[starts] = False
-    inner[ends - 1] = False
-    flat[inner] = p[cols % P]
-    return tuple(flat[i:j] for i, j in zip(starts.tolist(), ends.tolist()))
+    c3 = np.concatenate([cum[:-1], cum[:-1] + per, cum[:-1] + 2 * per])  # non-decreasing
+    # boundary_paths' vertices of path j, c3 > ta_j + tol and c3 < t1_j - tol: the run lo_j .. hi_j - 1
+    lo = np.searchsorted(c3, ta + tol, side="right").tolist()
+    hi = np.searchsorted(c3, t1 - tol, side="left").tolist()
+    # rows of [bxy; points]: each path's two ends and the loop's vertices between (a few dozen in all)
+    pick, bounds = [], [0]
+    for j in range(n):
+        pick.append(j)
+        pick.extend(n + i % P for i in range(lo[j], hi[j]))
+        pick.append(j + 1 if j + 1 < n else 0)
+        bounds.append(len(pick))
+    flat = np.concatenate([np.asarray(bxy, dtype=np.float64).reshape(n, 2), p])[pick]
+    return tuple(flat[i:j] for i, j in zip(bounds[:-1], bounds[1:]))
