@@ -123,7 +123,7 @@ def corner_boundary(shape: Shape, annotation: Annotation, alignment: np.ndarray,
     tt = np.asarray(annotation.t, dtype=np.float64)
     pts = shape.points
     J = np.flatnonzero(codes[al] != S_CODE)
-    u = tt[al].astype(np.float64).copy()
+    u = tt[al]  # (a new float64 array: tt is float64)
     pin = dict(zip(J.tolist(), al[J].tolist()))  # vertex -> corner point it stands on
     if J.size == 0:
         step = per / n
