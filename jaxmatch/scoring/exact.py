@@ -485,11 +485,13 @@ def utility_parts(codes, vals_one, weights, rotation: int, reflected: bool, alig
     a = np.asarray(alignment, dtype=np.int64).reshape(-1)
     if a.shape[0] != n:
         raise ValueError(f"alignment has length {a.shape[0]}, mesh has {n} boundary vertices")
-    if n and (a[0] < 0 or a[-1] >= c.shape[0] or np.any(np.diff(a) <= 0)):
+    al = a.tolist()
+    if n and (al[0] < 0 or al[-1] >= c.shape[0] or any(x >= y for x, y in zip(al, al[1:]))):
         raise ValueError("alignment must be strictly increasing input indices in range")
     t = triples(seq) - 2
-    tab = w.table_inf().astype(np.float64)
-    match = float(np.sum(tab[c[a], t[:, 0], t[:, 1], t[:, 2]]))
+    rows, cols = c[a], (t[:, 0] * 4 + t[:, 1]) * 4 + t[:, 2]  # each pair's entry of the (3, 64) table
+    # (table_inf's entries: -inf where forbidden, the float32 weight otherwise)
+    match = float(np.sum(np.where(w.forbidden[rows, cols], -np.inf, w.table[rows, cols]).astype(np.float64)))
     skip = skipped_weight(c, a, w)
     return UtilityParts(match + skip, match, skip)
 
