@@ -16,8 +16,8 @@ import numpy as np
 from jaxmatch.catalogue.mesh import QUAD_NEXT as _NEXT
 from jaxmatch.lazy import Later
 
-__all__ = ["corner_vectors", "edge_ratios", "inverted_mask", "quad_areas", "quality", "quality_inverted",
-           "sj_inverted"]
+__all__ = ["corner_vectors", "edge_ratios", "inverted_mask", "placement_measures", "quad_areas", "quality",
+           "quality_inverted", "sj_inverted"]
 
 _later = Later(kernels="jaxmatch.kernels.placement")
 """The compiled kernels, on the first :func:`sj_inverted`: where the C library is absent they
@@ -75,10 +75,33 @@ def quality_inverted(xy: np.ndarray, quads: np.ndarray) -> tuple[np.ndarray, np.
     return _scaled_jacobian(e1, e2, cross), ang.min(axis=1), ang.max(axis=1), (cross <= 0).any(axis=1)
 
 
-def _scaled_jacobian(e1: np.ndarray, e2: np.ndarray, cross: np.ndarray) -> np.ndarray:
+def placement_measures(xy: np.ndarray, quads: np.ndarray):
+    """``(scaled_jacobian, min_angle, max_angle, inverted, edge_ratio)``: :func:`quality_inverted`'s
+    four arrays and :func:`edge_ratios`, the same values from one set of corner vectors and one
+    set of edge lengths (a placement records all five; an edge's length is that of the edge
+    leaving its first corner, ``e2`` of a corner being ``-e1`` of the previous one).
+    xy: (V, 2) positions; quads: (F, 4) vertex ids, ccw."""
+    q = np.asarray(quads)
+    if q.size == 0:
+        return (*quality_inverted(xy, q), np.zeros(0))
+    e1, e2, cross = corner_vectors(xy, q)
+    dot = np.add.reduce(e1 * e2, axis=-1)  # (np.sum's reduction)
+    ang = np.degrees(np.mod(np.arctan2(cross, dot), 2 * np.pi))
+    l1 = np.sqrt(np.add.reduce(e1 * e1, axis=-1))  # (F, 4) edge lengths (np.linalg.norm's operations)
+    ln = l1 * l1[:, _PREV]
+    ok = ln > _TINY  # the scaled Jacobian as _scaled_jacobian computes it
+    sj = np.minimum(np.maximum(np.where(ok, cross / np.where(ok, ln, 1.0), 0.0).min(axis=1), -1.0), 1.0)  # (np.clip's)
+    lo, hi = l1.min(axis=1), l1.max(axis=1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.where(lo > 0, hi / np.where(lo > 0, lo, 1.0), np.inf)
+    return sj, ang.min(axis=1), ang.max(axis=1), (cross <= 0).any(axis=1), ratio
+
+
+def _scaled_jacobian(e1: np.ndarray, e2: np.ndarray, cross: np.ndarray, ln: np.ndarray | None = None) -> np.ndarray:
     """``(F,) float64`` scaled Jacobian from the corner vectors of :func:`corner_vectors` (the one
-    formula of :func:`quality` and :func:`sj_inverted`)."""
-    ln = np.linalg.norm(e1, axis=-1) * np.linalg.norm(e2, axis=-1)
+    formula of :func:`quality` and :func:`sj_inverted`); ``ln``: ``|e1| |e2|`` when the caller has it."""
+    if ln is None:
+        ln = np.linalg.norm(e1, axis=-1) * np.linalg.norm(e2, axis=-1)
     ok = ln > _TINY
     sj_c = np.where(ok, cross / np.where(ok, ln, 1.0), 0.0)
     return np.clip(sj_c.min(axis=1), -1.0, 1.0)

@@ -276,12 +276,12 @@ def largest_remainder(weights, total: int) -> np.ndarray:
     w = np.asarray(weights, dtype=np.float64)
     if w.size == 0:
         return np.zeros(0, np.int64)
-    quota = np.round(total * w / w.sum(), 6)
-    base = np.floor(quota).astype(np.int64)
-    rest = int(total - base.sum())
-    order = np.lexsort((np.arange(w.size), -(quota - base)))
-    base[order[:rest]] += 1
-    return base
+    quota = np.round(total * w / w.sum(), 6).tolist()
+    base = [math.floor(q) for q in quota]  # (the few bins in plain numbers: the same floors and fractions)
+    rest = int(total - sum(base))
+    for i in sorted(range(len(base)), key=lambda i: base[i] - quota[i])[:rest]:  # (stable: ties to the lower index)
+        base[i] += 1
+    return np.array(base, np.int64)
 
 
 def _collinear(points) -> bool:
@@ -622,9 +622,9 @@ def _lowest(xy) -> int:
     """Index of the lowest point of ``xy (k, 2)`` (unit box): smallest ``y``, then smallest ``x``
     among the points within ``1e-9`` of that ``y`` (so that round-off cannot reorder points at
     the same height, e.g. a flat bottom after translating or scaling)."""
-    y = xy[:, 1]
-    low = np.flatnonzero(y <= y.min() + 1e-9)
-    return int(low[np.argmin(xy[low, 0])])
+    x, y = xy[:, 0].tolist(), xy[:, 1].tolist()
+    cut = min(y) + 1e-9
+    return min((i for i, v in enumerate(y) if v <= cut), key=x.__getitem__)  # (the first of equal x: argmin's)
 
 
 def _check_corners(corners, n: int, source: str) -> np.ndarray:
@@ -687,23 +687,29 @@ def annotate(shape: Shape, m: int) -> Annotation:
         side = np.zeros(m, np.int32)
         start = 0.0
     else:
-        start = float(cum[shape.corners[0]])
-        tc = cum[shape.corners] - start  # corner parameters, tc[0] = 0
+        tcu = cum[shape.corners]
+        start = float(tcu[0])
+        tc = tcu - start  # corner parameters, tc[0] = 0
         lengths = np.diff(np.concatenate([tc, [per]]))
         corner_xy = shape.points[shape.corners]
         low = _lowest(corner_xy)  # ties broken from here
         counts = roll(largest_remainder(roll(lengths, -low), m - c), low)
-        per_side = counts + 1  # the corner plus its s points
-        side = np.repeat(np.arange(c), per_side).astype(np.int32)
-        first = np.concatenate([[0], np.cumsum(per_side)[:-1]])
-        k = np.arange(m) - first[side]  # 0 for the corner, i for the i-th s point
+        per_side = (counts + 1).tolist()  # the corner plus its s points
+        side_list = [j for j, p in enumerate(per_side) for _ in range(p)]
+        k_list = [i for p in per_side for i in range(p)]  # 0 for the corner, i for the i-th s point
+        side = np.array(side_list, np.int32)
+        k = np.array(k_list, np.int64)
         t = tc[side] + lengths[side] * k / (counts[side] + 1)
-        codes = np.where(k == 0, np.where(shape.convex[side], X, V), S).astype(np.int32)
+        kinds = [X if v else V for v in shape.convex.tolist()]
+        code_list = [kinds[j] if i == 0 else S for j, i in zip(side_list, k_list)]
+        codes = np.array(code_list, np.int32)
     positions = point_at(shape.points, t + start, cum)
     if c:  # corners exactly on their polyline vertices
-        positions[codes != S] = shape.points[shape.corners]
+        positions[codes != S] = corner_xy
+    else:
+        code_list = [S] * m
     return Annotation(
-        symbols="".join(SYMBOLS[k] for k in codes.tolist()),
+        symbols="".join([SYMBOLS[k] for k in code_list]),
         codes=codes,
         t=t,
         positions=positions,

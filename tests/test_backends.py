@@ -121,10 +121,29 @@ def test_small_problems_run_in_c_within_the_budget(monkeypatch):
     """With the C library built, the light kernel of the budget is C (not numpy): the same
     budget, numba after it; the values are XLA's."""
     shapes, vals, w, ref, ran = budget_case(monkeypatch, 4, "neg")
-    be = NumbaBackend(numpy_cells=2 * 2 * 8 * 8 * 30 * 64)  # two problems of 2n * n * m * meshes (padded)
+    be = NumbaBackend(numpy_cells=2 * 2 * 8 * 8 * 30 * 40)  # two problems of 2n * n * m * meshes (40, unpadded)
     for _ in range(3):
         np.testing.assert_array_equal(exact_values(shapes, vals, w, backend=be), ref)
     assert ran == ["c", "c", "numba"]
+
+
+@needs_c
+@pytest.mark.parametrize("meshes", [1, 3, 40, 70])
+def test_int16_kernels_get_the_meshes_unpadded(monkeypatch, meshes):
+    """exact_values hands the numba backend's int16 kernels the meshes as they are (no padding
+    to a block: 3 meshes are not scored as 64), with the values of the padded XLA kernel."""
+    from jaxmatch.kernels import backends
+
+    rng = np.random.default_rng(meshes)
+    shapes, vals = [rng.integers(0, 3, 30)], rng.integers(2, 6, (meshes, 10))
+    w = make_weights(*random_model(meshes, 0.2, "neg"))
+    seen = []
+    monkeypatch.setattr(backends, "c_values", lambda *a: seen.append(np.shape(a[2])) or c_values(*a))
+    monkeypatch.setattr(backends, "_NUMPY_SPENT", [0])
+    monkeypatch.setattr(backends, "_NUMBA_LOADED", [False])  # (the light kernel: not after numba ran)
+    got = exact_values(shapes, vals, w, backend=NumbaBackend(numpy_cells=1 << 40))
+    assert seen == [(meshes, 10)]
+    np.testing.assert_array_equal(got, exact_values(shapes, vals, w, backend=CPUBackend()))
 
 
 def test_numba_backend_runs_small_problems_in_numpy_within_its_budget(monkeypatch):
@@ -134,8 +153,8 @@ def test_numba_backend_runs_small_problems_in_numpy_within_its_budget(monkeypatc
     monkeypatch.setattr(backends, "_C_DP", [None, True])  # as if not built
     shapes, vals, w, ref, ran = budget_case(monkeypatch, 3, "must")
     exact_values(shapes, vals, w, backend=NumbaBackend(numpy_cells=1 << 40))
-    cells = backends._NUMPY_SPENT[0]  # 2n * n * m * meshes (padded to the chunk)
-    assert ran == ["numpy"] and cells == 2 * 8 * 8 * 30 * 64
+    cells = backends._NUMPY_SPENT[0]  # 2n * n * m * meshes (the 40 given: no padding meshes)
+    assert ran == ["numpy"] and cells == 2 * 8 * 8 * 30 * 40
     be = NumbaBackend(numpy_cells=3 * cells)
     for _ in range(3):  # two more within the budget, then numba
         np.testing.assert_array_equal(exact_values(shapes, vals, w, backend=be), ref)

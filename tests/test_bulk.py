@@ -97,6 +97,33 @@ def test_dp_kind_picks_the_narrowest_exact_type():
     assert dp_kind(np.full((3, 4, 4, 4), -np.inf), 5).dtype == np.int16
 
 
+def test_dp_kinds_reads_the_model_once_for_every_length():
+    """``dp_kinds`` gives each length the type of the rule ``n * max|W'|`` against ``2**13`` and
+    ``2**29`` (integer weights; float32 otherwise): with weights up to 1000 the int16 range ends
+    at n = 8 and int32 goes on."""
+    from jaxmatch.scoring.exact import dp_kinds
+
+    table = np.where(np.arange(192).reshape(3, 4, 4, 4) % 2, 1000.0, -np.inf)
+    kinds = dp_kinds(table, [1, 8, 9, 100])
+    assert [kinds[n].dtype for n in (1, 8, 9, 100)] == [np.int16, np.int16, np.int32, np.int32]
+    assert dp_kinds(random_table(0, 0.3, scale=0.5), [3, 10])[10].dtype == np.float32
+    assert all(dp_kind(table, n) == k for n, k in kinds.items())
+
+
+def test_exact_values_takes_the_callers_problem(fine):
+    """A problem built once per number type (what top_k does for its parts) gives the values that
+    exact_values builds for itself; one for another boundary length is refused."""
+    from jaxmatch.scoring.exact import dp_problem, exact_values
+
+    codes = annotate(load_shape(ROOT / "examples" / "lshape.json"), 24).codes
+    vals = np.random.default_rng(1).integers(2, 6, size=(9, 6)).astype(np.int32)
+    prob = dp_problem([codes], fine, 8)._replace(n=6)
+    np.testing.assert_array_equal(exact_values([codes], vals, fine, problem=prob), exact_values([codes], vals, fine))
+    np.testing.assert_array_equal(final_values(codes, vals, fine, problem=prob), final_values(codes, vals, fine))
+    with pytest.raises(ValueError, match="boundary length 8"):
+        exact_values([codes], vals, fine, problem=dp_problem([codes], fine, 8))
+
+
 @given(st.integers(0, 2**32 - 1), st.sampled_from([1.0, 1000.0, 0.5]), st.sampled_from([0.0, 0.3, 0.9]))
 @settings(max_examples=20)
 def test_every_number_type_gives_the_reference_utilities(seed, scale, forbidden):

@@ -22,7 +22,8 @@ from jaxmatch.placement.embed import (
     to_user,
     tutte,
 )
-from jaxmatch.quality import edge_ratios, inverted_mask, quad_areas, quality, quality_inverted, sj_inverted
+from jaxmatch.quality import (edge_ratios, inverted_mask, placement_measures, quad_areas, quality, quality_inverted,
+                              sj_inverted)
 from jaxmatch.catalogue.mesh import boundary_valences, from_quads, validate, valences
 
 # ---------------------------------------------------------------------------------------------
@@ -664,6 +665,46 @@ def test_boundary_paths_are_the_sub_polylines(seed, n, P):
         a, b = t[j], t[(j + 1) % n]
         want = sub_polyline(pts, a, b if b > a else b + cum[-1], cum)
         np.testing.assert_array_equal(got[j], want)
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), n=st.integers(1, 12), P=st.integers(3, 40), at_vertices=st.booleans())
+def test_exact_paths_are_the_boundary_paths_with_given_ends(seed, n, P, at_vertices):
+    """:func:`exact_paths` (every path gathered at once, ends never computed) gives bit for bit
+    the pieces of :func:`boundary_paths` with their ends replaced by the vertex positions, also
+    for parameters on polyline vertices (which a piece must not repeat) and one-vertex loops."""
+    from jaxmatch.placement.embed import exact_paths
+
+    rng = np.random.default_rng(seed)
+    ang = np.sort(rng.uniform(0, 2 * np.pi, P))
+    pts = np.c_[np.cos(ang), np.sin(ang)] * rng.uniform(0.5, 1.5, (P, 1))
+    cum = arc_lengths(pts)
+    t = np.unique(rng.choice(cum[:-1], min(n, P), replace=False) if at_vertices else rng.uniform(0, cum[-1], n))
+    bxy = rng.normal(size=(t.shape[0], 2))
+    want = [p.copy() for p in boundary_paths(pts, t, cum)]
+    for j, p in enumerate(want):
+        p[0], p[-1] = bxy[j], bxy[(j + 1) % len(want)]
+    for cum_given in (cum, None):
+        got = exact_paths(pts, t, bxy, cum_given)
+        assert len(got) == len(want)
+        for g, w in zip(got, want):
+            assert g.dtype == w.dtype and g.shape == w.shape and g.tobytes() == w.tobytes()
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), F=st.integers(0, 30), degenerate=st.booleans())
+def test_placement_measures_are_quality_and_edge_ratios(seed, F, degenerate):
+    """:func:`placement_measures` (one set of edge lengths for the scaled Jacobian and the edge
+    ratios) gives bit for bit :func:`quality_inverted` and :func:`edge_ratios`, also for folded
+    quads and quads with a repeated vertex (zero-length edges: ratio inf, scaled Jacobian 0)."""
+    rng = np.random.default_rng(seed)
+    xy = rng.normal(size=(12, 2)) * rng.uniform(1e-3, 1e3)
+    quads = rng.integers(0, 12 if not degenerate else 5, size=(F, 4))
+    got = placement_measures(xy, quads)
+    want = (*quality_inverted(xy, quads), edge_ratios(xy, quads))
+    assert len(got) == 5
+    for g, w in zip(got, want):
+        assert g.dtype == w.dtype and g.shape == w.shape and g.tobytes() == w.tobytes()
 
 
 def test_sj_inverted_refuses_vertex_ids_out_of_range():

@@ -566,6 +566,27 @@ def test_snap_picks_the_nearest_increasing_assignment(seed):
         assert np.all(np.diff(got) > 0) and sum((even[got] - tc) ** 2) == pytest.approx(best, abs=1e-12)
 
 
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), n=st.integers(1, 14), pinned=st.integers(1, 14))
+def test_run_arrays_are_the_runs(seed, n, pinned):
+    """:func:`_run_arrays` (every run between pinned vertices at once, as corner_boundary spreads
+    them) holds bit for bit what :func:`_runs` yields run by run, one pinned vertex included."""
+    from jaxmatch.placement.choose import _run_arrays, _runs
+
+    rng = np.random.default_rng(seed)
+    m = n + int(rng.integers(0, 10))
+    per = float(rng.uniform(0.5, 5.0))
+    tt = np.sort(rng.uniform(0, per, m))
+    P = np.sort(rng.choice(n, min(pinned, n), replace=False))
+    pin = dict(zip(P.tolist(), np.sort(rng.choice(m, P.size, replace=False)).tolist()))
+    want = list(_runs(P, lambda j: pin[j], tt, n, per))
+    got = _run_arrays(P, pin, tt, n, per)
+    assert all(len(a) == len(want) for a in got)
+    for q, (ja, jb, r, ta, tb) in enumerate(want):
+        assert (int(got[0][q]), int(got[1][q]), int(got[2][q])) == (int(ja), int(jb), int(r))
+        assert float(got[3][q]).hex() == float(ta).hex() and float(got[4][q]).hex() == float(tb).hex()
+
+
 def test_spare_vertices_take_the_corners_an_alignment_skipped():
     """An alignment of the L shape that skips the concave corner, with vertices on straight
     points around it: unsnapped, the corner is missed; snapped, one of those vertices stands
@@ -766,6 +787,49 @@ def _same_placement(a, b) -> bool:
         if not ok:
             return False
     return True
+
+
+@pytest.mark.parametrize("name", ["triangle", "lshape", "square"])
+def test_to_user_placement_maps_every_field_alone(ranked, cat, name):
+    """:func:`to_user_placement` (paths mapped as one array, fields set in one copy) gives each
+    position array bit for bit what ``shape.to_user`` gives it alone, and measures quality on
+    the mapped positions; fields given as ``unit`` replace the placement's before mapping."""
+    from jaxmatch.placement.choose import to_user_placement
+    from jaxmatch.quality import edge_ratios, quality_inverted
+
+    shp, r, _ = ranked[name]
+    for m in r.results[:4]:
+        pl = place(shp.points, r.annotation.t, m.alignment, cat.mesh(m.mesh_id), m.rotation, m.reflected)
+        assert len(pl.boundary_paths) == len(m.alignment)
+        miss = r.annotation.positions[:2]
+        user = to_user_placement(shp, pl, missed_corners=miss, corners=7)
+        assert user.corners == 7 and user.xy.tobytes() == shp.to_user(pl.xy).tobytes()
+        assert user.missed_corners.tobytes() == shp.to_user(miss).tobytes()
+        assert [p.tobytes() for p in user.boundary_paths] == [shp.to_user(p).tobytes() for p in pl.boundary_paths]
+        sj, amin, amax, folded = quality_inverted(user.xy, pl.mesh.quads)
+        assert user.scaled_jacobian.tobytes() == sj.tobytes() and user.inverted == int(folded.sum())
+        assert user.edge_ratio.tobytes() == edge_ratios(user.xy, pl.mesh.quads).tobytes()
+        assert user.mesh_area == pl.mesh_area * float(shp.scale) ** 2
+
+
+def test_placed_before_is_the_placement_key_order(ranked, cat):
+    """``_placed_before`` (coordinates compared only on equal leading parts) orders every pair
+    as ``placement_key(a) < placement_key(b)`` does: equal keys, a difference in each part, a
+    NaN mean scaled Jacobian (no quads measured) and equal leading parts with other positions."""
+    from jaxmatch.placement.choose import _placed_before, placement_key
+
+    shp, r, _ = ranked["lshape"]
+    m = r.results[0]
+    pl = place(shp.points, r.annotation.t, m.alignment, cat.mesh(m.mesh_id), m.rotation, m.reflected)
+    rep = dataclasses.replace
+    variants = [pl, rep(pl), rep(pl, inverted=pl.inverted + 1), rep(pl, xy=pl.xy + 1e-3), rep(pl, xy=pl.xy - 1e-3),
+                rep(pl, scaled_jacobian=np.zeros(0)), rep(pl, scaled_jacobian=pl.scaled_jacobian * 0.5),
+                rep(pl, edge_ratio=pl.edge_ratio * 2), rep(pl, missed_corners=np.zeros((1, 2)))]
+    keys: dict = {}
+    for a in variants:
+        for b in variants:
+            assert _placed_before(a, b, keys) == (placement_key(a) < placement_key(b))
+    assert not _placed_before(variants[0], variants[1], {}) and _placed_before(variants[4], variants[3], {})
 
 
 def _template_on_corners(cat, lat, ranking, n: int) -> list:

@@ -742,6 +742,26 @@ def test_kept_chord_topology_gives_the_chords_of_a_fresh_count(cat, reflected):
         topo.edges[0, 0] = 0
 
 
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), share=st.floats(0.0, 1.0))
+def test_chord_numbers_rank_the_first_meetings(cat, seed, share):
+    """``_chord_numbers`` numbers the chords as ranking each one's first occurrence in the given
+    edges followed by every edge does (``np.unique(..., return_index=True)``, written out
+    here), for any subset and order of edges, also none or with repeats (closed chords and
+    chords never met follow by their smallest edge)."""
+    rng = np.random.default_rng(seed)
+    ids = [i for b in cat.buckets([0, 1, 2, 3]) for i in b.ids.tolist()]
+    topo = T._kept_topology(cat, str(rng.choice(ids)), bool(rng.integers(0, 2)))
+    E = topo.edges.shape[0]
+    first = rng.integers(0, E, size=int(share * E))
+    order = np.concatenate([first, np.arange(E)])
+    labels, at = np.unique(topo.label[order], return_index=True)
+    want = np.empty(topo.n, np.int64)
+    want[labels[np.argsort(at)]] = np.arange(labels.shape[0])
+    got = T._chord_numbers(topo, first)
+    assert got.dtype == np.int64 and got.tolist() == want[topo.label].tolist()
+
+
 def test_a_size_whose_matches_a_scan_went_through_is_not_ranked_again(cat, lat, monkeypatch):
     """The Z's single patch: its k = 1 ranking holds fewer matches than the first scan asked
     for, and none of them is a template; the deeper scan would rank the same matches again

@@ -37,7 +37,7 @@ from jaxmatch.kernels import placement as kernels
 from jaxmatch.placement.embed import Placement, exact_paths, oriented_boundary, place
 from jaxmatch.placement.spread import (MAX_TIED_ALIGNMENTS, orientation_utilities, spread_alignment,
                                        spread_optimal_alignment, spread_setup)
-from jaxmatch.quality import edge_ratios, quad_areas, quality_inverted
+from jaxmatch.quality import placement_measures, quad_areas
 from jaxmatch.shape import S as S_CODE
 from jaxmatch.shape import point_at as shape_point_at
 from jaxmatch.scoring.rank import TIE_CAP, Match, Ranking, TieBreaker
@@ -123,13 +123,13 @@ def corner_boundary(shape: Shape, annotation: Annotation, alignment: np.ndarray,
     tt = np.asarray(annotation.t, dtype=np.float64)
     pts = shape.points
     J = np.flatnonzero(codes[al] != S_CODE)
-    u = tt[al].astype(np.float64).copy()
-    pin = {int(j): int(al[j]) for j in J}  # vertex -> corner point it stands on
+    u = tt[al]  # (a new float64 array: tt is float64)
+    pin = dict(zip(J.tolist(), al[J].tolist()))  # vertex -> corner point it stands on
     if J.size == 0:
         step = per / n
         phase = float(np.mean(tt[al] - step * np.arange(n)))
         u = phase + step * np.arange(n)
-    elif snap:
+    elif snap and len(pin) < int(np.count_nonzero(codes != S_CODE)):  # (every corner taken: none to snap)
         corner_pts = np.flatnonzero(codes != S_CODE)
         taken = set(pin.values())
         for ja, jb, r, ta, tb in _runs(J, lambda j: al[j], tt, n, per):
@@ -143,18 +143,32 @@ def corner_boundary(shape: Shape, annotation: Annotation, alignment: np.ndarray,
     cum = shape.arc_length
     if pin:
         P = np.array(sorted(pin))
-        L = cum[-1]
-        loop3 = (np.concatenate([cum[:-1], cum[:-1] + L, cum[:-1] + 2 * L]), np.concatenate([pts, pts, pts]))
-        for ja, jb, r, ta, tb in _runs(P, lambda j: pin[j], tt, n, per):
-            u[ja] = ta
-            js = (ja + 1 + np.arange(r)) % n
-            u[js] = ta + (tb - ta) * (np.arange(1, r + 1) / (r + 1))
-            if r and P.size > 1 and _straight(pts, cum, ta, tb, loop3):
-                groups.append((int(ja), int(jb), js.astype(np.int64)))
+        ja, jb, r, ta, tb = _run_arrays(P, pin, tt, n, per)
+        u[ja] = ta  # the runs' vertices are disjoint: all runs set at once, as one by one
+        each = np.repeat(np.arange(P.size), r)
+        k = np.arange(each.size) - np.repeat(np.cumsum(r) - r, r) + 1  # 1..r within each run
+        u[(ja[each] + k) % n] = ta[each] + (tb[each] - ta[each]) * (k / (r[each] + 1))
+        if P.size > 1 and r.any():
+            L = cum[-1]
+            loop3 = (np.concatenate([cum[:-1], cum[:-1] + L, cum[:-1] + 2 * L]), np.concatenate([pts, pts, pts]))
+            for q in np.flatnonzero(r).tolist():
+                if _straight(pts, cum, ta[q], tb[q], loop3):
+                    groups.append((int(ja[q]), int(jb[q]), (ja[q] + 1 + np.arange(r[q])) % n))
     xy = shape_point_at(pts, u, cum) if len(pin) < n else np.empty((n, 2))  # (every vertex pinned: all set below)
-    for j, c in pin.items():
-        xy[j] = annotation.positions[c]  # corners exactly
+    if pin:
+        xy[list(pin)] = np.asarray(annotation.positions)[list(pin.values())]  # corners exactly
     return Boundary(u, xy, tuple(groups), missed_corners(annotation, xy))
+
+
+def _run_arrays(P: np.ndarray, pin: dict, tt: np.ndarray, n: int, per: float):
+    """:func:`_runs` of the pinned vertices ``P`` (sorted) as arrays ``(ja, jb, r, ta, tb)``,
+    each ``(len(P),)``: the same values (vertex ``j`` stands on point ``pin[j]``)."""
+    pt = np.asarray([pin[j] for j in P.tolist()], np.int64)
+    jb = roll(P, -1)
+    r = (jb - P - 1) % n if P.size > 1 else np.full(1, n - 1, np.int64)
+    ta = tt[pt]
+    tb = tt[roll(pt, -1)] if P.size > 1 else ta + per
+    return P, jb, r, ta, np.where(tb <= ta, tb + per, tb)
 
 
 def _runs(J: np.ndarray, point_of, tt: np.ndarray, n: int, per: float):
@@ -255,14 +269,40 @@ def placement_key(pl: Placement) -> tuple:
     quads, higher min scaled Jacobian (:data:`SJ_DIGITS` decimals), lower max edge ratio
     (4 decimals), higher mean scaled Jacobian, then the sorted rounded vertex coordinates
     (a geometric, labelling-independent last resort: equal keys mean equal vertex positions)."""
+    return _key_head(pl) + (_key_coords(pl),)
+
+
+def _key_head(pl: Placement) -> tuple:
+    """:func:`placement_key` less its last part, the coordinates (:func:`_key_coords`): what
+    orders two placements unless it is equal."""
     sj = pl.min_scaled_jacobian
     sj = -math.inf if math.isnan(sj) else round(sj, SJ_DIGITS)
     er = pl.max_edge_ratio
     er = math.inf if math.isnan(er) else round(er, 4)
+    return (pl.missed_corners.shape[0], pl.inverted, -sj, er, -round(pl.mean_scaled_jacobian, SJ_DIGITS))
+
+
+def _key_coords(pl: Placement) -> tuple:
+    """The last part of :func:`placement_key`: the sorted rounded vertex coordinates."""
     coords = np.round(pl.xy, COORD_DIGITS) + 0.0  # -0.0 -> 0.0
     order = np.lexsort((coords[:, 1], coords[:, 0]))
-    return (pl.missed_corners.shape[0], pl.inverted, -sj, er, -round(pl.mean_scaled_jacobian, SJ_DIGITS),
-            tuple(coords[order].ravel().tolist()))
+    return tuple(coords[order].ravel().tolist())
+
+
+def _placed_before(a: Placement, b: Placement, keys: dict) -> bool:
+    """``placement_key(a) < placement_key(b)``, the coordinates compared only when the rest of
+    the keys is equal (a tuple comparison decides at the first unequal part). ``keys``: the
+    parts made so far, by ``(id(placement), part)`` (the caller keeps both placements alive)."""
+    def part(pl, which, make):
+        k = (id(pl), which)
+        if k not in keys:
+            keys[k] = make(pl)
+        return keys[k]
+
+    ha, hb = part(a, 0, _key_head), part(b, 0, _key_head)
+    if ha != hb:
+        return ha < hb
+    return part(a, 1, _key_coords) < part(b, 1, _key_coords)
 
 
 def match_candidates(annotation: Annotation, vals: np.ndarray, lattice, utility: float | None = None, *,
@@ -386,19 +426,18 @@ def place_match(shape: Shape, annotation: Annotation, catalogue: Catalogue, matc
                 loops[rot, refl] = val[oriented_boundary(mesh, rot, refl)[1]]
             sig = _boundary_signature(boundaries[key], loops[rot, refl])
             unique.setdefault(sig, (rot, refl, al, boundaries[key]))
-        best = None  # (key or None while no other placement needs comparing, placement, u)
+        best = None  # (placement, u): the best by placement_key so far
+        keys: dict = {}  # the parts of their keys made (_placed_before; every placement compared stays alive)
+        placed = []
         for sig in sorted(unique)[:MAX_CANDIDATES if min_utility is None else MAX_REORIENTED]:
             rot, refl, al, b = unique[sig]
             for pl, u in _place_candidate(shape, annotation, mesh, rot, refl, al, smooth_iters, b):
-                if best is None:
-                    best = (None, pl, u)
-                    continue
-                key = placement_key(pl)
-                kept = placement_key(best[1]) if best[0] is None else best[0]
-                best = (key, pl, u) if key < kept else (kept, best[1], best[2])
-        _, pl, u = best  # boundary paths only for the one kept
-        pl = dataclasses.replace(pl, boundary_paths=exact_paths(shape.points, u, pl.xy[pl.mesh.boundary], shape.arc_length))
-        user = to_user_placement(shape, pl)
+                placed.append(pl)
+                if best is None or _placed_before(pl, best[0], keys):
+                    best = (pl, u)
+        pl, u = best  # boundary paths only for the one kept
+        user = to_user_placement(shape, pl, boundary_paths=exact_paths(shape.points, u, pl.xy[pl.mesh.boundary],
+                                                                       shape.arc_length))
     if placements is not None:
         placements[cache_key] = user
     return user
@@ -420,25 +459,23 @@ def _place_pinned(shape: Shape, annotation: Annotation, mesh, match: Match, al: 
     between them), and no boundary vertex slides (none lies between two corners); the same
     :class:`Placement`, its figures computed as :func:`place` and :func:`to_user_placement`
     compute them. Without internal vertices nothing is smoothed either: the placement is built
-    directly (without the unit-box quality that :func:`to_user_placement` measures again)."""
+    directly in user coordinates (:func:`_user_fields`, what :func:`to_user_placement` sets)."""
     u = np.mod(np.asarray(annotation.t, dtype=np.float64)[al], float(shape.arc_length[-1]))
     bxy = np.asarray(annotation.positions)[al]
-    miss = missed_corners(annotation, bxy)
+    miss = np.asarray(annotation.positions)[:0]  # (0, 2): every corner point is a vertex's (missed_corners: none)
     if int(mesh.n_vertices) > al.shape[0]:  # internal vertices: placed and smoothed as the search places them
         pl = place(shape.points, annotation.t, al, mesh, match.rotation, match.reflected, boundary_xy=bxy,
                    smooth_iters=smooth_iters, paths=False, region_area=shape.area)
-        pl = dataclasses.replace(pl, missed_corners=miss, corners=shape.n_corners)
-    else:
-        om, loop = oriented_boundary(mesh, match.rotation, match.reflected)
-        xy = np.empty((om.n_vertices, 2))
-        xy[loop] = bxy  # (what place() puts there: no vertex is free)
-        none = np.zeros(0)  # the quality figures: to_user_placement measures them in user coordinates
-        pl = Placement(mesh=om, xy=xy, scaled_jacobian=none, min_angle=none, max_angle=none, inverted=0,
-                       irregular=np.zeros(0, np.int64), alignment=al, region_area=float(shape.area),
-                       mesh_area=float(quad_areas(xy, om.quads).sum()), rotation=int(match.rotation),
-                       reflected=bool(match.reflected), missed_corners=miss, corners=shape.n_corners)
-    pl = dataclasses.replace(pl, boundary_paths=exact_paths(shape.points, u, pl.xy[pl.mesh.boundary], shape.arc_length))
-    return to_user_placement(shape, pl)
+        paths = exact_paths(shape.points, u, pl.xy[pl.mesh.boundary], shape.arc_length)
+        return to_user_placement(shape, pl, missed_corners=miss, corners=shape.n_corners, boundary_paths=paths)
+    om, loop = oriented_boundary(mesh, match.rotation, match.reflected)
+    xy = np.empty((om.n_vertices, 2))
+    xy[loop] = bxy  # (what place() puts there: no vertex is free)
+    paths = exact_paths(shape.points, u, bxy, shape.arc_length)  # (bxy: xy[om.boundary])
+    return Placement(mesh=om, irregular=np.zeros(0, np.int64), alignment=al, rotation=int(match.rotation),
+                     reflected=bool(match.reflected), corners=shape.n_corners,
+                     **_user_fields(shape, xy, om.quads, miss, paths, float(shape.area),
+                                    float(quad_areas(xy, om.quads).sum())))
 
 
 def _pin_keys(annotation: Annotation, alignments: Sequence[np.ndarray]) -> list[bytes]:
@@ -473,8 +510,9 @@ def _place_candidate(shape, annotation, mesh, rot, refl, al, smooth_iters, b: Bo
 
     def put(groups):
         pl = place(shape.points, annotation.t, al, mesh, rot, refl, boundary_xy=b.xy, slide_groups=groups,
-                   smooth_iters=smooth_iters, paths=False, region_area=shape.area)
-        return dataclasses.replace(pl, missed_corners=b.missed, corners=shape.n_corners), np.mod(b.u, per)
+                   smooth_iters=smooth_iters, paths=False, region_area=shape.area, missed_corners=b.missed,
+                   corners=shape.n_corners)
+        return pl, np.mod(b.u, per)
 
     pl, u = put(())
     yield pl, u
@@ -482,25 +520,32 @@ def _place_candidate(shape, annotation, mesh, rot, refl, al, smooth_iters, b: Bo
         yield put(b.slide_groups)
 
 
-def to_user_placement(shape: Shape, pl: Placement) -> Placement:
-    """A unit-box placement mapped to user coordinates (``shape.to_user``), quality recomputed."""
-    xy = shape.to_user(pl.xy)
-    quads = pl.mesh.quads
-    sj, amin, amax, folded = quality_inverted(xy, quads)
+def to_user_placement(shape: Shape, pl: Placement, **unit) -> Placement:
+    """A unit-box placement mapped to user coordinates (``shape.to_user``), quality recomputed.
+    ``unit``: fields of ``pl`` to set first (unit box; e.g. ``boundary_paths``), in the same copy."""
+    def get(name):
+        return unit[name] if name in unit else getattr(pl, name)
+
+    fields = _user_fields(shape, get("xy"), pl.mesh.quads, get("missed_corners"), get("boundary_paths"),
+                          get("region_area"), get("mesh_area"))
+    return dataclasses.replace(pl, **{**unit, **fields})
+
+
+def _user_fields(shape: Shape, xy: np.ndarray, quads: np.ndarray, missed: np.ndarray, paths: tuple,
+                 region_area: float, mesh_area: float) -> dict:
+    """The :class:`Placement` fields that :func:`to_user_placement` maps or measures, from the
+    unit-box ``xy (V, 2)``, ``missed (c, 2)``, ``paths`` (``(k_j, 2)`` each) and areas: positions
+    in user coordinates (the paths mapped as one array, sliced back), quality measured there."""
+    user = shape.to_user(xy)
+    sj, amin, amax, folded, ratio = placement_measures(user, quads)
     s2 = float(shape.scale) ** 2
-    return dataclasses.replace(
-        pl,
-        xy=xy,
-        edge_ratio=edge_ratios(xy, quads),
-        missed_corners=shape.to_user(pl.missed_corners).reshape(-1, 2),
-        scaled_jacobian=sj,
-        min_angle=amin,
-        max_angle=amax,
-        inverted=int(folded.sum()),
-        boundary_paths=tuple(shape.to_user(p) for p in pl.boundary_paths),
-        region_area=pl.region_area * s2,
-        mesh_area=pl.mesh_area * s2,
-    )
+    if paths:
+        lens = np.cumsum([len(q) for q in paths]).tolist()
+        flat = shape.to_user(np.concatenate(paths))
+        paths = tuple(flat[i:j] for i, j in zip([0] + lens[:-1], lens))
+    return dict(xy=user, edge_ratio=ratio, missed_corners=shape.to_user(missed).reshape(-1, 2),
+                scaled_jacobian=sj, min_angle=amin, max_angle=amax, inverted=int(folded.sum()),
+                boundary_paths=tuple(paths), region_area=region_area * s2, mesh_area=mesh_area * s2)
 
 
 # ---------------------------------------------------------------------------------------------

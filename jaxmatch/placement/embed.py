@@ -51,7 +51,7 @@ import numpy as np
 from jaxmatch.catalogue.mesh import QuadMesh, edges, mesh_valences
 from jaxmatch.arrays import roll
 from jaxmatch.geometry import VERTEX_SNAP, cumulative_length, point_at, signed_area, sub_polyline
-from jaxmatch.quality import corner_vectors, edge_ratios, quad_areas, quality_inverted, sj_inverted
+from jaxmatch.quality import corner_vectors, placement_measures, quad_areas, sj_inverted
 
 __all__ = [
     "Placement",
@@ -59,6 +59,7 @@ __all__ = [
     "arc_lengths",
     "boundary_paths",
     "oriented_boundary",
+    "oriented_loop",
     "place",
     "point_at",
     "polygon_area",
@@ -163,13 +164,19 @@ def oriented_boundary(mesh: QuadMesh, rotation: int, reflected: bool) -> tuple[Q
     ``loop`` and its quads are ccw for a placement where ``loop`` runs ccw.
     """
     quads = np.asarray(mesh.quads, dtype=np.int32)
-    s = np.asarray(mesh.boundary, dtype=np.int32)
     if reflected:
         quads = quads[:, ::-1]
+    loop = oriented_loop(mesh, rotation, reflected)
+    return QuadMesh(quads=np.ascontiguousarray(quads), boundary=loop), loop
+
+
+def oriented_loop(mesh: QuadMesh, rotation: int, reflected: bool) -> np.ndarray:
+    """The ``loop`` of :func:`oriented_boundary` alone, ``(n,) int32`` (without the oriented quads)."""
+    s = np.asarray(mesh.boundary, dtype=np.int32)
+    if reflected:
         s = s[::-1]
     n = s.shape[0]
-    loop = roll(s, -(int(rotation) % n if n else 0)).astype(np.int32)
-    return QuadMesh(quads=np.ascontiguousarray(quads), boundary=loop), loop
+    return roll(s, -(int(rotation) % n if n else 0)).astype(np.int32)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -599,9 +606,10 @@ def _pick(best, best_key, cand, quads, tol: float = 1e-9):
 def _check_alignment(alignment: np.ndarray, m: int, n: int) -> None:
     if alignment.ndim != 1 or alignment.shape[0] != n:
         raise ValueError(f"alignment has {alignment.shape[0] if alignment.ndim else 0} entries, mesh boundary has {n}")
-    if n and (alignment.min() < 0 or alignment.max() >= m):
+    a = alignment.tolist()  # (a few dozen indices: plain numbers)
+    if n and (min(a) < 0 or max(a) >= m):
         raise ValueError(f"alignment indices must lie in [0, {m})")
-    if np.any(np.diff(alignment) <= 0):
+    if any(x >= y for x, y in zip(a, a[1:])):
         raise ValueError("alignment must be strictly increasing")
 
 
@@ -620,6 +628,8 @@ def place(
     smooth_iters: int = 200,
     paths: bool = True,
     region_area: float | None = None,
+    missed_corners: np.ndarray | None = None,
+    corners: int = 0,
 ) -> Placement:
     """Place ``mesh`` in the shape ``points`` following a match.
 
@@ -638,7 +648,8 @@ def place(
     smooth_iters: L-BFGS iterations per untangling/smoothing round (0: plain Tutte).
     paths: False leaves ``boundary_paths`` empty (for candidates that are only compared; the
     caller adds them to the one it keeps with :func:`exact_paths`). region_area: the area
-    enclosed by ``points``, when the caller has it (else computed).
+    enclosed by ``points``, when the caller has it (else computed). missed_corners, corners: recorded
+    as given (:class:`Placement`; this function knows no corners).
     """
     pts = np.asarray(points, dtype=np.float64)
     tt = np.asarray(t, dtype=np.float64).ravel()
@@ -657,8 +668,8 @@ def place(
     quads = om.quads
 
     # normalised frame: centred on the boundary vertices, unit RMS radius
-    offset = bxy.mean(axis=0)
-    scale = float(np.sqrt(np.mean(np.sum((bxy - offset) ** 2, axis=1)))) or 1.0
+    offset = np.add.reduce(bxy, axis=0) / bxy.shape[0]  # (np.mean's sum and division, without its wrapper)
+    scale = float(np.sqrt(np.add.reduce(np.add.reduce((bxy - offset) ** 2, axis=1)) / bxy.shape[0])) or 1.0
     nb = (bxy - offset) / scale
     groups = [(int(ja), int(jb), np.asarray(js, np.int64)) for ja, jb, js in slide_groups if len(js)]
     slides = tuple(Slide(nb[ja], nb[jb], loop[js]) for ja, jb, js in groups)
@@ -674,7 +685,7 @@ def place(
         bxy[js] = bxy[ja] + u[:, None] * (bxy[jb] - bxy[ja])
     xy[loop] = bxy  # exact boundary positions (no round-off from normalisation)
 
-    sj, amin, amax, folded = quality_inverted(xy, quads)
+    sj, amin, amax, folded, ratio = placement_measures(xy, quads)
     val = mesh_valences(mesh)  # the oriented mesh has the same vertices
     internal = np.ones(V, bool)
     internal[loop] = False
@@ -698,23 +709,48 @@ def place(
         boundary_paths=paths,
         region_area=polygon_area(pts) if region_area is None else float(region_area),
         mesh_area=float(quad_areas(xy, quads).sum()),
-        edge_ratio=edge_ratios(xy, quads),
+        edge_ratio=ratio,
         rotation=int(rotation),
         reflected=bool(reflected),
         slid=bool(groups),
+        missed_corners=np.zeros((0, 2)) if missed_corners is None else missed_corners,
+        corners=int(corners),
     )
 
 
 def exact_paths(points: np.ndarray, t_aligned: np.ndarray, bxy: np.ndarray,
                 cum: np.ndarray | None = None) -> tuple[np.ndarray, ...]:
     """:func:`boundary_paths` between the parameters ``t_aligned (n,)`` whose end points are
-    exactly the boundary vertex positions ``bxy (n, 2)`` (``cum``: as there)."""
-    paths = boundary_paths(points, t_aligned, cum)
-    n = len(paths)
-    out = []
-    for j, p in enumerate(paths):
-        p = p.copy()
-        p[0] = bxy[j]
-        p[-1] = bxy[(j + 1) % n]
-        out.append(p)
-    return tuple(out)
+    exactly the boundary vertex positions ``bxy (n, 2)`` (``cum``: as there).
+
+    The same polyline vertices as :func:`boundary_paths` picks, gathered for all paths in one
+    array (its ends never computed: they are ``bxy``); path ``j`` is a slice of it."""
+    p = np.asarray(points, dtype=np.float64)
+    cum = arc_lengths(p) if cum is None else cum
+    ta = np.asarray(t_aligned, dtype=np.float64).ravel()
+    n, P = ta.shape[0], p.shape[0]
+    if n == 0 or n * 3 * P > 4_000_000:  # as boundary_paths: one piece at a time
+        out = []
+        for j, q in enumerate(boundary_paths(p, ta, cum)):
+            q = q.copy()
+            q[0] = bxy[j]
+            q[-1] = bxy[(j + 1) % n]
+            out.append(q)
+        return tuple(out)
+    per = cum[-1]
+    t1 = roll(ta, -1)
+    t1 = np.where(t1 <= ta, t1 + per, t1)
+    tol = VERTEX_SNAP * per
+    c3 = np.concatenate([cum[:-1], cum[:-1] + per, cum[:-1] + 2 * per])  # non-decreasing
+    # boundary_paths' vertices of path j, c3 > ta_j + tol and c3 < t1_j - tol: the run lo_j .. hi_j - 1
+    lo = np.searchsorted(c3, ta + tol, side="right").tolist()
+    hi = np.searchsorted(c3, t1 - tol, side="left").tolist()
+    # rows of [bxy; points]: each path's two ends and the loop's vertices between (a few dozen in all)
+    pick, bounds = [], [0]
+    for j in range(n):
+        pick.append(j)
+        pick.extend(n + i % P for i in range(lo[j], hi[j]))
+        pick.append(j + 1 if j + 1 < n else 0)
+        bounds.append(len(pick))
+    flat = np.concatenate([np.asarray(bxy, dtype=np.float64).reshape(n, 2), p])[pick]
+    return tuple(flat[i:j] for i, j in zip(bounds[:-1], bounds[1:]))

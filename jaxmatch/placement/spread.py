@@ -67,7 +67,9 @@ def spread_alignment(t: np.ndarray, perimeter: float, codes: np.ndarray, alignme
     if n < 2:
         return al.copy()
     want = c[al]  # (n,) code of each vertex's point
-    if np.array_equal(np.bincount(want, minlength=3), np.bincount(c[np.isin(c, want)], minlength=3)):
+    need = np.bincount(want, minlength=3).tolist()
+    have = np.bincount(c, minlength=len(need)).tolist()  # (every wanted code is some point's: no longer than need)
+    if need == [h if k > 0 else 0 for k, h in zip(need, have)]:
         return al.copy()  # as many points of each wanted code as vertices want it: no other alignment
     ok = c[None, :] == want[:, None]  # (n, m) allowed points per vertex
     starts = np.flatnonzero(ok[0])

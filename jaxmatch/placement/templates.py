@@ -23,7 +23,7 @@ from jaxmatch.cache import key as cache_key
 from jaxmatch.catalogue.mesh import edges
 from jaxmatch.errors import UnmatchableError
 from jaxmatch.placement.choose import place_match
-from jaxmatch.placement.embed import Placement, oriented_boundary
+from jaxmatch.placement.embed import Placement, oriented_boundary, oriented_loop
 from jaxmatch.scoring.bulk import prepared
 from jaxmatch.scoring.rank import rank
 from jaxmatch.shape import Shape
@@ -195,17 +195,24 @@ def _chords(quads: np.ndarray, boundary: np.ndarray, first_edges: Sequence[tuple
     ``quads`` when the caller has it. Returns ``(edge_list (E, 2), edge_chord (E,), quad_chords
     (F, 2), n_chords)``."""
     t = _chord_topology(quads) if topology is None else topology
-    E = t.edges.shape[0]
-    # renumber: by first boundary edge along the sides, then the rest by smallest edge (every
-    # chord has an edge, so each label occurs in `order`; its number is the rank of its first
-    # occurrence)
     fe = np.asarray(first_edges, np.int64).reshape(-1, 2)
-    order = np.concatenate([_edge_id(t.key, t.V, fe[:, 0], fe[:, 1]), np.arange(E)])
-    labels, first = np.unique(t.label[order], return_index=True)
-    rename = np.empty(t.n, np.int64)
-    rename[labels[np.argsort(first)]] = np.arange(labels.shape[0])
-    chord = rename[t.label]
+    chord = _chord_numbers(t, _edge_id(t.key, t.V, fe[:, 0], fe[:, 1]))
     return t.edges, chord, np.stack([chord[t.quad_edges[:, 0]], chord[t.quad_edges[:, 1]]], axis=1), int(t.n)
+
+
+def _chord_numbers(t: _ChordTopology, first_ids: np.ndarray) -> np.ndarray:
+    """``(E,) int64`` chord number of each edge of ``t``: the chords of the edges ``first_ids``
+    (edge ids, in order) numbered by their first one there, then the other chords by their
+    smallest edge (what ranking the first occurrences in ``first_ids`` followed by every edge
+    gives). ``t.label`` numbers the chords by their smallest edge already (:func:`_components`
+    names each by its smallest edge), so the others keep their order."""
+    met = list(dict.fromkeys(t.label[first_ids].tolist()))  # chords in order of first meeting
+    rest = np.ones(t.n, bool)
+    rest[met] = False
+    rename = np.empty(t.n, np.int64)
+    rename[met] = np.arange(len(met))
+    rename[rest] = np.arange(len(met), t.n)
+    return rename[t.label]
 
 
 def _corner_positions(shape: Shape, annotation, alignment: np.ndarray) -> np.ndarray | None:
@@ -231,42 +238,34 @@ def fit_template(shape: Shape, annotation, match: "Match", catalogue: "Catalogue
     a corner of the shape has no mesh vertex. The chords and sides do not depend on the
     placement: :func:`~jaxmatch.placement.choose.place_match` re-spreads the alignment only over
     points of the same type, and a match with every corner matched uses every corner point."""
-    om, loop32 = oriented_boundary(catalogue.mesh(match.mesh_id), match.rotation, match.reflected)
-    loop = np.asarray(loop32, np.int64)
-    nb = loop.shape[0]
+    loop = oriented_loop(catalogue.mesh(match.mesh_id), match.rotation, match.reflected).tolist()
+    nb = len(loop)
     if shape.n_corners == 0:
-        a = np.zeros(1, np.int64)
-        stop = np.full(1, nb, np.int64)
-        rev = np.zeros(1, bool)
+        spans = [(0, nb, False)]
     else:
         pos = _corner_positions(shape, annotation, match.alignment)
         if pos is None:
             return None
         n = shape.n_corners
-        frame = np.asarray(shape.side_frame, np.int64).reshape(-1, 2)
-        a, b = pos[frame[:, 0]], pos[(frame[:, 0] + 1) % n]
-        stop = np.where(b > a, b, b + nb)
-        rev = frame[:, 1].astype(bool)
-    # side i's path: loop positions a_i .. stop_i (mod nb), backwards when the user runs it so;
-    # all sides' vertices in one array, side i's at [starts[i], starts[i] + lens[i])
-    lens = stop - a + 1
-    ends = np.cumsum(lens)
-    starts = ends - lens
-    side = np.repeat(np.arange(lens.shape[0]), lens)
-    k = np.arange(int(ends[-1])) - starts[side]
-    verts = loop[np.where(rev[side], stop[side] - k, a[side] + k) % nb]
-    inner = np.ones(verts.shape[0], bool)
-    inner[ends - 1] = False  # an edge from each vertex but a side's last
-    first = np.stack([verts[:-1][inner[:-1]], verts[1:][inner[:-1]]], axis=1)  # (sum e_i, 2) side edges in order
+        at = pos.tolist()
+        spans = []  # side i: loop positions a_i .. stop_i (mod nb), backwards when the user runs it so
+        for j, backwards in shape.side_frame:
+            a, b = at[j], at[(j + 1) % n]
+            spans.append((a, b if b > a else b + nb, bool(backwards)))
+    # (a patch's few sides in plain numbers)
+    paths = [[loop[i % nb] for i in (range(stop, a - 1, -1) if backwards else range(a, stop + 1))]
+             for a, stop, backwards in spans]
+    heads = np.array([v for p in paths for v in p[:-1]], np.int64)  # the side edges in order
+    tails = np.array([v for p in paths for v in p[1:]], np.int64)
     topo = _kept_topology(catalogue, match.mesh_id, match.reflected)
-    e, chord, qc, nc = _chords(om.quads, loop, first, topo)
-    along = chord[_edge_id(topo.key, topo.V, first[:, 0], first[:, 1])]
-    edge_ends = (ends - np.arange(1, lens.shape[0] + 1)).tolist()  # side i's edges end here in `along`
-    edge_starts = [0] + edge_ends[:-1]
-    side_chords = tuple(along[i:j] for i, j in zip(edge_starts, edge_ends))
-    bounds = zip(starts.tolist(), ends.tolist())
-    return PatchTemplate(shape, match.mesh_id, side_chords, nc, match, rank, None, qc, e, chord,
-                         tuple(verts[i:j].copy() for i, j in bounds))
+    ids = _edge_id(topo.key, topo.V, heads, tails)
+    chord = _chord_numbers(topo, ids)  # (what _chords gives for these first edges)
+    qc = np.stack([chord[topo.quad_edges[:, 0]], chord[topo.quad_edges[:, 1]]], axis=1)
+    along = chord[ids]
+    edge_ends = np.cumsum([len(p) - 1 for p in paths]).tolist()  # side i's edges end here in `along`
+    side_chords = tuple(along[i:j] for i, j in zip([0] + edge_ends[:-1], edge_ends))
+    return PatchTemplate(shape, match.mesh_id, side_chords, int(topo.n), match, rank, None, qc, topo.edges, chord,
+                         tuple(np.array(p, np.int64) for p in paths))
 
 
 def _candidates(shape: Shape, catalogue: "Catalogue", lattice: "Lattice", *, limit: int,

@@ -41,11 +41,14 @@ from typing import Callable, Iterable, NamedTuple, Sequence
 import numpy as np
 
 from jaxmatch.files import atomic_open
+from jaxmatch.kernels.backends import default_backend
 from jaxmatch.kernels.model import NEG, skip_frame, skip_offset, weights_of
 from jaxmatch.scoring.exact import (  # numpy only: no JAX import here
     DEFAULT_BATCH,
     UNROLL,
     block_size,
+    dp_kinds,
+    dp_problem,
     exact_values,
     final_values,
     reduce_orientations,
@@ -401,6 +404,7 @@ def _values(codes, seqs, weights, *, devices=None, plan=None, **kw) -> np.ndarra
     """Per-orientation values of ``seqs`` on one device (threads) or sharded over ``devices``."""
     if devices is not None and not (isinstance(devices, (int, np.integer)) and int(devices) == 1):
         kw.pop("threads", None)
+        kw.pop("problem", None)
         return sharded_values(codes, seqs, weights, devices=devices, plan=plan, **kw)
     return final_values(codes, seqs, weights, plan=plan, **kw)
 
@@ -496,14 +500,39 @@ def top_k(
                 thr[g] = sorted(us, reverse=True)[top - 1]
         return thr
 
+    backend: list = []  # the default backend (final_values'), chosen once for every part
+    kinds: dict = {}  # boundary length -> DP number type (dp_kinds), read once
+    problems: dict = {}  # DP number type -> the shape's DP problem (dp_problem), its n set per part
+
+    def problem(n: int):
+        """``dp_problem([codes], weights, n)``: the shape padded and the model compiled once per
+        number type (only ``n`` differs between the parts' problems)."""
+        if not kinds:
+            kinds.update(dp_kinds(weights, sorted({int(p.n) for p in parts})))
+        kind = kinds[int(n)]
+        if kind not in problems:
+            problems[kind] = dp_problem([codes], weights, int(n), kind=kind)
+        return problems[kind]._replace(n=int(n))
+
     def score_some(p: Part, sel: np.ndarray, plan) -> None:
-        rep = _values(codes, p.groups.seqs[sel], weights, plan=plan, batch=batch, threads=threads, devices=devices)
-        mesh_rows = np.flatnonzero(np.isin(p.groups.index, sel))
-        # fan_out of the scored rows only (sel is sorted): no (U, 2n) array per call
-        at = np.searchsorted(sel, p.groups.index[mesh_rows])
-        res = reduce_orientations(np.asarray(rep)[at[:, None], p.groups.orient[mesh_rows]])
+        every = len(sel) == len(p.groups.seqs)  # (sel sorted, distinct: every sequence)
+        one = devices is None or (isinstance(devices, (int, np.integer)) and int(devices) == 1)
+        if one and not backend:
+            backend.append(default_backend(threads, UNROLL))
+        rep = _values(codes, p.groups.seqs if every else p.groups.seqs[sel], weights, plan=plan, batch=batch,
+                      threads=threads, devices=devices, problem=problem(p.n),
+                      **({"backend": backend[0]} if one else {}))
+        if every:  # every mesh, as below
+            mesh_rows = np.arange(len(p.groups.index))
+            at, orient, ks = np.asarray(p.groups.index), p.groups.orient, p.k
+        else:
+            mesh_rows = np.flatnonzero(np.isin(p.groups.index, sel))
+            # fan_out of the scored rows only (sel is sorted): no (U, 2n) array per call
+            at = np.searchsorted(sel, p.groups.index[mesh_rows])
+            orient, ks = p.groups.orient[mesh_rows], p.k[mesh_rows]
+        res = reduce_orientations(np.asarray(rep)[at[:, None], orient])
         ok = np.isfinite(res.utility)
-        keep = ok & (res.utility >= cutoffs()[group_of(p.k[mesh_rows])])  # the others cannot be selected
+        keep = ok & (res.utility >= cutoffs()[group_of(ks)])  # the others cannot be selected
         st["rows"] = _select(st["rows"] + [
             (float(res.utility[i]), int(p.k[r]), p.n, str(p.ids[r]), int(res.rotation[i]), bool(res.reflected[i]), p.valences[r])
             for i, r in zip(np.flatnonzero(keep), mesh_rows[keep])], top, per_size)

@@ -89,7 +89,7 @@ import numpy as np
 from jaxmatch.arrays import roll
 from jaxmatch.catalogue.mesh import triples
 from jaxmatch.errors import UnmatchableError
-from jaxmatch.kernels.backends import c_align, c_kernel, default_backend
+from jaxmatch.kernels.backends import NumbaBackend, c_align, c_kernel, default_backend
 from jaxmatch.kernels.model import (  # noqa: F401 (SkipFrame re-exported)
     NEG,
     SkipFrame,
@@ -143,8 +143,9 @@ def bucket_length(m: int) -> int:
     return 64 * -(-m // 64)
 
 
-def pad_codes(codes, m_pad: int | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """``(codes_pad (m_pad,) int32, valid (m_pad,) bool)``; padded points are invalid (skipped)."""
+def _checked_codes(codes, m_pad: int | None) -> tuple[np.ndarray, int]:
+    """``(codes (m,) int32, m_pad)`` (default :func:`bucket_length`); ValueError for a code other
+    than 0/1/2 or ``m_pad < m``."""
     c = np.asarray(codes, dtype=np.int32).reshape(-1)
     m = c.shape[0]
     if c.size and (c.min() < 0 or c.max() > 2):
@@ -152,6 +153,13 @@ def pad_codes(codes, m_pad: int | None = None) -> tuple[np.ndarray, np.ndarray]:
     m_pad = bucket_length(m) if m_pad is None else int(m_pad)
     if m_pad < m:
         raise ValueError(f"m_pad={m_pad} < m={m}")
+    return c, m_pad
+
+
+def pad_codes(codes, m_pad: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """``(codes_pad (m_pad,) int32, valid (m_pad,) bool)``; padded points are invalid (skipped)."""
+    c, m_pad = _checked_codes(codes, m_pad)
+    m = c.shape[0]
     out = np.zeros(m_pad, np.int32)
     out[:m] = c
     return out, np.arange(m_pad) < m
@@ -186,15 +194,25 @@ def dp_kind(weights, n: int) -> DPKind:
     int32, anything else float32 with :data:`NEG` (bit for bit the recurrence of
     :func:`dp_scan`). All three give identical utilities.
     """
+    return dp_kinds(weights, [n])[int(n)]
+
+
+def dp_kinds(weights, ns) -> dict[int, DPKind]:
+    """:func:`dp_kind` of every boundary length in ``ns`` (``{n: kind}``), the model read once
+    (a ranking scores several lengths against one model)."""
     t = skip_frame(weights).table
     w = t[t > NEG / 2]
-    big = float(np.abs(w).max()) if w.size else 0.0
-    if w.size == 0 or np.all(w == np.round(w)):
-        if n * big < 2**13:
-            return DPKind(np.int16, float(NEG16))
-        if n * big < 2**29:
-            return DPKind(np.int32, float(NEG32))
-    return DPKind(np.float32, NEG)
+    big = float(abs(w).max()) if w.size else 0.0
+    integral = w.size == 0 or bool((w == w.round()).all())
+    out = {}
+    for n in ns:
+        kind = DPKind(np.float32, NEG)
+        if integral and int(n) * big < 2**13:
+            kind = DPKind(np.int16, float(NEG16))
+        elif integral and int(n) * big < 2**29:
+            kind = DPKind(np.int32, float(NEG32))
+        out[int(n)] = kind
+    return out
 
 
 def dp_table(weights, kind: DPKind) -> np.ndarray:
@@ -258,7 +276,7 @@ def dp_problem(codes_list: Sequence, weights, n: int, m_pad: int | None = None, 
     mp = bucket_length(max((len(c) for c in shapes), default=1)) if m_pad is None else int(m_pad)
     codes = np.full((len(shapes), mp), _INVALID, np.int32)
     for i, c in enumerate(shapes):
-        codes[i] = dp_codes(c, mp)
+        codes[i, :c.shape[0]] = _checked_codes(c, mp)[0]  # (dp_codes: padding points get code 3)
     kind = dp_kind(w, n) if kind is None else kind
     return DPProblem(codes, np.asarray([len(c) for c in shapes], np.int64),
                      np.asarray([skip_offset(c, w) for c in shapes], np.float64),
@@ -274,27 +292,38 @@ def exact_values(
     batch: int = DEFAULT_BATCH,
     m_pad: int | None = None,
     plan: tuple[int, int] | None = None,
+    problem: DPProblem | None = None,
 ) -> np.ndarray:
     """The exact host: best utility of every orientation of every mesh against every shape,
     ``(S, N, 2n) float32``, ``-inf`` where an orientation has no finite alignment (or ``n > m``).
 
     codes_list: ``S`` shapes ``(m_s,)``; vals: ``(N, n)`` boundary valences; weights: the model
     (:func:`jaxmatch.kernels.model.weights_of`). Meshes are padded to whole calls of
-    ``mesh_lanes x blocks per call x block`` (:func:`plan_chunks` of ``batch``, or ``plan``);
+    ``mesh_lanes x blocks per call x block`` (:func:`plan_chunks` of ``batch``, or ``plan``),
+    except for the int16 kernels of :class:`~jaxmatch.kernels.backends.NumbaBackend`, which
+    take the meshes as they are;
     ``backend`` (default :func:`jaxmatch.kernels.backends.default_backend`) computes the raw values.
+    ``problem``: ``dp_problem(codes_list, weights, n, m_pad)`` when the caller has it.
     """
     if backend is None:
         backend = default_backend()
     v = _check_vals(vals)
     big_n, n = v.shape
-    prob = dp_problem(codes_list, weights, n, m_pad)
-    lanes = max(int(backend.mesh_lanes), 1)
-    block, per_call = plan if plan is not None else plan_chunks(-(-big_n // lanes), n, batch)
-    chunk = lanes * per_call * block
-    n_calls = -(-big_n // chunk)
-    vp = np.full((n_calls * chunk, n), 2, np.int32)
-    vp[:big_n] = v
-    raw = backend.run(prob, vp.reshape(n_calls, lanes * per_call, block, n))[:, :big_n]
+    prob = dp_problem(codes_list, weights, n, m_pad) if problem is None else problem
+    if prob.n != n:
+        raise ValueError(f"the problem is for boundary length {prob.n}, the meshes have {n}")
+    if isinstance(backend, NumbaBackend) and np.dtype(prob.kind.dtype) == np.int16:
+        # its int16 kernels (C or numba) take any number of meshes, each computed alone: no
+        # padding meshes (a part of 3 meshes is not scored as a block of 64)
+        raw = backend.run(prob, v.reshape(1, 1, big_n, n))
+    else:
+        lanes = max(int(backend.mesh_lanes), 1)
+        block, per_call = plan if plan is not None else plan_chunks(-(-big_n // lanes), n, batch)
+        chunk = lanes * per_call * block
+        n_calls = -(-big_n // chunk)
+        vp = np.full((n_calls * chunk, n), 2, np.int32)
+        vp[:big_n] = v
+        raw = backend.run(prob, vp.reshape(n_calls, lanes * per_call, block, n))[:, :big_n]
     out = raw.astype(np.float64) + prob.offset[:, None, None]
     out[raw <= prob.kind.neg / 2] = -np.inf
     out[prob.lengths < n] = -np.inf
@@ -312,14 +341,16 @@ def final_values(
     threads: int | None = None,
     plan: tuple[int, int] | None = None,
     backend: Backend | None = None,
+    problem: DPProblem | None = None,
 ) -> np.ndarray:
     """Best utility of every orientation for one shape: ``(N, 2n) float32``, ``-inf`` where the
     orientation has no finite alignment (or ``n > m``). Column ``o`` is orientation ``o`` of the
     module docstring. :func:`exact_values` for one shape (``threads``, ``unroll``: of the
-    default backend, :func:`jaxmatch.kernels.backends.default_backend`)."""
+    default backend, :func:`jaxmatch.kernels.backends.default_backend`; ``problem``: as there)."""
     if backend is None:
         backend = default_backend(threads, unroll)
-    return exact_values([codes], vals, weights, backend=backend, batch=batch, m_pad=m_pad, plan=plan)[0]
+    return exact_values([codes], vals, weights, backend=backend, batch=batch, m_pad=m_pad, plan=plan,
+                        problem=problem)[0]
 
 
 def reduce_orientations(values: np.ndarray) -> ScoreResult:
@@ -414,7 +445,7 @@ def align(codes, vals_one, weights, rotation: int, reflected: bool, *, m_pad: in
     if n > m:
         raise UnmatchableError(f"mesh has {n} boundary vertices but the shape only {m} points")
     _check_vals(seq)
-    pad_codes(c, m_pad)  # checks the codes (and m_pad)
+    _checked_codes(c, m_pad)  # checks the codes (and m_pad)
     fr = skip_frame(weights)
     if c_kernel() is not None:  # the same rows and backtrack in C (jaxmatch/kernels/_dp.c)
         out = c_align(c, seq, fr.table, fr.gate, NEG)
@@ -454,11 +485,13 @@ def utility_parts(codes, vals_one, weights, rotation: int, reflected: bool, alig
     a = np.asarray(alignment, dtype=np.int64).reshape(-1)
     if a.shape[0] != n:
         raise ValueError(f"alignment has length {a.shape[0]}, mesh has {n} boundary vertices")
-    if n and (a[0] < 0 or a[-1] >= c.shape[0] or np.any(np.diff(a) <= 0)):
+    al = a.tolist()
+    if n and (al[0] < 0 or al[-1] >= c.shape[0] or any(x >= y for x, y in zip(al, al[1:]))):
         raise ValueError("alignment must be strictly increasing input indices in range")
     t = triples(seq) - 2
-    tab = w.table_inf().astype(np.float64)
-    match = float(np.sum(tab[c[a], t[:, 0], t[:, 1], t[:, 2]]))
+    rows, cols = c[a], (t[:, 0] * 4 + t[:, 1]) * 4 + t[:, 2]  # each pair's entry of the (3, 64) table
+    # (table_inf's entries: -inf where forbidden, the float32 weight otherwise)
+    match = float(np.sum(np.where(w.forbidden[rows, cols], -np.inf, w.table[rows, cols]).astype(np.float64)))
     skip = skipped_weight(c, a, w)
     return UtilityParts(match + skip, match, skip)
 
