@@ -344,26 +344,33 @@ def _faces(rings: list[np.ndarray], cuts: list[np.ndarray], inserts: list, overs
     extended by ``1e-7`` of the extent so that noding finds the crossing (the stub outside is a
     dangle that polygonize drops). A piece may keep a hole that no cut reaches."""
     import shapely
-    from shapely.ops import polygonize
 
     pts = rings[0]
     extent = float(np.max(pts.max(axis=0) - pts.min(axis=0)))
+    at: dict[tuple[int, int], list] = {}  # the inserts of each loop segment, in their order
+    for i in inserts:
+        at.setdefault((i[0], i[1]), []).append(i)
     lines = []
     for r, ring in enumerate(rings):  # each loop with the cut ends inserted (exact end points)
-        ring_pts = []
-        for k in range(ring.shape[0]):
-            ring_pts.append(ring[k])
-            ring_pts += [e for _, _, _, e in sorted((i for i in inserts if i[0] == r and i[1] == k), key=lambda i: i[2])]
-        ring_pts = np.array(ring_pts)
-        lines.append(shapely.LineString(np.vstack([ring_pts, ring_pts[:1]])))
-    for (a, b), over in zip(cuts, overshoot):
-        if over:
-            b = b + 1e-7 * extent * (b - a) / np.linalg.norm(b - a)
-        lines.append(shapely.LineString([a, b]))
+        if any(key[0] == r for key in at):
+            ring_pts = []
+            for k in range(ring.shape[0]):
+                ring_pts.append(ring[k])
+                if (r, k) in at:
+                    ring_pts += [e for _, _, _, e in sorted(at[r, k], key=lambda i: i[2])]
+            ring = np.array(ring_pts)
+        lines.append(shapely.linestrings(np.vstack([ring, ring[:1]])))
+    if cuts:
+        ends = np.array(cuts, np.float64)  # (n, 2, 2)
+        for j, over in enumerate(overshoot):
+            if over:
+                a, b = ends[j, 0], cuts[j][1]
+                ends[j, 1] = b + 1e-7 * extent * (b - a) / np.linalg.norm(b - a)
+        lines += list(shapely.linestrings(ends))
     noded = shapely.union_all(lines)
     if region is None:  # (the region as a shapely Polygon, when the caller has it)
         region = shapely.Polygon(rings[0], holes=rings[1:])
-    faces = list(polygonize(shapely.get_parts(noded)))
+    faces = list(shapely.get_parts(shapely.polygonize(shapely.get_parts(noded))))
     inside = shapely.contains(region, shapely.point_on_surface(np.array(faces, dtype=object))) if faces else []
     return [f for f, ok in zip(faces, inside) if ok]
 
