@@ -384,28 +384,36 @@ def _corner_points(shape: Shape) -> np.ndarray:
 def _layout(shape: Shape, faces: list, name: str, check: bool = True) -> Layout:
     """A :class:`Layout` of the pieces: corners are the shape's corners and every point where
     three or more piece edges meet (``check``: as :func:`~jaxmatch.placement.layout.make_layout`'s)."""
+    import shapely
+
     index: dict[tuple[float, float], int] = {}
     points: list[tuple[float, float]] = []
     loops: list[list[int]] = []
-    edges: set[frozenset] = set()
-    for f in faces:
-        if len(f.interiors):
-            raise InputError(f"a hole is not reached by any {name} cut (a piece would keep it)", where=shape.source)
+    edges: set[tuple[int, int]] = set()
+    if faces and np.any(shapely.get_num_interior_rings(faces) > 0):
+        raise InputError(f"a hole is not reached by any {name} cut (a piece would keep it)", where=shape.source)
+    xy, which = shapely.get_coordinates(shapely.get_exterior_ring(faces), return_index=True) if faces else \
+        (np.zeros((0, 2)), np.zeros(0, np.int64))
+    ends = np.flatnonzero(np.diff(which)).tolist() + [len(which) - 1]  # each ring's closing point (its first again)
+    xy = xy.tolist()
+    start = 0
+    for end in ends:
         loop = []
-        for x, y in np.asarray(f.exterior.coords)[:-1].tolist():
+        for x, y in xy[start:end]:
             if (x, y) not in index:
                 index[(x, y)] = len(points)
                 points.append((x, y))
             loop.append(index[(x, y)])
+        start = end + 1
         loops.append(loop)
-        edges.update(frozenset((a, b)) for a, b in zip(loop, loop[1:] + loop[:1]))
-    nbrs = np.zeros(len(points), np.int64)
-    for e in edges:
-        for v in e:
-            nbrs[v] += 1
+        edges.update((a, b) if a < b else (b, a) for a, b in zip(loop, loop[1:] + loop[:1]))
+    nbrs = [0] * len(points)
+    for a, b in edges:
+        nbrs[a] += 1
+        nbrs[b] += 1
     shape_corners = {tuple(p) for p in _corner_points(shape).tolist()}
     corners = [i for i, p in enumerate(points) if p in shape_corners or nbrs[i] >= 3]
-    return make_layout([list(p) for p in points], loops, corners, source=f"{shape.source} ({name} cuts)", check=check)
+    return make_layout(points, loops, corners, source=f"{shape.source} ({name} cuts)", check=check)
 
 
 def _recursive(shape: Shape, check: bool = True) -> Layout:
