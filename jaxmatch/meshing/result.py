@@ -230,11 +230,12 @@ class QuadMesh:
                 continue
             if self.field is not None:  # the field's integral, edge by edge, in place of the length
                 seg = seg / self.field(0.5 * (pts + np.roll(pts, -1, axis=0)))
-            csum = np.concatenate([[0.0], np.cumsum(seg)])
-            for a, b in zip(at, np.roll(at, -1)):
-                n = int((b - a) % len(loop)) or len(loop)
+            csum = [0.0] + np.cumsum(seg).tolist()  # (Python floats: the same sums, a corner at a time)
+            at = at.tolist()
+            for a, b in zip(at, at[1:] + at[:1]):
+                n = (b - a) % len(loop) or len(loop)
                 length = csum[b] - csum[a] if b > a else csum[-1] - csum[a] + csum[b]
-                out.append((n, float(length), outer))
+                out.append((n, length, outer))
         return np.asarray(out, np.float64).reshape(-1, 3)
 
     def stretches_off_size(self, tol: float) -> int:
