@@ -47,8 +47,8 @@ def _run(loop: np.ndarray, a: int, b: int) -> np.ndarray:
     """``(E, 2)`` the loop's edges from position ``a`` to position ``b`` (the whole loop when equal)."""
     n = len(loop)
     k = (b - a) % n or n
-    idx = (a + np.arange(k + 1)) % n
-    return np.stack([loop[idx[:-1]], loop[idx[1:]]], axis=1).astype(np.int64)
+    run = np.concatenate([loop[a:], loop[:a + 1]])[:k + 1] if a + k >= n else loop[a:a + k + 1]  # positions a..a+k
+    return np.stack([run[:-1], run[1:]], axis=1).astype(np.int64)
 
 
 def _side_runs(mesh: QuadMesh, region: Shape):
@@ -62,9 +62,10 @@ def _side_runs(mesh: QuadMesh, region: Shape):
     where = [_corner_vertices(mesh, r, c, loops) for r, c in zip(rings, corner_lists)]
     sides = [s for s in named_sides(region) if s.loop < len(rings)]
     edges_of: dict[str, np.ndarray] = {}
+    orders = [{c: k for k, c in enumerate(sorted(int(c) for c in cs))} for cs in corner_lists]  # corner -> its place
     for side in sides:
         lid, pos = where[side.loop]
-        order = {int(c): k for k, c in enumerate(np.sort(np.asarray(corner_lists[side.loop], np.int64)))}
+        order = orders[side.loop]
         edges_of[side.name] = _run(loops[lid], int(pos[order[side.start]]), int(pos[order[side.stop]]))
     return loops, rings, where, sides, edges_of
 
