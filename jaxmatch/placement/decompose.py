@@ -169,6 +169,36 @@ def _snap(rings: list[np.ndarray], end: np.ndarray, tol: float, inserts: list) -
     return end
 
 
+def _snap_all(rings: list[np.ndarray], ends: np.ndarray, tol: float, inserts: list) -> list[np.ndarray]:
+    """:func:`_snap` of each of ``ends (n, 2)`` in order (the same points and ``inserts``), the
+    distances to every loop computed for all of them at once."""
+    if not len(ends):
+        return []
+    snapped: list = [None] * len(ends)
+    best = [None] * len(ends)
+    for r, pts in enumerate(rings):
+        near = np.linalg.norm(pts[None, :, :] - ends[:, None, :], axis=2)  # (n, P)
+        j = np.argmin(near, axis=1)
+        a, b = pts, roll(pts, -1)
+        ab = b - a
+        f = np.clip(np.sum((ends[:, None, :] - a) * ab, axis=2) / np.sum(ab * ab, axis=1), 0.0, 1.0)  # (n, P)
+        d = np.linalg.norm(a + f[:, :, None] * ab - ends[:, None, :], axis=2)
+        k = np.argmin(d, axis=1)
+        for e in range(len(ends)):
+            if snapped[e] is not None:
+                continue
+            if near[e, j[e]] <= tol:
+                snapped[e] = pts[j[e]]
+            elif best[e] is None or d[e, k[e]] < best[e][0]:
+                best[e] = (float(d[e, k[e]]), r, int(k[e]), float(f[e, k[e]]))
+    for e in range(len(ends)):
+        if snapped[e] is None:
+            _, r, k, f = best[e]
+            inserts.append((r, k, f, ends[e]))
+            snapped[e] = ends[e]
+    return snapped
+
+
 def _hits(shape: Shape, strategy: str) -> tuple[list[np.ndarray], list[tuple[int, int, float, np.ndarray]]]:
     """Cuts (``(2, 2)`` segments) and where they end on a boundary loop: ``(ring, segment index,
     fraction along it, point)`` for ends inside a loop segment (ends within ``1e-9`` of the
@@ -189,13 +219,17 @@ def _hits(shape: Shape, strategy: str) -> tuple[list[np.ndarray], list[tuple[int
     starts = np.array([v for v, _ in rays])
     dirs = np.array([d for _, d in rays])
     hits = shapely.intersection(boundary, shapely.linestrings(np.stack([starts, starts + far * dirs], axis=1)))
-    for v, d, hit in zip(starts, dirs, hits):
-        coords = shapely.get_coordinates(hit)
-        dist = (coords - v) @ d
+    coords, which = shapely.get_coordinates(hits, return_index=True)  # every ray's crossings at once
+    found = []  # (ray, its first crossing beyond tol)
+    for r, (v, d) in enumerate(zip(starts, dirs)):
+        c = coords[which == r]
+        dist = (c - v) @ d
         ok = dist > tol
-        if not ok.any():
-            continue
-        end = _snap(rings, coords[ok][np.argmin(dist[ok])], tol, inserts)
+        if ok.any():
+            found.append((r, c[ok][np.argmin(dist[ok])]))
+    ends = _snap_all(rings, np.array([e for _, e in found]).reshape(-1, 2), tol, inserts)
+    for (r, _), end in zip(found, ends):
+        v = starts[r]
         seg = np.array([v, end])
         if not _close_to_any(seg, cuts, tol):  # (the same cut found twice, or from its other end)
             cuts.append(seg)
