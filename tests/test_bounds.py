@@ -136,7 +136,10 @@ def test_the_node_bound_counts_the_outline_as_numpy_does(path):
             continue
         bound = node_sj_bound(lay)
         assert bound == _node_bound_numpy(lay)
-        lm = mesh_layout(lay, load_catalogue(None), _lattice("fine"), size=float(np.ptp(shp.given_points, axis=0).max()) / 8)
+        try:
+            lm = mesh_layout(lay, load_catalogue(None), _lattice("fine"), size=float(np.ptp(shp.given_points, axis=0).max()) / 8)
+        except jaxmatch.InputError:  # (a layout the solve cannot mesh: no mesh to compare)
+            continue
         assert _min_sj(lm.xy, np.asarray(lm.quads)) <= bound + 1e-9 or lm.inverted
         tried += 1
     assert tried >= 1
