@@ -374,7 +374,7 @@ def scale_corners(points, h: float, corner_angle: float = DEFAULT_CORNER_ANGLE, 
     per = float(cum[-1])
     w = min(CORNER_WINDOW * float(h), per / 8)
     s = cum[:-1]
-    back, ahead = point_at(p, s - w, cum), point_at(p, s + w, cum)
+    back, ahead, near_back, near_ahead = point_at(p, np.stack([s - w, s + w, s - w / 4, s + w / 4]), cum)  # (one search)
     a, b = p - back, ahead - p
     cross = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
     wide = np.degrees(np.abs(np.arctan2(cross, np.sum(a * b, axis=1))))
@@ -391,22 +391,22 @@ def scale_corners(points, h: float, corner_angle: float = DEFAULT_CORNER_ANGLE, 
     sharp_runs = np.minimum(run_in, run_out) >= SHARP_RUN * w
     sharp = [int(i) for i in np.flatnonzero(held & (local > corner_angle + _ANGLE_TIE) & sharp_runs)]
     keep = list(sharp)  # a polygon's vertex between straight runs: a corner however close to the next
-    def turn_over(win: float) -> np.ndarray:
-        a, b = p - point_at(p, s - win, cum), point_at(p, s + win, cum) - p
-        return np.degrees(np.abs(np.arctan2(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0], np.sum(a * b, axis=1))))
-
-    concentrated = turn_over(w / 4) >= CONCENTRATION * wide  # a bend, not a smooth curve's slow turn
+    qa, qb = p - near_back, near_ahead - p  # the turn over a quarter of the window
+    quarter = np.degrees(np.abs(np.arctan2(qa[:, 0] * qb[:, 1] - qa[:, 1] * qb[:, 0], np.sum(qa * qb, axis=1))))
+    concentrated = quarter >= CONCENTRATION * wide  # a bend, not a smooth curve's slow turn
     bend = max(corner_angle, HELD_ANGLE) if held_angle is None else held_angle
     rest = np.flatnonzero((wide > bend + _ANGLE_TIE) & (local > 0) & concentrated)
     def near(i, others, r) -> np.ndarray:
         d = np.abs(s[others] - s[i])
         return np.minimum(d, per - d) < r
 
-    for i in rest[np.argsort(-wide[rest], kind="stable")]:  # a turn over the window: once, at its sharpest point
-        if keep and np.any(near(i, np.asarray(keep), w)):
+    kept = set(keep)  # (a point already kept is within w of itself: no distances needed)
+    for i in rest[np.argsort(-wide[rest], kind="stable")].tolist():  # a turn over the window: once, at its sharpest point
+        if (w > 0 and i in kept) or (keep and np.any(near(i, np.asarray(keep), w))):
             continue
         peer = rest[near(i, rest, w) & (wide[rest] >= wide[i] - PEAK_BAND)]
         keep.append(int(peer[np.argmax(local[peer])]))
+        kept.add(keep[-1])
     run = STRAIGHT_RUN * float(h)
     e_in = np.linalg.norm(p - roll(p, 1), axis=1)  # the edge arriving at each point
     e_out = roll(e_in, -1)
