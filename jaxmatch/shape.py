@@ -432,7 +432,8 @@ def check_corner_angle(corner_angle) -> float:
 
 
 def make_shape(points, corners=None, *, corner_angle: float = DEFAULT_CORNER_ANGLE, source: str = "<shape>",
-               holes=None, hole_corners=None, checked: bool = False, tags=None, periodic=None) -> Shape:
+               holes=None, hole_corners=None, checked: bool = False, tags=None, periodic=None,
+               holes_checked: bool = False) -> Shape:
     """Validate and normalise a loop into a :class:`Shape` (see the module docstring).
 
     points: ``(P, 2)`` numbers in user coordinates, a loop in either orientation; a closed
@@ -449,7 +450,10 @@ def make_shape(points, corners=None, *, corner_angle: float = DEFAULT_CORNER_ANG
     checked: the outer loop is known to be simple, of distinct points and non-zero area (a patch
         of a checked :class:`~jaxmatch.placement.layout.Layout`, or a shape's own loop listed
         from another point): its crossing and repeated-point checks are left out (a third of
-        the time of a small loop). Holes are checked all the same.
+        the time of a small loop). Holes are checked all the same, unless ``holes_checked``: they
+        are known to be valid holes of this outer loop (a shape's own holes listed from another
+        point, :func:`jaxmatch.meshing.region.canonical`): each is made as a checked loop and its
+        place against the outer loop and the other holes is not tested again.
     Raises :class:`InputError` (``where=source``) for any problem; indices in messages refer
     to the input order.
     """
@@ -457,32 +461,39 @@ def make_shape(points, corners=None, *, corner_angle: float = DEFAULT_CORNER_ANG
     with np.errstate(over="ignore", invalid="ignore", divide="ignore", under="ignore"):
         shape = _make_shape(points, corners, angle, str(source), checked)
         if holes is not None and len(holes) > 0:
-            shape = _with_holes(shape, holes, hole_corners, angle, str(source))
+            shape = _with_holes(shape, holes, hole_corners, angle, str(source), holes_checked)
     warn_unordered(shape)
     if tags is None and periodic is None:
         return shape
     return replace(shape, **dict(zip(("tags", "periodic"), check_groups(shape, tags, periodic))))
 
 
-def _with_holes(shape: Shape, holes, hole_corners, angle: float, source: str) -> Shape:
+def _with_holes(shape: Shape, holes, hole_corners, angle: float, source: str, checked: bool = False) -> Shape:
     """``shape`` with its holes validated (each a loop checked like the outer one, then inside
-    the outer loop without touching it or another hole: shapely predicates)."""
+    the outer loop without touching it or another hole: shapely predicates); ``checked``: holes
+    known to be valid (see :func:`make_shape`'s ``holes_checked``), made without the tests."""
     import shapely
 
     if hole_corners is None:
         hole_corners = [None] * len(holes)
     if len(hole_corners) != len(holes):
         raise InputError(f"hole_corners has {len(hole_corners)} entries for {len(holes)} holes", where=source)
-    outer = shapely.Polygon(shape.input_points)
+    outer = None if checked else shapely.Polygon(shape.input_points)
     rings, corner_lists, polys, numbers = [], [], [], []
     for k, (h, hc) in enumerate(zip(holes, hole_corners)):
         try:
-            hs = _make_shape(h, hc, angle, source)
+            hs = _make_shape(h, hc, angle, source, checked)
         except InputError as e:
             raise InputError(f"hole {k + 1}: {e.problem.replace('boundary', 'hole')}", where=source) from None
         ring = hs.input_points[::-1]  # clockwise, from its first corner (or lowest point)
         ring = np.roll(ring, 1, axis=0)
         corners_k = np.sort((hs.n_points - np.asarray(hs.corners, np.int64)) % hs.n_points)
+        if checked:
+            rings.append(np.ascontiguousarray(ring))
+            corner_lists.append(corners_k.astype(np.int64))
+            nb = hs.numbering[0]
+            numbers.append(nb._replace(numbers=np.roll(nb.numbers[::-1], 1), hole=k + 1))
+            continue
         poly = shapely.Polygon(ring)
         if not outer.contains(poly):
             what = "lies outside the outer boundary" if not outer.intersects(poly) else \

@@ -529,3 +529,33 @@ def test_corners_at_a_size_follow_the_plain_rule(seed, kind, noise, divisions, c
     h = float(np.sum(np.linalg.norm(np.roll(p, -1, axis=0) - p, axis=1))) / divisions
     np.testing.assert_array_equal(scale_corners(p, h, corner_angle, held_angle=held_angle),
                                   _scale_corners_plain(p, h, corner_angle, held_angle))
+
+
+@pytest.mark.parametrize("name", ["frame", "triangle-hole", "letter-A", "gasket", "bracket"])
+def test_checked_holes_make_the_shape_their_tests_make(name):
+    """make_shape with ``holes_checked`` (valid holes, e.g. a shape's own listed from another
+    point: canonical) gives the shape of the full tests, field for field."""
+    import dataclasses
+
+    from jaxmatch.meshing.region import canonical
+
+    path = Path(__file__).resolve().parent.parent / "examples" / "holes" / f"{name}.json"
+    shp = canonical(load_shape(path), None)
+    args = dict(corners=shp.corners.tolist(), source=shp.source, holes=list(shp.holes),
+                hole_corners=[list(c) for c in shp.hole_corners])
+    plain = make_shape(shp.given_points, **args)
+    fast = make_shape(shp.given_points, **args, checked=True, holes_checked=True)
+    for f in dataclasses.fields(plain):
+        assert _same_value(getattr(plain, f.name), getattr(fast, f.name)), f.name
+
+
+def _same_value(a, b) -> bool:
+    """Equal values, arrays bit for bit (dtype and shape too), through tuples, lists and dicts."""
+    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+        a, b = np.asarray(a), np.asarray(b)
+        return a.dtype == b.dtype and a.shape == b.shape and a.tobytes() == b.tobytes()
+    if isinstance(a, (tuple, list)):
+        return type(a) is type(b) and len(a) == len(b) and all(_same_value(x, y) for x, y in zip(a, b))
+    if isinstance(a, dict):
+        return a.keys() == b.keys() and all(_same_value(a[k], b[k]) for k in a)
+    return a == b
