@@ -39,7 +39,7 @@ def _corner_vertices(mesh: QuadMesh, ring: np.ndarray, corners, loops) -> tuple[
     anchors = ring[np.asarray(corners, np.int64)] if len(corners) else ring[:1]
     best = min(range(len(loops)), key=lambda i: float(np.min(np.linalg.norm(mesh.xy[loops[i]] - anchors[0], axis=1))))
     lxy = mesh.xy[loops[best]]
-    pos = np.array([int(np.argmin(np.linalg.norm(lxy - a, axis=1))) for a in anchors], np.int64)
+    pos = np.argmin(np.linalg.norm(lxy[None, :, :] - anchors[:, None, :], axis=2), axis=1).astype(np.int64)  # (c,)
     return best, (pos if len(corners) else np.zeros(0, np.int64))
 
 
@@ -48,7 +48,9 @@ def _run(loop: np.ndarray, a: int, b: int) -> np.ndarray:
     n = len(loop)
     k = (b - a) % n or n
     run = np.concatenate([loop[a:], loop[:a + 1]])[:k + 1] if a + k >= n else loop[a:a + k + 1]  # positions a..a+k
-    return np.stack([run[:-1], run[1:]], axis=1).astype(np.int64)
+    out = np.empty((k, 2), np.int64)
+    out[:, 0], out[:, 1] = run[:-1], run[1:]
+    return out
 
 
 def _side_runs(mesh: QuadMesh, region: Shape):
