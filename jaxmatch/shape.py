@@ -374,7 +374,7 @@ def scale_corners(points, h: float, corner_angle: float = DEFAULT_CORNER_ANGLE, 
     per = float(cum[-1])
     w = min(CORNER_WINDOW * float(h), per / 8)
     s = cum[:-1]
-    back, ahead = point_at(p, s - w, cum), point_at(p, s + w, cum)
+    back, ahead, near_back, near_ahead = point_at(p, np.stack([s - w, s + w, s - w / 4, s + w / 4]), cum)  # (one search)
     a, b = p - back, ahead - p
     cross = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
     wide = np.degrees(np.abs(np.arctan2(cross, np.sum(a * b, axis=1))))
@@ -391,22 +391,22 @@ def scale_corners(points, h: float, corner_angle: float = DEFAULT_CORNER_ANGLE, 
     sharp_runs = np.minimum(run_in, run_out) >= SHARP_RUN * w
     sharp = [int(i) for i in np.flatnonzero(held & (local > corner_angle + _ANGLE_TIE) & sharp_runs)]
     keep = list(sharp)  # a polygon's vertex between straight runs: a corner however close to the next
-    def turn_over(win: float) -> np.ndarray:
-        a, b = p - point_at(p, s - win, cum), point_at(p, s + win, cum) - p
-        return np.degrees(np.abs(np.arctan2(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0], np.sum(a * b, axis=1))))
-
-    concentrated = turn_over(w / 4) >= CONCENTRATION * wide  # a bend, not a smooth curve's slow turn
+    qa, qb = p - near_back, near_ahead - p  # the turn over a quarter of the window
+    quarter = np.degrees(np.abs(np.arctan2(qa[:, 0] * qb[:, 1] - qa[:, 1] * qb[:, 0], np.sum(qa * qb, axis=1))))
+    concentrated = quarter >= CONCENTRATION * wide  # a bend, not a smooth curve's slow turn
     bend = max(corner_angle, HELD_ANGLE) if held_angle is None else held_angle
     rest = np.flatnonzero((wide > bend + _ANGLE_TIE) & (local > 0) & concentrated)
     def near(i, others, r) -> np.ndarray:
         d = np.abs(s[others] - s[i])
         return np.minimum(d, per - d) < r
 
-    for i in rest[np.argsort(-wide[rest], kind="stable")]:  # a turn over the window: once, at its sharpest point
-        if keep and np.any(near(i, np.asarray(keep), w)):
+    kept = set(keep)  # (a point already kept is within w of itself: no distances needed)
+    for i in rest[np.argsort(-wide[rest], kind="stable")].tolist():  # a turn over the window: once, at its sharpest point
+        if (w > 0 and i in kept) or (keep and np.any(near(i, np.asarray(keep), w))):
             continue
         peer = rest[near(i, rest, w) & (wide[rest] >= wide[i] - PEAK_BAND)]
         keep.append(int(peer[np.argmax(local[peer])]))
+        kept.add(keep[-1])
     run = STRAIGHT_RUN * float(h)
     e_in = np.linalg.norm(p - roll(p, 1), axis=1)  # the edge arriving at each point
     e_out = roll(e_in, -1)
@@ -432,7 +432,8 @@ def check_corner_angle(corner_angle) -> float:
 
 
 def make_shape(points, corners=None, *, corner_angle: float = DEFAULT_CORNER_ANGLE, source: str = "<shape>",
-               holes=None, hole_corners=None, checked: bool = False, tags=None, periodic=None) -> Shape:
+               holes=None, hole_corners=None, checked: bool = False, tags=None, periodic=None,
+               holes_checked: bool = False) -> Shape:
     """Validate and normalise a loop into a :class:`Shape` (see the module docstring).
 
     points: ``(P, 2)`` numbers in user coordinates, a loop in either orientation; a closed
@@ -449,7 +450,10 @@ def make_shape(points, corners=None, *, corner_angle: float = DEFAULT_CORNER_ANG
     checked: the outer loop is known to be simple, of distinct points and non-zero area (a patch
         of a checked :class:`~jaxmatch.placement.layout.Layout`, or a shape's own loop listed
         from another point): its crossing and repeated-point checks are left out (a third of
-        the time of a small loop). Holes are checked all the same.
+        the time of a small loop). Holes are checked all the same, unless ``holes_checked``: they
+        are known to be valid holes of this outer loop (a shape's own holes listed from another
+        point, :func:`jaxmatch.meshing.region.canonical`): each is made as a checked loop and its
+        place against the outer loop and the other holes is not tested again.
     Raises :class:`InputError` (``where=source``) for any problem; indices in messages refer
     to the input order.
     """
@@ -457,32 +461,39 @@ def make_shape(points, corners=None, *, corner_angle: float = DEFAULT_CORNER_ANG
     with np.errstate(over="ignore", invalid="ignore", divide="ignore", under="ignore"):
         shape = _make_shape(points, corners, angle, str(source), checked)
         if holes is not None and len(holes) > 0:
-            shape = _with_holes(shape, holes, hole_corners, angle, str(source))
+            shape = _with_holes(shape, holes, hole_corners, angle, str(source), holes_checked)
     warn_unordered(shape)
     if tags is None and periodic is None:
         return shape
     return replace(shape, **dict(zip(("tags", "periodic"), check_groups(shape, tags, periodic))))
 
 
-def _with_holes(shape: Shape, holes, hole_corners, angle: float, source: str) -> Shape:
+def _with_holes(shape: Shape, holes, hole_corners, angle: float, source: str, checked: bool = False) -> Shape:
     """``shape`` with its holes validated (each a loop checked like the outer one, then inside
-    the outer loop without touching it or another hole: shapely predicates)."""
+    the outer loop without touching it or another hole: shapely predicates); ``checked``: holes
+    known to be valid (see :func:`make_shape`'s ``holes_checked``), made without the tests."""
     import shapely
 
     if hole_corners is None:
         hole_corners = [None] * len(holes)
     if len(hole_corners) != len(holes):
         raise InputError(f"hole_corners has {len(hole_corners)} entries for {len(holes)} holes", where=source)
-    outer = shapely.Polygon(shape.input_points)
+    outer = None if checked else shapely.Polygon(shape.input_points)
     rings, corner_lists, polys, numbers = [], [], [], []
     for k, (h, hc) in enumerate(zip(holes, hole_corners)):
         try:
-            hs = _make_shape(h, hc, angle, source)
+            hs = _make_shape(h, hc, angle, source, checked)
         except InputError as e:
             raise InputError(f"hole {k + 1}: {e.problem.replace('boundary', 'hole')}", where=source) from None
         ring = hs.input_points[::-1]  # clockwise, from its first corner (or lowest point)
         ring = np.roll(ring, 1, axis=0)
         corners_k = np.sort((hs.n_points - np.asarray(hs.corners, np.int64)) % hs.n_points)
+        if checked:
+            rings.append(np.ascontiguousarray(ring))
+            corner_lists.append(corners_k.astype(np.int64))
+            nb = hs.numbering[0]
+            numbers.append(nb._replace(numbers=np.roll(nb.numbers[::-1], 1), hole=k + 1))
+            continue
         poly = shapely.Polygon(ring)
         if not outer.contains(poly):
             what = "lies outside the outer boundary" if not outer.intersects(poly) else \

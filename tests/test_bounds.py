@@ -82,3 +82,73 @@ def test_no_claim_for_several_patches():
     pts = [[0, 0], [1, 0], [2, 0], [2, 1], [1, 1], [0, 1]]
     lay = make_layout(pts, [[0, 1, 4, 5], [1, 2, 3, 4]])
     assert template_sj_bound(lay, load_catalogue(None), _lattice("fine")) == 1.0
+
+
+def _node_bound_numpy(layout) -> float:
+    """node_sj_bound with the outline found by numpy's edge counting (np.unique of the undirected
+    segments, np.bincount of the patches at each point): the reference of its plain-Python count."""
+    from jaxmatch.placement import bounds as B
+
+    pts, loops = layout.points, layout.patches
+    n = pts.shape[0]
+    flat = np.concatenate(loops)
+    nxt = np.concatenate([np.roll(p, -1) for p in loops])
+    uses = np.bincount(flat, minlength=n)
+    und = np.minimum(flat, nxt) * n + np.maximum(flat, nxt)
+    _, inv, cnt = np.unique(und, return_inverse=True, return_counts=True)
+    a, b = flat[cnt[inv] == 1], nxt[cnt[inv] == 1]
+    if np.unique(a).size < a.size or np.unique(b).size < b.size:
+        return 1.0
+    ahead, back = dict(zip(a.tolist(), b.tolist())), dict(zip(b.tolist(), a.tolist()))
+    corner = np.zeros(n, bool)
+    for p, pc in zip(loops, layout.patch_corner):
+        corner[p[pc]] = True
+    stop = set(np.flatnonzero(corner).tolist())
+    bound = 1.0
+    for v in sorted(stop):
+        if v in ahead:
+            after, before = B._walk(ahead, stop, v), B._walk(back, stop, v)
+            if after is None or before is None:
+                continue
+            lo, hi = B._outline_angle(pts, v, after, before)
+        else:
+            lo = hi = 2 * math.pi
+        bound = min(bound, B._split_sj(lo - B.NODE_ANGLE_TOL, hi + B.NODE_ANGLE_TOL, int(uses[v])))
+    return bound
+
+
+@pytest.mark.parametrize("path", SHAPES + [EX / "holes" / "frame.json", EX / "holes" / "letter-A.json",
+                                           EX / "holes" / "bracket.json"], ids=lambda p: p.stem)
+def test_the_node_bound_counts_the_outline_as_numpy_does(path):
+    """node_sj_bound (its outline, corners and patches per point counted in plain Python) equals
+    the bound from numpy's counts, on every decomposition of the examples, and is a bound: the
+    mesh the solve makes of each layout is no better (numpy's own min scaled Jacobian)."""
+    from jaxmatch.placement.bounds import node_sj_bound
+    from jaxmatch.placement.decompose import STRATEGIES, decompose
+    from jaxmatch.placement.solve import mesh_layout
+
+    shp = canonical(jaxmatch.load_shape(path), None)
+    tried = 0
+    for strategy in STRATEGIES:
+        try:
+            lay = decompose(shp, strategy)
+        except jaxmatch.InputError:
+            continue
+        bound = node_sj_bound(lay)
+        assert bound == _node_bound_numpy(lay)
+        try:
+            lm = mesh_layout(lay, load_catalogue(None), _lattice("fine"), size=float(np.ptp(shp.given_points, axis=0).max()) / 8)
+        except jaxmatch.InputError:  # (a layout the solve cannot mesh: no mesh to compare)
+            continue
+        assert _min_sj(lm.xy, np.asarray(lm.quads)) <= bound + 1e-9 or lm.inverted
+        tried += 1
+    assert tried >= 1
+
+
+def test_an_outline_that_touches_itself_gets_no_node_claim():
+    """Two squares meeting at one point: the outline passes that point twice, so no claim (1)."""
+    from jaxmatch.placement.bounds import node_sj_bound
+
+    lay = make_layout([[0, 0], [1, 0], [1, 1], [0, 1], [2, 1], [2, 2], [1, 2]], [[0, 1, 2, 3], [2, 4, 5, 6]],
+                      check=False)
+    assert node_sj_bound(lay) == _node_bound_numpy(lay) == 1.0

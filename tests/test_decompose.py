@@ -150,6 +150,30 @@ def test_close_to_any_is_allclose_to_one_either_way(a, ds, tol, flips):
     plain = any(np.allclose(seg, c, atol=tol) or np.allclose(seg, c[::-1], atol=tol) for c in cuts)
     assert _close_to_any(seg, cuts, tol) == plain
 
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.lists(st.floats(-10, 10), min_size=2, max_size=2), min_size=0, max_size=6),
+       st.lists(st.integers(0, 11), min_size=0, max_size=4), st.sampled_from([1e-9, 1e-3, 0.5]),
+       st.integers(1, 3))
+def test_snapping_ends_together_is_snapping_them_one_by_one(free, on_points, tol, n_rings):
+    """``_snap_all`` (the ends of every ray at once) gives ``_snap``'s points and inserts, in
+    order: ends near a loop point (on the first loop that has one) moved onto it, the others
+    recorded on their nearest loop segment."""
+    from jaxmatch.placement.decompose import _snap, _snap_all
+
+    t = np.linspace(0, 2 * np.pi, 5)[:-1]
+    base = np.c_[9 * np.cos(t), 9 * np.sin(t)]
+    rings = [base, base + 1e-10, base.copy()][:n_rings]  # (4, 2) each: ties between loops too, the first wins
+    points = np.concatenate(rings)
+    ends = np.array(free + [points[i % len(points)] + 1e-10 for i in on_points], np.float64).reshape(-1, 2)
+    one, together = [], []
+    want = [_snap(rings, e, tol, one) for e in ends]
+    got = _snap_all(rings, ends, tol, together)
+    assert len(got) == len(want) and all(np.array_equal(g, w) for g, w in zip(got, want))
+    assert len(together) == len(one)
+    for a, b in zip(together, one):
+        assert a[:3] == b[:3] and np.array_equal(a[3], b[3])
+
+
 def filleted_l(r: float, step_deg: float, angle_deg: float = 0.0) -> np.ndarray:
     """An L of legs 20 thick (80 x 60) whose inner corner at (20, 20) is rounded to radius ``r``
     (sampled every ``step_deg`` degrees), counter-clockwise, turned by ``angle_deg``."""

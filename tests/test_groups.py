@@ -364,3 +364,19 @@ def test_corners_out_of_boundary_order_name_sides_by_point_numbers(tmp_path):
         shape = jaxmatch.load_shape(src)
     m = jaxmatch.mesh(shape, size=0.5)
     assert sorted(k for k in m.line_sets if k.startswith("side ")) == ["side 0-2", "side 2-3", "side 3-4", "side 4-0"]
+
+
+@given(st.integers(1, 12), st.data())
+def test_a_sides_run_is_the_loops_edges_from_a_to_b(n, data):
+    """``_run(loop, a, b)``: the loop's edges from position ``a`` to ``b`` going forward (the
+    whole loop when they are equal), as indexing the loop by ``(a + range(k + 1)) % n`` gives."""
+    from jaxmatch.meshing.groups import _run
+
+    loop = np.asarray(data.draw(st.permutations(list(range(100, 100 + n)))), np.int64)
+    a, b = data.draw(st.integers(0, n - 1)), data.draw(st.integers(0, n - 1))
+    k = (b - a) % n or n
+    idx = (a + np.arange(k + 1)) % n
+    want = np.stack([loop[idx[:-1]], loop[idx[1:]]], axis=1)
+    got = _run(loop, a, b)
+    assert got.dtype == np.int64
+    np.testing.assert_array_equal(got, want)

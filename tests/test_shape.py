@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from hypothesis import given
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from jaxmatch.errors import InputError, InputWarning
@@ -448,3 +448,114 @@ def test_given_points_and_user_area(points):
     s = make_shape(points)
     assert sorted(map(tuple, s.given_points.tolist())) == sorted(map(tuple, np.asarray(points, float).tolist()))
     assert s.user_area == pytest.approx(shapely.Polygon(points).area, rel=1e-12)
+
+
+def _scale_corners_plain(p: np.ndarray, h: float, corner_angle: float, held_angle) -> np.ndarray:
+    """scale_corners' rule written plainly: each window's points searched on their own, every
+    turn over the window tested against the points kept so far by their distance along the loop."""
+    from jaxmatch import shape as S
+    from jaxmatch.arrays import roll
+    from jaxmatch.geometry import cumulative_length, point_at
+
+    cum = cumulative_length(p)
+    per = float(cum[-1])
+    w = min(S.CORNER_WINDOW * float(h), per / 8)
+    s = cum[:-1]
+
+    def turn_over(win: float) -> np.ndarray:
+        a, b = p - point_at(p, s - win, cum), point_at(p, s + win, cum) - p
+        return np.degrees(np.abs(np.arctan2(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0], np.sum(a * b, axis=1))))
+
+    wide = turn_over(w)
+    local = np.degrees(np.abs(S.corner_turns(p)))
+    bent = np.flatnonzero(local > 0)
+    if bent.size:
+        k = np.searchsorted(bent, np.arange(p.shape[0]))
+        prev_b = bent[(k - 1) % bent.size]
+        next_b = bent[np.searchsorted(bent, np.arange(p.shape[0]), side="right") % bent.size]
+        run_in, run_out = (s - s[prev_b]) % per, (s[next_b] - s) % per
+    else:
+        run_in = run_out = np.full(p.shape[0], per)
+    tie = S._ANGLE_TIE
+    keep = [int(i) for i in np.flatnonzero((wide > corner_angle + tie) & (local > corner_angle + tie)
+                                           & (np.minimum(run_in, run_out) >= S.SHARP_RUN * w))]
+    bend = max(corner_angle, S.HELD_ANGLE) if held_angle is None else held_angle
+    rest = np.flatnonzero((wide > bend + tie) & (local > 0) & (turn_over(w / 4) >= S.CONCENTRATION * wide))
+
+    def near(i, others):
+        d = np.abs(s[others] - s[i])
+        return np.minimum(d, per - d) < w
+
+    for i in rest[np.argsort(-wide[rest], kind="stable")]:
+        if keep and np.any(near(i, np.asarray(keep))):
+            continue
+        peer = rest[near(i, rest) & (wide[rest] >= wide[i] - S.PEAK_BAND)]
+        keep.append(int(peer[np.argmax(local[peer])]))
+    e_in = np.linalg.norm(p - roll(p, 1), axis=1)
+    e_out = roll(e_in, -1)
+    straight = np.flatnonzero((np.minimum(e_in, e_out) >= S.STRAIGHT_RUN * h) & (local > S.MIN_STRAIGHT_TURN))
+    drawn = np.flatnonzero((np.maximum(e_in, e_out) >= S.TRACED * h) & (local > corner_angle + tie))
+    return np.unique(np.concatenate([np.asarray(keep, np.int64), straight.astype(np.int64), drawn.astype(np.int64)]))
+
+
+def _rounded_rectangle(w: float, h: float, r: float, step: float) -> np.ndarray:
+    """A w x h rectangle whose corners are rounded to radius r, sampled every ``step`` degrees."""
+    out = []
+    for cx, cy, a0 in ((w - r, r, -90), (w - r, h - r, 0), (r, h - r, 90), (r, r, 180)):
+        a = np.radians(np.arange(a0, a0 + 90 + 1e-9, step))
+        out.append(np.c_[cx + r * np.cos(a), cy + r * np.sin(a)])
+    return np.vstack(out)
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.integers(0, 2**16), st.sampled_from(["polygon", "noisy", "rounded"]), st.floats(0.0, 0.4),
+       st.sampled_from([4, 8, 16, 40, 200]), st.sampled_from([30.0, 45.0]), st.sampled_from([None, 20.0]))
+def test_corners_at_a_size_follow_the_plain_rule(seed, kind, noise, divisions, corner_angle, held_angle):
+    """scale_corners (its four windows searched at once, a point already kept not measured
+    against the others) keeps the corners of the rule written plainly: on polygons, noisy
+    curves and rounded rectangles (rounded corners, whose turn over a quarter window decides)."""
+    from jaxmatch.shape import scale_corners
+
+    rng = np.random.default_rng(seed)
+    if kind == "rounded":
+        p = _rounded_rectangle(4.0, 2.0 + 2 * noise, rng.uniform(0.05, 0.9), rng.choice([2.0, 5.0, 15.0]))
+    else:
+        n = int(rng.integers(3, 12 if kind == "polygon" else 120))
+        t = np.sort(rng.uniform(0, 2 * np.pi, n))
+        if len(np.unique(t)) < n:
+            return
+        r = 1.0 + (noise if kind == "noisy" else 0.3) * rng.standard_normal(n) / (1 if kind == "polygon" else 8)
+        p = np.c_[np.abs(r) * np.cos(t), np.abs(r) * np.sin(t)] + 0.05
+    h = float(np.sum(np.linalg.norm(np.roll(p, -1, axis=0) - p, axis=1))) / divisions
+    np.testing.assert_array_equal(scale_corners(p, h, corner_angle, held_angle=held_angle),
+                                  _scale_corners_plain(p, h, corner_angle, held_angle))
+
+
+@pytest.mark.parametrize("name", ["frame", "triangle-hole", "letter-A", "gasket", "bracket"])
+def test_checked_holes_make_the_shape_their_tests_make(name):
+    """make_shape with ``holes_checked`` (valid holes, e.g. a shape's own listed from another
+    point: canonical) gives the shape of the full tests, field for field."""
+    import dataclasses
+
+    from jaxmatch.meshing.region import canonical
+
+    path = Path(__file__).resolve().parent.parent / "examples" / "holes" / f"{name}.json"
+    shp = canonical(load_shape(path), None)
+    args = dict(corners=shp.corners.tolist(), source=shp.source, holes=list(shp.holes),
+                hole_corners=[list(c) for c in shp.hole_corners])
+    plain = make_shape(shp.given_points, **args)
+    fast = make_shape(shp.given_points, **args, checked=True, holes_checked=True)
+    for f in dataclasses.fields(plain):
+        assert _same_value(getattr(plain, f.name), getattr(fast, f.name)), f.name
+
+
+def _same_value(a, b) -> bool:
+    """Equal values, arrays bit for bit (dtype and shape too), through tuples, lists and dicts."""
+    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+        a, b = np.asarray(a), np.asarray(b)
+        return a.dtype == b.dtype and a.shape == b.shape and a.tobytes() == b.tobytes()
+    if isinstance(a, (tuple, list)):
+        return type(a) is type(b) and len(a) == len(b) and all(_same_value(x, y) for x, y in zip(a, b))
+    if isinstance(a, dict):
+        return a.keys() == b.keys() and all(_same_value(a[k], b[k]) for k in a)
+    return a == b

@@ -459,3 +459,24 @@ def test_the_fewest_chord_pieces_from_batches_are_those_of_the_search_one_count_
         assert L._fewest_pieces(arc, budget) == fast
     finally:
         L.CURVE_BATCH = old
+
+
+@pytest.mark.parametrize("change", [dict(area_tol=-1.0), dict(good_sj=1.01), dict(high_sj=1.01), dict(sj_step=0.3),
+                                    dict(coarse_side=0.5), dict(long_edge=0.5), dict(size_band=(0.99, 1.01)),
+                                    dict(band_share=1.01)])
+def test_a_kept_mesh_key_is_kept_per_threshold_it_reads(cat, change):
+    """mesh_key's kept key (all but the order tried, kept on the mesh) is kept per threshold of
+    the quality it reads: asked for a quality that differs in one of them (each changing the
+    key of this mesh), it equals the key of a fresh copy of the mesh; the order tried is its
+    last element whatever was kept."""
+    import jaxmatch
+    from jaxmatch.defaults import QUALITY
+    from jaxmatch.meshing.choose import mesh_key
+
+    m = jaxmatch.mesh(load_shape(ROOT / "examples" / "tshape.json"), catalogue=cat, size=0.3)
+    other = dataclasses.replace(QUALITY, **change)
+    kept = [mesh_key(m, 0, QUALITY), mesh_key(m, 3, other)]
+    assert kept[1] == mesh_key(dataclasses.replace(m), 3, other)
+    assert kept[1][:-1] != kept[0][:-1]  # (the threshold decides a rule here)
+    assert kept[0] == mesh_key(dataclasses.replace(m), 0, QUALITY) == mesh_key(m, 7, QUALITY)[:-1] + (0,)
+    assert mesh_key(m, 7, QUALITY)[-1] == 7

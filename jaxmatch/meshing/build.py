@@ -23,6 +23,16 @@ def _loop_edges(loop: np.ndarray) -> np.ndarray:
     return np.stack([loop, roll(loop, -1)], axis=1)
 
 
+def _path_edges(ids: np.ndarray) -> np.ndarray:
+    """``(k - 1, 2)`` the edges of the vertex path ``ids (k,)``, in its dtype (what
+    ``np.stack([ids[:-1], ids[1:]], axis=1)`` gives, without its general machinery: a layout
+    mesh has a side list per side)."""
+    out = np.empty((max(len(ids) - 1, 0), 2), ids.dtype)
+    out[:, 0] = ids[:-1]
+    out[:, 1] = ids[1:]
+    return out
+
+
 def _shape_corners(shape: Shape) -> np.ndarray:
     return shape.to_user(shape.points[shape.corners]) if shape.n_corners else np.zeros((0, 2))
 
@@ -42,7 +52,7 @@ def from_layout(lm, *, size: float | None = None, corners: np.ndarray | None = N
         line_sets[f"hole {h}"] = _loop_edges(loop)
     names, outer = lm.sides.names, lm.sides.outer
     for name, ids, o in zip(lm.sides.names, lm.side_vertices, outer):  # cuts between patches: "cut i-j"
-        line_sets[f"{'side' if o else 'cut'} {name}"] = np.stack([ids[:-1], ids[1:]], axis=1)
+        line_sets[f"{'side' if o else 'cut'} {name}"] = _path_edges(np.asarray(ids))
     return QuadMesh(xy=lm.xy, quads=np.asarray(lm.quads, np.int64), patch=np.asarray(lm.patch, np.int64),
                     line_sets=line_sets, region_area=float(lm.region_area), corners=np.asarray(corners, np.float64),
                     size=size, side_lengths={n: float(v) for n, v, o in zip(names, lm.sides.lengths, outer) if o},

@@ -74,8 +74,25 @@ RULES = ("no fold", "corners kept", "area kept", "quality floor", "size conformi
          "size fit", "size band", "irregular vertices", "fewer patches", "mean scaled Jacobian", "order tried")
 """The rules of :func:`mesh_key`, in order (the last one: the earlier candidate)."""
 
+def _thresholds(quality: Quality) -> tuple:
+    """The numbers of ``quality`` that :func:`mesh_key` reads (what its kept keys are kept by)."""
+    return ("mesh_key", quality.area_tol, quality.good_sj, quality.high_sj, quality.sj_step, quality.coarse_side,
+            quality.long_edge, quality.short_edge, quality.size_tol, tuple(quality.size_band), quality.band_share)
+
+
 def mesh_key(m: QuadMesh, order: int = 0, quality: Quality = QUALITY) -> tuple:
-    """The sort key of :data:`RULES` for mesh ``m`` (``order``: its place among the candidates)."""
+    """The sort key of :data:`RULES` for mesh ``m`` (``order``: its place among the candidates).
+    All but ``order`` is computed once per mesh and thresholds of ``quality`` (kept in the mesh's
+    ``_memo``, as its counts are): a call reads every candidate's key, several times."""
+    memo = m._memo
+    k = _thresholds(quality)
+    if k not in memo:
+        memo[k] = _rules_key(m, quality)
+    return memo[k] + (order,)
+
+
+def _rules_key(m: QuadMesh, quality: Quality) -> tuple:
+    """:func:`mesh_key` without its last element (the order tried), computed."""
     sj, mean = m.min_scaled_jacobian, m.mean_scaled_jacobian  # of the (Q,) array the mesh keeps
     area = m.area_ratio
     return (
@@ -91,7 +108,6 @@ def mesh_key(m: QuadMesh, order: int = 0, quality: Quality = QUALITY) -> tuple:
         max(int(m.irregular.size) - m.irregular_bound, 0),
         m.n_patches,
         -round(mean, 2),
-        order,
     )
 
 

@@ -39,7 +39,7 @@ def _corner_vertices(mesh: QuadMesh, ring: np.ndarray, corners, loops) -> tuple[
     anchors = ring[np.asarray(corners, np.int64)] if len(corners) else ring[:1]
     best = min(range(len(loops)), key=lambda i: float(np.min(np.linalg.norm(mesh.xy[loops[i]] - anchors[0], axis=1))))
     lxy = mesh.xy[loops[best]]
-    pos = np.array([int(np.argmin(np.linalg.norm(lxy - a, axis=1))) for a in anchors], np.int64)
+    pos = np.argmin(np.linalg.norm(lxy[None, :, :] - anchors[:, None, :], axis=2), axis=1).astype(np.int64)  # (c,)
     return best, (pos if len(corners) else np.zeros(0, np.int64))
 
 
@@ -47,8 +47,10 @@ def _run(loop: np.ndarray, a: int, b: int) -> np.ndarray:
     """``(E, 2)`` the loop's edges from position ``a`` to position ``b`` (the whole loop when equal)."""
     n = len(loop)
     k = (b - a) % n or n
-    idx = (a + np.arange(k + 1)) % n
-    return np.stack([loop[idx[:-1]], loop[idx[1:]]], axis=1).astype(np.int64)
+    run = np.concatenate([loop[a:], loop[:a + 1]])[:k + 1] if a + k >= n else loop[a:a + k + 1]  # positions a..a+k
+    out = np.empty((k, 2), np.int64)
+    out[:, 0], out[:, 1] = run[:-1], run[1:]
+    return out
 
 
 def _side_runs(mesh: QuadMesh, region: Shape):
@@ -62,9 +64,10 @@ def _side_runs(mesh: QuadMesh, region: Shape):
     where = [_corner_vertices(mesh, r, c, loops) for r, c in zip(rings, corner_lists)]
     sides = [s for s in named_sides(region) if s.loop < len(rings)]
     edges_of: dict[str, np.ndarray] = {}
+    orders = [{c: k for k, c in enumerate(sorted(int(c) for c in cs))} for cs in corner_lists]  # corner -> its place
     for side in sides:
         lid, pos = where[side.loop]
-        order = {int(c): k for k, c in enumerate(np.sort(np.asarray(corner_lists[side.loop], np.int64)))}
+        order = orders[side.loop]
         edges_of[side.name] = _run(loops[lid], int(pos[order[side.start]]), int(pos[order[side.stop]]))
     return loops, rings, where, sides, edges_of
 

@@ -137,15 +137,18 @@ def canonical(shape: Shape, size: float | None = None, corner_angle: float = DEF
     tol = DEDUPE * float(np.ptp(pts, axis=0).max())
     numbering = shape.numbering or (LoopNumbers(np.arange(len(pts)), None, shape.input_clockwise, 0),)
     holes, hole_corners, passed = [], [], []  # passed: per loop, the file's numbers of the points handed on
+    holes_kept = True  # every hole keeps its points (a checked hole listed from another point)
     order = sorted(range(len(shape.holes)), key=lambda k: tuple(shape.holes[k][first(shape.holes[k])]))
     for i in order:
         ring, hc = shape.holes[i], shape.hole_corners[i]
         nb = numbering[i + 1] if i + 1 < len(numbering) else LoopNumbers(np.arange(len(ring)), None, True, i + 1)
+        n_before = len(ring)
         ring, hc, keep = _dedupe(ring, corners_of(ring, hc), tol)
+        holes_kept = holes_kept and len(ring) == n_before
         k = first(ring)
-        holes.append(np.roll(ring, -k, axis=0))
+        holes.append(roll(ring, -k))
         hole_corners.append(sorted(int(c) for c in (hc - k) % len(ring)))
-        passed.append(nb._replace(numbers=np.roll(np.asarray(nb.numbers)[keep], -k)))
+        passed.append(nb._replace(numbers=roll(np.asarray(nb.numbers)[keep], -k)))
     pts2, outer, keep = _dedupe(pts, corners_of(pts, shape.corners), tol)
     start = first(pts2)
     if start == 0 and shape.corner_order is None and not holes and len(pts2) == len(pts) \
@@ -153,10 +156,11 @@ def canonical(shape: Shape, size: float | None = None, corner_angle: float = DEF
         return shape
     same_points = len(pts2) == len(pts)  # the checked loop from another point: simple, distinct points
     pts = pts2
-    passed.insert(0, numbering[0]._replace(numbers=np.roll(np.asarray(numbering[0].numbers)[keep], -start)))
+    passed.insert(0, numbering[0]._replace(numbers=roll(np.asarray(numbering[0].numbers)[keep], -start)))
     corners = sorted(int(c) for c in (outer - start) % len(pts))
-    region = make_shape(np.roll(pts, -start, axis=0), corners=corners, source=shape.source, holes=holes or None,
-                        hole_corners=hole_corners or None, checked=same_points)
+    region = make_shape(roll(pts, -start), corners=corners, source=shape.source, holes=holes or None,
+                        hole_corners=hole_corners or None, checked=same_points,
+                        holes_checked=holes_kept and same_points)  # (their place against the same outer loop)
     # the region's loops index the points handed on; the file's numbers are those points' numbers
     carried = tuple(p._replace(numbers=np.asarray(p.numbers)[np.asarray(r.numbers)])
                     for p, r in zip(passed, region.numbering))

@@ -14,6 +14,7 @@ from typing import Mapping, NamedTuple
 
 import numpy as np
 
+from jaxmatch.arrays import roll
 from jaxmatch.catalogue.mesh import boundary_loops, edges, valences
 from jaxmatch.defaults import QUALITY, Quality
 from jaxmatch.field import SHARE_BAND
@@ -219,7 +220,7 @@ class QuadMesh:
         ext = float(np.ptp(self.xy, axis=0).max()) if self.xy.size else 1.0
         for loop in self._loops:
             pts = self.xy[loop]
-            seg = np.linalg.norm(np.roll(pts, -1, axis=0) - pts, axis=1)
+            seg = np.linalg.norm(roll(pts, -1) - pts, axis=1)
             outer = float(signed_area(pts) > 0)
             at = np.zeros(0, np.int64)
             if self.corners.size:
@@ -229,12 +230,13 @@ class QuadMesh:
                 out.append((len(loop), float(seg.sum()), outer))
                 continue
             if self.field is not None:  # the field's integral, edge by edge, in place of the length
-                seg = seg / self.field(0.5 * (pts + np.roll(pts, -1, axis=0)))
-            csum = np.concatenate([[0.0], np.cumsum(seg)])
-            for a, b in zip(at, np.roll(at, -1)):
-                n = int((b - a) % len(loop)) or len(loop)
+                seg = seg / self.field(0.5 * (pts + roll(pts, -1)))
+            csum = [0.0] + np.cumsum(seg).tolist()  # (Python floats: the same sums, a corner at a time)
+            at = at.tolist()
+            for a, b in zip(at, at[1:] + at[:1]):
+                n = (b - a) % len(loop) or len(loop)
                 length = csum[b] - csum[a] if b > a else csum[-1] - csum[a] + csum[b]
-                out.append((n, float(length), outer))
+                out.append((n, length, outer))
         return np.asarray(out, np.float64).reshape(-1, 3)
 
     def stretches_off_size(self, tol: float) -> int:

@@ -13,7 +13,6 @@ from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
 
-from jaxmatch.arrays import roll
 from jaxmatch.catalogue.mesh import mesh_valences
 from jaxmatch.geometry import signed_area, turning_angles
 from jaxmatch.placement.layout import Layout
@@ -188,24 +187,26 @@ def node_sj_bound(layout: Layout) -> float:
     (With no quad inverted and the boundary running once round the outline, the mesh covers the
     region once, so the angles of a vertex's quads add up to its angle.)"""
     pts = layout.points
-    n = pts.shape[0]
-    loops = layout.patches
-    flat = np.concatenate(loops)
-    nxt = np.concatenate([roll(p, -1) for p in loops])
-    uses = np.bincount(flat, minlength=n)
-    und = np.minimum(flat, nxt) * n + np.maximum(flat, nxt)
-    _, inv, cnt = np.unique(und, return_inverse=True, return_counts=True)
-    once = cnt[inv] == 1  # outline segments, each in its patch's (ccw) direction
-    a, b = flat[once], nxt[once]
-    if np.unique(a).size < a.size or np.unique(b).size < b.size:  # the outline touches itself: no claim
+    segs = []  # every patch's segments (ccw), in order
+    uses: dict[int, int] = {}  # patches at each point
+    corner = set()
+    for p, pc in zip(layout.patches, layout.patch_corner):
+        ids = p.tolist()
+        segs += zip(ids, ids[1:] + ids[:1])
+        for v in ids:
+            uses[v] = uses.get(v, 0) + 1
+        corner.update(p[pc].tolist())
+    count: dict[tuple[int, int], int] = {}
+    for s in segs:
+        k = (s[0], s[1]) if s[0] < s[1] else (s[1], s[0])
+        count[k] = count.get(k, 0) + 1
+    once = [(x, y) for x, y in segs if count[(x, y) if x < y else (y, x)] == 1]  # outline segments (ccw)
+    ahead = dict(once)
+    back = {y: x for x, y in once}
+    if len(ahead) < len(once) or len(back) < len(once):  # the outline touches itself: no claim
         return 1.0
-    ahead = dict(zip(a.tolist(), b.tolist()))
-    back = dict(zip(b.tolist(), a.tolist()))
-    corner = np.zeros(n, bool)
-    for p, pc in zip(loops, layout.patch_corner):
-        corner[p[pc]] = True
     bound = 1.0
-    for v in np.flatnonzero(corner).tolist():
+    for v in sorted(corner):
         if v in ahead:
             after, before = _walk(ahead, corner, v), _walk(back, corner, v)
             if after is None or before is None:  # not a closed outline (a layout that fails its checks)
@@ -213,15 +214,15 @@ def node_sj_bound(layout: Layout) -> float:
             lo, hi = _outline_angle(pts, v, after, before)
         else:  # inside the region
             lo = hi = 2 * math.pi
-        bound = min(bound, _split_sj(lo - NODE_ANGLE_TOL, hi + NODE_ANGLE_TOL, int(uses[v])))
+        bound = min(bound, _split_sj(lo - NODE_ANGLE_TOL, hi + NODE_ANGLE_TOL, uses[v]))
     return bound
 
 
-def _walk(step: dict, stop: np.ndarray, v: int) -> list[int] | None:
+def _walk(step: dict, stop: set, v: int) -> list[int] | None:
     """The outline points after ``v`` by ``step`` (a point -> the next), up to and including the
-    first where ``stop`` is true (or ``v`` again); None when the outline breaks off first."""
+    first in ``stop`` (or ``v`` again); None when the outline breaks off first."""
     out = [step.get(v)]
-    while out[-1] is not None and not stop[out[-1]] and out[-1] != v and len(out) <= len(step):
+    while out[-1] is not None and out[-1] not in stop and out[-1] != v and len(out) <= len(step):
         out.append(step.get(out[-1]))
     return out if out[-1] is not None and len(out) <= len(step) else None
 

@@ -169,6 +169,36 @@ def _snap(rings: list[np.ndarray], end: np.ndarray, tol: float, inserts: list) -
     return end
 
 
+def _snap_all(rings: list[np.ndarray], ends: np.ndarray, tol: float, inserts: list) -> list[np.ndarray]:
+    """:func:`_snap` of each of ``ends (n, 2)`` in order (the same points and ``inserts``), the
+    distances to every loop computed for all of them at once."""
+    if not len(ends):
+        return []
+    snapped: list = [None] * len(ends)
+    best = [None] * len(ends)
+    for r, pts in enumerate(rings):
+        near = np.linalg.norm(pts[None, :, :] - ends[:, None, :], axis=2)  # (n, P)
+        j = np.argmin(near, axis=1)
+        a, b = pts, roll(pts, -1)
+        ab = b - a
+        f = np.clip(np.sum((ends[:, None, :] - a) * ab, axis=2) / np.sum(ab * ab, axis=1), 0.0, 1.0)  # (n, P)
+        d = np.linalg.norm(a + f[:, :, None] * ab - ends[:, None, :], axis=2)
+        k = np.argmin(d, axis=1)
+        for e in range(len(ends)):
+            if snapped[e] is not None:
+                continue
+            if near[e, j[e]] <= tol:
+                snapped[e] = pts[j[e]]
+            elif best[e] is None or d[e, k[e]] < best[e][0]:
+                best[e] = (float(d[e, k[e]]), r, int(k[e]), float(f[e, k[e]]))
+    for e in range(len(ends)):
+        if snapped[e] is None:
+            _, r, k, f = best[e]
+            inserts.append((r, k, f, ends[e]))
+            snapped[e] = ends[e]
+    return snapped
+
+
 def _hits(shape: Shape, strategy: str) -> tuple[list[np.ndarray], list[tuple[int, int, float, np.ndarray]]]:
     """Cuts (``(2, 2)`` segments) and where they end on a boundary loop: ``(ring, segment index,
     fraction along it, point)`` for ends inside a loop segment (ends within ``1e-9`` of the
@@ -189,13 +219,17 @@ def _hits(shape: Shape, strategy: str) -> tuple[list[np.ndarray], list[tuple[int
     starts = np.array([v for v, _ in rays])
     dirs = np.array([d for _, d in rays])
     hits = shapely.intersection(boundary, shapely.linestrings(np.stack([starts, starts + far * dirs], axis=1)))
-    for v, d, hit in zip(starts, dirs, hits):
-        coords = shapely.get_coordinates(hit)
-        dist = (coords - v) @ d
+    coords, which = shapely.get_coordinates(hits, return_index=True)  # every ray's crossings at once
+    found = []  # (ray, its first crossing beyond tol)
+    for r, (v, d) in enumerate(zip(starts, dirs)):
+        c = coords[which == r]
+        dist = (c - v) @ d
         ok = dist > tol
-        if not ok.any():
-            continue
-        end = _snap(rings, coords[ok][np.argmin(dist[ok])], tol, inserts)
+        if ok.any():
+            found.append((r, c[ok][np.argmin(dist[ok])]))
+    ends = _snap_all(rings, np.array([e for _, e in found]).reshape(-1, 2), tol, inserts)
+    for (r, _), end in zip(found, ends):
+        v = starts[r]
         seg = np.array([v, end])
         if not _close_to_any(seg, cuts, tol):  # (the same cut found twice, or from its other end)
             cuts.append(seg)
@@ -344,26 +378,33 @@ def _faces(rings: list[np.ndarray], cuts: list[np.ndarray], inserts: list, overs
     extended by ``1e-7`` of the extent so that noding finds the crossing (the stub outside is a
     dangle that polygonize drops). A piece may keep a hole that no cut reaches."""
     import shapely
-    from shapely.ops import polygonize
 
     pts = rings[0]
     extent = float(np.max(pts.max(axis=0) - pts.min(axis=0)))
+    at: dict[tuple[int, int], list] = {}  # the inserts of each loop segment, in their order
+    for i in inserts:
+        at.setdefault((i[0], i[1]), []).append(i)
     lines = []
     for r, ring in enumerate(rings):  # each loop with the cut ends inserted (exact end points)
-        ring_pts = []
-        for k in range(ring.shape[0]):
-            ring_pts.append(ring[k])
-            ring_pts += [e for _, _, _, e in sorted((i for i in inserts if i[0] == r and i[1] == k), key=lambda i: i[2])]
-        ring_pts = np.array(ring_pts)
-        lines.append(shapely.LineString(np.vstack([ring_pts, ring_pts[:1]])))
-    for (a, b), over in zip(cuts, overshoot):
-        if over:
-            b = b + 1e-7 * extent * (b - a) / np.linalg.norm(b - a)
-        lines.append(shapely.LineString([a, b]))
+        if any(key[0] == r for key in at):
+            ring_pts = []
+            for k in range(ring.shape[0]):
+                ring_pts.append(ring[k])
+                if (r, k) in at:
+                    ring_pts += [e for _, _, _, e in sorted(at[r, k], key=lambda i: i[2])]
+            ring = np.array(ring_pts)
+        lines.append(shapely.linestrings(np.vstack([ring, ring[:1]])))
+    if cuts:
+        ends = np.array(cuts, np.float64)  # (n, 2, 2)
+        for j, over in enumerate(overshoot):
+            if over:
+                a, b = ends[j, 0], cuts[j][1]
+                ends[j, 1] = b + 1e-7 * extent * (b - a) / np.linalg.norm(b - a)
+        lines += list(shapely.linestrings(ends))
     noded = shapely.union_all(lines)
     if region is None:  # (the region as a shapely Polygon, when the caller has it)
         region = shapely.Polygon(rings[0], holes=rings[1:])
-    faces = list(polygonize(shapely.get_parts(noded)))
+    faces = list(shapely.get_parts(shapely.polygonize(shapely.get_parts(noded))))
     inside = shapely.contains(region, shapely.point_on_surface(np.array(faces, dtype=object))) if faces else []
     return [f for f, ok in zip(faces, inside) if ok]
 
@@ -377,28 +418,36 @@ def _corner_points(shape: Shape) -> np.ndarray:
 def _layout(shape: Shape, faces: list, name: str, check: bool = True) -> Layout:
     """A :class:`Layout` of the pieces: corners are the shape's corners and every point where
     three or more piece edges meet (``check``: as :func:`~jaxmatch.placement.layout.make_layout`'s)."""
+    import shapely
+
     index: dict[tuple[float, float], int] = {}
     points: list[tuple[float, float]] = []
     loops: list[list[int]] = []
-    edges: set[frozenset] = set()
-    for f in faces:
-        if len(f.interiors):
-            raise InputError(f"a hole is not reached by any {name} cut (a piece would keep it)", where=shape.source)
+    edges: set[tuple[int, int]] = set()
+    if faces and np.any(shapely.get_num_interior_rings(faces) > 0):
+        raise InputError(f"a hole is not reached by any {name} cut (a piece would keep it)", where=shape.source)
+    xy, which = shapely.get_coordinates(shapely.get_exterior_ring(faces), return_index=True) if faces else \
+        (np.zeros((0, 2)), np.zeros(0, np.int64))
+    ends = np.flatnonzero(np.diff(which)).tolist() + [len(which) - 1]  # each ring's closing point (its first again)
+    xy = xy.tolist()
+    start = 0
+    for end in ends:
         loop = []
-        for x, y in np.asarray(f.exterior.coords)[:-1].tolist():
+        for x, y in xy[start:end]:
             if (x, y) not in index:
                 index[(x, y)] = len(points)
                 points.append((x, y))
             loop.append(index[(x, y)])
+        start = end + 1
         loops.append(loop)
-        edges.update(frozenset((a, b)) for a, b in zip(loop, loop[1:] + loop[:1]))
-    nbrs = np.zeros(len(points), np.int64)
-    for e in edges:
-        for v in e:
-            nbrs[v] += 1
+        edges.update((a, b) if a < b else (b, a) for a, b in zip(loop, loop[1:] + loop[:1]))
+    nbrs = [0] * len(points)
+    for a, b in edges:
+        nbrs[a] += 1
+        nbrs[b] += 1
     shape_corners = {tuple(p) for p in _corner_points(shape).tolist()}
     corners = [i for i, p in enumerate(points) if p in shape_corners or nbrs[i] >= 3]
-    return make_layout([list(p) for p in points], loops, corners, source=f"{shape.source} ({name} cuts)", check=check)
+    return make_layout(points, loops, corners, source=f"{shape.source} ({name} cuts)", check=check)
 
 
 def _recursive(shape: Shape, check: bool = True) -> Layout:
