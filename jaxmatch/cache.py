@@ -82,7 +82,7 @@ def key(*parts, ignore: tuple[str, ...] = ()) -> tuple:
     (a lattice) itself; other dataclass instances (a Shape, a Layout: arrays inside) their type and
     fields' keys, less the fields named in ``ignore`` (e.g. ``source``, which only messages use); numpy scalars Python numbers; everything else (str, int, float,
     bool, None, hashable objects such as a lattice) itself."""
-    return tuple(_part(p, ignore) for p in parts)
+    return tuple([_part(p, ignore) for p in parts])
 
 
 _PLAIN = frozenset({type(None), str, bool, int, float})
@@ -97,9 +97,8 @@ def _part(p, ignore):
     t = type(p)
     if t in _PLAIN:
         return p
-    if t is np.ndarray:
-        a = np.ascontiguousarray(p)
-        return a.dtype.str, a.shape, a.tobytes()
+    if t is np.ndarray:  # (``tobytes`` is in C order whatever the layout; a 0-d array keys as 1-d, as it did)
+        return p.dtype.str, (p.shape if p.ndim else (1,)), p.tobytes()
     if t is tuple or t is list:
         return tuple([_part(x, ignore) for x in p])
     return _other(p, ignore)

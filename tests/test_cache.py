@@ -101,6 +101,23 @@ def test_the_key_builder_compares_values(xs, b):
     assert hash(key(_Thing(a, b), [a, {"k": a}], None))
 
 
+def _plain_array_key(a):
+    """The reference key of an array: its contiguous copy's dtype, shape and bytes."""
+    c = np.ascontiguousarray(a)
+    return c.dtype.str, c.shape, c.tobytes()
+
+
+@pytest.mark.parametrize("a", [
+    np.arange(12.0).reshape(3, 4), np.arange(12.0).reshape(3, 4).T, np.arange(12.0).reshape(3, 4)[:, ::2],
+    np.arange(6, dtype=np.int32)[::-1], np.array(2.5), np.zeros((0, 2)), np.asfortranarray(np.eye(3, dtype=np.int64))])
+def test_an_array_keys_as_its_contiguous_copy(a):
+    """Any layout (transposed, strided, reversed, Fortran order, 0-d) keys as the contiguous copy
+    of the array, and equal values in another layout give the same key."""
+    assert key(a) == (_plain_array_key(a),)
+    assert key([a, (a,)]) == ((_plain_array_key(a), (_plain_array_key(a),)),)
+    assert key(a) == key(np.array(a, order="C"))
+
+
 def test_meshing_keeps_nothing_outside_the_catalogues_cache(cat):
     """After meshing, the catalogue and the shape hold only their own fields and their own
     computed properties (nothing written into them by another module), and the package keeps no
