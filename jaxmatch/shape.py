@@ -640,6 +640,8 @@ def _lowest(xy) -> int:
 
 def _check_corners(corners, n: int, source: str) -> np.ndarray:
     """Corner indices as ``(c,) int64``; rejects non-ints, out-of-range and duplicates."""
+    if type(corners) is list and all(type(c) is int and 0 <= c < n for c in corners) and len(set(corners)) == len(corners):
+        return np.array(corners, dtype=np.int64)  # (plain valid ints, a patch's every time: the loop below finds nothing)
     if isinstance(corners, (str, bytes)) or not hasattr(corners, "__len__"):
         raise InputError("corners must be a list of integer point indices", where=source)
     seen: set[int] = set()

@@ -120,7 +120,10 @@ def warn_unordered(shape) -> None:
         if loop >= len(shape.numbering) or shape.numbering[loop].corners is None or len(corners) < 3:
             continue
         nb = shape.numbering[loop]
-        place = {int(c): i for i, c in enumerate(nb.corners)}
+        listed = nb.corners
+        if all(a < b for a, b in zip(listed, listed[1:])):  # (an increasing list is in boundary order: the
+            continue  # loop's numbers run around it one way or the other; a patch's corners, every time)
+        place = {int(c): i for i, c in enumerate(listed)}
         labels = np.array([place.get(int(c), -1) for c in np.asarray(nb.numbers)[np.sort(corners)]])
         step = (roll(labels, -1) - labels) % len(labels)
         if not (np.all(step == 1) or np.all(step == len(labels) - 1)):

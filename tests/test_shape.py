@@ -559,3 +559,52 @@ def _same_value(a, b) -> bool:
     if isinstance(a, dict):
         return a.keys() == b.keys() and all(_same_value(a[k], b[k]) for k in a)
     return a == b
+
+
+def _shape_fields(s):
+    """Every field of a shape, arrays as lists (for equality)."""
+    import dataclasses
+
+    def plain(v):
+        if isinstance(v, np.ndarray):
+            return (v.dtype.str, v.tolist())
+        if isinstance(v, tuple):
+            return tuple(plain(x) for x in v)
+        return v
+    return {f.name: plain(getattr(s, f.name)) for f in dataclasses.fields(s)}
+
+
+@given(st.integers(3, 9), st.randoms(use_true_random=False), st.booleans(), st.booleans())
+def test_explicit_corners_warn_exactly_when_not_in_boundary_order(n, rnd, clockwise, closed):
+    """The warning fires exactly when the listed corners are not a cyclic run of the loop's
+    order, one way or the other (spelled out here from the input alone); a list of plain ints
+    gives the same shape as the same indices as numpy integers."""
+    import warnings
+
+    pts = [[math.cos(2 * math.pi * k / n), math.sin(2 * math.pi * k / n)] for k in range(n)]
+    if clockwise:
+        pts = pts[::-1]
+    if closed:
+        pts = pts + [pts[0]]
+    listed = rnd.sample(range(n), rnd.randint(1, n))
+    if rnd.random() < 0.5:
+        listed.sort()
+    ring = sorted(listed)  # the corners in the loop's own order
+    rotations = [ring[i:] + ring[:i] for i in range(len(ring))]
+    in_order = len(listed) < 3 or listed in rotations or listed[::-1] in rotations
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("always")
+        plain = make_shape(pts, corners=listed)
+    assert any("not listed in boundary order" in str(w.message) for w in seen) == (not in_order)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        numpy_ints = make_shape(pts, corners=[np.int64(c) for c in listed])
+    assert _shape_fields(plain) == _shape_fields(numpy_ints)
+
+
+@pytest.mark.parametrize("corners, words", [([0, 4], "corners\\[1\\] = 4 is out of range"), ([1, 1], "listed twice"),
+                                            ([0, True], "must be an integer"), ([0, -1], "out of range"),
+                                            ([0, 2.0], "must be an integer")])
+def test_bad_corner_lists_are_refused_by_their_entry(corners, words):
+    with pytest.raises(InputError, match=words):
+        make_shape(SQUARE, corners=corners, source="c.json")
