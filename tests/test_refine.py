@@ -308,6 +308,21 @@ def test_refined_side_vertices_step_each_template_edge(templates, name, j, data)
 # integer programs
 
 
+@pytest.mark.parametrize("name", ["square.json", "triangle.json", "lshape.json", "plus.json"])
+def test_side_matrix_counts_each_sides_edges_per_chord(templates, name):
+    """``A[i, c]``: the number of side ``i``'s edges on chord ``c``, counted here edge by edge."""
+    _, ts = templates(EXAMPLES / name)
+    assert ts
+    for t in ts:
+        A = t.side_matrix()
+        plain = np.zeros((len(t.side_chords), t.n_chords), np.int64)
+        for i, ch in enumerate(t.side_chords):
+            for c in np.asarray(ch).tolist():
+                plain[i, c] += 1
+        assert A.dtype == np.int64 and A.shape == plain.shape and np.array_equal(A, plain)
+        assert A.sum() == sum(len(ch) for ch in t.side_chords)
+
+
 @pytest.mark.parametrize("counted", [True, False])  # counted out, or the integer program
 @pytest.mark.parametrize("name, cap", [("square.json", 4), ("triangle.json", 6)])
 def test_milp_feasibility_equals_enumeration(templates, name, cap, counted, monkeypatch):
