@@ -76,10 +76,11 @@ def turning_angles(points) -> np.ndarray:
     positive is a left turn (convex for a counter-clockwise loop)."""
     p = _loop(points)
     e_in = p - roll(p, 1)
-    e_out = roll(p, -1) - p
-    cross = e_in[:, 0] * e_out[:, 1] - e_in[:, 1] * e_out[:, 0]
-    dot = np.sum(e_in * e_out, axis=1)
-    return np.arctan2(cross, dot)
+    e_out = roll(e_in, -1)  # (p[i + 1] - p[i]: point i + 1's incoming edge, the same differences)
+    xi, yi, xo, yo = e_in[:, 0], e_in[:, 1], e_out[:, 0], e_out[:, 1]
+    dot = xi * xo + yi * yo
+    dot += 0.0  # (as a sum from 0.0: -0.0 + -0.0 is +0.0 there, and arctan2 tells the zeros apart)
+    return np.arctan2(xi * yo - yi * xo, dot)
 
 
 def point_at(points, t, cum: np.ndarray | None = None) -> np.ndarray:

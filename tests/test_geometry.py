@@ -3,6 +3,7 @@ for the crossing search, the shoelace formula for areas, segment lengths for arc
 
 from __future__ import annotations
 
+import math
 from fractions import Fraction
 from itertools import combinations
 
@@ -11,7 +12,7 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from jaxmatch.geometry import cumulative_length, first_crossing, point_at, signed_area, sub_polyline
+from jaxmatch.geometry import cumulative_length, first_crossing, point_at, signed_area, sub_polyline, turning_angles
 
 
 def _orient(a, b, c) -> int:
@@ -133,3 +134,22 @@ def test_ring_is_simple_ignores_orientation(pts):
     rev = p[(-np.arange(len(p))) % len(p)]
     assert ring_is_simple(p) == ring_is_simple(rev)
     assert (first_crossing(rev, simple=ring_is_simple(p)) is None) == (first_crossing(rev) is None)
+
+
+@given(st.lists(st.tuples(st.sampled_from([0.0, -0.0, 1.0, -1.0, 2.5, 1e-300, 3.0]),
+                          st.sampled_from([0.0, -0.0, 1.0, -2.0, 0.5, 1e-300])), min_size=2, max_size=12))
+def test_turning_angles_equal_the_plain_formula_bit_for_bit(pts):
+    """Each point's ``arctan2(cross, dot)`` of its incoming and outgoing edges, cross and dot
+    worked out one point at a time in Python floats (repeated points included: zero edges, whose
+    signed zeros decide between 0 and pi; the dot product as a sum from 0.0)."""
+    p = np.asarray(pts, np.float64)
+    got = turning_angles(p)
+    cross, dot = [], []
+    for i in range(len(p)):
+        (ax, ay), (bx, by), (cx, cy) = p[i - 1].tolist(), p[i].tolist(), p[(i + 1) % len(p)].tolist()
+        xi, yi, xo, yo = bx - ax, by - ay, cx - bx, cy - by
+        cross.append(xi * yo - yi * xo)
+        dot.append(0.0 + xi * xo + yi * yo)
+    want = np.arctan2(np.asarray(cross), np.asarray(dot))
+    assert np.array_equal(got.view(np.int64), want.view(np.int64))
+    assert np.allclose(got, [math.atan2(c, d) for c, d in zip(cross, dot)], rtol=0, atol=1e-15)
