@@ -954,6 +954,23 @@ def _bulge(width: float):
     return pts, make_layout(pts, [list(range(n))], corners=[0, 1, 2, n - 1])
 
 
+@pytest.mark.parametrize("doc", [
+    {"points": [[0, 0], [2, 0], [2, 1], [1, 1], [0, 1]], "patches": [[0, 1, 2, 3], [0, 3, 4]]},
+    {"points": [[0, 0], [3, 0], [3, 3], [0, 3], [1, 1], [2, 1], [2, 2], [1, 2]],
+     "patches": [[0, 1, 5, 4], [1, 2, 6, 5], [2, 3, 7, 6], [3, 0, 4, 7]]}])
+def test_region_area_is_the_union_of_the_patch_polygons_bit_for_bit(doc):
+    """The area of the union of the patches made one by one as ``shapely.Polygon`` (the plain
+    path), exactly; and the sum of the patches' shoelace areas to round-off (a frame: its window
+    left out)."""
+    import shapely
+
+    pts = np.asarray(doc["points"], np.float64) * 1.37 + 0.11
+    lay = make_layout(pts, doc["patches"])
+    plain = shapely.union_all([shapely.Polygon(pts[lp]) for lp in lay.patches]).area
+    assert region_area(lay) == plain
+    assert region_area(lay) == pytest.approx(sum(_shoelace(pts[lp]) for lp in lay.patches), rel=1e-12)
+
+
 @pytest.mark.parametrize("width", [10.0, 40.0])
 def test_lean_curve_floors_share_the_area_budget_among_the_curved_sides(width):
     """The straight sides get no floor; with ``lean`` they take no share of the budget either, so
