@@ -137,17 +137,33 @@ def write_text_atomic(path: str | os.PathLike, text: str) -> None:
         fh.write(text)
 
 
+_PIECE = 1 << 16
+"""Bytes :func:`read_limited` asks for at a time beyond the size a file reports (a pipe, a device,
+a file still growing)."""
+
+
 def read_limited(path: str | os.PathLike, limit: int, what: str = "file") -> bytes:
     """The bytes of ``path``, at most ``limit`` of them.
 
     Raises :class:`InputError` (``where=str(path)``) when the file cannot be read (missing, a
     folder, no permission) or holds more than ``limit`` bytes. Reads at most ``limit + 1``
-    bytes, so devices and pipes cannot make it hang on an endless input.
+    bytes, so devices and pipes cannot make it hang on an endless input. Reads the size the file
+    reports first, then in pieces (``read(limit + 1)`` at once sets aside ``limit + 1`` bytes: 37 us
+    of 16 MiB to read a 13 kB lattice file, which every meshing call reads).
     """
     src = str(path)
     try:
         with open(path, "rb") as fh:
-            data = fh.read(limit + 1)
+            want = min(os.fstat(fh.fileno()).st_size + 1, limit + 1)
+            parts, got = [], 0
+            while got <= limit:
+                part = fh.read(min(want, limit + 1 - got))
+                if not part:
+                    break
+                parts.append(part)
+                got += len(part)
+                want = _PIECE
+            data = b"".join(parts)
     except OSError as err:
         raise InputError(f"cannot read {what}: {err.strerror or err}", where=src) from None
     if len(data) > limit:
