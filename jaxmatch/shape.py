@@ -523,8 +523,8 @@ def _make_shape(points, corners, angle: float, source: str, checked: bool = Fals
     n = p.shape[0]
     if n > MAX_POINTS + 1 or (n == MAX_POINTS + 1 and not _closes(p)):
         raise InputError(f"boundary has {n} points, more than the maximum {MAX_POINTS}", where=source)
-    bad = ~np.isfinite(p).all(axis=1)
-    if bad.any():
+    if not np.isfinite(p).all():
+        bad = ~np.isfinite(p).all(axis=1)
         raise InputError(f"boundary point {int(np.flatnonzero(bad)[0])} is not finite (NaN or infinity)", where=source)
 
     corner_idx = None
@@ -553,11 +553,12 @@ def _make_shape(points, corners, angle: float, source: str, checked: bool = Fals
     if not checked:
         repeated(p, 0.0)
     offset = p.min(axis=0)
-    extent = p.max(axis=0) - offset
+    top = p.max(axis=0)
+    extent = top - offset
     scale = float(extent.max())
     if not np.isfinite(extent).all() or not (scale > 0):
         raise InputError("coordinates are too large (extent overflows)", where=source)
-    big = np.abs(p).max()
+    big = max(abs(v) for v in offset.tolist() + top.tolist())  # (the largest |coordinate|: at a column's end)
     if big > MAX_COORDINATE:
         raise InputError(f"coordinates are too large ({big:.3g}; at most {MAX_COORDINATE:g} in absolute value, so that "
                          "areas and squared lengths of the placed mesh stay finite): rescale the shape", where=source)

@@ -608,3 +608,15 @@ def test_explicit_corners_warn_exactly_when_not_in_boundary_order(n, rnd, clockw
 def test_bad_corner_lists_are_refused_by_their_entry(corners, words):
     with pytest.raises(InputError, match=words):
         make_shape(SQUARE, corners=corners, source="c.json")
+
+
+@pytest.mark.parametrize("points, words", [
+    ([[0, 0], [1, 0], [float("nan"), 1]], "boundary point 2 is not finite"),
+    ([[0, 0], [float("inf"), 0], [1, 1]], "boundary point 1 is not finite"),
+    ([[-2e150, 0], [1, 0], [1, 1]], "coordinates are too large \\(2e\\+150;"),
+    ([[0, 0], [1, 3e150], [-1, 3e150]], "coordinates are too large \\(3e\\+150;")])
+def test_non_finite_or_huge_coordinates_are_named(points, words):
+    """The first non-finite point by its index; the largest coordinate in absolute value, from
+    either end of either column."""
+    with pytest.raises(InputError, match=words):
+        make_shape(points, source="c.json")
