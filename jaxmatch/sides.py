@@ -25,7 +25,7 @@ from jaxmatch.arrays import roll
 from jaxmatch.errors import InputError, InputWarning
 
 __all__ = ["LoopNumbers", "NamedSide", "RESERVED_GROUP", "check_groups", "named_sides", "periodic_lines",
-           "resolve_side", "side_polyline", "warn_unordered"]
+           "resolve_side", "side_lengths", "side_polyline", "warn_unordered"]
 
 
 def _short(value, limit: int = 40) -> str:
@@ -140,11 +140,40 @@ RESERVED_GROUP = re.compile(r"^(boundary|(side|hole|patch|cut|periodic) .*)$")
 def side_polyline(shape, side: NamedSide) -> np.ndarray:
     """``(k, 2) float64`` the points of ``side`` in user coordinates, in its name's direction
     (from its file corner ``i`` to ``j``)."""
-    ring = shape.given_points if side.loop == 0 else np.asarray(shape.holes[side.loop - 1], np.float64)
-    n = len(ring)
-    pts = ring[(side.start + np.arange(((side.stop - side.start) % n or n) + 1)) % n]
-    first = side.name.rsplit(" ", 1)[1].split("-")[0]
-    return pts if _label_at(shape, side, side.start) == first else pts[::-1]
+    ring = _ring(shape, side.loop)
+    pts = ring[_along(side, len(ring))]
+    return pts if _named_forward(shape, side) else pts[::-1]
+
+
+def side_lengths(shape, sides: list[NamedSide]) -> list[float]:
+    """Per side, its length (user units) as :func:`side_polyline`'s points give it: the sum of its
+    edges' lengths in its name's direction (the same sum, bit for bit), each loop's edges measured
+    once."""
+    seg: dict[int, np.ndarray] = {}
+    out = []
+    for side in sides:
+        if side.loop not in seg:
+            ring = _ring(shape, side.loop)
+            seg[side.loop] = np.linalg.norm(roll(ring, -1) - ring, axis=1)  # (edge i: point i to i + 1)
+        e = seg[side.loop]
+        lengths = e[_along(side, len(e))[:-1]]
+        out.append(float((lengths if _named_forward(shape, side) else lengths[::-1].copy()).sum()))
+    return out
+
+
+def _ring(shape, loop: int) -> np.ndarray:
+    """``(n, 2) float64`` loop ``loop``'s points in user coordinates (0: the outer loop)."""
+    return shape.given_points if loop == 0 else np.asarray(shape.holes[loop - 1], np.float64)
+
+
+def _along(side: NamedSide, n: int) -> np.ndarray:
+    """The point indices of ``side`` on its loop of ``n`` points, in the stored direction."""
+    return (side.start + np.arange(((side.stop - side.start) % n or n) + 1)) % n
+
+
+def _named_forward(shape, side: NamedSide) -> bool:
+    """Whether ``side``'s name runs the stored direction (its first corner is its ``start``)."""
+    return _label_at(shape, side, side.start) == side.name.rsplit(" ", 1)[1].split("-")[0]
 
 
 def _label_at(shape, side: NamedSide, point: int) -> str:

@@ -380,3 +380,31 @@ def test_a_sides_run_is_the_loops_edges_from_a_to_b(n, data):
     got = _run(loop, a, b)
     assert got.dtype == np.int64
     np.testing.assert_array_equal(got, want)
+
+
+def _wavy(n: int, clockwise: bool = False) -> list[list[float]]:
+    """A square whose bottom side is traced with ``n`` uneven points (long sides: numpy sums them pairwise)."""
+    bottom = [[10.0 * (k / n) ** 1.3, 0.37 * np.sin(k)] for k in range(n)]
+    pts = bottom + [[10.0, 0.0], [10.0, 7.0], [0.0, 7.0]]
+    return pts[::-1] if clockwise else pts
+
+
+@pytest.mark.parametrize("doc", [
+    {"boundary": _wavy(30)},
+    {"boundary": _wavy(30, clockwise=True)},
+    {"boundary": _wavy(12), "corners": [0, 12, 13, 14]},
+    {"boundary": _wavy(12), "corners": [14, 13, 12, 0]},  # listed backwards: names run against the loop
+    {"boundary": _wavy(20), "holes": [[[2, 2], [2, 4], [3, 4.5], [4, 4], [4, 2]]], "hole_corners": [[4, 3, 1, 0]]},
+])
+def test_side_lengths_are_the_side_polylines_lengths_bit_for_bit(doc):
+    from jaxmatch.sides import named_sides, side_lengths, side_polyline
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        shape = jaxmatch.parse_shape(json.dumps(doc).encode(), "s.json")
+    sides = named_sides(shape)
+    assert len(sides) >= 4
+    plain = [float(np.linalg.norm(np.diff(side_polyline(shape, s), axis=0), axis=1).sum()) for s in sides]
+    assert side_lengths(shape, sides) == plain
+    assert sum(plain) == pytest.approx(
+        shapely.Polygon(shape.given_points, [h for h in shape.holes]).length, rel=1e-12)

@@ -22,7 +22,7 @@ from jaxmatch.errors import InputError
 from jaxmatch.meshing.result import _KEPT, QuadMesh
 from jaxmatch.placement.refine import harmonic_displacement
 from jaxmatch.shape import Shape
-from jaxmatch.sides import NamedSide, named_sides, resolve_side, side_polyline
+from jaxmatch.sides import NamedSide, named_sides, resolve_side, side_lengths, side_polyline
 
 __all__ = ["make_periodic", "name_groups", "periodic_mismatch", "periodic_nodes"]
 
@@ -83,10 +83,10 @@ def name_groups(mesh: QuadMesh, region: Shape) -> QuadMesh:
     loops, rings, where, sides, edges_of = _side_runs(mesh, region)
     sets: dict[str, np.ndarray] = {"boundary": np.asarray(mesh.line_sets["boundary"], np.int64)}
     counts, lengths = {}, {}
-    for side in sides:
+    for side, length in zip(sides, side_lengths(region, sides)):
         key = side.name[len("side "):] if side.loop == 0 else side.name
         counts[key] = int(len(edges_of[side.name]))
-        lengths[key] = float(np.linalg.norm(np.diff(side_polyline(region, side), axis=0), axis=1).sum())
+        lengths[key] = length
         if side.loop == 0:
             sets[side.name] = edges_of[side.name]
     hole_sets: dict[int, dict[str, np.ndarray]] = {}
