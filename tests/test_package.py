@@ -28,6 +28,11 @@ SKIP = shutil.ignore_patterns(".venv", ".git", "build", "dist", "*.egg-info", "_
                               ".cache", "out")
 
 
+CLEAN_ENV = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+"""The environment of the package's commands: a ``PYTHONPATH`` pointing at the checkout would make
+pip see jaxmatch as installed already (and skip the wheel) and hide a wheel missing a module."""
+
+
 def _run(cmd, **kw):
     r = subprocess.run([str(c) for c in cmd], capture_output=True, text=True, timeout=600, **kw)
     assert r.returncode == 0, (cmd, r.stdout[-2000:], r.stderr[-2000:])
@@ -40,14 +45,15 @@ def installed(tmp_path_factory):
     base = tmp_path_factory.mktemp("package")
     src = base / "src"
     shutil.copytree(ROOT, src, ignore=SKIP, symlinks=True)  # build from a copy: the checkout stays clean
-    _run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "--no-index", "-q", "-w", base / "dist", src])
+    _run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "--no-index", "-q", "-w", base / "dist", src],
+         env=CLEAN_ENV)
     wheel = next((base / "dist").glob("jaxmatch-*.whl"))
     venv = base / "venv"
-    _run([sys.executable, "-m", "venv", "--without-pip", venv])
+    _run([sys.executable, "-m", "venv", "--without-pip", venv], env=CLEAN_ENV)
     py = venv / "bin" / "python"
-    site = Path(_run([py, "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"]).stdout.strip())
+    site = Path(_run([py, "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"], env=CLEAN_ENV).stdout.strip())
     (site / "_test_dependencies.pth").write_text(sysconfig.get_paths()["purelib"] + "\n")
-    _run([sys.executable, "-m", "pip", "--python", py, "install", "--no-deps", "--no-index", "-q", wheel])
+    _run([sys.executable, "-m", "pip", "--python", py, "install", "--no-deps", "--no-index", "-q", wheel], env=CLEAN_ENV)
     return venv / "bin", wheel
 
 
@@ -65,7 +71,7 @@ def test_installed_command_runs_outside_the_repository(installed, tmp_path):
     work = tmp_path / "elsewhere"
     work.mkdir()
     shutil.copy(ROOT / "examples" / "lshape.csv", work / "part.csv")
-    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH",)}
+    env = dict(CLEAN_ENV)
     env["JAXMATCH_CACHE"] = str(tmp_path / "cache")
     where = _run([bin_dir / "python", "-c", "import jaxmatch, jaxmatch.scoring.lattice as l; print(jaxmatch.__file__); "
                   "print(l.BUILTIN_DIR.is_dir())"], cwd=work, env=env).stdout.split()
