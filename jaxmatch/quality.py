@@ -89,12 +89,8 @@ def placement_measures(xy: np.ndarray, quads: np.ndarray):
     ang = np.degrees(np.mod(np.arctan2(cross, dot), 2 * np.pi))
     l1 = np.sqrt(np.add.reduce(e1 * e1, axis=-1))  # (F, 4) edge lengths (np.linalg.norm's operations)
     ln = l1 * l1[:, _PREV]
-    ok = ln > _TINY  # the scaled Jacobian as _scaled_jacobian computes it
-    sj = np.minimum(np.maximum(np.where(ok, cross / np.where(ok, ln, 1.0), 0.0).min(axis=1), -1.0), 1.0)  # (np.clip's)
-    lo, hi = l1.min(axis=1), l1.max(axis=1)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        ratio = np.where(lo > 0, hi / np.where(lo > 0, lo, 1.0), np.inf)
-    return sj, ang.min(axis=1), ang.max(axis=1), (cross <= 0).any(axis=1), ratio
+    sj = _scaled_jacobian(e1, e2, cross, ln)
+    return sj, ang.min(axis=1), ang.max(axis=1), (cross <= 0).any(axis=1), _longest_over_shortest(l1)
 
 
 def _scaled_jacobian(e1: np.ndarray, e2: np.ndarray, cross: np.ndarray, ln: np.ndarray | None = None) -> np.ndarray:
@@ -104,7 +100,7 @@ def _scaled_jacobian(e1: np.ndarray, e2: np.ndarray, cross: np.ndarray, ln: np.n
         ln = np.linalg.norm(e1, axis=-1) * np.linalg.norm(e2, axis=-1)
     ok = ln > _TINY
     sj_c = np.where(ok, cross / np.where(ok, ln, 1.0), 0.0)
-    return np.clip(sj_c.min(axis=1), -1.0, 1.0)
+    return np.minimum(np.maximum(sj_c.min(axis=1), -1.0), 1.0)  # (np.clip's values, without its overhead)
 
 
 def sj_inverted(xy: np.ndarray, quads: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -140,7 +136,11 @@ def edge_ratios(xy: np.ndarray, quads: np.ndarray) -> np.ndarray:
     if q.size == 0:
         return np.zeros(0)
     p = np.asarray(xy, dtype=np.float64)[q]
-    ln = np.linalg.norm(p[:, _NEXT] - p, axis=-1)
-    lo, hi = ln.min(axis=1), ln.max(axis=1)
+    return _longest_over_shortest(np.linalg.norm(p[:, _NEXT] - p, axis=-1))
+
+
+def _longest_over_shortest(lengths: np.ndarray) -> np.ndarray:
+    """``(F,) float64`` each row's longest over shortest of ``lengths (F, 4)`` (``inf`` when one is 0)."""
+    lo, hi = lengths.min(axis=1), lengths.max(axis=1)
     with np.errstate(divide="ignore", invalid="ignore"):
         return np.where(lo > 0, hi / np.where(lo > 0, lo, 1.0), np.inf)
