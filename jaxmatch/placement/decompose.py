@@ -149,29 +149,16 @@ def _rays(shape: Shape, strategy: str) -> list[tuple[np.ndarray, np.ndarray]]:
 
 
 def _snap(rings: list[np.ndarray], end: np.ndarray, tol: float, inserts: list) -> np.ndarray:
-    """``end`` on a boundary loop: moved onto a loop point within ``tol``, else recorded in
-    ``inserts`` as ``(ring, segment index, fraction along it, point)`` of the nearest segment."""
-    best = None
-    for r, pts in enumerate(rings):
-        near = np.linalg.norm(pts - end, axis=1)
-        j = int(np.argmin(near))
-        if near[j] <= tol:
-            return pts[j]
-        a, b = pts, roll(pts, -1)
-        ab = b - a
-        f = np.clip(np.sum((end - a) * ab, axis=1) / np.sum(ab * ab, axis=1), 0.0, 1.0)
-        d = np.linalg.norm(a + f[:, None] * ab - end, axis=1)
-        k = int(np.argmin(d))
-        if best is None or d[k] < best[0]:
-            best = (float(d[k]), r, k, float(f[k]))
-    _, r, k, f = best
-    inserts.append((r, k, f, end))
-    return end
+    """``end`` on a boundary loop: moved onto a loop point within ``tol`` (the first loop's that
+    has one), else recorded in ``inserts`` as ``(ring, segment index, fraction along it, point)``
+    of the nearest segment (:func:`_snap_all` of one end)."""
+    return _snap_all(rings, np.asarray(end, np.float64).reshape(1, 2), tol, inserts)[0]
 
 
 def _snap_all(rings: list[np.ndarray], ends: np.ndarray, tol: float, inserts: list) -> list[np.ndarray]:
-    """:func:`_snap` of each of ``ends (n, 2)`` in order (the same points and ``inserts``), the
-    distances to every loop computed for all of them at once."""
+    """Each of ``ends (n, 2)`` on a boundary loop, in order (:func:`_snap`), the distances to
+    every loop computed for all of them at once: a list of ``(2,)`` points, ``inserts`` appended
+    to for the ends that no loop point is within ``tol`` of."""
     if not len(ends):
         return []
     snapped: list = [None] * len(ends)
