@@ -251,3 +251,35 @@ def test_sums_of_chords_are_highs_answer(lengths, size, req, floors):
         return
     if got is not None:
         assert got[1].tolist() == ref[1].tolist() and got[0][0].tolist() == ref[0][0].tolist()
+
+
+def test_the_model_passed_as_arrays_solves_as_the_model_passed_as_an_lp(monkeypatch):
+    """Every integer program of a few meshes (side counts, feasibility checks, and a size field's
+    template choice with its own HiGHS options), passed to HiGHS as numpy arrays in one call, gives
+    the status and the solution bit for bit that the same program passed as a ``HighsLp`` gives."""
+    from jaxmatch.field import load_field
+
+    progs = []
+    real = milp._highs
+
+    def keep(*a, **k):
+        progs.append((a, k))
+        return real(*a, **k)
+
+    monkeypatch.setattr(milp, "_highs", keep)
+    cat = jaxmatch.load_catalogue()
+    cat.cache.forget_shapes()
+    for name in ("lshape.json", "tshape.json", "holes/letter-A.json"):
+        jaxmatch.mesh(jaxmatch.load_shape(EX / name), divisions=24)
+    jaxmatch.mesh(jaxmatch.load_shape(EX / "graded" / "strip.json"), size=load_field(EX / "graded" / "strip.field.json"))
+    monkeypatch.setattr(milp, "_highs", real)
+    assert len(progs) >= 10 and any(k.get("options") for _, k in progs)  # (the template choice's)
+    assert any(not np.any(a[4]) for a, _ in progs)  # (a linear relaxation: the choice screens)
+    got = {}
+    for arrays in (True, False):
+        monkeypatch.setattr(milp, "PASS_ARRAYS", arrays)
+        got[arrays] = [real(*a, **k) for a, k in progs]
+    for (st_a, x_a, _), (st_l, x_l, _) in zip(got[True], got[False]):
+        assert st_a == st_l and (x_a is None) == (x_l is None)
+        if x_a is not None:
+            assert x_a.tobytes() == x_l.tobytes()

@@ -13,7 +13,7 @@ import numpy as np
 
 from jaxmatch.errors import InputError, SolverError
 
-__all__ = ["CHORD_WEIGHT", "Choice", "FEASIBILITY_JUMP", "LayoutInfeasible", "MILP_TIME_LIMIT", "OneSides", "SparseRows",
+__all__ = ["CHORD_WEIGHT", "Choice", "FEASIBILITY_JUMP", "LayoutInfeasible", "MILP_TIME_LIMIT", "OneSides", "PASS_ARRAYS", "SparseRows",
            "STRIPS", "STRIP_FREE", "STRIP_MARGIN", "STRIP_POINTS", "one_patch_sides", "count_cost", "counts_feasible", "run_milp",
            "solve_choice", "solve_counts", "strip_counts"]
 
@@ -831,16 +831,6 @@ def _highs(cost, A, lo, hi, integrality, lb, ub, *, presolve: bool, time_limit: 
         return res.status, res.x, res.message
     m, n = A.shape
     start, index, value = _columns(A)
-    lp = highspy.HighsLp()
-    lp.num_col_, lp.num_row_ = n, m
-    lp.a_matrix_.num_col_, lp.a_matrix_.num_row_ = n, m
-    lp.a_matrix_.format_ = highspy.MatrixFormat.kColwise
-    lp.a_matrix_.start_, lp.a_matrix_.index_, lp.a_matrix_.value_ = start, index, value
-    lp.col_cost_, lp.col_lower_, lp.col_upper_ = cost, lb, ub
-    lp.row_lower_, lp.row_upper_ = lo, hi
-    ints = np.asarray(integrality).astype(int).tolist()
-    kinds = {i: highspy.HighsVarType(i) for i in set(ints)}
-    lp.integrality_ = [kinds[i] for i in ints]
     h = getattr(_SOLVER, "highs", None)
     if h is None:  # one solver object per thread, its model cleared for each program
         h = _SOLVER.highs = highspy.Highs()
@@ -848,14 +838,14 @@ def _highs(cost, A, lo, hi, integrality, lb, ub, *, presolve: bool, time_limit: 
         h.clearModel()
         h.resetOptions()  # (a program's own options go with it)
     h.setOptionValue("log_to_console", False)  # as scipy sets it
-    for name, value in (options or {}).items():
-        h.setOptionValue(name, value)
+    for name, setting in (options or {}).items():
+        h.setOptionValue(name, setting)
     h.setOptionValue("time_limit", float(time_limit))
     h.setOptionValue("presolve", "on" if presolve else "off")
     h.setOptionValue("mip_heuristic_run_feasibility_jump", bool(FEASIBILITY_JUMP))
     h.setOptionValue("mip_max_nodes", int(max_nodes) if max_nodes is not None else highspy.kHighsIInf)
     S = highspy.HighsModelStatus
-    if h.passModel(lp) == highspy.HighsStatus.kError:
+    if _pass_model(h, highspy, n, m, start, index, value, cost, lb, ub, lo, hi, integrality) == highspy.HighsStatus.kError:
         return 2, None, "the model could not be loaded"  # as scipy: kModelError
     if x0 is not None:  # a feasible start: the answer past the time limit is no worse
         sol = highspy.HighsSolution()
@@ -871,6 +861,35 @@ def _highs(cost, A, lo, hi, integrality, lb, ub, *, presolve: bool, time_limit: 
         return status, None, h.modelStatusToString(st)
     return status, np.array(h.getSolution().col_value), h.modelStatusToString(st)
 
+
+
+PASS_ARRAYS = True
+"""Whether :func:`_highs` passes the model to HiGHS as numpy arrays in one call (``Highs.passModel``
+of the sizes and arrays, :func:`_pass_model`) rather than through a ``HighsLp`` object filled field
+by field (its integrality a Python list of ``HighsVarType``): the same model, so the same solutions
+bit for bit (tests/test_milp.py), about half of the Python time of passing it."""
+
+
+def _pass_model(h, highspy, n: int, m: int, start, index, value, cost, lb, ub, lo, hi, integrality):
+    """Load one program into the HiGHS object ``h`` (``n`` columns, ``m`` rows; ``start``, ``index``,
+    ``value`` its compressed columns, :func:`_columns`; the rest as :func:`run_milp` takes them) and
+    return ``h.passModel``'s status: minimise, no offset, column-wise."""
+    if PASS_ARRAYS:
+        return h.passModel(n, m, int(index.size), int(highspy.MatrixFormat.kColwise), int(highspy.ObjSense.kMinimize),
+                           0.0, np.asarray(cost, np.float64), np.asarray(lb, np.float64), np.asarray(ub, np.float64),
+                           np.asarray(lo, np.float64), np.asarray(hi, np.float64), start, index, value,
+                           np.asarray(integrality).astype(np.int32))
+    lp = highspy.HighsLp()
+    lp.num_col_, lp.num_row_ = n, m
+    lp.a_matrix_.num_col_, lp.a_matrix_.num_row_ = n, m
+    lp.a_matrix_.format_ = highspy.MatrixFormat.kColwise
+    lp.a_matrix_.start_, lp.a_matrix_.index_, lp.a_matrix_.value_ = start, index, value
+    lp.col_cost_, lp.col_lower_, lp.col_upper_ = cost, lb, ub
+    lp.row_lower_, lp.row_upper_ = lo, hi
+    ints = np.asarray(integrality).astype(int).tolist()
+    kinds = {i: highspy.HighsVarType(i) for i in set(ints)}
+    lp.integrality_ = [kinds[i] for i in ints]
+    return h.passModel(lp)
 
 
 def _columns(A) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
