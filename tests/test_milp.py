@@ -283,3 +283,49 @@ def test_the_model_passed_as_arrays_solves_as_the_model_passed_as_an_lp(monkeypa
         assert st_a == st_l and (x_a is None) == (x_l is None)
         if x_a is not None:
             assert x_a.tobytes() == x_l.tobytes()
+
+
+def _dense_side_rows(sides, matrices, equal=()):
+    """The rows of _side_rows written out one entry at a time from their definition (dense)."""
+    offs = np.cumsum([0] + [np.shape(A)[1] for A in matrices])
+    M, S = int(offs[-1]), len(sides.chains)
+    rows = []
+    for p, A in enumerate(matrices):
+        for i, ids in enumerate(sides.patch_sides[p]):
+            r = np.zeros(M + S)
+            r[offs[p]:offs[p + 1]] = np.asarray(A, np.float64)[i]
+            r[M + np.unique(np.asarray(ids, np.int64))] = -1.0
+            rows.append(r)
+    for a, b in equal:
+        r = np.zeros(M + S)
+        r[M + np.unique(np.asarray(a, np.int64))] += 1.0
+        r[M + np.unique(np.asarray(b, np.int64))] -= 1.0
+        rows.append(r)
+    return np.array(rows).reshape(len(rows), M + S)
+
+
+def test_the_side_rows_of_real_layouts_are_their_definition(monkeypatch):
+    """The patch sides' rows of every program of a few meshes (many patches, T-junctions, sides
+    listed twice) and of a periodic pair: each entry once, the dense matrix of the definition."""
+    calls = []
+    real = milp._side_rows
+
+    def keep(*a, **k):
+        calls.append((a, k))
+        return real(*a, **k)
+
+    monkeypatch.setattr(milp, "_side_rows", keep)
+    cat = jaxmatch.load_catalogue()
+    cat.cache.forget_shapes()
+    for name in ("lshape.json", "tshape.json", "holes/letter-A.json"):
+        jaxmatch.mesh(jaxmatch.load_shape(EX / name), divisions=24)
+    lay, sd = grid([1.0, 2.0], [1.0, 0.5])
+    calls.append(((sd, [QUAD] * 4), {"equal": [([0, 1], [2]), ([3], [3, 4])]}))
+    assert len(calls) >= 5 and max(len(a[1]) for a, _ in calls) >= 8
+    for a, k in calls:
+        row, col, val, n0 = real(*a, **k)
+        dense = _dense_side_rows(*a, **k)
+        assert n0 == dense.shape[0] and len(set(zip(row.tolist(), col.tolist()))) == row.size and np.all(val != 0)
+        got = np.zeros_like(dense)
+        got[row, col] = val
+        np.testing.assert_array_equal(got, dense)

@@ -615,23 +615,24 @@ def _side_rows(sides, matrices: Sequence[np.ndarray], equal: Sequence = ()):
     chords, patch after patch) then ``n`` (one per side): one row per patch side, ``A_p[i] @ m_p -
     sum of n_s over the layout sides along it = 0``, then one per pair of ``equal``. Returns
     ``(row, col, val, number of rows)`` (entries as :class:`SparseRows`)."""
-    S = len(sides.chains)
-    off = _chord_offsets(matrices)
-    M = int(off[-1])
-    rr, cc, vv = [], [], []  # the rows of the patch sides, then of the pairs of `equal`
+    offs = _chord_offsets(matrices).tolist()
+    M = offs[-1]
+    er, ec, ev = [], [], []  # the patch sides' entries (Python lists: a few per patch side)
     k = 0
     for p, A in enumerate(matrices):
         ps = sides.patch_sides[p]
-        A = np.asarray(A, dtype=np.float64)[:len(ps)]
-        i, j = np.nonzero(A)  # a chord's edges on the side
-        parts = [np.asarray(x, np.int64).ravel() for x in ps]
-        rows = k + np.repeat(np.arange(len(ps)), [x.size for x in parts])
-        cols = M + np.concatenate(parts) if parts else np.zeros(0, np.int64)
-        _, first = np.unique(rows * (M + S) + cols, return_index=True)  # a side listed twice: one entry
-        rr += [k + i, rows[first]]
-        cc += [off[p] + j, cols[first]]
-        vv += [A[i, j], np.full(first.size, -1.0)]
-        k += len(ps)
+        for i, line in enumerate(np.asarray(A)[:len(ps)].tolist()):
+            for j, v in enumerate(line):
+                if v:  # a chord's edges on the side
+                    er.append(k)
+                    ec.append(offs[p] + j)
+                    ev.append(float(v))
+            for s in sorted(set(np.asarray(ps[i], np.int64).ravel().tolist())):  # a side listed twice: one entry
+                er.append(k)
+                ec.append(M + s)
+                ev.append(-1.0)
+            k += 1
+    rr, cc, vv = [np.array(er, np.int64)], [np.array(ec, np.int64)], [np.array(ev, np.float64)]  # then the pairs of `equal`
     for ids_a, ids_b in equal:  # periodic sides: one count
         a = np.unique(np.asarray(ids_a, np.int64))
         b = np.unique(np.asarray(ids_b, np.int64))
