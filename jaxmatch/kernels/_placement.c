@@ -158,8 +158,10 @@ static double energy_value(const double *pos, const i64 *quads, i64 F, double de
             st2(r + 4 * q + c, rr);
             st2(h + 4 * q + c, hh);
             st2(k + 4 * q + c, kq);
-            if (!(kq[0] <= kmax)) kmax = kq[0]; /* NaN propagates */
-            if (!(kq[1] <= kmax)) kmax = kq[1];
+            /* as "if (!(kq <= kmax)) kmax = kq" (a NaN taken) but for which of two equal zeros is kept,
+               which the test below treats alike: no branch (maxsd) */
+            kmax = kmax > kq[0] ? kmax : kq[0];
+            kmax = kmax > kq[1] ? kmax : kq[1];
         }
     }
     if (!(isfinite(kmax) && kmax > 0)) return INFINITY;
