@@ -346,18 +346,24 @@ static void lbfgs(const Problem *P, double *x, i64 n, double delta, double power
     double f = objective(P, x, delta, power, sq, g, W, n);
     if (!isfinite(f)) return;
     i64 cnt = 0, head = 0;
+    /* gmax: the largest |g[i]|; s_g: dot(newest s, g) where fresh (that pair stored by the last step:
+       summed with it, the same terms in the same order) */
+    double gmax = 0.0, s_g = 0.0;
+    int fresh = 0;
+    for (i64 i = 0; i < n; i++) {
+        double a = fabs(g[i]);
+        if (a > gmax) gmax = a; /* as fmax(gmax, a), which passes over a NaN too */
+    }
     for (i64 it = 0; it < maxiter; it++) {
-        double gmax = 0.0;
-        for (i64 i = 0; i < n; i++) {
-            double a = fabs(g[i]);
-            if (a > gmax) gmax = a; /* as fmax(gmax, a), which passes over a NaN too */
-        }
         if (gmax <= gtol) break;
         /* the two-loop recursion; each pass over q also sums the dot product the next step needs
            (the terms and order of dot()) */
         double d = 0.0;
         const double *nv = cnt > 0 ? Sm + (head + cnt - 1) % mem * n : NULL;
-        if (nv)
+        if (nv && fresh) {
+            memcpy(q, g, sizeof(double) * n);
+            d = s_g;
+        } else if (nv)
             for (i64 i = 0; i < n; i++) {
                 q[i] = g[i];
                 d += nv[i] * q[i];
@@ -417,13 +423,20 @@ static void lbfgs(const Problem *P, double *x, i64 n, double delta, double power
             step *= 0.5;
             if (step < 1e-12) return;
         }
-        double sy = 0.0, ss = 0.0;
+        /* one pass for s.y, s.s, y.y, s.gn and the next gmax: independent sums, each in dot()'s order */
+        double sy = 0.0, ss = 0.0, yy = 0.0, sgn = 0.0, gmn = 0.0;
         for (i64 i = 0; i < n; i++) {
-            double si = xn[i] - x[i];
-            sy += si * (gn[i] - g[i]);
+            double si = xn[i] - x[i], yi = gn[i] - g[i], a = fabs(gn[i]);
+            sy += si * yi;
             ss += si * si;
+            yy += yi * yi;
+            sgn += si * gn[i];
+            if (a > gmn) gmn = a;
         }
-        if (sy > 1e-12 * ss) {
+        gmax = gmn;
+        s_g = sgn;
+        fresh = sy > 1e-12 * ss;
+        if (fresh) {
             i64 row;
             if (cnt < mem) {
                 row = (head + cnt) % mem;
@@ -438,7 +451,7 @@ static void lbfgs(const Problem *P, double *x, i64 n, double delta, double power
             }
             sys[row] = sy;
             rhos[row] = 1.0 / sy;
-            yys[row] = dot(Ym + row * n, Ym + row * n, n);
+            yys[row] = yy;
         }
         int done = f - fn <= ftol * fmax(1.0, fabs(f));
         memcpy(x, xn, sizeof(double) * n);
