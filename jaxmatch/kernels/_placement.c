@@ -11,6 +11,8 @@
  * Why C and not numba here: a process pays ~0.55 s to import numba and load its cached code
  * before the first placement (docs/perf.md); this library loads in milliseconds.
  *
+ * GNU C (GCC or Clang): the energy computes two corners per vector instruction with GNU C vector
+ * types; a compiler without them does not build the library (the numba fallback then smooths).
  * Arrays are C-contiguous: double, or int64_t for indices. The module init makes it importable
  * (its __file__ locates the library); it exports no Python functions.
  */
@@ -127,9 +129,9 @@ static inline double powsq(double x, double power, int squarings) {
    k, r, h ((F, 4) scratch) and edge vectors e ((F, 4, 4) scratch: per quad e1x, e1y, e2x, e2y of its
    four corners); then, only where needed (a line search asks for the gradient of accepted points
    alone), energy_grad: the gradient (V, 2) from what the value pass kept, and f, or INFINITY (grad
-   zero) where the gradient is not finite. sq: squarings(power). Written a quad at a time, its four
-   two corners at a time the lanes of a v2 (each lane the same IEEE operations as one corner in
-   scalar code, so the same doubles), the sums in corner order. */
+   zero) where the gradient is not finite. sq: squarings(power). Written a quad at a time, its corners
+   two by two in the lanes of a v2 (each lane the same IEEE operations as one corner in scalar code,
+   so the same doubles), the sums in corner order. */
 static double energy_value(const double *pos, const i64 *quads, i64 F, double delta, double power, int sq, double *k,
                            double *r, double *h, double *e) {
     double d2 = 4.0 * delta * delta, kmax = -INFINITY;
