@@ -5,6 +5,7 @@ hence the same smoothed placements (up to round-off)."""
 
 from __future__ import annotations
 
+import math
 import shutil
 
 import numpy as np
@@ -159,6 +160,66 @@ def test_c_and_numba_tutte_agree(k):
     a = kernels.tutte_dense(mesh.quads, mesh.n_vertices, mesh.boundary, bxy)
     b = _numba_smooth.tutte_dense(np.asarray(mesh.quads, np.int64), mesh.n_vertices, np.asarray(mesh.boundary, np.int64), bxy)
     np.testing.assert_allclose(a, b, atol=1e-12)
+
+
+def _scalar_energy(xy, quads, delta, power):
+    """The C energy's formula one corner at a time in Python floats (IEEE doubles; math.sqrt is
+    correctly rounded, math.pow is the C library's pow), each sum in corner order: what the
+    library's two corners per vector instruction must give to the bit. Returns (f, grad (V, 2))."""
+    d2 = 4.0 * delta * delta
+    sq = next((e for e in range(7) if power == math.ldexp(1.0, e)), -1)
+    corners, kmax = [], -math.inf
+    for v in quads.tolist():
+        for c in range(4):
+            p, nx, pv = v[c], v[(c + 1) % 4], v[(c + 3) % 4]
+            e1x, e1y = xy[nx][0] - xy[p][0], xy[nx][1] - xy[p][1]
+            e2x, e2y = xy[pv][0] - xy[p][0], xy[pv][1] - xy[p][1]
+            a = e1x * e2y - e1y * e2x
+            r = math.sqrt(a * a + d2)
+            h = 0.5 * (a + r) if a >= 0 else d2 / (2.0 * (r - a))
+            k = (e1x * e1x + e1y * e1y + e2x * e2x + e2y * e2y) / (2.0 * h)
+            kmax = k if not k <= kmax else kmax
+            corners.append((p, nx, pv, e1x, e1y, e2x, e2y, r, h, k))
+    C = 4.0 * len(quads)
+    acc = 0.0
+    for *_, k in corners:
+        t = k / kmax
+        for _ in range(sq):
+            t = t * t
+        acc += t
+    f = kmax * math.pow(acc / C, 1.0 / power)
+    grad = [[0.0, 0.0] for _ in xy]
+    for p, nx, pv, e1x, e1y, e2x, e2y, r, h, k in corners:
+        x = t = k / f
+        for _ in range(sq):
+            t = t * t
+        dk = t / x / C
+        gN, ga = dk / (2.0 * h), -dk * k / r
+        g1x, g1y = 2.0 * gN * e1x + ga * e2y, 2.0 * gN * e1y - ga * e2x
+        g2x, g2y = 2.0 * gN * e2x - ga * e1y, 2.0 * gN * e2y + ga * e1x
+        grad[p][0] -= g1x + g2x
+        grad[p][1] -= g1y + g2y
+        grad[nx][0] += g1x
+        grad[nx][1] += g1y
+        grad[pv][0] += g2x
+        grad[pv][1] += g2y
+    return f, np.array(grad)
+
+
+@needs_c
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), amp=st.floats(0.0, 0.6), delta=st.sampled_from([1e-6, 1e-3, 0.1]),
+       power=st.sampled_from([1.0, 2.0, 4.0, 8.0, 16.0]))
+def test_c_energy_equals_its_scalar_formula_to_the_bit(seed, amp, delta, power):
+    """The library computes a quad's corners two to a vector instruction: the same IEEE
+    operations as the formula written corner by corner, so the same doubles, folded corners
+    (amp up to 0.6) included."""
+    mesh, xy, _, _ = _strip_case(seed, amp)
+    q = np.asarray(mesh.quads, np.int64)
+    f, g = kernels.energy(xy, q, delta, power)
+    f_ref, g_ref = _scalar_energy(xy.tolist(), q, delta, power)
+    assert f == f_ref
+    np.testing.assert_array_equal(g, g_ref)
 
 
 @pytest.mark.skipif(not (shutil.which("cc") or shutil.which("gcc")), reason="no C compiler: numba is the expected backend")

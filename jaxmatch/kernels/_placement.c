@@ -11,6 +11,8 @@
  * Why C and not numba here: a process pays ~0.55 s to import numba and load its cached code
  * before the first placement (docs/perf.md); this library loads in milliseconds.
  *
+ * GNU C (GCC or Clang): the energy computes two corners per vector instruction with GNU C vector
+ * types; a compiler without them does not build the library (the numba fallback then smooths).
  * Arrays are C-contiguous: double, or int64_t for indices. The module init makes it importable
  * (its __file__ locates the library); it exports no Python functions.
  */
@@ -20,6 +22,9 @@
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
 
 typedef int64_t i64;
 
@@ -81,6 +86,31 @@ static void positions(const Problem *P, const double *x, double *pos) {
     }
 }
 
+/* two doubles as one GNU C vector (GCC, Clang; an SSE2 register): the arithmetic operators act
+   lane by lane with the IEEE operations of scalar code (no contraction: the build targets no FMA) */
+typedef double v2 __attribute__((vector_size(16)));
+typedef int64_t v2i __attribute__((vector_size(16)));
+
+static inline v2 ld2(const double *p) {
+    v2 a;
+    memcpy(&a, p, sizeof a);
+    return a;
+}
+
+static inline void st2(double *p, v2 a) { memcpy(p, &a, sizeof a); }
+
+/* lane by lane m ? a : b, m a comparison's lanes (all ones or zero) */
+static inline v2 vselect(v2i m, v2 a, v2 b) { return (v2)((m & (v2i)a) | (~m & (v2i)b)); }
+
+/* the correctly rounded square root of each lane (sqrt's value: IEEE rounds it exactly) */
+static inline v2 vsqrt(v2 a) {
+#if defined(__SSE2__)
+    return (v2)_mm_sqrt_pd((__m128d)a);
+#else
+    return (v2){sqrt(a[0]), sqrt(a[1])};
+#endif
+}
+
 /* e where power == 2^e (0 <= e < 7), else -1 (then powsq calls pow) */
 static int squarings(double power) {
     int sq = -1;
@@ -99,37 +129,42 @@ static inline double powsq(double x, double power, int squarings) {
    k, r, h ((F, 4) scratch) and edge vectors e ((F, 4, 4) scratch: per quad e1x, e1y, e2x, e2y of its
    four corners); then, only where needed (a line search asks for the gradient of accepted points
    alone), energy_grad: the gradient (V, 2) from what the value pass kept, and f, or INFINITY (grad
-   zero) where the gradient is not finite. sq: squarings(power). Written a quad at a time, its four
-   corners side by side (the compiler computes them in vector lanes: the same operations on each, so
-   the same doubles), the sums in corner order. */
+   zero) where the gradient is not finite. sq: squarings(power). Written a quad at a time, its corners
+   two by two in the lanes of a v2 (each lane the same IEEE operations as one corner in scalar code,
+   so the same doubles), the sums in corner order. */
 static double energy_value(const double *pos, const i64 *quads, i64 F, double delta, double power, int sq, double *k,
                            double *r, double *h, double *e) {
     double d2 = 4.0 * delta * delta, kmax = -INFINITY;
     for (i64 q = 0; q < F; q++) {
         const i64 *v = quads + 4 * q;
-        double X[4], Y[4], *e1x = e + 16 * q, *e1y = e1x + 4, *e2x = e1x + 8, *e2y = e1x + 12;
-        double *kq = k + 4 * q, *rq = r + 4 * q, *hq = h + 4 * q;
-        for (int c = 0; c < 4; c++) {
-            X[c] = pos[2 * v[c]];
-            Y[c] = pos[2 * v[c] + 1];
+        double *eq = e + 16 * q;
+        double X0 = pos[2 * v[0]], X1 = pos[2 * v[1]], X2 = pos[2 * v[2]], X3 = pos[2 * v[3]];
+        double Y0 = pos[2 * v[0] + 1], Y1 = pos[2 * v[1] + 1], Y2 = pos[2 * v[2] + 1], Y3 = pos[2 * v[3] + 1];
+        /* corners (0, 1), then (2, 3): the corner, its next and previous vertices */
+        v2 xs[2][3] = {{{X0, X1}, {X1, X2}, {X3, X0}}, {{X2, X3}, {X3, X0}, {X1, X2}}};
+        v2 ys[2][3] = {{{Y0, Y1}, {Y1, Y2}, {Y3, Y0}}, {{Y2, Y3}, {Y3, Y0}, {Y1, Y2}}};
+        for (int j = 0; j < 2; j++) {
+            int c = 2 * j;
+            v2 e1x = xs[j][1] - xs[j][0], e1y = ys[j][1] - ys[j][0];
+            v2 e2x = xs[j][2] - xs[j][0], e2y = ys[j][2] - ys[j][0];
+            v2 a = e1x * e2y - e1y * e2x;
+            v2 rr = vsqrt(a * a + d2);
+            v2 hh = 0.5 * (a + rr);
+            if (!(a[0] >= 0 && a[1] >= 0)) hh = vselect(a >= 0.0, hh, d2 / (2.0 * (rr - a)));
+            v2 N = e1x * e1x + e1y * e1y + e2x * e2x + e2y * e2y;
+            v2 kq = N / (2.0 * hh);
+            st2(eq + c, e1x);
+            st2(eq + 4 + c, e1y);
+            st2(eq + 8 + c, e2x);
+            st2(eq + 12 + c, e2y);
+            st2(r + 4 * q + c, rr);
+            st2(h + 4 * q + c, hh);
+            st2(k + 4 * q + c, kq);
+            /* as "if (!(kq <= kmax)) kmax = kq" (a NaN taken) but for which of two equal zeros is kept,
+               which the test below treats alike: no branch (maxsd) */
+            kmax = kmax > kq[0] ? kmax : kq[0];
+            kmax = kmax > kq[1] ? kmax : kq[1];
         }
-        for (int c = 0; c < 4; c++) {
-            e1x[c] = X[(c + 1) & 3] - X[c];
-            e1y[c] = Y[(c + 1) & 3] - Y[c];
-            e2x[c] = X[(c + 3) & 3] - X[c];
-            e2y[c] = Y[(c + 3) & 3] - Y[c];
-        }
-        for (int c = 0; c < 4; c++) {
-            double a = e1x[c] * e2y[c] - e1y[c] * e2x[c];
-            double rr = sqrt(a * a + d2);
-            double hh = a >= 0 ? 0.5 * (a + rr) : d2 / (2.0 * (rr - a));
-            double N = e1x[c] * e1x[c] + e1y[c] * e1y[c] + e2x[c] * e2x[c] + e2y[c] * e2y[c];
-            rq[c] = rr;
-            hq[c] = hh;
-            kq[c] = N / (2.0 * hh);
-        }
-        for (int c = 0; c < 4; c++)
-            if (!(kq[c] <= kmax)) kmax = kq[c]; /* NaN propagates */
     }
     if (!(isfinite(kmax) && kmax > 0)) return INFINITY;
     double C = 4.0 * (double)F;
@@ -160,38 +195,37 @@ static double energy_grad(const i64 *quads, i64 V, i64 F, double power, int sq, 
     memset(grad, 0, sizeof(double) * 2 * V);
     for (i64 q = 0; q < F; q++) {
         const i64 *v = quads + 4 * q;
-        const double *e1x = e + 16 * q, *e1y = e1x + 4, *e2x = e1x + 8, *e2y = e1x + 12;
-        const double *kq = k + 4 * q, *rq = r + 4 * q, *hq = h + 4 * q;
-        double x[4], t[4], dk[4], g1x[4], g1y[4], g2x[4], g2y[4];
-        int pos_all = sq >= 0;
-        for (int c = 0; c < 4; c++) {
-            x[c] = kq[c] / f;
-            t[c] = x[c];
-            pos_all &= x[c] > 0;
-        }
-        if (pos_all) {
-            for (int s = 0; s < sq; s++)
-                for (int c = 0; c < 4; c++) t[c] = t[c] * t[c];
-            for (int c = 0; c < 4; c++) dk[c] = t[c] / x[c] / C;
-        } else
-            for (int c = 0; c < 4; c++)
-                dk[c] = x[c] > 0 ? powsq(x[c], power, sq) / x[c] / C : pow(kq[c] / f, power - 1.0) / C;
-        for (int c = 0; c < 4; c++) {
-            double gN = dk[c] / (2.0 * hq[c]);
-            double ga = -dk[c] * kq[c] / rq[c];
-            g1x[c] = 2.0 * gN * e1x[c] + ga * e2y[c];
-            g1y[c] = 2.0 * gN * e1y[c] - ga * e2x[c];
-            g2x[c] = 2.0 * gN * e2x[c] - ga * e1y[c];
-            g2y[c] = 2.0 * gN * e2y[c] + ga * e1x[c];
-        }
-        for (int c = 0; c < 4; c++) {
-            i64 p = v[c], nx = v[(c + 1) & 3], pv = v[(c + 3) & 3];
-            grad[2 * p] -= g1x[c] + g2x[c];
-            grad[2 * p + 1] -= g1y[c] + g2y[c];
-            grad[2 * nx] += g1x[c];
-            grad[2 * nx + 1] += g1y[c];
-            grad[2 * pv] += g2x[c];
-            grad[2 * pv + 1] += g2y[c];
+        const double *eq = e + 16 * q, *kq = k + 4 * q;
+        v2 x[2] = {ld2(kq) / f, ld2(kq + 2) / f}, dk[2];
+        if (sq >= 0 && x[0][0] > 0 && x[0][1] > 0 && x[1][0] > 0 && x[1][1] > 0)
+            for (int j = 0; j < 2; j++) {
+                v2 t = x[j];
+                for (int s = 0; s < sq; s++) t = t * t;
+                dk[j] = t / x[j] / C;
+            }
+        else
+            for (int c = 0; c < 4; c++) {
+                double xc = x[c >> 1][c & 1];
+                dk[c >> 1][c & 1] = xc > 0 ? powsq(xc, power, sq) / xc / C : pow(kq[c] / f, power - 1.0) / C;
+            }
+        for (int j = 0; j < 2; j++) { /* corners 2j, 2j + 1 */
+            int c = 2 * j;
+            v2 e1x = ld2(eq + c), e1y = ld2(eq + 4 + c), e2x = ld2(eq + 8 + c), e2y = ld2(eq + 12 + c);
+            v2 gN = dk[j] / (2.0 * ld2(h + 4 * q + c));
+            v2 ga = -dk[j] * ld2(kq + c) / ld2(r + 4 * q + c);
+            v2 g1x = 2.0 * gN * e1x + ga * e2y;
+            v2 g1y = 2.0 * gN * e1y - ga * e2x;
+            v2 g2x = 2.0 * gN * e2x - ga * e1y;
+            v2 g2y = 2.0 * gN * e2y + ga * e1x;
+            for (int l = 0; l < 2; l++) {
+                i64 p = v[c + l], nx = v[(c + l + 1) & 3], pv = v[(c + l + 3) & 3];
+                grad[2 * p] -= g1x[l] + g2x[l];
+                grad[2 * p + 1] -= g1y[l] + g2y[l];
+                grad[2 * nx] += g1x[l];
+                grad[2 * nx + 1] += g1y[l];
+                grad[2 * pv] += g2x[l];
+                grad[2 * pv + 1] += g2y[l];
+            }
         }
     }
     for (i64 v = 0; v < 2 * V; v++)
@@ -314,18 +348,24 @@ static void lbfgs(const Problem *P, double *x, i64 n, double delta, double power
     double f = objective(P, x, delta, power, sq, g, W, n);
     if (!isfinite(f)) return;
     i64 cnt = 0, head = 0;
+    /* gmax: the largest |g[i]|; s_g: dot(newest s, g) where fresh (that pair stored by the last step:
+       summed with it, the same terms in the same order) */
+    double gmax = 0.0, s_g = 0.0;
+    int fresh = 0;
+    for (i64 i = 0; i < n; i++) {
+        double a = fabs(g[i]);
+        if (a > gmax) gmax = a; /* as fmax(gmax, a), which passes over a NaN too */
+    }
     for (i64 it = 0; it < maxiter; it++) {
-        double gmax = 0.0;
-        for (i64 i = 0; i < n; i++) {
-            double a = fabs(g[i]);
-            if (a > gmax) gmax = a; /* as fmax(gmax, a), which passes over a NaN too */
-        }
         if (gmax <= gtol) break;
         /* the two-loop recursion; each pass over q also sums the dot product the next step needs
            (the terms and order of dot()) */
         double d = 0.0;
         const double *nv = cnt > 0 ? Sm + (head + cnt - 1) % mem * n : NULL;
-        if (nv)
+        if (nv && fresh) {
+            memcpy(q, g, sizeof(double) * n);
+            d = s_g;
+        } else if (nv)
             for (i64 i = 0; i < n; i++) {
                 q[i] = g[i];
                 d += nv[i] * q[i];
@@ -385,13 +425,20 @@ static void lbfgs(const Problem *P, double *x, i64 n, double delta, double power
             step *= 0.5;
             if (step < 1e-12) return;
         }
-        double sy = 0.0, ss = 0.0;
+        /* one pass for s.y, s.s, y.y, s.gn and the next gmax: independent sums, each in dot()'s order */
+        double sy = 0.0, ss = 0.0, yy = 0.0, sgn = 0.0, gmn = 0.0;
         for (i64 i = 0; i < n; i++) {
-            double si = xn[i] - x[i];
-            sy += si * (gn[i] - g[i]);
+            double si = xn[i] - x[i], yi = gn[i] - g[i], a = fabs(gn[i]);
+            sy += si * yi;
             ss += si * si;
+            yy += yi * yi;
+            sgn += si * gn[i];
+            if (a > gmn) gmn = a;
         }
-        if (sy > 1e-12 * ss) {
+        gmax = gmn;
+        s_g = sgn;
+        fresh = sy > 1e-12 * ss;
+        if (fresh) {
             i64 row;
             if (cnt < mem) {
                 row = (head + cnt) % mem;
@@ -406,7 +453,7 @@ static void lbfgs(const Problem *P, double *x, i64 n, double delta, double power
             }
             sys[row] = sy;
             rhos[row] = 1.0 / sy;
-            yys[row] = dot(Ym + row * n, Ym + row * n, n);
+            yys[row] = yy;
         }
         int done = f - fn <= ftol * fmax(1.0, fabs(f));
         memcpy(x, xn, sizeof(double) * n);

@@ -51,6 +51,7 @@ import numpy as np
 from jaxmatch.catalogue.mesh import QuadMesh, edges, mesh_valences
 from jaxmatch.arrays import roll
 from jaxmatch.geometry import VERTEX_SNAP, cumulative_length, point_at, signed_area, sub_polyline
+from jaxmatch.kernels import placement as kernels
 from jaxmatch.quality import corner_vectors, placement_measures, quad_areas, sj_inverted
 
 __all__ = [
@@ -247,8 +248,6 @@ def tutte(quads: np.ndarray, n_vertices: int, boundary: np.ndarray, boundary_xy:
     """
     V = int(n_vertices)
     if not reference and 0 < V - len(boundary) <= DENSE_TUTTE:
-        from jaxmatch.kernels import placement as kernels
-
         return kernels.tutte_dense(np.ascontiguousarray(quads, dtype=np.int64), V, np.asarray(boundary, dtype=np.int64),
                               np.ascontiguousarray(boundary_xy, dtype=np.float64))
     xy = np.zeros((V, 2))
@@ -339,9 +338,7 @@ class _Params:
         self.free = free
         self.slides = [Slide(np.asarray(s.a, float), np.asarray(s.b, float), np.asarray(s.vertices, np.int64)) for s in slides]
         self.nf = 2 * free.size
-        from jaxmatch.kernels.placement import flat_slides
-
-        self.flat = flat_slides(self.slides)  # (sa, sb, sp, sv) for the compiled optimiser
+        self.flat = kernels.flat_slides(self.slides)  # (sa, sb, sp, sv) for the compiled optimiser
 
     def start(self, xy) -> np.ndarray:
         z = [np.asarray(xy, float)[self.free].ravel()]
@@ -508,12 +505,11 @@ def smooth(
     slides = tuple(s for s in slides if len(s.vertices))
     if (free.size == 0 and not slides) or iters <= 0 or q.size == 0:
         return xy.copy()
-    params = _Params(xy, free, slides)
     if not reference:
-        from jaxmatch.kernels import placement as kernels
-
-        return kernels.smooth(xy, np.ascontiguousarray(q, dtype=np.int64), free.astype(np.int64), *params.flat, int(iters),
-                         np.asarray(powers, dtype=np.float64), int(untangle_rounds), LBFGS_MEMORY, LBFGS_FTOL, LBFGS_GTOL)
+        return kernels.smooth(xy, np.ascontiguousarray(q, dtype=np.int64), free.astype(np.int64, copy=False),
+                              *kernels.flat_slides(slides), int(iters), np.asarray(powers, dtype=np.float64),
+                              int(untangle_rounds), LBFGS_MEMORY, LBFGS_FTOL, LBFGS_GTOL)
+    params = _Params(xy, free, slides)
     F = q.shape[0]
     area = float(np.abs(quad_areas(xy, q)).sum()) or 1.0
     eps = 1e-2 * area / F  # corner area under which a corner counts as nearly folded
