@@ -21,7 +21,7 @@ from hypothesis import strategies as st
 from jaxmatch.defaults import QUALITY
 from jaxmatch.errors import EXIT_BAD_INPUT, InputError
 from jaxmatch.field import (NUMPY_PAIRS, CallableSize, Field, Near, SizeField, bind, field_share, graded_points,
-                            line_integral, load_field, parse_field, segment_distance)
+                            line_integral, load_field, parse_field, segment_distance, segment_distances)
 from jaxmatch.io.readers import load_shape
 from jaxmatch.meshing.pipeline import mesh
 from jaxmatch.shape import make_shape
@@ -122,6 +122,28 @@ def test_property_the_field_gives_shapelys_distances_bit_for_bit(lines, pts, sha
     f = Field(1.0, tuple(near)).bind(SQUARE)
     with patch("jaxmatch.field.NUMPY_PAIRS", 0 if shapely_path else NUMPY_PAIRS):
         np.testing.assert_array_equal(f(x), want)
+
+
+@settings(max_examples=40, deadline=None)
+@given(lines=st.lists(st.lists(st.tuples(coords, coords), min_size=1, max_size=12), min_size=1, max_size=3),
+       pts=st.lists(st.tuples(coords, coords), min_size=1, max_size=30), d=st.floats(0.01, 3.0),
+       shapely_path=st.booleans())
+def test_property_distances_within_reach_only_give_every_pairs_sizes_bit_for_bit(lines, pts, d, shapely_path):
+    # many pairs: each entry's distances computed only for the points within its reach (its
+    # distance d from its bounding box, rounding included); the others take the entry's largest
+    # size, as every pair's distances give them, bit for bit (points at the reach's edge too)
+    near = tuple(Near("point", line[0], 0.1, d) if len(line) == 1 else Near("curve", tuple(line), 0.1 + 0.01 * k, d)
+                 for k, line in enumerate(lines))
+    edge = [(lo[0] - d, lo[1]) for lo in (np.min(np.array(line), axis=0) for line in lines)] + \
+        [(hi[0], hi[1] + d * (1 + 1e-15)) for hi in (np.max(np.array(line), axis=0) for line in lines)]
+    x = np.array(pts + edge, np.float64)
+    f = Field(1.0, near).bind(SQUARE)
+    segments, starts, s, dd = f._segments
+    dist = np.minimum.reduceat(segment_distances(x, segments), starts, axis=1)  # every pair, numpy
+    want = np.minimum(1.0, (s + (1.0 - s) * np.minimum(1.0, dist / dd)).min(axis=1))
+    with patch("jaxmatch.field.PRUNE_PAIRS", 0), patch("jaxmatch.field.NUMPY_PAIRS", 0 if shapely_path else NUMPY_PAIRS):
+        got = f(x)
+    np.testing.assert_array_equal(got, want)
 
 
 def test_line_integral_along_a_linear_ramp():
