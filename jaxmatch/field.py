@@ -216,31 +216,41 @@ class SizeField:  # (eq=False: hashed by identity, so a Quality holding one is a
         if segments.shape[0] == starts.shape[0] and not np.any(segments[:, 0] - segments[:, 1]):  # points only
             a = segments[:, 0]
             dist = np.sqrt((pts[:, 0:1] - a[:, 0]) ** 2 + (pts[:, 1:2] - a[:, 1]) ** 2)
-        elif pts.shape[0] * segments.shape[0] <= PRUNE_PAIRS:  # every entry at once, numpy (GEOS's arithmetic)
+        elif pts.shape[0] >= NUMPY_POINTS and self._few_segments:  # every entry at once, numpy (GEOS's arithmetic)
             dist = np.minimum.reduceat(segment_distances(pts, segments), starts, axis=1)
         else:
             dist = self._distances(pts)
         return np.minimum(H, (s + (H - s) * np.minimum(1.0, dist / d)).min(axis=1))
 
     def _distances(self, pts: np.ndarray) -> np.ndarray:
-        """``(n, E) float64``: each of ``pts (n, 2)``'s distance to each entry, ``inf`` where it
-        lies beyond the entry's reach (:attr:`_reach`: its distance ``d`` and more from the
-        entry's bounding box, where ``dist / d >= 1`` and the size is the entry's largest
-        whatever the exact distance). The others: numpy's (GEOS's arithmetic,
-        :func:`segment_distances`) up to :data:`NUMPY_PAIRS` (point, segment) pairs, shapely's
-        beyond; both give the same numbers."""
-        dist = np.full((pts.shape[0], len(self.entries)), np.inf)
+        """``(n, E) float64``: each of ``pts (n, 2)``'s distance to each entry: numpy's (GEOS's
+        arithmetic, :func:`segment_distances`) for at least :data:`NUMPY_POINTS` points on at most
+        :data:`NUMPY_SEGMENTS` segments, else shapely's (GEOS, per point in C; both give the same
+        numbers), there ``inf`` for the points beyond the entry's reach when there are
+        :data:`PRUNE_POINTS` or more (:attr:`_reach`: its distance ``d`` and more from the entry's
+        bounding box, where ``dist / d >= 1`` and the size is the entry's largest whatever the
+        exact distance)."""
+        n = pts.shape[0]
+        dist = np.full((n, len(self.entries)), np.inf)
         for e, (lo, hi, reach2, seg, geom) in enumerate(self._reach):
-            gap = np.maximum(np.maximum(lo - pts, pts - hi), 0.0)
-            near = (gap * gap).sum(axis=1) <= reach2
-            sub = pts[near]
-            if not sub.shape[0]:
+            if n >= NUMPY_POINTS and seg.shape[0] <= NUMPY_SEGMENTS:  # a few pairs a point: all of them
+                dist[:, e] = segment_distances(pts, seg).min(axis=1)
                 continue
-            if sub.shape[0] * seg.shape[0] <= NUMPY_PAIRS:
-                dist[near, e] = segment_distances(sub, seg).min(axis=1)
-            else:  # many points: shapely's distances, in C
-                dist[near, e] = shapely.distance(shapely.points(sub), geom)
+            if n >= PRUNE_POINTS:
+                gap = np.maximum(np.maximum(lo - pts, pts - hi), 0.0)
+                near = (gap * gap).sum(axis=1) <= reach2
+                sub = pts[near]
+                if not sub.shape[0]:
+                    continue
+            else:
+                near, sub = slice(None), pts
+            dist[near, e] = shapely.distance(shapely.points(sub), geom)
         return dist
+
+    @cached_property
+    def _few_segments(self) -> bool:
+        """Whether every entry has at most :data:`NUMPY_SEGMENTS` segments."""
+        return all(seg.shape[0] <= NUMPY_SEGMENTS for _, _, seg in self.entries)
 
     @cached_property
     def _reach(self) -> tuple:
@@ -288,18 +298,19 @@ class SizeField:  # (eq=False: hashed by identity, so a Quality holding one is a
         return tuple(out)
 
 
-PRUNE_PAIRS = 1 << 12
-"""Up to this many (point, segment) pairs a call's distances are numpy's, every entry at once
-(:func:`segment_distances`: no loop over the entries, no point left out); beyond, per entry
-and only for the points within its reach (:meth:`SizeField._distances`): on the graded
-examples' fields (holes of 48 segments) a call of 160 points took 192 us every pair computed
-and 148 us pruned, one of 40 points 74 and 93 us."""
+PRUNE_POINTS = 64
+"""From this many points a call measures shapely's distances to an entry only for the points
+within its reach (:meth:`SizeField._distances`): on fewer, the look costs about what it saves."""
 
-NUMPY_PAIRS = 1 << 14
-"""Up to this many (point, segment) pairs an entry's distances are numpy's
-(:func:`segment_distances`: no shapely points to make: the cost of the many calls on few
-points); beyond, shapely's (faster there). Both give the same numbers; a field of points only is
-numpy's at any size."""
+NUMPY_POINTS = 128
+NUMPY_SEGMENTS = 8
+"""An entry's distances are numpy's (:func:`segment_distances`, the whole array at once) for
+at least :data:`NUMPY_POINTS` points and at most :data:`NUMPY_SEGMENTS` segments; shapely's
+otherwise (GEOS in C, per point: no fixed cost of some twenty array operations, and ~10 ns a
+pair against numpy's ~25). Measured one entry at a time: numpy / shapely 21 / 3 us at 5 points
+and one segment, 22 / 18 at 80, 25 / 74 at 320; 27 / 5, 68 / 50 and 433 / 198 us at 5, 80 and
+320 points on 48 segments. Both give the same numbers; a field of points only is numpy's at
+any size."""
 
 
 def segment_distances(points: np.ndarray, segments: np.ndarray) -> np.ndarray:

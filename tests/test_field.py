@@ -20,7 +20,7 @@ from hypothesis import strategies as st
 
 from jaxmatch.defaults import QUALITY
 from jaxmatch.errors import EXIT_BAD_INPUT, InputError
-from jaxmatch.field import (NUMPY_PAIRS, CallableSize, Field, Near, SizeField, bind, field_share, graded_points,
+from jaxmatch.field import (CallableSize, Field, Near, SizeField, bind, field_share, graded_points,
                             line_integral, load_field, parse_field, segment_distance, segment_distances)
 from jaxmatch.io.readers import load_shape
 from jaxmatch.meshing.pipeline import mesh
@@ -108,7 +108,7 @@ def test_property_field_is_the_reference_and_between_its_sizes(H, entries, pts):
 @given(lines=st.lists(st.lists(st.tuples(coords, coords), min_size=1, max_size=6), min_size=1, max_size=4),
        pts=st.lists(st.tuples(coords, coords), min_size=1, max_size=20), shapely_path=st.booleans())
 def test_property_the_field_gives_shapelys_distances_bit_for_bit(lines, pts, shapely_path):
-    # numpy for few (point, segment) pairs, shapely for many: either way the same numbers
+    # numpy for many points on few segments, shapely otherwise: either way the same numbers
     x = np.array(pts, np.float64)
     near, want = [], np.full(len(pts), 1.0)
     for k, line in enumerate(lines):
@@ -120,7 +120,8 @@ def test_property_the_field_gives_shapelys_distances_bit_for_bit(lines, pts, sha
         near.append(Near("point", line[0], s, d) if len(line) == 1 else Near("curve", tuple(line), s, d))
         want = np.minimum(want, s + (1.0 - s) * np.minimum(1.0, shapely.distance(shapely.points(x), geom) / d))
     f = Field(1.0, tuple(near)).bind(SQUARE)
-    with patch("jaxmatch.field.NUMPY_PAIRS", 0 if shapely_path else NUMPY_PAIRS):
+    with patch("jaxmatch.field.NUMPY_POINTS", 10 ** 9 if shapely_path else 0), \
+            patch("jaxmatch.field.NUMPY_SEGMENTS", 10 ** 9):
         np.testing.assert_array_equal(f(x), want)
 
 
@@ -129,7 +130,7 @@ def test_property_the_field_gives_shapelys_distances_bit_for_bit(lines, pts, sha
        pts=st.lists(st.tuples(coords, coords), min_size=1, max_size=30), d=st.floats(0.01, 3.0),
        shapely_path=st.booleans())
 def test_property_distances_within_reach_only_give_every_pairs_sizes_bit_for_bit(lines, pts, d, shapely_path):
-    # many pairs: each entry's distances computed only for the points within its reach (its
+    # many points: each entry's distances computed only for the points within its reach (its
     # distance d from its bounding box, rounding included); the others take the entry's largest
     # size, as every pair's distances give them, bit for bit (points at the reach's edge too)
     near = tuple(Near("point", line[0], 0.1, d) if len(line) == 1 else Near("curve", tuple(line), 0.1 + 0.01 * k, d)
@@ -141,7 +142,8 @@ def test_property_distances_within_reach_only_give_every_pairs_sizes_bit_for_bit
     segments, starts, s, dd = f._segments
     dist = np.minimum.reduceat(segment_distances(x, segments), starts, axis=1)  # every pair, numpy
     want = np.minimum(1.0, (s + (1.0 - s) * np.minimum(1.0, dist / dd)).min(axis=1))
-    with patch("jaxmatch.field.PRUNE_PAIRS", 0), patch("jaxmatch.field.NUMPY_PAIRS", 0 if shapely_path else NUMPY_PAIRS):
+    with patch("jaxmatch.field.PRUNE_POINTS", 0), patch("jaxmatch.field.NUMPY_POINTS", 10 ** 9 if shapely_path else 0), \
+            patch("jaxmatch.field.NUMPY_SEGMENTS", 10 ** 9):
         got = f(x)
     np.testing.assert_array_equal(got, want)
 
