@@ -216,14 +216,18 @@ class SizeField:  # (eq=False: hashed by identity, so a Quality holding one is a
         if segments.shape[0] == starts.shape[0] and not np.any(segments[:, 0] - segments[:, 1]):  # points only
             a = segments[:, 0]
             dist = np.sqrt((pts[:, 0:1] - a[:, 0]) ** 2 + (pts[:, 1:2] - a[:, 1]) ** 2)
-        elif pts.shape[0] >= NUMPY_POINTS and self._few_segments:  # every entry at once, numpy (GEOS's arithmetic)
-            dist = np.minimum.reduceat(segment_distances(pts, segments), starts, axis=1)
+        elif len(self.entries) > FEW_ENTRIES and pts.shape[0] * segments.shape[0] > NUMPY_PAIRS:
+            where = shapely.points(pts)  # many entries on many points: shapely's per entry, in C
+            dist = np.stack([shapely.distance(where, g) for g in self._geometries], axis=1)
+        elif len(self.entries) > FEW_ENTRIES or (pts.shape[0] >= NUMPY_POINTS and self._few_segments):
+            dist = np.minimum.reduceat(segment_distances(pts, segments), starts, axis=1)  # every entry at once, numpy
         else:
             dist = self._distances(pts)
         return np.minimum(H, (s + (H - s) * np.minimum(1.0, dist / d)).min(axis=1))
 
     def _distances(self, pts: np.ndarray) -> np.ndarray:
-        """``(n, E) float64``: each of ``pts (n, 2)``'s distance to each entry: numpy's (GEOS's
+        """``(n, E) float64`` (a field of at most :data:`FEW_ENTRIES` entries): each of
+        ``pts (n, 2)``'s distance to each entry: numpy's (GEOS's
         arithmetic, :func:`segment_distances`) for at least :data:`NUMPY_POINTS` points on at most
         :data:`NUMPY_SEGMENTS` segments, else shapely's (GEOS, per point in C; both give the same
         numbers), there ``inf`` for the points beyond the entry's reach when there are
@@ -232,19 +236,20 @@ class SizeField:  # (eq=False: hashed by identity, so a Quality holding one is a
         exact distance)."""
         n = pts.shape[0]
         dist = np.full((n, len(self.entries)), np.inf)
+        where = None  # the points as shapely's, made once
         for e, (lo, hi, reach2, seg, geom) in enumerate(self._reach):
             if n >= NUMPY_POINTS and seg.shape[0] <= NUMPY_SEGMENTS:  # a few pairs a point: all of them
                 dist[:, e] = segment_distances(pts, seg).min(axis=1)
                 continue
+            if where is None:
+                where = shapely.points(pts)
             if n >= PRUNE_POINTS:
                 gap = np.maximum(np.maximum(lo - pts, pts - hi), 0.0)
-                near = (gap * gap).sum(axis=1) <= reach2
-                sub = pts[near]
-                if not sub.shape[0]:
-                    continue
+                near = np.flatnonzero((gap * gap).sum(axis=1) <= reach2)
+                if near.size:
+                    dist[near, e] = shapely.distance(where[near], geom)
             else:
-                near, sub = slice(None), pts
-            dist[near, e] = shapely.distance(shapely.points(sub), geom)
+                dist[:, e] = shapely.distance(where, geom)
         return dist
 
     @cached_property
@@ -297,6 +302,16 @@ class SizeField:  # (eq=False: hashed by identity, so a Quality holding one is a
                 out.append(shapely.MultiLineString([x for x in seg]))
         return tuple(out)
 
+
+FEW_ENTRIES = 4
+"""A field of more entries (an automatic size field's features: tens of short curves) takes
+numpy's distances to every entry at once up to :data:`NUMPY_PAIRS` (point, segment) pairs, and
+shapely's per entry beyond (one call each, on every point: one numpy call or one shapely call
+an entry costs less there than a choice per entry); a field of fewer entries (a user's) has
+them chosen per entry (:meth:`SizeField._distances`)."""
+
+NUMPY_PAIRS = 1 << 14
+"""See :data:`FEW_ENTRIES`."""
 
 PRUNE_POINTS = 64
 """From this many points a call measures shapely's distances to an entry only for the points

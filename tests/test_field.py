@@ -105,10 +105,11 @@ def test_property_field_is_the_reference_and_between_its_sizes(H, entries, pts):
 
 
 @settings(max_examples=40, deadline=None)
-@given(lines=st.lists(st.lists(st.tuples(coords, coords), min_size=1, max_size=6), min_size=1, max_size=4),
+@given(lines=st.lists(st.lists(st.tuples(coords, coords), min_size=1, max_size=6), min_size=1, max_size=7),
        pts=st.lists(st.tuples(coords, coords), min_size=1, max_size=20), shapely_path=st.booleans())
 def test_property_the_field_gives_shapelys_distances_bit_for_bit(lines, pts, shapely_path):
-    # numpy for many points on few segments, shapely otherwise: either way the same numbers
+    # numpy's distances or shapely's (a field of few entries chooses per entry, one of many for
+    # them all): either way the same numbers
     x = np.array(pts, np.float64)
     near, want = [], np.full(len(pts), 1.0)
     for k, line in enumerate(lines):
@@ -121,7 +122,7 @@ def test_property_the_field_gives_shapelys_distances_bit_for_bit(lines, pts, sha
         want = np.minimum(want, s + (1.0 - s) * np.minimum(1.0, shapely.distance(shapely.points(x), geom) / d))
     f = Field(1.0, tuple(near)).bind(SQUARE)
     with patch("jaxmatch.field.NUMPY_POINTS", 10 ** 9 if shapely_path else 0), \
-            patch("jaxmatch.field.NUMPY_SEGMENTS", 10 ** 9):
+            patch("jaxmatch.field.NUMPY_SEGMENTS", 10 ** 9), patch("jaxmatch.field.NUMPY_PAIRS", 0 if shapely_path else 10 ** 9):
         np.testing.assert_array_equal(f(x), want)
 
 
@@ -143,7 +144,7 @@ def test_property_distances_within_reach_only_give_every_pairs_sizes_bit_for_bit
     dist = np.minimum.reduceat(segment_distances(x, segments), starts, axis=1)  # every pair, numpy
     want = np.minimum(1.0, (s + (1.0 - s) * np.minimum(1.0, dist / dd)).min(axis=1))
     with patch("jaxmatch.field.PRUNE_POINTS", 0), patch("jaxmatch.field.NUMPY_POINTS", 10 ** 9 if shapely_path else 0), \
-            patch("jaxmatch.field.NUMPY_SEGMENTS", 10 ** 9):
+            patch("jaxmatch.field.NUMPY_SEGMENTS", 10 ** 9), patch("jaxmatch.field.NUMPY_PAIRS", 0 if shapely_path else 10 ** 9):
         got = f(x)
     np.testing.assert_array_equal(got, want)
 
