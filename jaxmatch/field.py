@@ -450,11 +450,11 @@ def line_integral(f, polyline: np.ndarray, *, per_size: int = 4) -> np.ndarray:
     cut into pieces no longer than ``smallest / per_size`` (at most 512 a segment) and integrated
     by the trapezoidal rule on ``1 / f``."""
     p = np.asarray(polyline, np.float64)
-    seg = np.linalg.norm(np.diff(p, axis=0), axis=1)
-    small = smallest_size(f)
-    step = small / per_size if small > 0 and math.isfinite(small) else (seg.max() if seg.size else 1.0) / 64
 
     def integrate():
+        seg = np.linalg.norm(np.diff(p, axis=0), axis=1)
+        small = smallest_size(f)
+        step = small / per_size if small > 0 and math.isfinite(small) else (seg.max() if seg.size else 1.0) / 64
         k = np.clip(np.ceil(seg / max(step, 1e-300)), 1, 512).astype(np.int64)
         pieces = np.repeat(np.arange(seg.size), k)
         j = np.arange(pieces.size) - np.repeat(np.cumsum(k) - k, k)
@@ -483,14 +483,15 @@ def graded_points(f, polyline: np.ndarray, count: int) -> np.ndarray:
     bit-identical points."""
     poly = np.asarray(polyline, dtype=np.float64)
     N = int(count)
-    first, last = poly[0], poly[-1]
-    flip = (not np.array_equal(first, last)) and tuple(last) < tuple(first)
+    first, last = poly[0].tolist(), poly[-1].tolist()
+    flip = first != last and last < first
     p = poly[::-1] if flip else poly
-    seg = np.linalg.norm(np.diff(p, axis=0), axis=1)
-    small = smallest_size(f)
-    step = small / 4 if small > 0 and math.isfinite(small) else (seg.max() if seg.size else 1.0) / 64
+
     # the polyline cut finely, then the integral's inverse by linear interpolation
     def cut():
+        seg = np.linalg.norm(np.diff(p, axis=0), axis=1)
+        small = smallest_size(f)
+        step = small / 4 if small > 0 and math.isfinite(small) else (seg.max() if seg.size else 1.0) / 64
         k = np.clip(np.ceil(seg / max(step, 1e-300)), 1, 512).astype(np.int64)
         pieces = np.repeat(np.arange(seg.size), k)
         j = np.arange(pieces.size) - np.repeat(np.cumsum(k) - k, k)
@@ -501,7 +502,7 @@ def graded_points(f, polyline: np.ndarray, count: int) -> np.ndarray:
 
     fine, cum = _remembered(f, ("graded", p.tobytes(), p.shape), cut)
     t = np.arange(N + 1, dtype=np.float64) / N * cum[-1]
-    idx = np.clip(np.searchsorted(cum, t, side="right") - 1, 0, fine.shape[0] - 2)
+    idx = np.minimum(np.maximum(np.searchsorted(cum, t, side="right") - 1, 0), fine.shape[0] - 2)
     dc = cum[idx + 1] - cum[idx]
     w = np.where(dc > 0, (t - cum[idx]) / np.where(dc > 0, dc, 1.0), 0.0)
     out = fine[idx] + w[:, None] * (fine[idx + 1] - fine[idx])
