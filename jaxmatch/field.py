@@ -444,6 +444,26 @@ def _remembered(f, key: tuple, compute):
     return memo[key]
 
 
+def _inverse_at_starts(f, p: np.ndarray, starts: np.ndarray, more: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(1 / f(starts), 1 / f(more))``: ``starts (n, 2)`` the starts of the pieces
+    :func:`line_integral` (``per_size`` 4) and :func:`graded_points` both cut polyline ``p``
+    into (the same points: the same formula on the same numbers), ``more (k, 2)`` what else one
+    of them asks for. The field's values at the starts are kept on a bound :class:`SizeField`
+    (as :func:`_remembered`), so the second of the two along the same polyline, in the same
+    direction, asks only for ``more`` (the field at a point does not depend on the other points
+    of the call)."""
+    memo = getattr(f, "_memo", None) if isinstance(f, SizeField) else None
+    key = ("starts", p.tobytes(), p.shape)
+    known = None if memo is None else memo.get(key)
+    if known is not None:
+        return known, 1.0 / f(more)
+    inv = 1.0 / f(np.concatenate([starts, more]))
+    n = starts.shape[0]
+    if memo is not None:
+        memo[key] = inv[:n]
+    return inv[:n], inv[n:]
+
+
 def line_integral(f, polyline: np.ndarray, *, per_size: int = 4) -> np.ndarray:
     """``(k,) float64`` cumulative ``integral of 1 / f ds`` along ``polyline (k, 2)`` at its
     points (0 at the first): the number of edges of size ``f`` that fit along it. Each segment is
@@ -463,7 +483,11 @@ def line_integral(f, polyline: np.ndarray, *, per_size: int = 4) -> np.ndarray:
         # a piece ends where the next one of its segment starts (the same a + t d): the field is
         # asked at every start and at each segment's last end only
         last = np.cumsum(k) - 1
-        inv = 1.0 / f(np.concatenate([a + t0[:, None] * d, a[last] + t1[last][:, None] * d[last]]))
+        starts, ends = a + t0[:, None] * d, a[last] + t1[last][:, None] * d[last]
+        if per_size == 4:  # (graded_points' pieces: the field at their starts asked for once)
+            inv = np.concatenate(_inverse_at_starts(f, p, starts, ends))
+        else:
+            inv = 1.0 / f(np.concatenate([starts, ends]))
         n = pieces.size
         end = np.empty(n)
         end[:-1] = inv[1:n]
@@ -495,8 +519,9 @@ def graded_points(f, polyline: np.ndarray, count: int) -> np.ndarray:
         k = np.clip(np.ceil(seg / max(step, 1e-300)), 1, 512).astype(np.int64)
         pieces = np.repeat(np.arange(seg.size), k)
         j = np.arange(pieces.size) - np.repeat(np.cumsum(k) - k, k)
-        fine = np.concatenate([p[:-1][pieces] + (j / k[pieces])[:, None] * (p[1:] - p[:-1])[pieces], p[-1:]])
-        inv = 1.0 / f(fine)  # already fine: the trapezoidal rule on its segments
+        starts = p[:-1][pieces] + (j / k[pieces])[:, None] * (p[1:] - p[:-1])[pieces]
+        fine = np.concatenate([starts, p[-1:]])
+        inv = np.concatenate(_inverse_at_starts(f, p, starts, p[-1:]))  # already fine: the trapezoidal rule
         return fine, np.concatenate([[0.0], np.cumsum(0.5 * (inv[:-1] + inv[1:]) * np.linalg.norm(np.diff(fine, axis=0),
                                                                                                  axis=1))])
 

@@ -149,6 +149,24 @@ def test_property_distances_within_reach_only_give_every_pairs_sizes_bit_for_bit
     np.testing.assert_array_equal(got, want)
 
 
+@pytest.mark.parametrize("first", ["integral", "points"])
+def test_integral_and_graded_points_along_one_polyline_ask_the_field_once_the_same_numbers(first):
+    # line_integral and graded_points cut a polyline into the same pieces: the second along it (in
+    # the same direction) takes the field at their starts from the first, its answers bit for bit
+    # those of a field that had seen neither
+    t = np.linspace(0.0, 2 * np.pi, 49)[:-1]
+    ring = tuple((0.5 + 0.2 * math.cos(a), 0.5 + 0.2 * math.sin(a)) for a in t)
+    field = Field(0.3, (Near("curve", ring + ring[:1], 0.03, 0.4), Near("point", (0.9, 0.1), 0.05, 0.3)))
+    polys = [np.array([[0.0, 0.0], [0.4, 0.1], [1.0, 0.3]]), np.array([[1.0, 1.0], [0.0, 0.7]]),
+             np.array([[0.2, 0.9], [0.3, 0.2], [0.8, 0.5], [0.95, 0.95]])]
+    shared = field.bind(SQUARE)
+    for poly in polys:
+        for q in (poly, poly[::-1].copy()):
+            calls = [lambda f: line_integral(f, q), lambda f: graded_points(f, q, 9)]
+            for call in (calls if first == "integral" else calls[::-1]):
+                np.testing.assert_array_equal(call(shared), call(field.bind(SQUARE)))
+
+
 def test_line_integral_along_a_linear_ramp():
     # size grows from s at x = 0 to H at x = d along the x axis: integral of 1/size is d/(H-s) ln(H/s)
     s, H, d = 0.05, 0.5, 1.0
