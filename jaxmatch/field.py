@@ -216,10 +216,10 @@ class SizeField:  # (eq=False: hashed by identity, so a Quality holding one is a
         if segments.shape[0] == starts.shape[0] and not np.any(segments[:, 0] - segments[:, 1]):  # points only
             a = segments[:, 0]
             dist = np.sqrt((pts[:, 0:1] - a[:, 0]) ** 2 + (pts[:, 1:2] - a[:, 1]) ** 2)
-        elif len(self.entries) > FEW_ENTRIES and pts.shape[0] * segments.shape[0] > NUMPY_PAIRS:
-            where = shapely.points(pts)  # many entries on many points: shapely's per entry, in C
-            dist = np.stack([shapely.distance(where, g) for g in self._geometries], axis=1)
-        elif len(self.entries) > FEW_ENTRIES or (pts.shape[0] >= NUMPY_POINTS and self._few_segments):
+        elif len(self.entries) > FEW_ENTRIES:
+            dist = np.concatenate([self._pair_distances(pts[i:i + PAIR_BLOCK // len(self.entries) + 1])
+                                   for i in range(0, pts.shape[0], PAIR_BLOCK // len(self.entries) + 1)])
+        elif pts.shape[0] >= NUMPY_POINTS and self._few_segments:
             dist = np.minimum.reduceat(segment_distances(pts, segments), starts, axis=1)  # every entry at once, numpy
         else:
             dist = self._distances(pts)
@@ -251,6 +251,34 @@ class SizeField:  # (eq=False: hashed by identity, so a Quality holding one is a
             else:
                 dist[:, e] = shapely.distance(where, geom)
         return dist
+
+    def _pair_distances(self, pts: np.ndarray) -> np.ndarray:
+        """``(n, E) float64`` (a field of many entries): each of ``pts (n, 2)``'s distance to
+        each entry whose reach it lies in (:attr:`_reach`), ``inf`` to the others (there
+        ``dist / d >= 1`` whatever the exact distance): numpy's (:func:`_point_segment`) on the
+        (point, segment) pairs of those (point, entry) pairs only, the least of each."""
+        lo, hi, reach2, first, count = self._boxes
+        gap = np.maximum(np.maximum(lo - pts[:, None], pts[:, None] - hi), 0.0)  # (n, E, 2)
+        pi, ei = np.nonzero((gap * gap).sum(axis=2) <= reach2)
+        dist = np.full((pts.shape[0], len(self.entries)), np.inf)
+        if pi.size:
+            cnt = count[ei]
+            run = np.cumsum(cnt) - cnt  # where each (point, entry) pair's segments start
+            seg = np.arange(int(cnt.sum())) - np.repeat(run - first[ei], cnt)
+            at = np.repeat(pi, cnt)
+            sg = self._segments[0]
+            d = _point_segment(pts[at, 0], pts[at, 1], sg[seg, 0, 0], sg[seg, 0, 1], sg[seg, 1, 0], sg[seg, 1, 1])
+            dist[pi, ei] = np.minimum.reduceat(d, run)
+        return dist
+
+    @cached_property
+    def _boxes(self) -> tuple:
+        """The entries' :attr:`_reach` as arrays: ``lo, hi (E, 2)``, ``reach2 (E,)``, and where
+        each entry's segments start among :attr:`_segments`' ``(E,)`` and how many ``(E,)``."""
+        seg, starts = self._segments[:2]
+        count = np.diff(np.append(starts, seg.shape[0]))
+        return (np.array([r[0] for r in self._reach]), np.array([r[1] for r in self._reach]),
+                np.array([r[2] for r in self._reach]), np.asarray(starts, np.int64), count.astype(np.int64))
 
     @cached_property
     def _few_segments(self) -> bool:
@@ -305,13 +333,13 @@ class SizeField:  # (eq=False: hashed by identity, so a Quality holding one is a
 
 FEW_ENTRIES = 4
 """A field of more entries (an automatic size field's features: tens of short curves) takes
-numpy's distances to every entry at once up to :data:`NUMPY_PAIRS` (point, segment) pairs, and
-shapely's per entry beyond (one call each, on every point: one numpy call or one shapely call
-an entry costs less there than a choice per entry); a field of fewer entries (a user's) has
-them chosen per entry (:meth:`SizeField._distances`)."""
+numpy's distances on the (point, segment) pairs of the (point, entry) pairs within the entry's
+reach only (:meth:`SizeField._pair_distances`: a point is near few of them); a field of fewer
+entries (a user's) has the way chosen per entry (:meth:`SizeField._distances`)."""
 
-NUMPY_PAIRS = 1 << 14
-"""See :data:`FEW_ENTRIES`."""
+PAIR_BLOCK = 1 << 16
+"""(point, entry) pairs :meth:`SizeField._pair_distances` looks at in one go (the points in
+blocks: its arrays stay a few MB)."""
 
 PRUNE_POINTS = 64
 """From this many points a call measures shapely's distances to an entry only for the points
@@ -330,11 +358,16 @@ any size."""
 
 def segment_distances(points: np.ndarray, segments: np.ndarray) -> np.ndarray:
     """``(n, m) float64``: each of ``points (n, 2)``'s distance to each of ``segments (m, 2, 2)``
-    (a segment of length 0 is a point), with GEOS's arithmetic (``Distance::pointToSegment``:
-    the projection's parameter, then the nearer end or the perpendicular distance), so the
+    (a segment of length 0 is a point), with GEOS's arithmetic (:func:`_point_segment`), so the
     values are those ``shapely.distance`` gives."""
-    px, py = points[:, 0:1], points[:, 1:2]
-    ax, ay, bx, by = segments[:, 0, 0], segments[:, 0, 1], segments[:, 1, 0], segments[:, 1, 1]
+    return _point_segment(points[:, 0:1], points[:, 1:2], segments[:, 0, 0], segments[:, 0, 1], segments[:, 1, 0],
+                          segments[:, 1, 1])
+
+
+def _point_segment(px, py, ax, ay, bx, by) -> np.ndarray:
+    """The distance from point ``(px, py)`` to segment ``(ax, ay)-(bx, by)``, elementwise over
+    arrays that broadcast together, with GEOS's arithmetic (``Distance::pointToSegment``: the
+    projection's parameter, then the nearer end or the perpendicular distance)."""
     dx, dy = bx - ax, by - ay
     len2 = dx * dx + dy * dy
     safe = np.where(len2 > 0, len2, 1.0)
