@@ -45,7 +45,7 @@ import shapely
 from jaxmatch.errors import InputError
 
 __all__ = ["KINDS", "CallableSize", "Field", "Near", "SizeField", "bind", "edge_ratios",
-           "field_share", "graded_points", "line_integral", "load_field", "outline_size", "parse_field",
+           "field_share", "graded_points", "kept_on_field", "line_integral", "load_field", "outline_size", "parse_field",
            "segment_distance", "segment_distances", "smallest_size"]
 
 KINDS = ("hole", "point", "side", "curve")
@@ -475,6 +475,20 @@ def _remembered(f, key: tuple, compute):
     if key not in memo:
         memo[key] = compute()
     return memo[key]
+
+
+def kept_on_field(f, what: str, owners: tuple, compute):
+    """``compute()`` (not to be written to), kept on a bound :class:`SizeField` for the objects
+    ``owners`` (by identity: they are kept with the answer, so no other object takes their ids
+    while it is kept), as its integrals are (:func:`_remembered`: a field is bound anew by every
+    meshing call); computed every time for another callable. what: names the quantity."""
+    memo = getattr(f, "_memo", None) if isinstance(f, SizeField) else None
+    if memo is None:
+        return compute()
+    key = (what,) + tuple(id(o) for o in owners)
+    if key not in memo:
+        memo[key] = (owners, compute())
+    return memo[key][1]
 
 
 def _inverse_at_starts(f, p: np.ndarray, starts: np.ndarray, more: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
