@@ -244,8 +244,9 @@ class SizeField:  # (eq=False: hashed by identity, so a Quality holding one is a
             if where is None:
                 where = shapely.points(pts)
             if n >= PRUNE_POINTS:
-                gap = np.maximum(np.maximum(lo - pts, pts - hi), 0.0)
-                near = np.flatnonzero((gap * gap).sum(axis=1) <= reach2)
+                gx = np.maximum(np.maximum(lo[0] - pts[:, 0], pts[:, 0] - hi[0]), 0.0)
+                gy = np.maximum(np.maximum(lo[1] - pts[:, 1], pts[:, 1] - hi[1]), 0.0)
+                near = np.flatnonzero(gx * gx + gy * gy <= reach2)
                 if near.size:
                     dist[near, e] = shapely.distance(where[near], geom)
             else:
@@ -258,8 +259,10 @@ class SizeField:  # (eq=False: hashed by identity, so a Quality holding one is a
         ``dist / d >= 1`` whatever the exact distance): numpy's (:func:`_point_segment`) on the
         (point, segment) pairs of those (point, entry) pairs only, the least of each."""
         lo, hi, reach2, first, count = self._boxes
-        gap = np.maximum(np.maximum(lo - pts[:, None], pts[:, None] - hi), 0.0)  # (n, E, 2)
-        pi, ei = np.nonzero((gap * gap).sum(axis=2) <= reach2)
+        px, py = pts[:, 0:1], pts[:, 1:2]
+        gx = np.maximum(np.maximum(lo[:, 0] - px, px - hi[:, 0]), 0.0)  # (n, E) each
+        gy = np.maximum(np.maximum(lo[:, 1] - py, py - hi[:, 1]), 0.0)
+        pi, ei = np.nonzero(gx * gx + gy * gy <= reach2)
         dist = np.full((pts.shape[0], len(self.entries)), np.inf)
         if pi.size:
             cnt = count[ei]
