@@ -246,7 +246,7 @@ class SizeField:  # (eq=False: hashed by identity, so a Quality holding one is a
             if n >= PRUNE_POINTS:
                 gx = np.maximum(np.maximum(lo[0] - pts[:, 0], pts[:, 0] - hi[0]), 0.0)
                 gy = np.maximum(np.maximum(lo[1] - pts[:, 1], pts[:, 1] - hi[1]), 0.0)
-                near = np.flatnonzero(gx * gx + gy * gy <= reach2)
+                near = np.flatnonzero(~(gx * gx + gy * gy > reach2))  # (a NaN point measured, as before)
                 if near.size:
                     dist[near, e] = shapely.distance(where[near], geom)
             else:
@@ -262,7 +262,7 @@ class SizeField:  # (eq=False: hashed by identity, so a Quality holding one is a
         px, py = pts[:, 0:1], pts[:, 1:2]
         gx = np.maximum(np.maximum(lo[:, 0] - px, px - hi[:, 0]), 0.0)  # (n, E) each
         gy = np.maximum(np.maximum(lo[:, 1] - py, py - hi[:, 1]), 0.0)
-        pi, ei = np.nonzero(gx * gx + gy * gy <= reach2)
+        pi, ei = np.nonzero(~(gx * gx + gy * gy > reach2))  # (a NaN point measured, as before)
         dist = np.full((pts.shape[0], len(self.entries)), np.inf)
         if pi.size:
             cnt = count[ei]
