@@ -109,7 +109,7 @@ def test_property_field_is_the_reference_and_between_its_sizes(H, entries, pts):
        pts=st.lists(st.tuples(coords, coords), min_size=1, max_size=20), shapely_path=st.booleans())
 def test_property_the_field_gives_shapelys_distances_bit_for_bit(lines, pts, shapely_path):
     # numpy's distances or shapely's (a field of few entries chooses per entry; one of many takes
-    # numpy's on the pairs within reach): either way shapely's numbers
+    # numpy's on the pairs within reach or shapely's per entry): either way shapely's numbers
     x = np.array(pts, np.float64)
     near, want = [], np.full(len(pts), 1.0)
     for k, line in enumerate(lines):
@@ -122,7 +122,8 @@ def test_property_the_field_gives_shapelys_distances_bit_for_bit(lines, pts, sha
         want = np.minimum(want, s + (1.0 - s) * np.minimum(1.0, shapely.distance(shapely.points(x), geom) / d))
     f = Field(1.0, tuple(near)).bind(SQUARE)
     with patch("jaxmatch.field.NUMPY_POINTS", 10 ** 9 if shapely_path else 0), \
-            patch("jaxmatch.field.NUMPY_SEGMENTS", 10 ** 9):
+            patch("jaxmatch.field.NUMPY_SEGMENTS", 10 ** 9), \
+            patch("jaxmatch.field.NUMPY_NS", (1e9, 1e9) if shapely_path else (0.0, 0.0)):
         np.testing.assert_array_equal(f(x), want)
 
 
@@ -133,8 +134,8 @@ def test_property_the_field_gives_shapelys_distances_bit_for_bit(lines, pts, sha
 def test_property_distances_within_reach_only_give_every_pairs_sizes_bit_for_bit(lines, pts, d, shapely_path):
     # each entry's distances computed only for the points within its reach (its distance d from
     # its bounding box, rounding included; a field of few entries per entry, one of many per
-    # (point, entry) pair, the points in blocks); the others take the entry's largest size, as
-    # every pair's distances give them, bit for bit (points at the reach's edge too)
+    # (point, entry) pair or per entry, the points in blocks); the others take the entry's
+    # largest size, as every pair's distances give them, bit for bit (points at the reach's edge too)
     near = tuple(Near("point", line[0], 0.1, d) if len(line) == 1 else Near("curve", tuple(line), 0.1 + 0.01 * k, d)
                  for k, line in enumerate(lines))
     edge = [(lo[0] - d, lo[1]) for lo in (np.min(np.array(line), axis=0) for line in lines)] + \
@@ -145,7 +146,8 @@ def test_property_distances_within_reach_only_give_every_pairs_sizes_bit_for_bit
     dist = np.minimum.reduceat(segment_distances(x, segments), starts, axis=1)  # every pair, numpy
     want = np.minimum(1.0, (s + (1.0 - s) * np.minimum(1.0, dist / dd)).min(axis=1))
     with patch("jaxmatch.field.PRUNE_POINTS", 0), patch("jaxmatch.field.NUMPY_POINTS", 10 ** 9 if shapely_path else 0), \
-            patch("jaxmatch.field.NUMPY_SEGMENTS", 10 ** 9), patch("jaxmatch.field.PAIR_BLOCK", 7):
+            patch("jaxmatch.field.NUMPY_SEGMENTS", 10 ** 9), patch("jaxmatch.field.PAIR_BLOCK", 7), \
+            patch("jaxmatch.field.NUMPY_NS", (1e9, 1e9) if shapely_path else (0.0, 0.0)):
         got = f(x)
     np.testing.assert_array_equal(got, want)
 
