@@ -45,7 +45,7 @@ import shapely
 from jaxmatch.errors import InputError
 
 __all__ = ["KINDS", "CallableSize", "Field", "Near", "SizeField", "bind", "edge_ratios",
-           "field_share", "graded_points", "line_integral", "load_field", "outline_size", "parse_field",
+           "field_share", "graded_points", "kept_on_field", "line_integral", "load_field", "outline_size", "parse_field",
            "segment_distance", "segment_distances", "smallest_size"]
 
 KINDS = ("hole", "point", "side", "curve")
@@ -216,12 +216,103 @@ class SizeField:  # (eq=False: hashed by identity, so a Quality holding one is a
         if segments.shape[0] == starts.shape[0] and not np.any(segments[:, 0] - segments[:, 1]):  # points only
             a = segments[:, 0]
             dist = np.sqrt((pts[:, 0:1] - a[:, 0]) ** 2 + (pts[:, 1:2] - a[:, 1]) ** 2)
-        elif pts.shape[0] * segments.shape[0] <= NUMPY_PAIRS:  # every entry at once, numpy (GEOS's arithmetic)
-            dist = np.minimum.reduceat(segment_distances(pts, segments), starts, axis=1)
-        else:  # many points: shapely's distances per entry, in C
-            where = shapely.points(pts)
-            dist = np.stack([shapely.distance(where, g) for g in self._geometries], axis=1)
+        elif len(self.entries) > FEW_ENTRIES:
+            dist = np.concatenate([self._pair_distances(pts[i:i + PAIR_BLOCK // len(self.entries) + 1])
+                                   for i in range(0, pts.shape[0], PAIR_BLOCK // len(self.entries) + 1)])
+        elif pts.shape[0] >= NUMPY_POINTS and self._few_segments:
+            dist = np.minimum.reduceat(segment_distances(pts, segments), starts, axis=1)  # every entry at once, numpy
+        else:
+            dist = self._distances(pts)
         return np.minimum(H, (s + (H - s) * np.minimum(1.0, dist / d)).min(axis=1))
+
+    def _distances(self, pts: np.ndarray) -> np.ndarray:
+        """``(n, E) float64`` (a field of at most :data:`FEW_ENTRIES` entries): each of
+        ``pts (n, 2)``'s distance to each entry: numpy's (GEOS's
+        arithmetic, :func:`segment_distances`) for at least :data:`NUMPY_POINTS` points on at most
+        :data:`NUMPY_SEGMENTS` segments, else shapely's (GEOS, per point in C; both give the same
+        numbers), there ``inf`` for the points beyond the entry's reach when there are
+        :data:`PRUNE_POINTS` or more (:attr:`_reach`: its distance ``d`` and more from the entry's
+        bounding box, where ``dist / d >= 1`` and the size is the entry's largest whatever the
+        exact distance)."""
+        n = pts.shape[0]
+        dist = np.full((n, len(self.entries)), np.inf)
+        where = None  # the points as shapely's, made once
+        for e, (lo, hi, reach2, seg, geom) in enumerate(self._reach):
+            if n >= NUMPY_POINTS and seg.shape[0] <= NUMPY_SEGMENTS:  # a few pairs a point: all of them
+                dist[:, e] = segment_distances(pts, seg).min(axis=1)
+                continue
+            if where is None:
+                where = shapely.points(pts)
+            if n >= PRUNE_POINTS:
+                gx = np.maximum(np.maximum(lo[0] - pts[:, 0], pts[:, 0] - hi[0]), 0.0)
+                gy = np.maximum(np.maximum(lo[1] - pts[:, 1], pts[:, 1] - hi[1]), 0.0)
+                near = np.flatnonzero(~(gx * gx + gy * gy > reach2))  # (a NaN point measured, as before)
+                if near.size:
+                    dist[near, e] = shapely.distance(where[near], geom)
+            else:
+                dist[:, e] = shapely.distance(where, geom)
+        return dist
+
+    def _pair_distances(self, pts: np.ndarray) -> np.ndarray:
+        """``(n, E) float64`` (a field of many entries): each of ``pts (n, 2)``'s distance to
+        each entry whose reach it lies in (:attr:`_reach`), ``inf`` to the others (there
+        ``dist / d >= 1`` whatever the exact distance): numpy's (:func:`_point_segment`) on the
+        (point, segment) pairs of those (point, entry) pairs only, the least of each."""
+        lo, hi, reach2, first, count = self._boxes
+        px, py = pts[:, 0:1], pts[:, 1:2]
+        gx = np.maximum(np.maximum(lo[:, 0] - px, px - hi[:, 0]), 0.0)  # (n, E) each
+        gy = np.maximum(np.maximum(lo[:, 1] - py, py - hi[:, 1]), 0.0)
+        near = ~(gx * gx + gy * gy > reach2)  # (a NaN point measured, as before)
+        dist = np.full((pts.shape[0], len(self.entries)), np.inf)
+        pi, ei = np.nonzero(near)
+        entries = np.flatnonzero(near.any(axis=0))
+        pairs = float(count[ei].sum())
+        if NUMPY_NS[0] + NUMPY_NS[1] * pairs > (SHAPELY_NS[0] * entries.size + SHAPELY_NS[1] * pi.size
+                                                + SHAPELY_NS[2] * pairs + SHAPELY_NS[3] * pts.shape[0]):
+            where = shapely.points(pts)  # shapely's per entry, on the points within its reach
+            for e in entries.tolist():
+                at = np.flatnonzero(near[:, e])
+                dist[at, e] = shapely.distance(where[at], self._geometries[e])
+            return dist
+        if pi.size:
+            cnt = count[ei]
+            run = np.cumsum(cnt) - cnt  # where each (point, entry) pair's segments start
+            seg = np.arange(int(cnt.sum())) - np.repeat(run - first[ei], cnt)
+            at = np.repeat(pi, cnt)
+            sg = self._segments[0]
+            d = _point_segment(pts[at, 0], pts[at, 1], sg[seg, 0, 0], sg[seg, 0, 1], sg[seg, 1, 0], sg[seg, 1, 1])
+            dist[pi, ei] = np.minimum.reduceat(d, run)
+        return dist
+
+    @cached_property
+    def _boxes(self) -> tuple:
+        """The entries' :attr:`_reach` as arrays: ``lo, hi (E, 2)``, ``reach2 (E,)``, and where
+        each entry's segments start among :attr:`_segments`' ``(E,)`` and how many ``(E,)``."""
+        seg, starts = self._segments[:2]
+        count = np.diff(np.append(starts, seg.shape[0]))
+        return (np.array([r[0] for r in self._reach]), np.array([r[1] for r in self._reach]),
+                np.array([r[2] for r in self._reach]), np.asarray(starts, np.int64), count.astype(np.int64))
+
+    @cached_property
+    def _few_segments(self) -> bool:
+        """Whether every entry has at most :data:`NUMPY_SEGMENTS` segments."""
+        return all(seg.shape[0] <= NUMPY_SEGMENTS for _, _, seg in self.entries)
+
+    @cached_property
+    def _reach(self) -> tuple:
+        """Per entry ``(lo (2,), hi (2,), reach2, segments (m, 2, 2), geometry)``: the bounding
+        box of its segments and the squared distance from that box beyond which a point is
+        further than ``d`` from every segment, rounding included (``d`` plus ``1e-8`` of the
+        larger of ``d``, the box's size and its coordinates: a distance's rounding error is
+        some units in the last place of these), its segments and its shapely geometry."""
+        out = []
+        for (_, d, seg), geom in zip(self.entries, self._geometries):
+            ends = seg.reshape(-1, 2)
+            lo, hi = ends.min(axis=0), ends.max(axis=0)
+            scale = max(float(d), float(np.abs(ends).max()), float((hi - lo).max()))
+            reach = float(d) + 1e-8 * scale
+            out.append((lo, hi, reach * reach, seg, geom))
+        return tuple(out)
 
     @cached_property
     def _memo(self) -> dict:
@@ -253,20 +344,54 @@ class SizeField:  # (eq=False: hashed by identity, so a Quality holding one is a
         return tuple(out)
 
 
-NUMPY_PAIRS = 1 << 14
-"""Up to this many (point, segment) pairs a call's distances are numpy's, every entry at once
-(:func:`segment_distances`: no shapely points to make, no loop over the entries: the cost of the
-many calls on few points); beyond, shapely's per entry (faster there). Both give the same
-numbers; a field of points only is numpy's at any size."""
+FEW_ENTRIES = 4
+"""A field of more entries (an automatic size field's features: tens of short curves) takes
+numpy's distances on the (point, segment) pairs of the (point, entry) pairs within the entry's
+reach only (:meth:`SizeField._pair_distances`: a point is near few of them); a field of fewer
+entries (a user's) has the way chosen per entry (:meth:`SizeField._distances`)."""
+
+NUMPY_NS = (30000.0, 45.0)
+SHAPELY_NS = (4000.0, 174.0, 6.6, 100.0)
+"""What a field of many entries' distances cost (ns, fitted to calls of the automatic fields of
+examples/parts' flange, slotted link, star and gear on their meshes' points and on random
+points): numpy's arithmetic a call and a (point, segment) pair within reach
+(:data:`NUMPY_NS`); shapely's an entry called, a (point, entry) pair, a (point, segment) pair
+and a point made (:data:`SHAPELY_NS`). :meth:`SizeField._pair_distances` takes the cheaper:
+numpy's where points are within reach of few segments, shapely's per entry where of many (the
+gear's mesh, 1,375 points, 55 entries: 15.8 ms by numpy's pairs, 4.0 by shapely's; 60 of its
+points 0.14 and 0.23 ms)."""
+
+PAIR_BLOCK = 1 << 16
+"""(point, entry) pairs :meth:`SizeField._pair_distances` looks at in one go (the points in
+blocks: its arrays stay a few MB)."""
+
+PRUNE_POINTS = 64
+"""From this many points a call measures shapely's distances to an entry only for the points
+within its reach (:meth:`SizeField._distances`): on fewer, the look costs about what it saves."""
+
+NUMPY_POINTS = 128
+NUMPY_SEGMENTS = 8
+"""An entry's distances are numpy's (:func:`segment_distances`, the whole array at once) for
+at least :data:`NUMPY_POINTS` points and at most :data:`NUMPY_SEGMENTS` segments; shapely's
+otherwise (GEOS in C, per point: no fixed cost of some twenty array operations, and ~10 ns a
+pair against numpy's ~25). Measured one entry at a time: numpy / shapely 21 / 3 us at 5 points
+and one segment, 22 / 18 at 80, 25 / 74 at 320; 27 / 5, 68 / 50 and 433 / 198 us at 5, 80 and
+320 points on 48 segments. Both give the same numbers; a field of points only is numpy's at
+any size."""
 
 
 def segment_distances(points: np.ndarray, segments: np.ndarray) -> np.ndarray:
     """``(n, m) float64``: each of ``points (n, 2)``'s distance to each of ``segments (m, 2, 2)``
-    (a segment of length 0 is a point), with GEOS's arithmetic (``Distance::pointToSegment``:
-    the projection's parameter, then the nearer end or the perpendicular distance), so the
+    (a segment of length 0 is a point), with GEOS's arithmetic (:func:`_point_segment`), so the
     values are those ``shapely.distance`` gives."""
-    px, py = points[:, 0:1], points[:, 1:2]
-    ax, ay, bx, by = segments[:, 0, 0], segments[:, 0, 1], segments[:, 1, 0], segments[:, 1, 1]
+    return _point_segment(points[:, 0:1], points[:, 1:2], segments[:, 0, 0], segments[:, 0, 1], segments[:, 1, 0],
+                          segments[:, 1, 1])
+
+
+def _point_segment(px, py, ax, ay, bx, by) -> np.ndarray:
+    """The distance from point ``(px, py)`` to segment ``(ax, ay)-(bx, by)``, elementwise over
+    arrays that broadcast together, with GEOS's arithmetic (``Distance::pointToSegment``: the
+    projection's parameter, then the nearer end or the perpendicular distance)."""
     dx, dy = bx - ax, by - ay
     len2 = dx * dx + dy * dy
     safe = np.where(len2 > 0, len2, 1.0)
@@ -376,17 +501,51 @@ def _remembered(f, key: tuple, compute):
     return memo[key]
 
 
+def kept_on_field(f, what: str, owners: tuple, compute):
+    """``compute()`` (not to be written to), kept on a bound :class:`SizeField` for the objects
+    ``owners`` (by identity: they are kept with the answer, so no other object takes their ids
+    while it is kept), as its integrals are (:func:`_remembered`: a field is bound anew by every
+    meshing call); computed every time for another callable. what: names the quantity."""
+    memo = getattr(f, "_memo", None) if isinstance(f, SizeField) else None
+    if memo is None:
+        return compute()
+    key = (what,) + tuple(id(o) for o in owners)
+    if key not in memo:
+        memo[key] = (owners, compute())
+    return memo[key][1]
+
+
+def _inverse_at_starts(f, p: np.ndarray, starts: np.ndarray, more: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(1 / f(starts), 1 / f(more))``: ``starts (n, 2)`` the starts of the pieces
+    :func:`line_integral` (``per_size`` 4) and :func:`graded_points` both cut polyline ``p``
+    into (the same points: the same formula on the same numbers), ``more (k, 2)`` what else one
+    of them asks for. The field's values at the starts are kept on a bound :class:`SizeField`
+    (as :func:`_remembered`), so the second of the two along the same polyline, in the same
+    direction, asks only for ``more`` (the field at a point does not depend on the other points
+    of the call)."""
+    memo = getattr(f, "_memo", None) if isinstance(f, SizeField) else None
+    key = ("starts", p.tobytes(), p.shape)
+    known = None if memo is None else memo.get(key)
+    if known is not None:
+        return known, 1.0 / f(more)
+    inv = 1.0 / f(np.concatenate([starts, more]))
+    n = starts.shape[0]
+    if memo is not None:
+        memo[key] = inv[:n]
+    return inv[:n], inv[n:]
+
+
 def line_integral(f, polyline: np.ndarray, *, per_size: int = 4) -> np.ndarray:
     """``(k,) float64`` cumulative ``integral of 1 / f ds`` along ``polyline (k, 2)`` at its
     points (0 at the first): the number of edges of size ``f`` that fit along it. Each segment is
     cut into pieces no longer than ``smallest / per_size`` (at most 512 a segment) and integrated
     by the trapezoidal rule on ``1 / f``."""
     p = np.asarray(polyline, np.float64)
-    seg = np.linalg.norm(np.diff(p, axis=0), axis=1)
-    small = smallest_size(f)
-    step = small / per_size if small > 0 and math.isfinite(small) else (seg.max() if seg.size else 1.0) / 64
 
     def integrate():
+        seg = np.linalg.norm(np.diff(p, axis=0), axis=1)
+        small = smallest_size(f)
+        step = small / per_size if small > 0 and math.isfinite(small) else (seg.max() if seg.size else 1.0) / 64
         k = np.clip(np.ceil(seg / max(step, 1e-300)), 1, 512).astype(np.int64)
         pieces = np.repeat(np.arange(seg.size), k)
         j = np.arange(pieces.size) - np.repeat(np.cumsum(k) - k, k)
@@ -395,7 +554,11 @@ def line_integral(f, polyline: np.ndarray, *, per_size: int = 4) -> np.ndarray:
         # a piece ends where the next one of its segment starts (the same a + t d): the field is
         # asked at every start and at each segment's last end only
         last = np.cumsum(k) - 1
-        inv = 1.0 / f(np.concatenate([a + t0[:, None] * d, a[last] + t1[last][:, None] * d[last]]))
+        starts, ends = a + t0[:, None] * d, a[last] + t1[last][:, None] * d[last]
+        if per_size == 4:  # (graded_points' pieces: the field at their starts asked for once)
+            inv = np.concatenate(_inverse_at_starts(f, p, starts, ends))
+        else:
+            inv = 1.0 / f(np.concatenate([starts, ends]))
         n = pieces.size
         end = np.empty(n)
         end[:-1] = inv[1:n]
@@ -415,25 +578,27 @@ def graded_points(f, polyline: np.ndarray, count: int) -> np.ndarray:
     bit-identical points."""
     poly = np.asarray(polyline, dtype=np.float64)
     N = int(count)
-    first, last = poly[0], poly[-1]
-    flip = (not np.array_equal(first, last)) and tuple(last) < tuple(first)
+    first, last = poly[0].tolist(), poly[-1].tolist()
+    flip = first != last and last < first
     p = poly[::-1] if flip else poly
-    seg = np.linalg.norm(np.diff(p, axis=0), axis=1)
-    small = smallest_size(f)
-    step = small / 4 if small > 0 and math.isfinite(small) else (seg.max() if seg.size else 1.0) / 64
+
     # the polyline cut finely, then the integral's inverse by linear interpolation
     def cut():
+        seg = np.linalg.norm(np.diff(p, axis=0), axis=1)
+        small = smallest_size(f)
+        step = small / 4 if small > 0 and math.isfinite(small) else (seg.max() if seg.size else 1.0) / 64
         k = np.clip(np.ceil(seg / max(step, 1e-300)), 1, 512).astype(np.int64)
         pieces = np.repeat(np.arange(seg.size), k)
         j = np.arange(pieces.size) - np.repeat(np.cumsum(k) - k, k)
-        fine = np.concatenate([p[:-1][pieces] + (j / k[pieces])[:, None] * (p[1:] - p[:-1])[pieces], p[-1:]])
-        inv = 1.0 / f(fine)  # already fine: the trapezoidal rule on its segments
+        starts = p[:-1][pieces] + (j / k[pieces])[:, None] * (p[1:] - p[:-1])[pieces]
+        fine = np.concatenate([starts, p[-1:]])
+        inv = np.concatenate(_inverse_at_starts(f, p, starts, p[-1:]))  # already fine: the trapezoidal rule
         return fine, np.concatenate([[0.0], np.cumsum(0.5 * (inv[:-1] + inv[1:]) * np.linalg.norm(np.diff(fine, axis=0),
                                                                                                  axis=1))])
 
     fine, cum = _remembered(f, ("graded", p.tobytes(), p.shape), cut)
     t = np.arange(N + 1, dtype=np.float64) / N * cum[-1]
-    idx = np.clip(np.searchsorted(cum, t, side="right") - 1, 0, fine.shape[0] - 2)
+    idx = np.minimum(np.maximum(np.searchsorted(cum, t, side="right") - 1, 0), fine.shape[0] - 2)
     dc = cum[idx + 1] - cum[idx]
     w = np.where(dc > 0, (t - cum[idx]) / np.where(dc > 0, dc, 1.0), 0.0)
     out = fine[idx] + w[:, None] * (fine[idx + 1] - fine[idx])

@@ -20,8 +20,8 @@ from hypothesis import strategies as st
 
 from jaxmatch.defaults import QUALITY
 from jaxmatch.errors import EXIT_BAD_INPUT, InputError
-from jaxmatch.field import (NUMPY_PAIRS, CallableSize, Field, Near, SizeField, bind, field_share, graded_points,
-                            line_integral, load_field, parse_field, segment_distance)
+from jaxmatch.field import (CallableSize, Field, Near, SizeField, bind, field_share, graded_points,
+                            line_integral, load_field, parse_field, segment_distance, segment_distances)
 from jaxmatch.io.readers import load_shape
 from jaxmatch.meshing.pipeline import mesh
 from jaxmatch.shape import make_shape
@@ -105,10 +105,11 @@ def test_property_field_is_the_reference_and_between_its_sizes(H, entries, pts):
 
 
 @settings(max_examples=40, deadline=None)
-@given(lines=st.lists(st.lists(st.tuples(coords, coords), min_size=1, max_size=6), min_size=1, max_size=4),
+@given(lines=st.lists(st.lists(st.tuples(coords, coords), min_size=1, max_size=6), min_size=1, max_size=7),
        pts=st.lists(st.tuples(coords, coords), min_size=1, max_size=20), shapely_path=st.booleans())
 def test_property_the_field_gives_shapelys_distances_bit_for_bit(lines, pts, shapely_path):
-    # numpy for few (point, segment) pairs, shapely for many: either way the same numbers
+    # numpy's distances or shapely's (a field of few entries chooses per entry; one of many takes
+    # numpy's on the pairs within reach or shapely's per entry): either way shapely's numbers
     x = np.array(pts, np.float64)
     near, want = [], np.full(len(pts), 1.0)
     for k, line in enumerate(lines):
@@ -120,8 +121,53 @@ def test_property_the_field_gives_shapelys_distances_bit_for_bit(lines, pts, sha
         near.append(Near("point", line[0], s, d) if len(line) == 1 else Near("curve", tuple(line), s, d))
         want = np.minimum(want, s + (1.0 - s) * np.minimum(1.0, shapely.distance(shapely.points(x), geom) / d))
     f = Field(1.0, tuple(near)).bind(SQUARE)
-    with patch("jaxmatch.field.NUMPY_PAIRS", 0 if shapely_path else NUMPY_PAIRS):
+    with patch("jaxmatch.field.NUMPY_POINTS", 10 ** 9 if shapely_path else 0), \
+            patch("jaxmatch.field.NUMPY_SEGMENTS", 10 ** 9), \
+            patch("jaxmatch.field.NUMPY_NS", (1e9, 1e9) if shapely_path else (0.0, 0.0)):
         np.testing.assert_array_equal(f(x), want)
+
+
+@settings(max_examples=40, deadline=None)
+@given(lines=st.lists(st.lists(st.tuples(coords, coords), min_size=1, max_size=12), min_size=1, max_size=8),
+       pts=st.lists(st.tuples(coords, coords), min_size=1, max_size=30), d=st.floats(0.01, 3.0),
+       shapely_path=st.booleans())
+def test_property_distances_within_reach_only_give_every_pairs_sizes_bit_for_bit(lines, pts, d, shapely_path):
+    # each entry's distances computed only for the points within its reach (its distance d from
+    # its bounding box, rounding included; a field of few entries per entry, one of many per
+    # (point, entry) pair or per entry, the points in blocks); the others take the entry's
+    # largest size, as every pair's distances give them, bit for bit (points at the reach's edge too)
+    near = tuple(Near("point", line[0], 0.1, d) if len(line) == 1 else Near("curve", tuple(line), 0.1 + 0.01 * k, d)
+                 for k, line in enumerate(lines))
+    edge = [(lo[0] - d, lo[1]) for lo in (np.min(np.array(line), axis=0) for line in lines)] + \
+        [(hi[0], hi[1] + d * (1 + 1e-15)) for hi in (np.max(np.array(line), axis=0) for line in lines)]
+    x = np.array(pts + edge, np.float64)
+    f = Field(1.0, near).bind(SQUARE)
+    segments, starts, s, dd = f._segments
+    dist = np.minimum.reduceat(segment_distances(x, segments), starts, axis=1)  # every pair, numpy
+    want = np.minimum(1.0, (s + (1.0 - s) * np.minimum(1.0, dist / dd)).min(axis=1))
+    with patch("jaxmatch.field.PRUNE_POINTS", 0), patch("jaxmatch.field.NUMPY_POINTS", 10 ** 9 if shapely_path else 0), \
+            patch("jaxmatch.field.NUMPY_SEGMENTS", 10 ** 9), patch("jaxmatch.field.PAIR_BLOCK", 7), \
+            patch("jaxmatch.field.NUMPY_NS", (1e9, 1e9) if shapely_path else (0.0, 0.0)):
+        got = f(x)
+    np.testing.assert_array_equal(got, want)
+
+
+@pytest.mark.parametrize("first", ["integral", "points"])
+def test_integral_and_graded_points_along_one_polyline_ask_the_field_once_the_same_numbers(first):
+    # line_integral and graded_points cut a polyline into the same pieces: the second along it (in
+    # the same direction) takes the field at their starts from the first, its answers bit for bit
+    # those of a field that had seen neither
+    t = np.linspace(0.0, 2 * np.pi, 49)[:-1]
+    ring = tuple((0.5 + 0.2 * math.cos(a), 0.5 + 0.2 * math.sin(a)) for a in t)
+    field = Field(0.3, (Near("curve", ring + ring[:1], 0.03, 0.4), Near("point", (0.9, 0.1), 0.05, 0.3)))
+    polys = [np.array([[0.0, 0.0], [0.4, 0.1], [1.0, 0.3]]), np.array([[1.0, 1.0], [0.0, 0.7]]),
+             np.array([[0.2, 0.9], [0.3, 0.2], [0.8, 0.5], [0.95, 0.95]])]
+    shared = field.bind(SQUARE)
+    for poly in polys:
+        for q in (poly, poly[::-1].copy()):
+            calls = [lambda f: line_integral(f, q), lambda f: graded_points(f, q, 9)]
+            for call in (calls if first == "integral" else calls[::-1]):
+                np.testing.assert_array_equal(call(shared), call(field.bind(SQUARE)))
 
 
 def test_line_integral_along_a_linear_ramp():

@@ -10,11 +10,13 @@ import pytest
 import shapely
 
 from jaxmatch.defaults import QUALITY
+from jaxmatch.field import Field, Near
 from jaxmatch.inputs import load_catalogue, load_lattice
 from jaxmatch.placement.decompose import single_patch
 from jaxmatch.placement.layout import make_layout
 from jaxmatch.placement.milp import count_cost, one_patch_sides, solve_choice, solve_counts
-from jaxmatch.placement.solve import mesh_layout, off_size_patches
+from jaxmatch.placement.solve import _chord_targets, mesh_layout, off_size_patches
+from jaxmatch.placement.templates import first_group_templates
 from jaxmatch.shape import make_shape
 
 GRID = np.array([[1, 0], [0, 1], [1, 0], [0, 1]])
@@ -151,3 +153,33 @@ def test_translated_patches_take_their_transitions_and_the_mesh_conforms():
     for c in pts[[0, 2, 3, 6]]:
         assert np.min(np.linalg.norm(trans.xy - c, axis=1)) < 1e-12
     assert _scaled_jacobians(trans.xy, q).min() >= QUALITY.good_sj
+
+
+def test_chord_targets_are_the_templates_own_worked_out_once_per_field():
+    # the rounds and the transition rounds ask again for a template's chord targets under a size
+    # field: the field keeps the answer (a copy each time, bit for bit the template's own), and
+    # another field, or the same template placed again, has its own
+    cat, lat = load_catalogue(), load_lattice("fine")
+    shape = make_shape(TRAPEZOID, corners=[0, 1, 2, 3])
+    t = first_group_templates(shape, cat, lat, 3, ((0, 1), (2, 3)))[0]
+    field = Field(1.0, (Near("point", (4.0, 0.0), 0.2, 3.0),))
+    f, g = field.bind(shape), Field(1.0, (Near("point", (4.0, 2.0), 0.3, 3.0),)).bind(shape)
+    calls = []
+    real = type(t).chord_targets
+
+    def counted(self, fld):
+        calls.append(fld)
+        return real(self, fld)
+
+    type(t).chord_targets = counted
+    try:
+        first, again = _chord_targets(t, f), _chord_targets(t._replace(shape=shape), f)
+        other = _chord_targets(t, g)
+    finally:
+        type(t).chord_targets = real
+    assert calls == [f, g]
+    np.testing.assert_array_equal(first, real(t, f))
+    np.testing.assert_array_equal(again, first)
+    np.testing.assert_array_equal(other, real(t, g))
+    first[:] = -1.0  # a copy: the kept answer stays
+    np.testing.assert_array_equal(_chord_targets(t, f), real(t, f))

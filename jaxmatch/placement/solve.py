@@ -37,7 +37,7 @@ from jaxmatch.cache import Cache
 from jaxmatch.cache import key as cache_key
 from jaxmatch.defaults import QUALITY, Quality
 from jaxmatch.errors import InputError, UnmatchableError
-from jaxmatch.field import line_integral
+from jaxmatch.field import kept_on_field, line_integral
 from jaxmatch.placement.embed import sj_inverted, smooth_in_frame, smooth_near
 from jaxmatch.placement.floors import curve_floors
 from jaxmatch.placement.layout import (Layout, LayoutMesh, Sides, _boundary_loops, fit_sides,
@@ -78,6 +78,15 @@ def _has(templates, j: int) -> bool:
     except IndexError:
         return False
     return True
+
+
+def _chord_targets(t, f) -> np.ndarray:
+    """``t.chord_targets(f)`` of template ``t`` under size field ``f``
+    (:meth:`~jaxmatch.placement.templates.PatchTemplate.chord_targets`), worked out once per
+    placement and field (:func:`~jaxmatch.field.kept_on_field`: the rounds of each layout and the
+    transition rounds ask again for the same templates); a copy."""
+    return kept_on_field(f, "chord targets", (t.placement, t.edge_list, t.edge_chord),
+                         lambda: t.chord_targets(f)).copy()
 
 
 def _round_key(refined_mesh) -> tuple:
@@ -385,7 +394,7 @@ def _rounds(layout: Layout, sides: Sides, shapes, cands, moved, choice: list, wa
         try:
             mults, n = _solve_counts_cached(layout, sides, [t.side_matrix() for t in tmpl], want, size,
                                             [t.chord_widths() for t in tmpl], floors, cache, lkey, equal, side_targets,
-                                            None if side_targets is None else [t.chord_targets(f) for t in tmpl])
+                                            None if side_targets is None else [_chord_targets(t, f) for t in tmpl])
         except LayoutInfeasible:
             if not _advance_for_feasibility(sides, cands, choice, want, size, layout.source, equal,
                                             None if side_targets is None else f, side_targets):
@@ -595,7 +604,7 @@ def _transition_rounds(layout: Layout, sides: Sides, shapes, cands, moved, best:
     below ``quality.good_sj``; else ``best``."""
     cache = catalogue.cache
     _, tmpl, mults, n, _ = best
-    ct = None if side_targets is None else [t.chord_targets(f) for t in tmpl]
+    ct = None if side_targets is None else [_chord_targets(t, f) for t in tmpl]
     flagged = off_size_patches(sides, tmpl, mults, n, size, quality, side_targets=side_targets, chord_targets=ct,
                                floors=floors, want=want)
     tgt = np.asarray(side_targets, np.float64) if side_targets is not None else sides.lengths / float(size)
@@ -637,7 +646,7 @@ def _transition_rounds(layout: Layout, sides: Sides, shapes, cands, moved, best:
             ch = solve_choice(sides, [[t.side_matrix() for t in a] for a in pick], penalties=pen, size=size,
                               widths=[[t.chord_widths() for t in a] for a in pick], floors=floors, counts=want,
                               equal=equal, side_targets=side_targets,
-                              chord_targets=None if f is None else [[t.chord_targets(f) for t in a] for a in pick],
+                              chord_targets=None if f is None else [[_chord_targets(t, f) for t in a] for a in pick],
                               chord_weight=TRANSITION_CHORD_WEIGHT, bound=bound, most=most,
                               start=(mults, n), max_nodes=TRANSITION_NODES, screen=TRANSITION_SCREEN,
                               source=layout.source)
