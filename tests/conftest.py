@@ -100,3 +100,25 @@ def cli_then():
     as its arguments in-process (a nonzero exit fails it), then the lines ``after`` (e.g. a look
     at ``sys.modules``)."""
     return lambda after: CLI_THEN + after
+
+
+@pytest.fixture
+def recorded(monkeypatch):
+    """``recorded(module, name, run)``: the ``(args, kwargs)`` of every call of ``module.name``
+    while ``run()`` runs, in order (the function itself still answers each call; restored after)."""
+
+    def record(module, name: str, run) -> list:
+        calls, real = [], getattr(module, name)
+
+        def keep(*a, **k):
+            calls.append((a, k))
+            return real(*a, **k)
+
+        monkeypatch.setattr(module, name, keep)
+        try:
+            run()
+        finally:
+            monkeypatch.setattr(module, name, real)
+        return calls
+
+    return record

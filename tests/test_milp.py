@@ -253,26 +253,24 @@ def test_sums_of_chords_are_highs_answer(lengths, size, req, floors):
         assert got[1].tolist() == ref[1].tolist() and got[0][0].tolist() == ref[0][0].tolist()
 
 
-def test_the_model_passed_as_arrays_solves_as_the_model_passed_as_an_lp(monkeypatch):
+def _mesh_a_few(field: bool = False) -> None:
+    """lshape, tshape and letter-A at P/24 (shapes forgotten first: their programs solved again),
+    and with ``field`` the graded strip (a size field's template choice)."""
+    from jaxmatch.field import load_field
+
+    jaxmatch.load_catalogue().cache.forget_shapes()
+    for name in ("lshape.json", "tshape.json", "holes/letter-A.json"):
+        jaxmatch.mesh(jaxmatch.load_shape(EX / name), divisions=24)
+    if field:
+        jaxmatch.mesh(jaxmatch.load_shape(EX / "graded" / "strip.json"), size=load_field(EX / "graded" / "strip.field.json"))
+
+
+def test_the_model_passed_as_arrays_solves_as_the_model_passed_as_an_lp(monkeypatch, recorded):
     """Every integer program of a few meshes (side counts, feasibility checks, and a size field's
     template choice with its own HiGHS options), passed to HiGHS as numpy arrays in one call, gives
     the status and the solution bit for bit that the same program passed as a ``HighsLp`` gives."""
-    from jaxmatch.field import load_field
-
-    progs = []
     real = milp._highs
-
-    def keep(*a, **k):
-        progs.append((a, k))
-        return real(*a, **k)
-
-    monkeypatch.setattr(milp, "_highs", keep)
-    cat = jaxmatch.load_catalogue()
-    cat.cache.forget_shapes()
-    for name in ("lshape.json", "tshape.json", "holes/letter-A.json"):
-        jaxmatch.mesh(jaxmatch.load_shape(EX / name), divisions=24)
-    jaxmatch.mesh(jaxmatch.load_shape(EX / "graded" / "strip.json"), size=load_field(EX / "graded" / "strip.field.json"))
-    monkeypatch.setattr(milp, "_highs", real)
+    progs = recorded(milp, "_highs", lambda: _mesh_a_few(field=True))
     assert len(progs) >= 10 and any(k.get("options") for _, k in progs)  # (the template choice's)
     assert any(not np.any(a[4]) for a, _ in progs)  # (a linear relaxation: the choice screens)
     got = {}
@@ -304,21 +302,11 @@ def _dense_side_rows(sides, matrices, equal=()):
     return np.array(rows).reshape(len(rows), M + S)
 
 
-def test_the_side_rows_of_real_layouts_are_their_definition(monkeypatch):
+def test_the_side_rows_of_real_layouts_are_their_definition(recorded):
     """The patch sides' rows of every program of a few meshes (many patches, T-junctions, sides
     listed twice) and of a periodic pair: each entry once, the dense matrix of the definition."""
-    calls = []
     real = milp._side_rows
-
-    def keep(*a, **k):
-        calls.append((a, k))
-        return real(*a, **k)
-
-    monkeypatch.setattr(milp, "_side_rows", keep)
-    cat = jaxmatch.load_catalogue()
-    cat.cache.forget_shapes()
-    for name in ("lshape.json", "tshape.json", "holes/letter-A.json"):
-        jaxmatch.mesh(jaxmatch.load_shape(EX / name), divisions=24)
+    calls = recorded(milp, "_side_rows", _mesh_a_few)
     lay, sd = grid([1.0, 2.0], [1.0, 0.5])
     calls.append(((sd, [QUAD] * 4), {"equal": [([0, 1], [2]), ([3], [3, 4])]}))
     assert len(calls) >= 5 and max(len(a[1]) for a, _ in calls) >= 8

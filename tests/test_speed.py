@@ -381,7 +381,7 @@ def test_a_side_walk_of_a_refined_topology_is_the_edge_by_edge_one(cat):
                 assert sv.dtype == np.int64
 
 
-def test_a_reused_highs_object_solves_as_a_fresh_one(cat, monkeypatch):
+def test_a_reused_highs_object_solves_as_a_fresh_one(cat, monkeypatch, recorded):
     """Every integer program of a few meshes, solved by the thread's one HiGHS object (its model
     cleared each time), in order and in reverse, gives the status and solution of a new object."""
     import threading
@@ -389,18 +389,13 @@ def test_a_reused_highs_object_solves_as_a_fresh_one(cat, monkeypatch):
     import jaxmatch
     from jaxmatch.placement import milp
 
-    progs = []
+    def run():
+        cat.cache.clear()
+        for name in ("lshape.json", "tshape.json", "holes/letter-A.json"):
+            jaxmatch.mesh(load_shape(ROOT / "examples" / name), catalogue=cat, divisions=24)
+
     real = milp._highs
-
-    def keep(*a, **k):
-        progs.append((a, k))
-        return real(*a, **k)
-
-    monkeypatch.setattr(milp, "_highs", keep)
-    cat.cache.clear()
-    for name in ("lshape.json", "tshape.json", "holes/letter-A.json"):
-        jaxmatch.mesh(load_shape(ROOT / "examples" / name), catalogue=cat, divisions=24)
-    monkeypatch.setattr(milp, "_highs", real)
+    progs = recorded(milp, "_highs", run)
     assert len(progs) >= 5
     reused = [real(*a, **k) for a, k in progs] + [real(*a, **k) for a, k in reversed(progs)][::-1]
     fresh = []
