@@ -338,7 +338,13 @@ class _Params:
         self.free = free
         self.slides = [Slide(np.asarray(s.a, float), np.asarray(s.b, float), np.asarray(s.vertices, np.int64)) for s in slides]
         self.nf = 2 * free.size
-        self.flat = kernels.flat_slides(self.slides)  # (sa, sb, sp, sv) for the compiled optimiser
+
+    @property
+    def flat(self) -> tuple:
+        """``(sa, sb, sp, sv)``: the slides as the compiled kernels take them
+        (:func:`jaxmatch.kernels.placement.flat_slides`; the tests hand them to the kernels, the
+        numpy path here does not use them)."""
+        return kernels.flat_slides(self.slides)
 
     def start(self, xy) -> np.ndarray:
         z = [np.asarray(xy, float)[self.free].ravel()]
