@@ -261,13 +261,16 @@ def _catalogue_id(cat) -> str:
 def options_hash(options: dict, writing: MeshOutput, corner_angle: float) -> str:
     """SHA-256 of everything a region's mesh depends on besides its file: ``options`` (the
     :func:`~jaxmatch.meshing.pipeline.mesh` keywords: size, divisions, strategies, budget,
-    catalogue, lattice), how the mesh file is written (``writing``: format, MSH version, element
+    catalogue, lattice, and automatic sizing and the search where not the default), how the mesh file is written (``writing``: format, MSH version, element
     type, order, extrusion), the corner angle and jaxmatch's version (the shipped catalogue by
     name, another by its file's contents; the lattice by its weights)."""
     doc = {"size": options.get("size"), "divisions": options.get("divisions"), "strategies": options.get("strategies"),
            "budget_s": options.get("budget_s"), "writing": dataclasses.asdict(writing), "corner_angle": float(corner_angle),
            "catalogue": _catalogue_id(options.get("catalogue")), "lattice": repr(options.get("lattice")),
            "version": __version__}
+    for key, default in (("auto_size", False), ("search", None)):  # (only when given: the hashes of other runs as they were)
+        if options.get(key, default) not in (default, "best"):
+            doc[key] = options[key]
     return hashlib.sha256(json.dumps(doc, sort_keys=True, default=str).encode()).hexdigest()
 
 

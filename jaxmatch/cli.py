@@ -20,7 +20,7 @@ from rich.console import Console
 from jaxmatch import __version__, report
 from jaxmatch.catalogue import store as cat_mod
 from jaxmatch.errors import EXIT_BAD_INPUT, EXIT_INVERTED, EXIT_UNMATCHABLE, InputError, InputWarning, SolverError, UnmatchableError
-from jaxmatch.defaults import DEFAULT_BUDGET_S, DEFAULT_LATTICE, DEFAULT_TIE_BREAK, DEFAULT_TOP, QUALITY, TIE_BREAKS
+from jaxmatch.defaults import DEFAULT_BUDGET_S, DEFAULT_LATTICE, DEFAULT_TIE_BREAK, DEFAULT_TOP, QUALITY, SEARCHES, TIE_BREAKS
 from jaxmatch.io.meshfile import MESH_FORMATS, mesh_format, write_mesh
 from jaxmatch.field import load_field
 from jaxmatch.io.output import MeshOutput, PictureOutput, parse_png_size
@@ -448,6 +448,8 @@ def mesh(
                                        "(or $JAXMATCH_DASK; needs pip install 'jaxmatch[dask]')."),
     strategy: Optional[str] = typer.Option(None, "--strategy", metavar="NAMES", help="Candidates to try, comma-separated: "
                                            "single, continuations, bisectors, recursive, radial, fillets, rings (default: all)."),
+    search: str = typer.Option("best", "--search", metavar="best|fast", help="best: every candidate that could win; "
+                               "fast: stop at the first good mesh (about 1.7x the regions/s, some quality lost: docs/perf.md)."),
     budget: float = typer.Option(DEFAULT_BUDGET_S, "--budget", metavar="SECONDS", help="Stop trying candidates after "
                                  "this long once one valid mesh exists (the best so far is kept)."),
     catalogue: Optional[Path] = typer.Option(None, metavar="FILE", help=CATALOGUE_HELP),
@@ -500,7 +502,7 @@ def mesh(
         size = load_field(size_field)
     if template:
         for opt, given in (("--size", size is not None), ("--divisions", divisions is not None),
-                           ("--sides", sides is not None), ("--auto-size", auto_size),
+                           ("--sides", sides is not None), ("--auto-size", auto_size), ("--search", search != "best"),
                            ("--sides-file", sides_file is not None), ("--strategy", strategy is not None),
                            ("--out-dir", out_dir is not None), ("--png-size/--dpi/--color/--histogram",
                                                                     drawing != PictureOutput())):
@@ -532,6 +534,10 @@ def mesh(
     options = dict(size=size, divisions=divisions, catalogue=cat, lattice=lat, strategies=names, budget_s=budget)
     if auto_size:
         options["auto_size"] = True
+    if search != "best":
+        if search not in SEARCHES:
+            raise InputError(f"expected one of {', '.join(SEARCHES)}, got {search!r}", "--search")
+        options["search"] = search
     if len(regions) > 1 or out_dir is not None:
         for opt, given in (("--out", out_path is not None), ("--png", png is not None), ("--svg", svg is not None),
                            ("--sides", sides is not None), ("--sides-file", sides_file is not None),

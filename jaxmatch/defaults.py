@@ -39,6 +39,36 @@ from dataclasses import dataclass
 
 
 @dataclass(frozen=True)
+class Search:
+    """How much of the candidate search :func:`jaxmatch.mesh` runs (``search=``, ``--search``):
+    the search itself is the same, these only stop it earlier.
+
+    name: ``"best"`` (the default: every candidate that could win is meshed, so the mesh is the
+        one the choice rule picks among all of them) or ``"fast"``.
+    layouts: at most this many layouts are meshed (the most promising first) once one of them
+        is valid and reaches :attr:`Quality.good_sj`; None: every layout that could win.
+    conforming: whether the single templates whose side counts follow the size are tried
+        (:class:`jaxmatch.meshing.strategies.Conforming`).
+    enough: after the layouts, stop at a best mesh that is valid, conforms to the size and
+        reaches :attr:`Quality.high_sj` (no ring partition, no leaner curves, no bends).
+    box: the layouts' count programs are first solved with every count bounded
+        (:func:`jaxmatch.placement.milp.count_box`): an optimum all the same, found faster, but of
+        equally good counts not always the one found without.
+    """
+
+    name: str = "best"
+    layouts: int | None = None
+    conforming: bool = True
+    enough: bool = False
+    box: bool = False
+
+
+SEARCHES = {"best": Search(), "fast": Search("fast", layouts=1, conforming=False, enough=True, box=True)}
+"""The searches by name (``--search``). ``"fast"``: what it gives up, measured on 300 random
+parts and the 50 benchmark cases, is in docs/perf.md ("The fast search")."""
+
+
+@dataclass(frozen=True)
 class Quality:
     """The meshing quality policy: every floor and band, defined once.
 
@@ -93,6 +123,7 @@ class Quality:
         (``scripts/make_bulk_parts.py --count 80 --seed 38``, in-process) they doubled the CPU
         time (31.3 s against 15.8 s) for 3 meshes nearer the size band; on, the 8-pointed star
         part at P/40 has 94 % of its edges in the band instead of 50 %.
+    search: how much of the candidate search runs (:class:`Search`; default the whole of it).
     field: the size field the mesh follows (a bound :class:`jaxmatch.field.SizeField` or
         :class:`~jaxmatch.field.CallableSize`: ``(n, 2)`` points to ``(n,)`` sizes), or None: one size
         ``h`` everywhere. With a field, side counts are its integrals, side vertices are spaced by it
@@ -117,6 +148,7 @@ class Quality:
     transition_gain: float = 0.5
     transition_cost: float = 0.02
     uniform_transitions: bool = False
+    search: Search = Search()
     field: object = None
 
 

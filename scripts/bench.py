@@ -125,6 +125,10 @@ def parse_args(argv=None):
                          "alternated with this one in the same run (ratio: vs_ref)")
     ap.add_argument("--mesh-bulk-reps", type=int, default=1, help="--mesh-bulk: timed runs of each command (default 1)")
     ap.add_argument("--mesh-bulk-no-gmsh", action="store_true", help="--mesh-bulk: leave out the gmsh reference")
+    ap.add_argument("--mesh-bulk-search", default="best", choices=("best", "fast"),
+                    help="--mesh-bulk, --mesh-bulk-profile: the --search (default best)")
+    ap.add_argument("--mesh-bulk-ref-search", default=None, choices=("best", "fast"),
+                    help="--mesh-bulk-ref: the reference command's --search (default: --mesh-bulk-search)")
     ap.add_argument("--mesh-graded", action="store_true",
                     help="--mesh: only graded against uniform meshing (bench_graded): time per quad of jaxmatch.mesh "
                          "with each examples/graded size field over a uniform size giving about as many quads")
@@ -1069,13 +1073,14 @@ MESH_BULK_REGIONS = ("examples/*.json", "examples/labels/shapes/*.json")
 """The regions of the bulk benchmark (globs from the repository root): every example shape."""
 
 
-def _bulk_command(root: Path, paths: list[str], divisions: int, jobs: int, out: Path) -> tuple[float, float, list[dict]]:
+def _bulk_command(root: Path, paths: list[str], divisions: int, jobs: int, out: Path,
+                  search: str = "best") -> tuple[float, float, list[dict]]:
     """One whole ``jaxmatch mesh PATHS --divisions DIV --out-dir OUT --jobs N --skip-bad`` run from
-    the checkout ``root`` (its ``jaxmatch`` package, by ``python -m`` from there): wall seconds, CPU
-    seconds (user + system of the command and its workers: what other users of the machine
-    change least) and the summary's records."""
+    the checkout ``root`` (its ``jaxmatch`` package, by ``python -m`` from there), with
+    ``--search SEARCH`` unless the best: wall seconds, CPU seconds (user + system of the command
+    and its workers: what other users of the machine change least) and the summary's records."""
     cmd = [sys.executable, "-m", "jaxmatch", "mesh", *paths, "--divisions", str(int(divisions)), "--out-dir", str(out),
-           "--jobs", str(int(jobs)), "--skip-bad"]
+           "--jobs", str(int(jobs)), "--skip-bad"] + (["--search", search] if search != "best" else [])
     if "--msh-version" in (root / "jaxmatch" / "cli.py").read_text():  # (the format references before MSH 4.1 wrote: the same writing cost)
         cmd += ["--msh-version", "2.2"]
     env = {**os.environ, "JAXMATCH_PROGRESS": "0"}
@@ -1092,7 +1097,7 @@ def _bulk_command(root: Path, paths: list[str], divisions: int, jobs: int, out: 
 
 
 def mesh_bulk(divisions: int = 16, jobs: int = 2, parts: int = 0, ref: Path | None = None, reps: int = 1,
-              gmsh: bool = True) -> dict:
+              gmsh: bool = True, search: str = "best", ref_search: str | None = None) -> dict:
     """Bulk meshing as a user runs it: one ``jaxmatch mesh REGIONS --divisions DIV --out-dir DIR
     --jobs N --skip-bad`` process over every region of :data:`MESH_BULK_REGIONS` (``parts``: over
     that many random parts of ``scripts/make_bulk_parts.py`` instead), timed as a whole
@@ -1100,7 +1105,9 @@ def mesh_bulk(divisions: int = 16, jobs: int = 2, parts: int = 0, ref: Path | No
     every wall time; ``cpu_s``, ``shapes_per_cpu_s``: the CPU seconds of the command and its
     workers, which other users of the machine change least). ``ref``: the same command run from
     another checkout, alternated with this one: ``ref.shapes_per_s`` and ``vs_ref`` (this rate
-    over the reference's; ``vs_ref_cpu`` the same by CPU time). Reference, same
+    over the reference's; ``vs_ref_cpu`` the same by CPU time). ``search``: the command's
+    ``--search`` (``ref_search`` the reference's, default the same; e.g. this checkout's best
+    search as the reference of its fast one). Reference, same
     run: gmsh's quasi-structured quads (:data:`MESH_GMSH`) of each region's outline at the same
     h, one after another in this process (initialised, meshed, read back each; the
     characteristic length calibrated untimed, as in :func:`mesh_case`), regions with holes left
@@ -1124,10 +1131,11 @@ def mesh_bulk(divisions: int = 16, jobs: int = 2, parts: int = 0, ref: Path | No
         walls, cpus, ref_walls, ref_cpus, recs = [], [], [], [], []
         for rep in range(max(int(reps), 1)):
             if ref is not None:
-                wall, cpu, _ = _bulk_command(Path(ref).resolve(), paths, divisions, jobs, Path(tmp) / f"ref{rep}")
+                wall, cpu, _ = _bulk_command(Path(ref).resolve(), paths, divisions, jobs, Path(tmp) / f"ref{rep}",
+                                             search if ref_search is None else ref_search)
                 ref_walls.append(wall)
                 ref_cpus.append(cpu)
-            wall, cpu, recs = _bulk_command(root, paths, divisions, jobs, Path(tmp) / f"out{rep}")
+            wall, cpu, recs = _bulk_command(root, paths, divisions, jobs, Path(tmp) / f"out{rep}", search)
             walls.append(wall)
             cpus.append(cpu)
         load1 = list(os.getloadavg())
@@ -1148,13 +1156,13 @@ def mesh_bulk(divisions: int = 16, jobs: int = 2, parts: int = 0, ref: Path | No
     per_region = sorted(r["seconds"] for r in recs if "seconds" in r)
     wall = min(walls)
     out = {"regions": len(paths), "meshed": sum(r.get("status", "meshed") == "meshed" and "error" not in r for r in recs),
-           "divisions": int(divisions), "jobs": int(jobs), "parts": int(parts), "wall_s": wall, "runs_s": walls,
+           "divisions": int(divisions), "jobs": int(jobs), "search": search, "parts": int(parts), "wall_s": wall, "runs_s": walls,
            "shapes_per_s": len(paths) / wall, "cpu_s": min(cpus), "shapes_per_cpu_s": len(paths) / min(cpus),
            "per_region_s": {"median": statistics.median(per_region), "max": per_region[-1],
                             "sum": sum(per_region)} if per_region else None,
            "load": {"before": load0, "after": load1}}
     if ref is not None:
-        out["ref"] = {"root": str(ref), "runs_s": ref_walls, "shapes_per_s": len(paths) / min(ref_walls),
+        out["ref"] = {"root": str(ref), "search": search if ref_search is None else ref_search, "runs_s": ref_walls, "shapes_per_s": len(paths) / min(ref_walls),
                       "cpu_s": min(ref_cpus), "shapes_per_cpu_s": len(paths) / min(ref_cpus)}
         out["vs_ref"] = out["shapes_per_s"] / out["ref"]["shapes_per_s"]
         out["vs_ref_cpu"] = out["shapes_per_cpu_s"] / out["ref"]["shapes_per_cpu_s"]
@@ -1248,7 +1256,7 @@ def profile_mesh(name: str, div: int, top: int = 10) -> dict:
     return {"shape": name, "div": div, "wall_s": wall, "profiled_s": st.total_tt, "top": entries(3), "top_own": entries(2)}
 
 
-def profile_bulk(parts: int, div: int = 32, top: int = 15) -> dict:
+def profile_bulk(parts: int, div: int = 32, top: int = 15, search: str = "best") -> dict:
     """The bulk path's per-part work in this one process, as a ``--jobs`` worker does it (the
     catalogue opened once, the kernels warmed, BLAS on one thread; one part meshed untimed): the
     first ``parts`` random parts of ``scripts/make_bulk_parts.py`` meshed at perimeter / ``div``
@@ -1280,21 +1288,21 @@ def profile_bulk(parts: int, div: int = 32, top: int = 15) -> dict:
     cat = jaxmatch.load_catalogue()
     warm_kernels(True)
     one_core()
-    jaxmatch.mesh(shapes[-1], divisions=div, catalogue=cat)  # (a part not measured: the code paths warm)
+    jaxmatch.mesh(shapes[-1], divisions=div, catalogue=cat, search=search)  # (a part not measured: the code paths warm)
     shapes = shapes[:-1]
     cat.cache.forget_shapes()
     meshes = []
     with _layout_losers() as layouts, _strategy_outcomes() as outcomes:
         t = time.process_time()
         for s in shapes:
-            meshes.append(jaxmatch.mesh(s, divisions=div, catalogue=cat))
+            meshes.append(jaxmatch.mesh(s, divisions=div, catalogue=cat, search=search))
             outcomes.part(meshes[-1])
         cpu = time.process_time() - t - outcomes.bound_cpu_s
     cat.cache.forget_shapes()
     prof = cProfile.Profile(time.process_time)
     prof.enable()
     for s in shapes:
-        jaxmatch.mesh(s, divisions=div, catalogue=cat)
+        jaxmatch.mesh(s, divisions=div, catalogue=cat, search=search)
     prof.disable()
     st = pstats.Stats(prof)
     per = {}
@@ -1485,12 +1493,13 @@ def main(argv=None) -> int:
                        f"({r['rss_before_mb']:.0f} MB before the call); load {r['load'][0]:.2f}", r, args.json)
     if args.mesh and args.mesh_bulk:
         r = mesh_bulk(args.mesh_bulk, args.mesh_jobs, args.mesh_bulk_parts, args.mesh_bulk_ref, args.mesh_bulk_reps,
-                      not args.mesh_bulk_no_gmsh)
-        ref = (f"; {r['ref']['root']}, same regions, alternated: {r['ref']['shapes_per_s']:.1f} shapes/s, "
+                      not args.mesh_bulk_no_gmsh, args.mesh_bulk_search, args.mesh_bulk_ref_search)
+        ref = (f"; {r['ref']['root']} (--search {r['ref']['search']}), same regions, alternated: {r['ref']['shapes_per_s']:.1f} shapes/s, "
                f"{r['ref']['cpu_s']:.1f} CPU s (vs_ref {r['vs_ref']:.2f}, by CPU time {r['vs_ref_cpu']:.2f})") if "ref" in r else ""
         gm = (f"; gmsh, same outlines one after another in one process: {r['gmsh']['shapes_per_s']:.1f} shapes/s "
               f"({r['gmsh']['regions']} regions); bulk_vs_gmsh {r['bulk_vs_gmsh']:.1f}") if "gmsh" in r else ""
-        return _report(f"bulk: {r['meshed']}/{r['regions']} regions meshed at perimeter / {r['divisions']} with --jobs "
+        return _report(f"bulk: {r['meshed']}/{r['regions']} regions meshed at perimeter / {r['divisions']} with --search "
+                       f"{r['search']} --jobs "
                        f"{r['jobs']} in {r['wall_s']:.2f} s (whole command): {r['shapes_per_s']:.1f} shapes/s, "
                        f"{r['cpu_s']:.1f} CPU s (per region "
                        f"in the workers: median {r['per_region_s']['median']:.3f} s, max {r['per_region_s']['max']:.3f} s, "
@@ -1498,7 +1507,7 @@ def main(argv=None) -> int:
                        f"{r['load']['before'][0]:.2f} -> {r['load']['after'][0]:.2f}", r, args.json)
     if args.mesh and args.mesh_bulk_profile:
         n, _, div = args.mesh_bulk_profile.partition(":")
-        r = profile_bulk(int(n), int(div or 32))
+        r = profile_bulk(int(n), int(div or 32), search=args.mesh_bulk_search)
         out = sys.stderr if args.json else sys.stdout
         print(f"bulk path, {r['parts']} random parts at perimeter / {r['div']} in one process: {r['cpu_s']:.2f} CPU s "
               f"({r['cpu_s_per_part']:.3f} s a part); under cProfile (CPU clock) {r['profiled_s']:.2f} s; load "

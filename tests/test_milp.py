@@ -24,9 +24,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import jaxmatch
-from jaxmatch.placement import milp
+from jaxmatch.placement import milp, solve
 from jaxmatch.placement.layout import layout_sides, make_layout
-from jaxmatch.placement.milp import CHORD_WEIGHT, LayoutInfeasible, solve_counts, strip_counts
+from jaxmatch.placement.milp import CHORD_WEIGHT, LayoutInfeasible, count_cost, solve_counts, strip_counts
 
 EX = Path(__file__).resolve().parent.parent / "examples"
 QUAD = np.array([[1, 0], [0, 1], [1, 0], [0, 1]])  # a quad template: opposite sides cross one chord
@@ -317,3 +317,56 @@ def test_the_side_rows_of_real_layouts_are_their_definition(recorded):
         got = np.zeros_like(dense)
         got[row, col] = val
         np.testing.assert_array_equal(got, dense)
+
+
+def _meets_the_rows(sides, matrices, mults, n, counts) -> bool:
+    """Every patch side's chords sum to the counts of the layout sides along it, requested counts
+    met, every count and multiplicity at least 1 (the program's constraints, from their definition)."""
+    for p, A in enumerate(matrices):
+        for i, ids in enumerate(sides.patch_sides[p][:np.shape(A)[0]]):
+            if int(np.asarray(A)[i] @ mults[p]) != int(np.sum(n[np.unique(np.asarray(ids, np.int64))])):
+                return False
+    return all(n[s] == c for s, c in counts.items()) and min(n) >= 1 and all(min(m) >= 1 for m in mults if len(m))
+
+
+def test_the_boxed_program_gives_an_optimum_of_the_whole_program(monkeypatch, recorded):
+    """Every count program of a few meshes (uniform and a size field's), solved by HiGHS with every
+    count bounded by ``count_box`` (the fast search's ``box``), meets the program's rows and costs
+    what the unbounded program's optimum costs (one optimum of the same program; among equally
+    good counts possibly another). The box holds the unbounded answer whenever that costs at most
+    its limit."""
+    monkeypatch.setattr(milp, "STRIPS", False)  # (every program to HiGHS)
+    calls = recorded(solve, "solve_counts", lambda: _mesh_a_few(field=True))  # (the layouts' programs)
+    assert len(calls) >= 10 and any(k.get("side_targets") is not None for _, k in calls)
+    bounded = 0
+    for a, k in calls:
+        k = {key: v for key, v in k.items() if key != "box"}
+        try:
+            free = milp.solve_counts(*a, **k)
+        except LayoutInfeasible:
+            with pytest.raises(LayoutInfeasible):
+                milp.solve_counts(*a, **k, box=True)
+            continue
+        boxed = milp.solve_counts(*a, **k, box=True)
+        sides, matrices = a[0], a[1]
+        assert _meets_the_rows(sides, matrices, *boxed, k.get("counts") or {})
+        size = k.get("size") or float(sum(sides.lengths[s] for s in k["counts"]) / sum(k["counts"].values()))
+        cost = [count_cost(sides, *r, size=size, widths=k.get("widths"), counts=k.get("counts"),
+                           side_targets=k.get("side_targets"), chord_targets=k.get("chord_targets"),
+                           chord_weight=k.get("chord_weight", CHORD_WEIGHT)) for r in (free, boxed)]
+        assert cost[1] == pytest.approx(cost[0], rel=2e-4, abs=1e-6)
+        S = len(sides.chains)
+        counts = k.get("counts") or {}
+        targets = {s: float(k["side_targets"][s]) if k.get("side_targets") is not None else float(sides.lengths[s]) / size
+                   for s in range(S) if s not in counts}
+        off = milp._chord_offsets(matrices)
+        lb = np.ones(int(off[-1]) + S)
+        ub = np.full(lb.size, np.inf)
+        for s, v in counts.items():
+            lb[off[-1] + s] = ub[off[-1] + s] = v
+        box = milp.count_box(sides, matrices, off, targets, lb, ub)
+        if box is not None and cost[0] <= box[1]:
+            x = np.concatenate([*free[0], free[1]]).astype(np.float64)
+            assert np.all(x <= box[0][:x.size]), "the box cuts off an optimum within its limit"
+            bounded += 1
+    assert bounded >= 10

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import jaxmatch
-from jaxmatch.defaults import QUALITY, Quality
+from jaxmatch.defaults import QUALITY, SEARCHES, Quality, Search
 from jaxmatch.field import Field, load_field
 from jaxmatch.meshing import strategies as S
 from jaxmatch.meshing.result import Candidate
@@ -285,3 +285,82 @@ def test_graded_single_patch_ruled_out_by_its_templates_gives_the_same_mesh(monk
     assert next(c for c in every.tried if c.name == "single").mesh is not None
     assert (m.chosen, m.rule, m.runner_up) == (every.chosen, every.rule, every.runner_up)
     assert np.array_equal(m.xy, every.xy) and np.array_equal(m.quads, every.quads)
+
+
+# ---------------------------------------------------------------------------------------------
+# the search (Search): how much of the plan runs
+
+
+def _bulk_part(i: int):
+    import importlib.util
+    import json
+    import tempfile
+
+    spec = importlib.util.spec_from_file_location("make_bulk_parts", EX.parent / "scripts" / "make_bulk_parts.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    with tempfile.TemporaryDirectory() as tmp:
+        p = Path(tmp) / f"part-{i:03d}.json"
+        p.write_text(json.dumps(mod.parts(i + 1)[i]))
+        return jaxmatch.load_shape(p)
+
+
+def test_the_default_search_is_the_best_one():
+    assert QUALITY.search == Search() == SEARCHES["best"]
+    assert QUALITY.search.layouts is None and QUALITY.search.conforming and not QUALITY.search.enough
+    shp = jaxmatch.load_shape(EX / "tshape.json")
+    a, b = jaxmatch.mesh(shp, divisions=32), jaxmatch.mesh(shp, divisions=32, search="best")
+    assert (a.chosen, a.rule) == (b.chosen, b.rule)
+    assert np.array_equal(a.xy, b.xy) and np.array_equal(a.quads, b.quads)
+
+
+@pytest.mark.parametrize("bad", ["fastest", "", "Best"])
+def test_an_unknown_search_is_refused(bad):
+    with pytest.raises(jaxmatch.InputError, match="search: expected one of best, fast"):
+        jaxmatch.mesh(jaxmatch.load_shape(EX / "tshape.json"), divisions=16, search=bad)
+
+
+@pytest.mark.parametrize("part", [0, 3, 7, 12, 18, 25])
+def test_the_fast_search_keeps_a_candidate_of_the_best_search_and_meshes_fewer(part):
+    """Every layout the fast search meshes is the candidate of that name of the whole search with
+    the same count programs (``box``), bit for bit (it only stops earlier); it meshes no more
+    candidates, no further layout once one reaches the quality floor, and its mesh is valid with
+    every corner."""
+    shp = _bulk_part(part)
+    best = jaxmatch.mesh(shp, divisions=32, search=Search("boxed", box=True))
+    fast = jaxmatch.mesh(shp, divisions=32, search="fast")
+    exact = {c.name: c.mesh for c in best.tried if c.mesh is not None}
+    made = [c for c in fast.tried if c.mesh is not None]
+    assert fast.valid and len(fast.missed_corners) == 0
+    assert 1 <= len(made) <= len(exact)
+    layouts = {st.name for st in S.layout_strategies(("single",) + STRATEGIES)}
+    for c in made:
+        if c.name in layouts:
+            assert np.array_equal(c.mesh.xy, exact[c.name].xy) and np.array_equal(c.mesh.quads, exact[c.name].quads)
+    first = [c for c in fast.tried if c.name in layouts]
+    good = [i for i, c in enumerate(first) if c.mesh is not None and c.mesh.valid
+            and c.mesh.min_scaled_jacobian >= QUALITY.good_sj]
+    skipped = [c for c in first if c.note.startswith("not tried: the fast search")]
+    assert good or not skipped  # the cap waits for a mesh at the floor
+    if skipped:
+        assert sum(c.mesh is not None for c in first) >= 1
+
+
+def test_the_fast_search_skips_the_conforming_templates_and_stops_at_a_good_mesh(monkeypatch):
+    """With ``conforming`` off the conforming templates are never asked for; with ``enough`` a
+    plan ends at a valid, size-conforming mesh in the quality band (no ring partition after it),
+    and without it the same request goes on."""
+    asked = []
+    monkeypatch.setattr(S, "conforming_templates", lambda *a, **k: asked.append(1) or [])
+    shp = jaxmatch.load_shape(EX / "lshape.json")
+    jaxmatch.mesh(shp, divisions=32, search=Search("no-conforming", conforming=False))
+    assert not asked
+    rings = []
+    orig = S.RingPartition.candidates
+    monkeypatch.setattr(S.RingPartition, "candidates", lambda self, req, tried: rings.append(1) or orig(self, req, tried))
+    monkeypatch.setattr(S.RingPartition, "wanted", lambda self, best, tried, req: True)
+    full = jaxmatch.mesh(shp, divisions=32, search=Search("all"))
+    assert rings and full.valid and full.min_scaled_jacobian >= QUALITY.high_sj and full.size_conformity() == 0
+    rings.clear()
+    jaxmatch.mesh(shp, divisions=32, search=Search("enough", enough=True))
+    assert not rings

@@ -36,7 +36,7 @@ from typing import Callable, Mapping, Sequence
 import numpy as np
 
 from jaxmatch.autosize import auto_field
-from jaxmatch.defaults import DEFAULT_LATTICE, QUALITY, Quality
+from jaxmatch.defaults import DEFAULT_LATTICE, QUALITY, SEARCHES, Quality, Search
 from jaxmatch.errors import InputError
 from jaxmatch.field import CallableSize, Field, SizeField, bind, outline_size
 from jaxmatch.meshing.build import from_layout, from_placement, from_refined
@@ -45,7 +45,7 @@ from jaxmatch.meshing.groups import make_periodic, name_groups, periodic_mismatc
 from jaxmatch.meshing.grading import follow_field
 from jaxmatch.meshing.region import canonical, corner_points, default_size, load_region
 from jaxmatch.meshing.result import Candidate, QuadMesh
-from jaxmatch.meshing.strategies import (RINGS, SINGLE, Bends, Conforming, Larger, Layouts, LeanCurves, Request, RingPartition,
+from jaxmatch.meshing.strategies import (RINGS, SINGLE, Bends, Conforming, Enough, Larger, Layouts, LeanCurves, Request, RingPartition,
                                          Rings, Smooth, Transitions, layout_strategies, run)
 from jaxmatch.inputs import _lattice, check_sizes, load_catalogue
 from jaxmatch.lazy import Later
@@ -105,7 +105,7 @@ def mesh(region=None, *, regions=None, size: float | None = None, divisions: int
          catalogue=None, lattice=DEFAULT_LATTICE, strategies: Sequence[str] | None = None,
          quality: Quality = QUALITY, corner_angle: float = DEFAULT_CORNER_ANGLE, budget_s: float | None = None,
          progress: Callable[[int, int, str], None] | None = None, auto_size: bool = False,
-         **template_options) -> QuadMesh:
+         search: str | Search | None = None, **template_options) -> QuadMesh:
     """Mesh a region: the one front door.
 
     Args:
@@ -135,6 +135,9 @@ def mesh(region=None, *, regions=None, size: float | None = None, divisions: int
       catalogue, lattice: None / a path / the object (default: shipped catalogue, ``"fine"``).
       strategies: candidate names (default all of :func:`strategy_names`).
       quality: the policy (:class:`jaxmatch.defaults.Quality`).
+      search: how much of the candidate search runs: ``"best"`` (every candidate that could win),
+        ``"fast"`` (stops earlier, at some cost in quality: docs/perf.md) or a
+        :class:`~jaxmatch.defaults.Search`; default ``quality.search`` (the best).
       budget_s: stop trying further candidates after this many seconds once one valid mesh exists.
       progress: ``progress(done, total, name)`` after each candidate.
 
@@ -146,6 +149,8 @@ def mesh(region=None, *, regions=None, size: float | None = None, divisions: int
       InputError: a bad request (unreadable file, bad size, counts no template meets: the
         message names the nearest feasible counts), or no candidate could be meshed.
     """
+    if search is not None:
+        quality = replace(quality, search=_search(search))
     if regions is not None:
         if region is not None:
             raise InputError("give region or regions, not both")
@@ -195,6 +200,16 @@ def mesh(region=None, *, regions=None, size: float | None = None, divisions: int
         return _mesh_sides(region, cat, lat, sides, quality)
     h = size if size is not None else default_size(region)
     return _mesh_size(region, cat, lat, h, strategies, quality, budget_s, progress, corner_angle)
+
+
+def _search(search) -> Search:
+    """The :class:`~jaxmatch.defaults.Search` named (:data:`~jaxmatch.defaults.SEARCHES`) or given.
+    Raises :class:`InputError` for an unknown name."""
+    if isinstance(search, Search):
+        return search
+    if search not in SEARCHES:
+        raise InputError(f"expected one of {', '.join(SEARCHES)}, got {search!r}", "search")
+    return SEARCHES[search]
 
 
 def _divisions_size(region, divisions) -> float | None:
@@ -295,13 +310,16 @@ def _mesh_size(shape, cat, lat, h, strategies, quality, budget_s, progress, corn
             finer = canonical(shape, h, corner_angle, held_angle=corner_angle)
             return None if np.array_equal(finer.corners, region.corners) else finer
 
+        search = quality.search
+        enough = (Enough(),) if search.enough else ()
         if quality.field is None:
             lean = LeanCurves(layouts.strategies + ((Rings(),) if rings else ()))
             trans = (Transitions(lean.strategies),) if quality.uniform_transitions else ()
-            plan = (layouts, Larger(), Conforming()) + rings + (lean,) + trans + (Bends(layouts, rejudge),)
+            conforming = (Conforming(),) if search.conforming else ()
+            plan = (layouts,) + enough + (Larger(),) + conforming + rings + (lean,) + trans + (Bends(layouts, rejudge),)
         else:  # graded: the ring partition before the larger templates, tried only if it too misses the field
             trans = Transitions(layouts.strategies + ((Rings(),) if rings else ()))
-            plan = (layouts,) + rings + (trans, Larger(), Bends(layouts, rejudge))
+            plan = (layouts,) + enough + rings + (trans, Larger(), Bends(layouts, rejudge))
     tried = run(plan, req)
     if region.periodic:  # a candidate whose periodic sides got different counts (no equal-count program) is out
         tried = [c if c.mesh is None or not periodic_mismatch(c.mesh, region) else

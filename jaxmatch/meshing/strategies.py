@@ -25,6 +25,8 @@ strategy                candidates                                              
                                                                                          miss; one size only with
                                                                                          uniform_transitions)
 :class:`Bends`          the layouts again with a curved outline's bends as corners        every candidate folds
+:class:`Enough`         not a candidate: ends the plan (the fast search,                  the best is valid, conforms
+                        :attr:`~jaxmatch.defaults.Search.enough`)                         and reaches the band
 :class:`Smooth`         a region with fewer than two corners: a refined template and the  (its own plan)
                         central block (``"disk"``)
 ======================= ================================================================= ===========================
@@ -61,7 +63,7 @@ from jaxmatch.placement.templates import walk
 from jaxmatch.shape import Shape
 from jaxmatch.sides import periodic_lines
 
-__all__ = ["CONFORMING_TRIES", "DISK", "FINER", "LEAN", "RINGS", "SINGLE", "Bends", "Conforming", "Larger", "LayoutStrategy",
+__all__ = ["CONFORMING_TRIES", "DISK", "Enough", "FINER", "LEAN", "RINGS", "SINGLE", "Bends", "Conforming", "Larger", "LayoutStrategy",
            "Layouts", "LeanCurves", "TRANSITIONS", "Transitions", "has_curves",
            "Request", "RingPartition", "Rings", "Single", "Smooth", "Split", "conforming_templates", "larger_templates", "layout_strategies", "run",
            "smooth_candidates", "try_layouts"]
@@ -107,7 +109,9 @@ def try_layouts(shape: Shape, strategies: Sequence["LayoutStrategy"], cat, lat, 
     split, and for the single patch :func:`~jaxmatch.placement.bounds.single_sj_bound` from its
     template sizes and, with a size field, :func:`~jaxmatch.placement.bounds.template_sj_bound`
     from its candidate templates' corners and internal vertices) is not meshed, so the choice is
-    the one meshing all of them would give. A strategy whose cuts or solve fail for any reason is
+    the one meshing all of them would give. With a search that caps them (``quality.search.layouts``,
+    :class:`~jaxmatch.defaults.Search`), no further layout is meshed once that many are and one
+    is valid and reaches ``quality.good_sj``. A strategy whose cuts or solve fail for any reason is
     skipped with that reason. ``lean_curves``:
     the solve's curve floors from the curved sides' share alone
     (:func:`~jaxmatch.placement.solve.mesh_layout`); ``transitions``: templates chosen for size
@@ -148,6 +152,7 @@ def try_layouts(shape: Shape, strategies: Sequence["LayoutStrategy"], cat, lat, 
         except FAILED:  # (a layout its checks refuse: the solve below says why)
             caps[i] = 1.0
     order = sorted(layouts, key=lambda il: (il[0] in late, best_possible_key(il[1].n_patches, il[0], caps[il[0]], quality)))
+    most, meshed, floor_met = quality.search.layouts, 0, False  # (the fast search: Search.layouts)
     for done, (i, lay) in enumerate(order, start=1):
         label = names[i] + suffix
         sizes = strategies[i].sizes
@@ -171,6 +176,9 @@ def try_layouts(shape: Shape, strategies: Sequence["LayoutStrategy"], cat, lat, 
                                  if not cannot_win(best[0], lay.n_patches, i, 1.0, quality) else
                                  f"{lay.n_patches} patches cannot beat {best[1]}",
                                  best_possible_key(lay.n_patches, i, bound, quality))
+        elif most is not None and meshed >= most and floor_met:
+            tried[i] = Candidate(label, None, f"not tried: the {quality.search.name} search meshes at most {most} "
+                                 f"layout{'s' if most > 1 else ''} once one reaches min scaled Jacobian {quality.good_sj:g}")
         elif budget_s is not None and time.perf_counter() - t0 > budget_s and best is not None and best[2]:
             tried[i] = Candidate(label, None, f"not tried: time budget of {budget_s:g} s spent")
         else:
@@ -183,6 +191,8 @@ def try_layouts(shape: Shape, strategies: Sequence["LayoutStrategy"], cat, lat, 
             else:
                 m = from_layout(lm, size=h, corners=corners, field=quality.field)
                 tried[i] = Candidate(label, m)
+                meshed += 1
+                floor_met = floor_met or (m.valid and m.min_scaled_jacobian >= quality.good_sj)
                 key = mesh_key(m, i, quality)
                 if best is None or key < best[0]:
                     best = (key, label, m.valid)
@@ -483,11 +493,27 @@ def _best(tried, quality: Quality) -> QuadMesh | None:
     return tried[kept[1]].mesh if kept else None
 
 
+class Enough:
+    """Not a candidate: the end of the plan (:func:`run` stops here) when the search stops at a
+    good enough mesh (:attr:`jaxmatch.defaults.Search.enough`) and the best mesh so far is valid,
+    conforms to the size and reaches the quality band (``Quality.high_sj``)."""
+
+    ends = True
+
+    def wanted(self, best: QuadMesh | None, tried, req: Request) -> bool:
+        q = req.quality
+        return best is not None and best.valid and best.size_conformity(q) == 0 and best.min_scaled_jacobian >= q.high_sj
+
+    def candidates(self, req: Request, tried) -> list[Candidate]:
+        return []
+
+
 def run(plan: Sequence, req: Request) -> list[Candidate]:
     """Every strategy of ``plan`` whose condition on the best mesh so far holds
     (``wanted(best, tried, req)``), in order; the candidates of a strategy marked
     ``after_single`` (:class:`Larger`, :class:`Conforming`) go right after the single candidate (single, conforming, larger, the
-    decompositions, the bends), the others at the end. Returns every candidate, for the one
+    decompositions, the bends), the others at the end; a strategy marked ``ends``
+    (:class:`Enough`) whose condition holds ends the plan. Returns every candidate, for the one
     choice (:func:`~jaxmatch.meshing.choose.choose`)."""
     tried: list[Candidate] = []
     for st in plan:
@@ -496,6 +522,8 @@ def run(plan: Sequence, req: Request) -> list[Candidate]:
             continue  # nothing meshed: no condition on a best mesh can be judged
         if not st.wanted(best, tried, req):
             continue
+        if getattr(st, "ends", False):
+            break
         more = st.candidates(req, tried)
         if getattr(st, "after_single", False):
             at = next((i + 1 for i, c in enumerate(tried) if c.name == SINGLE), 1)

@@ -13,9 +13,9 @@ import numpy as np
 
 from jaxmatch.errors import InputError, SolverError
 
-__all__ = ["CHORD_WEIGHT", "Choice", "FEASIBILITY_JUMP", "LayoutInfeasible", "MILP_TIME_LIMIT", "OneSides", "PASS_ARRAYS", "SparseRows",
+__all__ = ["BOX_SLACK", "CHORD_WEIGHT", "Choice", "FEASIBILITY_JUMP", "LayoutInfeasible", "MILP_TIME_LIMIT", "OneSides", "PASS_ARRAYS", "SparseRows",
            "STRIPS", "STRIP_FREE", "STRIP_MARGIN", "STRIP_POINTS", "one_patch_sides", "count_cost", "counts_feasible", "run_milp",
-           "solve_choice", "solve_counts", "strip_counts"]
+           "count_box", "solve_choice", "solve_counts", "strip_counts"]
 
 
 class LayoutInfeasible(InputError):
@@ -59,7 +59,7 @@ def solve_counts(sides, matrices: Sequence[np.ndarray], *, counts: Mapping[int, 
                  size: float | None = None, widths: Sequence[np.ndarray] | None = None,
                  source: str = "<layout>", floors: np.ndarray | None = None,
                  chord_weight: float = CHORD_WEIGHT, equal: Sequence = (), side_targets: np.ndarray | None = None,
-                 chord_targets: Sequence[np.ndarray] | None = None) -> tuple[list[np.ndarray], np.ndarray]:
+                 chord_targets: Sequence[np.ndarray] | None = None, box: bool = False) -> tuple[list[np.ndarray], np.ndarray]:
     """Chord multiplicities of every patch from ONE integer program (``scipy.optimize.milp``).
 
     matrices: per patch ``(n_p, c_p) int64`` side matrix (edges of chord ``c`` on the patch's
@@ -70,7 +70,9 @@ def solve_counts(sides, matrices: Sequence[np.ndarray], *, counts: Mapping[int, 
     ``(side ids A, side ids B)`` whose total counts must be equal (periodic sides: a side of
     the input may be several layout sides where cuts end on it); side_targets, chord_targets: a
     size field's targets instead of ``length_s / size`` (``(S,)``, the integral of 1 / size along
-    each side) and ``width_c / size`` (per patch ``(c_p,)``).
+    each side) and ``width_c / size`` (per patch ``(c_p,)``); box: first solve with every count
+    bounded by :func:`count_box` (an optimum all the same, HiGHS much faster on large programs,
+    but of equally good counts possibly another one than without).
 
     Variables: ``m_p >= 1`` integer per patch and chord, ``n_s >= 1`` integer per side.
     Constraints: ``A_p[i] @ m_p = sum of n_s over the layout sides along patch side i`` for
@@ -133,7 +135,14 @@ def solve_counts(sides, matrices: Sequence[np.ndarray], *, counts: Mapping[int, 
         for s, v in fixed.items():
             lb[M + s] = ub[M + s] = float(v)
         integrality = np.concatenate([np.ones(M + S), np.zeros(T + M)])
-        x = run_milp(cost, A, lo, hi, integrality, lb, ub)
+        x = None
+        top = count_box(sides, matrices, off, targets, lb, ub) if box else None
+        if top is not None:  # (an answer within the box's cost limit is an optimum of the whole program)
+            x = run_milp(cost, A, lo, hi, integrality, lb, top[0])
+            if x is not None and not float(cost @ x) <= top[1]:
+                x = None
+        if x is None:
+            x = run_milp(cost, A, lo, hi, integrality, lb, ub)
         if x is None:
             return None
         x = np.rint(x).astype(np.int64)
@@ -159,6 +168,37 @@ def solve_counts(sides, matrices: Sequence[np.ndarray], *, counts: Mapping[int, 
     raise LayoutInfeasible(f"the requested edge counts cannot be met together ({detail}; every patch needs an even "
                            "number of boundary edges, and both ends of a strip of quads get the same count)",
                            where=source, nearest=nearest)
+
+
+BOX_SLACK = (3.0, 10.0)
+"""``(a, b)``: the box of :func:`count_box` holds every solution of :func:`solve_counts`' program
+costing at most ``a * T + b`` (``T`` sides with a target)."""
+
+
+def count_box(sides, matrices: Sequence[np.ndarray], off: np.ndarray, targets: Mapping[int, float], lb: np.ndarray,
+              ub: np.ndarray) -> tuple[np.ndarray, float] | None:
+    """``(upper bounds (n,), cost limit)``: finite upper bounds on the counts and multiplicities of
+    :func:`solve_counts`' program (its columns: ``M`` multiplicities, ``S`` side counts, then the
+    deviations; ``lb``, ``ub`` its bounds, ``off`` :func:`_chord_offsets`) that every solution
+    costing at most the limit meets: a side more than the limit off its target costs more, and a
+    chord has at most as many edges as the sides along a patch side it crosses. None where a
+    side without a target has no upper bound. HiGHS fixes columns by their reduced costs over
+    up to 1,024 values each when a column has no upper bound: the box spares most of that."""
+    M, S = int(off[-1]), len(sides.chains)
+    limit = BOX_SLACK[0] * len(targets) + BOX_SLACK[1]
+    top = np.array(ub, np.float64)
+    for s, t in targets.items():
+        top[M + s] = max(math.floor(t + limit), lb[M + s])
+    most = top[M:M + S]
+    if not np.all(np.isfinite(most)):
+        return None
+    for p, A in enumerate(matrices):
+        A = np.asarray(A)
+        for i, ids in enumerate(sides.patch_sides[p][:A.shape[0]]):
+            cap = float(np.sum(most[np.unique(np.asarray(ids, np.int64).ravel())]))
+            for c in np.flatnonzero(A[i]):
+                top[off[p] + c] = min(top[off[p] + c], math.floor(cap / A[i, c]))
+    return top, limit
 
 
 STRIPS = True

@@ -240,17 +240,20 @@ def patch_shapes_kept(layout: Layout, catalogue: Catalogue, lkey: tuple | None =
 
 
 def _solve_counts_cached(layout: Layout, sides: Sides, matrices, want, size, widths, floors, cache: Cache,
-                         lkey: tuple, equal: tuple = (), side_targets=None, chord_targets=None):
+                         lkey: tuple, equal: tuple = (), side_targets=None, chord_targets=None, box: bool = False):
     """:func:`solve_counts` of ``layout`` (whose ``sides`` these are, ``lkey`` its
-    :func:`layout_key`), from ``cache`` (store ``solves``) when the same program was solved
-    before; fresh copies of the arrays either way."""
+    :func:`layout_key`; ``box`` as there), from ``cache`` (store ``solves``) when the same program
+    was solved before; fresh copies of the arrays either way."""
     k = (lkey,) + cache_key(matrices, {int(a): int(b) for a, b in want.items()}, None if size is None else float(size),
                             widths, floors) + ((equal,) if equal else ())
     if side_targets is not None:  # a size field's targets (uniform sizes: the key as it was)
         k = k + cache_key(side_targets, chord_targets)
+    if box:
+        k = k + ("box",)
     mults, n = cache.get("solves", k, lambda: solve_counts(sides, matrices, counts=want, size=size, widths=widths,
                                                           source=layout.source, floors=floors, equal=equal,
-                                                          side_targets=side_targets, chord_targets=chord_targets),
+                                                          side_targets=side_targets, chord_targets=chord_targets,
+                                                          box=box),
                          keep_errors=(InputError, LayoutInfeasible))
     return [np.array(m) for m in mults], np.array(n)
 
@@ -394,7 +397,8 @@ def _rounds(layout: Layout, sides: Sides, shapes, cands, moved, choice: list, wa
         try:
             mults, n = _solve_counts_cached(layout, sides, [t.side_matrix() for t in tmpl], want, size,
                                             [t.chord_widths() for t in tmpl], floors, cache, lkey, equal, side_targets,
-                                            None if side_targets is None else [_chord_targets(t, f) for t in tmpl])
+                                            None if side_targets is None else [_chord_targets(t, f) for t in tmpl],
+                                            quality.search.box)
         except LayoutInfeasible:
             if not _advance_for_feasibility(sides, cands, choice, want, size, layout.source, equal,
                                             None if side_targets is None else f, side_targets):
