@@ -364,7 +364,7 @@ def test_the_boxed_program_gives_an_optimum_of_the_whole_program(monkeypatch, re
         ub = np.full(lb.size, np.inf)
         for s, v in counts.items():
             lb[off[-1] + s] = ub[off[-1] + s] = v
-        box = milp.count_box(sides, matrices, off, targets, lb, ub)
+        box = milp.count_box(milp._side_rows(sides, matrices, k.get("equal", ())), int(off[-1]), S, targets, lb, ub)
         if box is not None and cost[0] <= box[1]:
             x = np.concatenate([*free[0], free[1]]).astype(np.float64)
             assert np.all(x <= box[0][:x.size]), "the box cuts off an optimum within its limit"

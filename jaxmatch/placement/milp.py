@@ -136,7 +136,7 @@ def solve_counts(sides, matrices: Sequence[np.ndarray], *, counts: Mapping[int, 
             lb[M + s] = ub[M + s] = float(v)
         integrality = np.concatenate([np.ones(M + S), np.zeros(T + M)])
         x = None
-        top = count_box(sides, matrices, off, targets, lb, ub) if box else None
+        top = count_box(rows[0], M, S, targets, lb, ub) if box else None
         if top is not None:  # (an answer within the box's cost limit is an optimum of the whole program)
             x = run_milp(cost, A, lo, hi, integrality, lb, top[0])
             if x is not None and not float(cost @ x) <= top[1]:
@@ -175,29 +175,29 @@ BOX_SLACK = (3.0, 10.0)
 costing at most ``a * T + b`` (``T`` sides with a target)."""
 
 
-def count_box(sides, matrices: Sequence[np.ndarray], off: np.ndarray, targets: Mapping[int, float], lb: np.ndarray,
+def count_box(rows, M: int, S: int, targets: Mapping[int, float], lb: np.ndarray,
               ub: np.ndarray) -> tuple[np.ndarray, float] | None:
     """``(upper bounds (n,), cost limit)``: finite upper bounds on the counts and multiplicities of
     :func:`solve_counts`' program (its columns: ``M`` multiplicities, ``S`` side counts, then the
-    deviations; ``lb``, ``ub`` its bounds, ``off`` :func:`_chord_offsets`) that every solution
-    costing at most the limit meets: a side more than the limit off its target costs more, and a
-    chord has at most as many edges as the sides along a patch side it crosses. None where a
-    side without a target has no upper bound. HiGHS fixes columns by their reduced costs over
-    up to 1,024 values each when a column has no upper bound: the box spares most of that."""
-    M, S = int(off[-1]), len(sides.chains)
+    deviations; ``rows`` its patch sides' rows, :func:`_side_rows`; ``lb``, ``ub`` its bounds)
+    that every solution costing at most the limit meets: a side more than the limit off its
+    target costs more, and a chord has at most as many edges as the sides along a patch side it
+    crosses. None where a side without a target has no upper bound. HiGHS fixes columns by their
+    reduced costs over up to 1,024 values each when a column has no upper bound: the box spares
+    most of that."""
+    row, col, val, n0 = rows
     limit = BOX_SLACK[0] * len(targets) + BOX_SLACK[1]
     top = np.array(ub, np.float64)
-    for s, t in targets.items():
-        top[M + s] = max(math.floor(t + limit), lb[M + s])
+    t = M + np.fromiter(targets.keys(), np.int64, len(targets))
+    top[t] = np.maximum(np.floor(np.fromiter(targets.values(), np.float64, len(targets)) + limit), lb[t])
     most = top[M:M + S]
     if not np.all(np.isfinite(most)):
         return None
-    for p, A in enumerate(matrices):
-        A = np.asarray(A)
-        for i, ids in enumerate(sides.patch_sides[p][:A.shape[0]]):
-            cap = float(np.sum(most[np.unique(np.asarray(ids, np.int64).ravel())]))
-            for c in np.flatnonzero(A[i]):
-                top[off[p] + c] = min(top[off[p] + c], math.floor(cap / A[i, c]))
+    side = (col >= M) & (val < 0)  # (a patch side's layout sides; the rows of equal pairs have no chords)
+    cap = np.zeros(n0)
+    np.add.at(cap, row[side], most[col[side] - M])
+    chord = col < M
+    np.minimum.at(top, col[chord], np.floor(cap[row[chord]] / val[chord]))
     return top, limit
 
 
