@@ -367,3 +367,15 @@ def test_dask_unreachable_is_one_line(cli, tmp_path):
                        "--dask", "tcp://127.0.0.1:9", *MSH)
     assert code == EXIT_BAD_INPUT and "--dask" in err and "cannot reach a Dask scheduler" in err
     assert len(err.strip().splitlines()) == 1
+
+
+def test_the_options_hash_covers_the_search_and_automatic_sizing():
+    """A run with ``--search fast`` or ``--auto-size`` is not resumed from one without (their meshes
+    differ); the best search named or not, and no automatic sizing, hash as before."""
+    writing = cli_mod.MeshOutput(None, "4.1", True, None, 1, False, None, 1, 1.0)
+    base = {"size": None, "divisions": 32, "strategies": None, "budget_s": 60.0, "catalogue": None, "lattice": "fine"}
+    h = batch.options_hash(base, writing, 30.0)
+    assert batch.options_hash({**base, "search": "best"}, writing, 30.0) == h
+    assert batch.options_hash({**base, "auto_size": False}, writing, 30.0) == h
+    fast, auto = (batch.options_hash({**base, **extra}, writing, 30.0) for extra in ({"search": "fast"}, {"auto_size": True}))
+    assert len({h, fast, auto}) == 3

@@ -270,3 +270,21 @@ def test_annotate_loads_no_solver(cli_then):
                        capture_output=True, text=True, cwd=ROOT, timeout=300)
     assert r.returncode == 0, r.stderr
     assert r.stdout.rstrip().splitlines()[-1] == "[]", r.stdout
+
+
+@pytest.mark.parametrize("args, where", [(["--search", "fastest"], "--search"),
+                                         (["--search", "fast", "--template"], "--search")])
+def test_mesh_search_refused_is_one_line(cli, args, where):
+    code, stdout, err = cli("mesh", STAIRS, *args)
+    assert code == EXIT_BAD_INPUT and where in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
+
+
+def test_mesh_search_fast_meshes_and_says_what_it_skipped(cli, tmp_path):
+    """``--search fast``: a valid mesh, and the layouts left out are named with the reason."""
+    code, stdout, err = cli("mesh", STAIRS, "--divisions", "32", "--search", "fast", "--json")
+    d = json.loads(stdout)
+    assert code == 0 and d["inverted"] == 0 and d["missed_corners"] == 0
+    skipped = [c["name"] for c in d["candidates"] if c["note"].startswith("not tried: the fast search meshes at most 1 layout")]
+    assert skipped and d["chosen"] not in skipped
+    code, stdout, err = cli("mesh", STAIRS, "--divisions", "32", "--search", "best", "--json")
+    assert code == 0 and not any(c["note"].startswith("not tried") for c in json.loads(stdout)["candidates"])
