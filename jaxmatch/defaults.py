@@ -46,7 +46,8 @@ class Search:
     name: ``"best"`` (the default: every candidate that could win is meshed, so the mesh is the
         one the choice rule picks among all of them) or ``"fast"``.
     layouts: at most this many layouts are meshed (the most promising first) once one of them
-        is valid and reaches :attr:`Quality.good_sj`; None: every layout that could win.
+        is valid and reaches :attr:`Quality.good_sj` (with a size field: and follows it; else the
+        ring partition and the transitions would run after it); None: every layout that could win.
     conforming: whether the single templates whose side counts follow the size are tried
         (:class:`jaxmatch.meshing.strategies.Conforming`).
     enough: after the layouts, stop at a best mesh that is valid, conforms to the size and

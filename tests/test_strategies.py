@@ -364,3 +364,16 @@ def test_the_fast_search_skips_the_conforming_templates_and_stops_at_a_good_mesh
     rings.clear()
     jaxmatch.mesh(shp, divisions=32, search=Search("enough", enough=True))
     assert not rings
+
+
+@pytest.mark.parametrize("name", ["lshape", "plate-hole"])
+def test_the_fast_search_of_a_graded_mesh_waits_for_a_layout_that_follows_the_field(name):
+    """With a size field the fast search caps the layouts only once one is valid, reaches the
+    quality floor and follows the field (a layout that misses it would send the request on to
+    the ring partition and the transitions): here the first such layout is the whole search's
+    choice, so both give the same mesh."""
+    shp = jaxmatch.load_shape(EX / "graded" / f"{name}.json")
+    field = load_field(EX / "graded" / f"{name}.field.json")
+    best, fast = jaxmatch.mesh(shp, size=field), jaxmatch.mesh(shp, size=field, search="fast")
+    assert (fast.chosen, fast.rule) == (best.chosen, best.rule)
+    assert np.array_equal(fast.xy, best.xy) and np.array_equal(fast.quads, best.quads)

@@ -111,7 +111,7 @@ def try_layouts(shape: Shape, strategies: Sequence["LayoutStrategy"], cat, lat, 
     from its candidate templates' corners and internal vertices) is not meshed, so the choice is
     the one meshing all of them would give. With a search that caps them (``quality.search.layouts``,
     :class:`~jaxmatch.defaults.Search`), no further layout is meshed once that many are and one
-    is valid and reaches ``quality.good_sj``. A strategy whose cuts or solve fail for any reason is
+    is valid and reaches ``quality.good_sj`` (with a size field: and follows it). A strategy whose cuts or solve fail for any reason is
     skipped with that reason. ``lean_curves``:
     the solve's curve floors from the curved sides' share alone
     (:func:`~jaxmatch.placement.solve.mesh_layout`); ``transitions``: templates chosen for size
@@ -192,7 +192,8 @@ def try_layouts(shape: Shape, strategies: Sequence["LayoutStrategy"], cat, lat, 
                 m = from_layout(lm, size=h, corners=corners, field=quality.field)
                 tried[i] = Candidate(label, m)
                 meshed += 1
-                floor_met = floor_met or (m.valid and m.min_scaled_jacobian >= quality.good_sj)
+                floor_met = floor_met or (m.valid and m.min_scaled_jacobian >= quality.good_sj and  # (graded: and follows
+                                          (quality.field is None or m.size_conformity(quality) == 0))  # the field)
                 key = mesh_key(m, i, quality)
                 if best is None or key < best[0]:
                     best = (key, label, m.valid)
