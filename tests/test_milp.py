@@ -370,3 +370,14 @@ def test_the_boxed_program_gives_an_optimum_of_the_whole_program(monkeypatch, re
             assert np.all(x <= box[0][:x.size]), "the box cuts off an optimum within its limit"
             bounded += 1
     assert bounded >= 10
+
+
+@pytest.mark.parametrize("above, boxed", [(0, True), (10**9, False)])
+def test_programs_larger_than_box_above_are_boxed_in_every_search(monkeypatch, recorded, above, boxed):
+    """``BOX_ABOVE``: a program of more columns is boxed without being asked (``box=False``); a
+    smaller one only when asked."""
+    monkeypatch.setattr(milp, "STRIPS", False)
+    monkeypatch.setattr(milp, "BOX_ABOVE", above)
+    lay, sd = grid([1.0, 2.0], [1.0, 0.5])
+    calls = recorded(milp, "count_box", lambda: solve_counts(sd, [QUAD] * 4, size=0.25))
+    assert bool(calls) == boxed
