@@ -48,8 +48,8 @@ class Search:
     layouts: at most this many layouts are meshed (the most promising first) once one of them
         is valid and reaches :attr:`Quality.good_sj` (with a size field: and follows it; else the
         ring partition and the transitions would run after it); None: every layout that could win.
-    conforming: whether the single templates whose side counts follow the size are tried
-        (:class:`jaxmatch.meshing.strategies.Conforming`).
+    leave_out: the strategies of the plan not run, by class name
+        (:mod:`jaxmatch.meshing.strategies`: ``"Conforming"``, ``"Larger"``, ``"LeanCurves"``, ...).
     enough: after the layouts, stop at a best mesh that is valid, conforms to the size and
         reaches :attr:`Quality.high_sj` (no ring partition, no leaner curves, no bends).
     box: the layouts' count programs are first solved with every count bounded
@@ -59,12 +59,13 @@ class Search:
 
     name: str = "best"
     layouts: int | None = None
-    conforming: bool = True
+    leave_out: tuple = ()
     enough: bool = False
     box: bool = False
 
 
-SEARCHES = {"best": Search(), "fast": Search("fast", layouts=1, conforming=False, enough=True, box=True)}
+SEARCHES = {"best": Search(), "fast": Search("fast", layouts=1, leave_out=("Conforming", "Larger", "LeanCurves"), enough=True,
+                                           box=True)}
 """The searches by name (``--search``). ``"fast"``: what it gives up, measured on 300 random
 parts and the 50 benchmark cases, is in docs/perf.md ("The fast search")."""
 

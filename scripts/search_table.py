@@ -15,7 +15,7 @@ the mean and lowest min scaled Jacobian, the mean of the mean scaled Jacobians, 
 vertices in all, the share of edges within [0.5, 1.5] h, and against the first search's mesh of
 the same region: how many lose more than 0.05 of min scaled Jacobian, how many gain more, and
 the largest loss. ``--variant NAME:FIELD=VALUE,...`` adds a search made of
-:class:`jaxmatch.defaults.Search` fields (e.g. ``--variant k2:layouts=2,conforming=false``).
+:class:`jaxmatch.defaults.Search` fields (e.g. ``--variant k2:layouts=2,leave_out=Conforming/LeanCurves``; ``leave_out``'s names joined by ``/``).
 """
 
 from __future__ import annotations
@@ -58,7 +58,10 @@ def variant(text: str) -> Search:
     for item in filter(None, fields.split(",")):
         key, _, value = item.partition("=")
         low = value.strip().lower()
-        kw[key.strip()] = None if low == "none" else (low == "true") if low in ("true", "false") else int(value)
+        if key.strip() == "leave_out":
+            kw["leave_out"] = tuple(v for v in value.split("/") if v)
+        else:
+            kw[key.strip()] = None if low == "none" else (low == "true") if low in ("true", "false") else int(value)
     return Search(name, **kw)
 
 

@@ -307,7 +307,7 @@ def _bulk_part(i: int):
 
 def test_the_default_search_is_the_best_one():
     assert QUALITY.search == Search() == SEARCHES["best"]
-    assert QUALITY.search.layouts is None and QUALITY.search.conforming and not QUALITY.search.enough
+    assert QUALITY.search.layouts is None and not QUALITY.search.leave_out and not QUALITY.search.enough
     shp = jaxmatch.load_shape(EX / "tshape.json")
     a, b = jaxmatch.mesh(shp, divisions=32), jaxmatch.mesh(shp, divisions=32, search="best")
     assert (a.chosen, a.rule) == (b.chosen, b.rule)
@@ -347,13 +347,13 @@ def test_the_fast_search_keeps_a_candidate_of_the_best_search_and_meshes_fewer(p
 
 
 def test_the_fast_search_skips_the_conforming_templates_and_stops_at_a_good_mesh(monkeypatch):
-    """With ``conforming`` off the conforming templates are never asked for; with ``enough`` a
+    """With ``Conforming`` left out the conforming templates are never asked for; with ``enough`` a
     plan ends at a valid, size-conforming mesh in the quality band (no ring partition after it),
     and without it the same request goes on."""
     asked = []
     monkeypatch.setattr(S, "conforming_templates", lambda *a, **k: asked.append(1) or [])
     shp = jaxmatch.load_shape(EX / "lshape.json")
-    jaxmatch.mesh(shp, divisions=32, search=Search("no-conforming", conforming=False))
+    jaxmatch.mesh(shp, divisions=32, search=Search("no-conforming", leave_out=("Conforming",)))
     assert not asked
     rings = []
     orig = S.RingPartition.candidates

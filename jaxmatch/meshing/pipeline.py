@@ -315,11 +315,11 @@ def _mesh_size(shape, cat, lat, h, strategies, quality, budget_s, progress, corn
         if quality.field is None:
             lean = LeanCurves(layouts.strategies + ((Rings(),) if rings else ()))
             trans = (Transitions(lean.strategies),) if quality.uniform_transitions else ()
-            conforming = (Conforming(),) if search.conforming else ()
-            plan = (layouts,) + enough + (Larger(),) + conforming + rings + (lean,) + trans + (Bends(layouts, rejudge),)
+            plan = (layouts,) + enough + (Larger(), Conforming()) + rings + (lean,) + trans + (Bends(layouts, rejudge),)
         else:  # graded: the ring partition before the larger templates, tried only if it too misses the field
             trans = Transitions(layouts.strategies + ((Rings(),) if rings else ()))
             plan = (layouts,) + enough + rings + (trans, Larger(), Bends(layouts, rejudge))
+        plan = tuple(st for st in plan if type(st).__name__ not in search.leave_out)
     tried = run(plan, req)
     if region.periodic:  # a candidate whose periodic sides got different counts (no equal-count program) is out
         tried = [c if c.mesh is None or not periodic_mismatch(c.mesh, region) else
