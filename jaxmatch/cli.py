@@ -449,7 +449,7 @@ def mesh(
     strategy: Optional[str] = typer.Option(None, "--strategy", metavar="NAMES", help="Candidates to try, comma-separated: "
                                            "single, continuations, bisectors, recursive, radial, fillets, rings (default: all)."),
     search: str = typer.Option("best", "--search", metavar="best|fast", help="best: every candidate that could win; "
-                               "fast: stop at the first good mesh (about 1.7x the regions/s, some quality lost: docs/perf.md)."),
+                               "fast: stop at the first good mesh (about 2x the regions/s, some quality lost: docs/perf.md)."),
     budget: float = typer.Option(DEFAULT_BUDGET_S, "--budget", metavar="SECONDS", help="Stop trying candidates after "
                                  "this long once one valid mesh exists (the best so far is kept)."),
     catalogue: Optional[Path] = typer.Option(None, metavar="FILE", help=CATALOGUE_HELP),
