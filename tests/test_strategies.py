@@ -377,3 +377,20 @@ def test_the_fast_search_of_a_graded_mesh_waits_for_a_layout_that_follows_the_fi
     best, fast = jaxmatch.mesh(shp, size=field), jaxmatch.mesh(shp, size=field, search="fast")
     assert (fast.chosen, fast.rule) == (best.chosen, best.rule)
     assert np.array_equal(fast.xy, best.xy) and np.array_equal(fast.quads, best.quads)
+
+
+def test_the_fast_search_runs_none_of_the_strategies_it_leaves_out(monkeypatch):
+    """``SEARCHES["fast"].leave_out``: on parts where the whole search asks the conforming, the
+    larger templates and the leaner curves for candidates, the fast search asks none of them."""
+    asked = {}
+    for cls in (S.Conforming, S.Larger, S.LeanCurves):
+        real = cls.candidates
+        monkeypatch.setattr(cls, "candidates", lambda self, req, tried, real=real, name=cls.__name__:
+                            asked.setdefault(name, []).append(req.quality.search.name) or real(self, req, tried))
+    assert set(SEARCHES["fast"].leave_out) == {"Conforming", "Larger", "LeanCurves"}
+    for part in (3, 8, 16):
+        shp = _bulk_part(part)
+        jaxmatch.mesh(shp, divisions=32)
+        jaxmatch.mesh(shp, divisions=32, search="fast")
+    assert set(asked) == {"Conforming", "Larger", "LeanCurves"}  # (the whole search asked each)
+    assert all(who == "best" for calls in asked.values() for who in calls)
