@@ -122,3 +122,27 @@ def recorded(monkeypatch):
         return calls
 
     return record
+
+
+@pytest.fixture(scope="session")
+def bulk_parts():
+    """``bulk_parts(folder, count) -> [Path]``: the first ``count`` random parts of
+    ``scripts/make_bulk_parts.py`` (the bulk benchmark's, seed 38) written as
+    ``folder/part-NNN.json``, in order."""
+    import importlib.util
+    import json
+
+    spec = importlib.util.spec_from_file_location("make_bulk_parts", Path(__file__).resolve().parent.parent / "scripts"
+                                                  / "make_bulk_parts.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+
+    def write(folder: Path, count: int) -> list[Path]:
+        folder.mkdir(parents=True, exist_ok=True)
+        paths = []
+        for i, doc in enumerate(mod.parts(count)):
+            paths.append(folder / f"part-{i:03d}.json")
+            paths[-1].write_text(json.dumps(doc) + "\n")
+        return paths
+
+    return write

@@ -4,7 +4,6 @@ field documented."""
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import os
 import resource
@@ -29,19 +28,6 @@ MSH = ("--msh-version", "2.2")
 """Every run here writes MSH 2.2 (the bench compares with references that wrote it)."""
 SLOW = EX / "dense" / "coastline.json"
 """A region that takes ~3 s at perimeter / 32 on a quiet core."""
-
-
-def _parts(folder: Path, count: int) -> list[Path]:
-    spec = importlib.util.spec_from_file_location("make_bulk_parts", ROOT / "scripts" / "make_bulk_parts.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    folder.mkdir(parents=True, exist_ok=True)
-    paths = []
-    for i, doc in enumerate(mod.parts(count)):
-        p = folder / f"part-{i:03d}.json"
-        p.write_text(json.dumps(doc) + "\n")
-        paths.append(p)
-    return paths
 
 
 def _command(*args, **kw) -> subprocess.Popen:
@@ -178,12 +164,12 @@ def test_a_region_past_the_region_budget_gets_its_record_and_the_others_finish(t
 
 
 @pytest.mark.slow
-def test_a_run_killed_with_sigkill_resumes_with_one_record_and_one_mesh_per_region(tmp_path):
+def test_a_run_killed_with_sigkill_resumes_with_one_record_and_one_mesh_per_region(tmp_path, bulk_parts):
     """One whole run (reference), then the same run killed part-way with SIGKILL and resumed:
     one record and one mesh file per region, the same meshes as the whole run, the regions
     done before the kill not meshed again, and the two runs together within 1.3x the whole one
     (CPU seconds of each command and its workers)."""
-    paths = _parts(tmp_path / "parts", 80)
+    paths = bulk_parts(tmp_path / "parts", 80)
     opts = ["--divisions", "24", "--jobs", "2"]
     c = _children_cpu()
     code, err, whole = _run(*paths, "--out-dir", tmp_path / "whole", *opts, *MSH)
@@ -325,12 +311,12 @@ def test_dask_missing_is_one_line(cli, tmp_path, monkeypatch):
 
 
 @pytest.mark.slow
-def test_dask_local_cluster_gives_the_local_meshes(tmp_path, monkeypatch):
+def test_dask_local_cluster_gives_the_local_meshes(tmp_path, monkeypatch, bulk_parts):
     """60 parts on a LocalCluster of two worker processes: the local run's meshes, byte for byte;
     --skip-bad, --resume and --region-budget as in a local run."""
     distributed = pytest.importorskip("distributed")
     monkeypatch.setenv("PYTHONPATH", str(ROOT))  # the workers import this checkout's jaxmatch, as the client does
-    paths = _parts(tmp_path / "parts", 60)
+    paths = bulk_parts(tmp_path / "parts", 60)
     bad = tmp_path / "parts" / "bad.json"
     bad.write_text('{"boundary": [[0, 0], [1, 0]]}')
     code, err, _ = _run(*paths, "--divisions", "16", "--out-dir", tmp_path / "local", "--jobs", "2", *MSH)

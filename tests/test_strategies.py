@@ -291,20 +291,6 @@ def test_graded_single_patch_ruled_out_by_its_templates_gives_the_same_mesh(monk
 # the search (Search): how much of the plan runs
 
 
-def _bulk_part(i: int):
-    import importlib.util
-    import json
-    import tempfile
-
-    spec = importlib.util.spec_from_file_location("make_bulk_parts", EX.parent / "scripts" / "make_bulk_parts.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    with tempfile.TemporaryDirectory() as tmp:
-        p = Path(tmp) / f"part-{i:03d}.json"
-        p.write_text(json.dumps(mod.parts(i + 1)[i]))
-        return jaxmatch.load_shape(p)
-
-
 def test_the_default_search_is_the_best_one():
     assert QUALITY.search == Search() == SEARCHES["best"]
     assert QUALITY.search.layouts is None and not QUALITY.search.leave_out and not QUALITY.search.enough
@@ -314,6 +300,11 @@ def test_the_default_search_is_the_best_one():
     assert np.array_equal(a.xy, b.xy) and np.array_equal(a.quads, b.quads)
 
 
+def test_a_search_leaving_out_no_strategy_of_the_plan_is_refused():
+    with pytest.raises(jaxmatch.InputError, match="leave_out names no strategy of the plan: Conformng"):
+        jaxmatch.mesh(jaxmatch.load_shape(EX / "tshape.json"), divisions=16, search=Search("typo", leave_out=("Conformng",)))
+
+
 @pytest.mark.parametrize("bad", ["fastest", "", "Best"])
 def test_an_unknown_search_is_refused(bad):
     with pytest.raises(jaxmatch.InputError, match="search: expected one of best, fast"):
@@ -321,12 +312,12 @@ def test_an_unknown_search_is_refused(bad):
 
 
 @pytest.mark.parametrize("part", [0, 3, 7, 12, 18, 25])
-def test_the_fast_search_keeps_a_candidate_of_the_best_search_and_meshes_fewer(part):
+def test_the_fast_search_keeps_a_candidate_of_the_best_search_and_meshes_fewer(part, bulk_parts, tmp_path):
     """Every layout the fast search meshes is the candidate of that name of the whole search with
     the same count programs (``box``), bit for bit (it only stops earlier); it meshes no more
     candidates, no further layout once one reaches the quality floor, and its mesh is valid with
     every corner."""
-    shp = _bulk_part(part)
+    shp = jaxmatch.load_shape(bulk_parts(tmp_path, part + 1)[part])
     best = jaxmatch.mesh(shp, divisions=32, search=Search("boxed", box=True))
     fast = jaxmatch.mesh(shp, divisions=32, search="fast")
     exact = {c.name: c.mesh for c in best.tried if c.mesh is not None}
@@ -379,7 +370,7 @@ def test_the_fast_search_of_a_graded_mesh_waits_for_a_layout_that_follows_the_fi
     assert np.array_equal(fast.xy, best.xy) and np.array_equal(fast.quads, best.quads)
 
 
-def test_the_fast_search_runs_none_of_the_strategies_it_leaves_out(monkeypatch):
+def test_the_fast_search_runs_none_of_the_strategies_it_leaves_out(monkeypatch, bulk_parts, tmp_path):
     """``SEARCHES["fast"].leave_out``: on parts where the whole search asks the conforming, the
     larger templates and the leaner curves for candidates, the fast search asks none of them."""
     asked = {}
@@ -388,8 +379,9 @@ def test_the_fast_search_runs_none_of_the_strategies_it_leaves_out(monkeypatch):
         monkeypatch.setattr(cls, "candidates", lambda self, req, tried, real=real, name=cls.__name__:
                             asked.setdefault(name, []).append(req.quality.search.name) or real(self, req, tried))
     assert set(SEARCHES["fast"].leave_out) == {"Conforming", "Larger", "LeanCurves"}
+    paths = bulk_parts(tmp_path, 17)
     for part in (3, 8, 16):
-        shp = _bulk_part(part)
+        shp = jaxmatch.load_shape(paths[part])
         jaxmatch.mesh(shp, divisions=32)
         jaxmatch.mesh(shp, divisions=32, search="fast")
     assert set(asked) == {"Conforming", "Larger", "LeanCurves"}  # (the whole search asked each)

@@ -205,11 +205,19 @@ def mesh(region=None, *, regions=None, size: float | None = None, divisions: int
 def _search(search) -> Search:
     """The :class:`~jaxmatch.defaults.Search` named (:data:`~jaxmatch.defaults.SEARCHES`) or given.
     Raises :class:`InputError` for an unknown name."""
-    if isinstance(search, Search):
-        return search
-    if search not in SEARCHES:
-        raise InputError(f"expected one of {', '.join(SEARCHES)}, got {search!r}", "search")
-    return SEARCHES[search]
+    if not isinstance(search, Search):
+        if search not in SEARCHES:
+            raise InputError(f"expected one of {', '.join(SEARCHES)}, got {search!r}", "search")
+        search = SEARCHES[search]
+    unknown = [n for n in search.leave_out if n not in PLAN_STRATEGIES]
+    if unknown:  # (a name of no plan strategy would leave nothing out, silently)
+        raise InputError(f"leave_out names no strategy of the plan: {', '.join(unknown)} (expected among "
+                         f"{', '.join(sorted(PLAN_STRATEGIES))})", "search")
+    return search
+
+
+PLAN_STRATEGIES = frozenset(cls.__name__ for cls in (Larger, Conforming, RingPartition, LeanCurves, Transitions, Bends))
+"""The strategies a search may leave out of the plan (:attr:`jaxmatch.defaults.Search.leave_out`)."""
 
 
 def _divisions_size(region, divisions) -> float | None:

@@ -249,7 +249,7 @@ def _solve_counts_cached(layout: Layout, sides: Sides, matrices, want, size, wid
     if side_targets is not None:  # a size field's targets (uniform sizes: the key as it was)
         k = k + cache_key(side_targets, chord_targets)
     if box:
-        k = k + ("box",)
+        k = k + cache_key("box")
     mults, n = cache.get("solves", k, lambda: solve_counts(sides, matrices, counts=want, size=size, widths=widths,
                                                           source=layout.source, floors=floors, equal=equal,
                                                           side_targets=side_targets, chord_targets=chord_targets,
