@@ -64,8 +64,7 @@ class Search:
     box: bool = False
 
 
-SEARCHES = {"best": Search(), "fast": Search("fast", layouts=1, leave_out=("Conforming", "Larger", "LeanCurves"), enough=True,
-                                           box=True)}
+SEARCHES = {"best": Search(), "fast": Search("fast", layouts=1, leave_out=("Conforming", "Larger"), enough=True, box=True)}
 """The searches by name (``--search``). ``"fast"``: what it gives up, measured on 300 random
 parts and the 50 benchmark cases, is in docs/perf.md ("The fast search")."""
 

@@ -6,8 +6,9 @@ one process, every figure measured here from the meshes' points and quads and th
     .venv/bin/python scripts/search_table.py [--parts 300] [--searches best,fast] [--json OUT]
 
 The regions: the first ``--parts`` random parts of ``scripts/make_bulk_parts.py`` (the bulk
-benchmark's, perimeter / 32) and the 50 cases of ``scripts/bench.py --mesh`` (10 shapes and 15
-with holes, each at perimeter / 16 and / 32). Every mesh is a first call: the meshing caches
+benchmark's, perimeter / 32) and the 50 cases of ``scripts/bench.py --mesh`` (13 shapes and 12
+with holes, each at perimeter / 16 and / 32), and the 15 engineering parts of ``examples/parts``
+(fillets, round holes, a gear, fins, an airfoil) at perimeter / 40. Every mesh is a first call: the meshing caches
 cleared before each (``bench.clear_mesh_caches``); its CPU seconds are this process's
 (``time.process_time``). Per search and set of regions: the CPU seconds and their ratio to the
 first search's, the meshes that differ from the first search's (points or quads), valid meshes,
@@ -77,6 +78,8 @@ def regions(parts: int, bench) -> list[tuple[str, object, dict]]:
         for div in bench.MESH_DIVISIONS:
             shp, _, _, _, h = bench._mesh_region(name, div)
             out.append((f"bench|{name}|{div}", shp, {"size": h}))
+    for path in sorted((ROOT / "examples" / "parts").glob("*.json")):
+        out.append((f"parts|{path.stem}", jaxmatch.load_shape(path), {"divisions": 40}))
     return out
 
 
@@ -134,7 +137,8 @@ def main(parts: int = typer.Option(300, help="Random bulk parts (scripts/make_bu
     table = {}
     cols = ("regions", "cpu_s", "ratio", "changed", "valid", "mean_min_sj", "lowest_min_sj", "mean_mean_sj", "irregular",
             "in_band", "worse", "better", "worst_loss")
-    for prefix, title in (("bulk|", f"{parts} random bulk parts at perimeter / 32"), ("bench|", "the 50 bench.py --mesh cases")):
+    for prefix, title in (("bulk|", f"{parts} random bulk parts at perimeter / 32"), ("bench|", "the 50 bench.py --mesh cases"),
+                          ("parts|", "the engineering parts of examples/parts at perimeter / 40")):
         print(f"\n{title}\n\n| search | " + " | ".join(c.replace("_", " ") for c in cols) + " |")
         print("|---" * (len(cols) + 1) + "|")
         for s in chosen:

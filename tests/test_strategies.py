@@ -371,18 +371,28 @@ def test_the_fast_search_of_a_graded_mesh_waits_for_a_layout_that_follows_the_fi
 
 
 def test_the_fast_search_runs_none_of_the_strategies_it_leaves_out(monkeypatch, bulk_parts, tmp_path):
-    """``SEARCHES["fast"].leave_out``: on parts where the whole search asks the conforming, the
-    larger templates and the leaner curves for candidates, the fast search asks none of them."""
+    """``SEARCHES["fast"].leave_out``: on parts where the whole search asks the conforming and the
+    larger templates for candidates, the fast search asks neither; it still asks the leaner curves."""
     asked = {}
     for cls in (S.Conforming, S.Larger, S.LeanCurves):
         real = cls.candidates
         monkeypatch.setattr(cls, "candidates", lambda self, req, tried, real=real, name=cls.__name__:
                             asked.setdefault(name, []).append(req.quality.search.name) or real(self, req, tried))
-    assert set(SEARCHES["fast"].leave_out) == {"Conforming", "Larger", "LeanCurves"}
+    assert set(SEARCHES["fast"].leave_out) == {"Conforming", "Larger"}
     paths = bulk_parts(tmp_path, 17)
     for part in (3, 8, 16):
         shp = jaxmatch.load_shape(paths[part])
         jaxmatch.mesh(shp, divisions=32)
         jaxmatch.mesh(shp, divisions=32, search="fast")
-    assert set(asked) == {"Conforming", "Larger", "LeanCurves"}  # (the whole search asked each)
-    assert all(who == "best" for calls in asked.values() for who in calls)
+    assert {"Conforming", "Larger", "LeanCurves"} <= {n for n, calls in asked.items() if "best" in calls}
+    assert {n for n, calls in asked.items() if "fast" in calls} == {"LeanCurves"}
+
+
+@pytest.mark.parametrize("part", ["plate-3-holes", "web-plate"])
+def test_the_fast_search_keeps_the_leaner_curves_of_parts_with_round_holes(part):
+    """Parts whose round holes the whole search meshes with coarser curves (``+lean curves``, in
+    the size band) get that mesh from the fast search too."""
+    shp = jaxmatch.load_shape(EX / "parts" / f"{part}.json")
+    best, fast = jaxmatch.mesh(shp, divisions=40), jaxmatch.mesh(shp, divisions=40, search="fast")
+    assert best.chosen.endswith(S.LEAN) and fast.chosen == best.chosen
+    assert np.array_equal(fast.xy, best.xy) and np.array_equal(fast.quads, best.quads)
