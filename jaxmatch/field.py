@@ -244,9 +244,7 @@ class SizeField:  # (eq=False: hashed by identity, so a Quality holding one is a
             if where is None:
                 where = shapely.points(pts)
             if n >= PRUNE_POINTS:
-                gx = np.maximum(np.maximum(lo[0] - pts[:, 0], pts[:, 0] - hi[0]), 0.0)
-                gy = np.maximum(np.maximum(lo[1] - pts[:, 1], pts[:, 1] - hi[1]), 0.0)
-                near = np.flatnonzero(~(gx * gx + gy * gy > reach2))  # (a NaN point measured, as before)
+                near = np.flatnonzero(_within_reach(pts[:, 0], pts[:, 1], lo, hi, reach2))
                 if near.size:
                     dist[near, e] = shapely.distance(where[near], geom)
             else:
@@ -259,10 +257,7 @@ class SizeField:  # (eq=False: hashed by identity, so a Quality holding one is a
         ``dist / d >= 1`` whatever the exact distance): numpy's (:func:`_point_segment`) on the
         (point, segment) pairs of those (point, entry) pairs only, the least of each."""
         lo, hi, reach2, first, count = self._boxes
-        px, py = pts[:, 0:1], pts[:, 1:2]
-        gx = np.maximum(np.maximum(lo[:, 0] - px, px - hi[:, 0]), 0.0)  # (n, E) each
-        gy = np.maximum(np.maximum(lo[:, 1] - py, py - hi[:, 1]), 0.0)
-        near = ~(gx * gx + gy * gy > reach2)  # (a NaN point measured, as before)
+        near = _within_reach(pts[:, 0:1], pts[:, 1:2], lo.T, hi.T, reach2)  # (n, E)
         dist = np.full((pts.shape[0], len(self.entries)), np.inf)
         pi, ei = np.nonzero(near)
         entries = np.flatnonzero(near.any(axis=0))
@@ -342,6 +337,17 @@ class SizeField:  # (eq=False: hashed by identity, so a Quality holding one is a
             else:
                 out.append(shapely.MultiLineString([x for x in seg]))
         return tuple(out)
+
+
+def _within_reach(px: np.ndarray, py: np.ndarray, lo: np.ndarray, hi: np.ndarray, reach2) -> np.ndarray:
+    """Whether each point ``(px, py)`` lies within the reach of each box (``lo``, ``hi``: its
+    corners' x and y first, ``reach2`` the squared reach, :attr:`SizeField._reach`): its squared
+    distance from the box is not above ``reach2`` (a NaN point counts as within, measured). The
+    arguments broadcast: ``(n,)`` points against one box, or ``(n, 1)`` against ``(2, E)`` boxes,
+    ``(n, E)``."""
+    gx = np.maximum(np.maximum(lo[0] - px, px - hi[0]), 0.0)
+    gy = np.maximum(np.maximum(lo[1] - py, py - hi[1]), 0.0)
+    return ~(gx * gx + gy * gy > reach2)
 
 
 FEW_ENTRIES = 4
